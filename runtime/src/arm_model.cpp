@@ -1,0 +1,159 @@
+#include "nao/arm_model.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <console_bridge/console.h>
+#include <urdf_parser/urdf_parser.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+namespace nao {
+namespace {
+
+// urdfdom reports why it rejects a file only through console_bridge; collect those lines so
+// the exception can carry them instead of letting them scroll past on stderr.
+class CollectErrors : public console_bridge::OutputHandler {
+ public:
+  void log(const std::string& text, console_bridge::LogLevel level, const char*, int) override {
+    if (level >= console_bridge::CONSOLE_BRIDGE_LOG_ERROR) {
+      if (!text_.empty()) text_ += "; ";
+      text_ += text;
+    }
+  }
+  const std::string& text() const { return text_; }
+
+ private:
+  std::string text_;
+};
+
+[[noreturn]] void fail(const std::string& origin, const std::string& what) {
+  throw ArmModelError(origin + ": " + what);
+}
+
+Eigen::Vector3d toEigen(const urdf::Vector3& v) { return {v.x, v.y, v.z}; }
+
+Eigen::Matrix3d toEigen(const urdf::Rotation& r) {
+  double x, y, z, w;
+  r.getQuaternion(x, y, z, w);
+  return Eigen::Quaterniond(w, x, y, z).normalized().toRotationMatrix();
+}
+
+const char* typeName(int type) {
+  switch (type) {
+    case urdf::Joint::REVOLUTE: return "revolute";
+    case urdf::Joint::CONTINUOUS: return "continuous";
+    case urdf::Joint::PRISMATIC: return "prismatic";
+    case urdf::Joint::FLOATING: return "floating";
+    case urdf::Joint::PLANAR: return "planar";
+    case urdf::Joint::FIXED: return "fixed";
+    default: return "unknown";
+  }
+}
+
+LinkInertial readInertial(const urdf::Link& link, const std::string& origin) {
+  if (!link.inertial) fail(origin, "link '" + link.name + "' has no <inertial>; the simulator needs its mass");
+  const urdf::Inertial& in = *link.inertial;
+  if (!(in.mass > 0.0) || !std::isfinite(in.mass))
+    fail(origin, "link '" + link.name + "' has mass " + std::to_string(in.mass) + "; expected > 0");
+  LinkInertial out;
+  out.mass = in.mass;
+  out.p_LC = toEigen(in.origin.position);
+  Eigen::Matrix3d I;
+  I << in.ixx, in.ixy, in.ixz, in.ixy, in.iyy, in.iyz, in.ixz, in.iyz, in.izz;
+  // The URDF gives the inertia in the <inertial> origin frame; express it in link axes.
+  const Eigen::Matrix3d R_LI = toEigen(in.origin.rotation);
+  out.I_C = R_LI * I * R_LI.transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(out.I_C);
+  if (!(eig.eigenvalues().minCoeff() > 0.0))
+    fail(origin, "link '" + link.name + "' has an inertia that is not positive definite");
+  return out;
+}
+
+}  // namespace
+
+ArmModel loadArmModel(const std::string& urdf_path) {
+  std::ifstream file(urdf_path);
+  if (!file) fail(urdf_path, "cannot open the URDF file (does it exist and is it readable?)");
+  std::ostringstream text;
+  text << file.rdbuf();
+  return parseArmModel(text.str(), urdf_path);
+}
+
+ArmModel parseArmModel(const std::string& urdf_xml, const std::string& origin) {
+  urdf::ModelInterfaceSharedPtr urdf;
+  {
+    CollectErrors errors;
+    console_bridge::useOutputHandler(&errors);
+    urdf = urdf::parseURDF(urdf_xml);
+    console_bridge::restorePreviousOutputHandler();
+    if (!urdf) {
+      fail(origin, "not a valid URDF (" +
+                       (errors.text().empty() ? std::string("urdfdom gave no reason") : errors.text()) + ")");
+    }
+  }
+
+  ArmModel model;
+  std::string parent_link = kTorsoLink;
+  if (!urdf->getLink(parent_link)) fail(origin, "has no link named '" + parent_link + "'");
+
+  for (int j = 0; j < kNumJoints; ++j) {
+    const std::string name = kJointNames[j];
+    const urdf::JointConstSharedPtr joint = urdf->getJoint(name);
+    if (!joint) fail(origin, "has no joint named '" + name + "'");
+    if (joint->type != urdf::Joint::REVOLUTE)
+      fail(origin, "joint '" + name + "' is of type " + typeName(joint->type) + "; expected revolute");
+    if (joint->parent_link_name != parent_link)
+      fail(origin, "joint '" + name + "' has parent link '" + joint->parent_link_name + "'; expected '" +
+                       parent_link + "' (the chain is torso > " + kJointNames[0] + " > ... > " + kJointNames[4] + ")");
+    if (!joint->limits) fail(origin, "joint '" + name + "' has no <limit>");
+    const urdf::JointLimits& lim = *joint->limits;
+    if (!(lim.lower < lim.upper))
+      fail(origin, "joint '" + name + "' has limit lower=" + std::to_string(lim.lower) +
+                       " upper=" + std::to_string(lim.upper) + " (missing or empty range)");
+    if (!(lim.velocity > 0.0)) fail(origin, "joint '" + name + "' has no positive velocity limit");
+    if (!(lim.effort > 0.0)) fail(origin, "joint '" + name + "' has no positive effort limit");
+    const Eigen::Vector3d axis = toEigen(joint->axis);
+    if (!(axis.norm() > 0.5)) fail(origin, "joint '" + name + "' has a zero rotation axis");
+
+    model.p_PJ[j] = toEigen(joint->parent_to_joint_origin_transform.position);
+    model.R_PJ[j] = toEigen(joint->parent_to_joint_origin_transform.rotation);
+    model.axis_J[j] = axis.normalized();
+    model.q_min[j] = lim.lower;
+    model.q_max[j] = lim.upper;
+    model.v_max[j] = lim.velocity;
+    model.tau_max[j] = lim.effort;
+
+    const urdf::LinkConstSharedPtr child = urdf->getLink(joint->child_link_name);
+    if (!child) fail(origin, "joint '" + name + "' moves link '" + joint->child_link_name + "', which does not exist");
+    model.link[j] = readInertial(*child, origin);
+    parent_link = child->name;
+  }
+
+  // The hand point: r_hand hangs off the wrist link by one fixed joint.
+  const urdf::LinkConstSharedPtr hand = urdf->getLink(kHandLink);
+  if (!hand) fail(origin, std::string("has no link named '") + kHandLink + "'");
+  const urdf::JointConstSharedPtr hand_joint = hand->parent_joint;
+  if (!hand_joint || hand_joint->parent_link_name != parent_link)
+    fail(origin, std::string("link '") + kHandLink + "' must be attached to '" + parent_link + "'");
+  if (hand_joint->type != urdf::Joint::FIXED)
+    fail(origin, "joint '" + hand_joint->name + "' to '" + kHandLink + "' is of type " + typeName(hand_joint->type) +
+                     "; expected fixed");
+  model.p_WH = toEigen(hand_joint->parent_to_joint_origin_transform.position);
+  model.R_WH = toEigen(hand_joint->parent_to_joint_origin_transform.rotation);
+  return model;
+}
+
+double robotScale(const ArmModel& model) {
+  // RShoulderPitch's origin is the shoulder itself (relative to the torso), not a link.
+  double d = model.p_WH.norm();
+  for (int j = 1; j < kNumJoints; ++j) d += model.p_PJ[j].norm();
+  return d;
+}
+
+JointVector clampToLimits(const ArmModel& model, const JointVector& q) {
+  return q.cwiseMax(model.q_min).cwiseMin(model.q_max);
+}
+
+}  // namespace nao
