@@ -1,0 +1,93 @@
+// The simulated NAO arm: an ODE world built from the ArmModel, driven by position servos.
+//
+// Physics: torso fixed to the world (world frame = torso frame, gravity -z), one ODE body per
+// link placed at its centre of mass with the URDF inertia, one hinge per joint with the URDF
+// axis. Hinge stops sit 1 degree outside the URDF limits as a safety net (see kStopMarginRad
+// in sim_arm.cpp); the servo itself keeps every joint inside the limits. Integrated with
+// dWorldStep, the direct solver: no random constraint reordering, so runs repeat bitwise.
+//
+// Servo law at every physics substep (1 ms), standing in for NAO's position servos:
+//   e = q_cmd - q,   v* = sign(e) * min(K |e|, v_max, sqrt(a_brake |e|)),
+//   v = v* limited to change by at most a_brake * dt per substep,
+// sent as the hinge motor's target velocity, motor torque capped at the URDF effort.
+//  - K (servo_gain_per_s, default 25 /s): 40 ms time constant close to the target.
+//  - v_max: the URDF velocity limit.
+//  - a_brake: a deceleration the motor can always deliver, per joint, from the URDF at
+//    configure time: half of (effort - worst-case gravity torque) / worst-case inertia.
+//  - The slew limit gives an acceleration-limited profile (accelerate, cruise, brake), so
+//    distal joints never jerk hard enough to overpower the shoulder motors by reaction.
+//  - The square-root term brakes at a_brake / 2, which the slew limit can always follow,
+//    so large steps stop on the target instead of overshooting it.
+#pragma once
+
+#include "nao/arm_model.hpp"
+#include "nao/kinematics.hpp"
+
+#include <array>
+#include <cstdint>
+
+// Opaque ODE handles (ode/common.h), declared here so users of this header need not include ODE.
+struct dxWorld;
+struct dxBody;
+struct dxJoint;
+
+namespace nao {
+
+struct SimParams {
+  double dt_s = 1e-3;               ///< physics step, s
+  int substeps_per_tick = 100;      ///< physics steps per control tick (100 x 1 ms = 10 Hz)
+  double servo_gain_per_s = 25.0;   ///< K of the servo law, 1/s
+  double gravity_mps2 = 9.81;       ///< magnitude, along -z of the torso frame
+  int warmup_substeps = 10;         ///< steps taken in configure so ODE sizes its arena there
+};
+
+/// Immutable description of the simulation: the arm, the parameters, and per-joint servo
+/// braking limits derived from them.
+struct SimModel {
+  ArmModel arm;
+  SimParams params;
+  JointVector a_brake;  ///< guaranteed deceleration per joint, rad/s^2
+};
+
+/// Builds the SimModel (configure time). Throws std::invalid_argument for parameters out of
+/// range and ArmModelError for an arm whose motors cannot hold it against gravity.
+SimModel makeSimModel(const ArmModel& arm, const SimParams& params = {});
+
+/// The running simulation: the ODE world and what the last tick measured. Owns its ODE
+/// objects; construct and destroy it on the control thread (ODE keeps per-thread data).
+class SimData {
+ public:
+  /// Builds the world with the arm at rest at q0 (clamped to the limits), then takes
+  /// `warmup_substeps` steps and resets, so later ticks allocate nothing. Configure time.
+  SimData(const SimModel& model, const JointVector& q0);
+  ~SimData();
+  SimData(const SimData&) = delete;
+  SimData& operator=(const SimData&) = delete;
+
+  JointVector q = JointVector::Zero();        ///< joint angles after the last tick, rad
+  JointVector qd = JointVector::Zero();       ///< joint velocities after the last tick, rad/s
+  JointVector qd_peak = JointVector::Zero();  ///< largest |qd| seen at any substep of the last tick
+  JointVector q_cmd = JointVector::Zero();    ///< last command, clamped to the limits, rad
+  JointVector v_servo = JointVector::Zero();  ///< motor target velocities of the last substep, rad/s
+  std::int64_t substeps = 0;                  ///< physics steps taken since the last reset
+
+  dxWorld* world = nullptr;
+  std::array<dxBody*, kNumJoints> body{};    ///< body of the link moved by joint j
+  std::array<dxJoint*, kNumJoints> hinge{};  ///< hinge of joint j
+  ArmData kin;                               ///< workspace for placing bodies
+};
+
+/// Puts the arm at rest at pose q0 (clamped to limits) and commands it to stay there.
+/// Real-time safe (moves existing bodies only).
+void resetSim(const SimModel& model, SimData& data, const JointVector& q0);
+
+/// Advances one control tick: `substeps_per_tick` physics steps toward q_cmd (clamped to the
+/// limits). Updates q, qd, qd_peak, q_cmd in `data`; returns data.q. Real-time safe after
+/// the SimData constructor's warm-up: no allocation, no I/O.
+const JointVector& stepSim(const SimModel& model, SimData& data, const JointVector& q_cmd);
+
+/// Hand point of the simulated arm in the torso frame, from the ODE body pose of the wrist
+/// link (not from the joint angles: an independent check of the kinematics). Real-time safe.
+Eigen::Vector3d simHandPosition(const SimModel& model, const SimData& data);
+
+}  // namespace nao
