@@ -27,6 +27,12 @@ nao_require(CLI11_FOUND "CLI11" libcli11-dev)
 find_package(nlohmann_json 3 QUIET CONFIG)
 nao_require(nlohmann_json_FOUND "nlohmann-json" nlohmann-json3-dev)
 
+find_package(tomlplusplus 3 QUIET CONFIG)
+nao_require(tomlplusplus_FOUND "toml++" libtomlplusplus-dev)
+
+find_package(benchmark QUIET CONFIG)
+nao_require(benchmark_FOUND "Google Benchmark" libbenchmark-dev)
+
 if(NAO_BUILD_TESTS)
   find_package(doctest QUIET CONFIG)
   nao_require(doctest_FOUND "doctest" doctest-dev)
