@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <fstream>
 #include <iostream>
+#include <vector>
 
 namespace {
 
@@ -88,6 +89,7 @@ int main(int argc, char** argv) {
   nao::SimData sim(sim_model, q0);
   nao::ArmData kin;
 
+  // Open the log now so a bad path fails before the run, not after it.
   std::ofstream csv;
   if (!csv_path.empty()) {
     csv.open(csv_path);
@@ -95,11 +97,23 @@ int main(int argc, char** argv) {
       std::cerr << "nao_rt: cannot write " << csv_path << "\n";
       return 2;
     }
-    csv << "tick,t_s";
-    for (const char* n : {"q_cmd", "q"})
-      for (int j = 0; j < nao::kNumJoints; ++j) csv << ',' << n << '_' << j;
-    csv << ",ee_x,ee_y,ee_z,ee_ref_x,ee_ref_y,ee_ref_z\n";
-    csv.precision(9);
+  }
+
+  // Everything the loop produces goes into records sized here; the loop itself does no I/O.
+  struct TickRecord {
+    double t_s;
+    nao::JointVector q_cmd, q;
+    Eigen::Vector3d p_sim, p_ref;
+  };
+  std::vector<TickRecord> records(static_cast<std::size_t>(n_ticks));
+
+  for (int tick = 0; tick < n_ticks; ++tick) {
+    TickRecord& r = records[static_cast<std::size_t>(tick)];
+    r.t_s = (tick + 1) * kTickS;
+    r.q = nao::stepSim(sim_model, sim, scriptedCommand(r.t_s));
+    r.q_cmd = sim.q_cmd;
+    r.p_ref = nao::forwardKinematics(arm, kin, sim.q_cmd);
+    r.p_sim = nao::simHandPosition(sim_model, sim);
   }
 
   std::printf("nao_rt: %s, d_r = %.5f m, %d ticks of %.0f ms\n", urdf_path.c_str(), nao::robotScale(arm), n_ticks,
@@ -107,27 +121,36 @@ int main(int argc, char** argv) {
   std::printf("%7s  %-26s  %-26s  %9s\n", "t [s]", "hand (sim) [m]", "hand (commanded) [m]", "err [mm]");
   double sum_sq = 0.0, worst_mm = 0.0;
   for (int tick = 0; tick < n_ticks; ++tick) {
-    const double t_s = (tick + 1) * kTickS;
-    const nao::JointVector q_cmd = scriptedCommand(t_s);
-    const nao::JointVector& q = nao::stepSim(sim_model, sim, q_cmd);
-    const Eigen::Vector3d p_ref = nao::forwardKinematics(arm, kin, sim.q_cmd);
-    const Eigen::Vector3d p_sim = nao::simHandPosition(sim_model, sim);
-    const double err_mm = (p_sim - p_ref).norm() * 1e3;
+    const TickRecord& r = records[static_cast<std::size_t>(tick)];
+    const double err_mm = (r.p_sim - r.p_ref).norm() * 1e3;
     sum_sq += err_mm * err_mm;
     worst_mm = std::max(worst_mm, err_mm);
     if (tick % 10 == 9 || tick == n_ticks - 1)
-      std::printf("%7.1f  (%+.4f, %+.4f, %+.4f)  (%+.4f, %+.4f, %+.4f)  %9.2f\n", t_s, p_sim.x(), p_sim.y(), p_sim.z(),
-                  p_ref.x(), p_ref.y(), p_ref.z(), err_mm);
-    if (csv.is_open()) {
-      csv << tick << ',' << t_s;
-      for (int j = 0; j < nao::kNumJoints; ++j) csv << ',' << sim.q_cmd[j];
-      for (int j = 0; j < nao::kNumJoints; ++j) csv << ',' << q[j];
-      csv << ',' << p_sim.x() << ',' << p_sim.y() << ',' << p_sim.z() << ',' << p_ref.x() << ',' << p_ref.y() << ','
-          << p_ref.z() << '\n';
-    }
+      std::printf("%7.1f  (%+.4f, %+.4f, %+.4f)  (%+.4f, %+.4f, %+.4f)  %9.2f\n", r.t_s, r.p_sim.x(), r.p_sim.y(),
+                  r.p_sim.z(), r.p_ref.x(), r.p_ref.y(), r.p_ref.z(), err_mm);
   }
   std::printf("hand tracking error (sim vs commanded pose): rms %.2f mm, max %.2f mm over %d ticks\n",
               std::sqrt(sum_sq / n_ticks), worst_mm, n_ticks);
-  if (csv.is_open()) std::printf("per-tick log: %s\n", csv_path.c_str());
+
+  if (csv.is_open()) {
+    csv.precision(9);
+    csv << "tick,t_s";
+    for (const char* n : {"q_cmd", "q"})
+      for (int j = 0; j < nao::kNumJoints; ++j) csv << ',' << n << '_' << j;
+    csv << ",ee_x,ee_y,ee_z,ee_ref_x,ee_ref_y,ee_ref_z\n";
+    for (int tick = 0; tick < n_ticks; ++tick) {
+      const TickRecord& r = records[static_cast<std::size_t>(tick)];
+      csv << tick << ',' << r.t_s;
+      for (int j = 0; j < nao::kNumJoints; ++j) csv << ',' << r.q_cmd[j];
+      for (int j = 0; j < nao::kNumJoints; ++j) csv << ',' << r.q[j];
+      csv << ',' << r.p_sim.x() << ',' << r.p_sim.y() << ',' << r.p_sim.z() << ',' << r.p_ref.x() << ','
+          << r.p_ref.y() << ',' << r.p_ref.z() << '\n';
+    }
+    if (!csv) {
+      std::cerr << "nao_rt: error while writing " << csv_path << "\n";
+      return 1;
+    }
+    std::printf("per-tick log: %s\n", csv_path.c_str());
+  }
   return 0;
 }
