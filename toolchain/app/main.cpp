@@ -5,13 +5,6 @@
 #include <cstring>
 #include <iostream>
 
-namespace nao::tools {
-std::vector<CommandEntry>& commandRegistry() {
-  static std::vector<CommandEntry> registry;
-  return registry;
-}
-}  // namespace nao::tools
-
 int main(int argc, char** argv) {
   CLI::App app{
       "nao_toolchain: offline pipeline of nao-rt. Human demonstrations (OpenPose BODY_25 from two or\n"
