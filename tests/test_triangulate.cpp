@@ -1,0 +1,579 @@
+// Triangulation against synthetic scenes with known 3D truth: a standing human upper body seen
+// by two or three cameras (camera.hpp's project()), written as OpenPose JSON, read back and
+// triangulated. Covers exactness, noise (checked against the Cramer-Rao bound), subject
+// selection, undetected and one-camera points, BODY_25B, outlier rejection and resampling.
+#include "nao/tools/calibration.hpp"
+#include "nao/tools/command.hpp"
+#include "nao/tools/openpose.hpp"
+#include "nao/tools/triangulate.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace nao;
+using namespace nao::tools;
+namespace fs = std::filesystem;
+using Points = std::array<Eigen::Vector3d, kNumSkeletonPoints>;
+using FramePeople = std::vector<std::vector<Person2d>>;  // [camera][person]
+
+constexpr double kHalfMm = 0.5e-3;
+
+Camera lookAt(const std::string& name, const Eigen::Vector3d& C_W, const Eigen::Vector3d& target_W, double f,
+              const Eigen::Matrix<double, 5, 1>& dist) {
+  Camera cam;
+  cam.name = name;
+  cam.width = 1920, cam.height = 1080;
+  cam.K << f, 0.0, 962.0, 0.0, f * 1.001, 541.0, 0.0, 0.0, 1.0;
+  cam.dist = dist;
+  const Eigen::Vector3d z = (target_W - C_W).normalized();
+  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();  // image right
+  const Eigen::Vector3d y = z.cross(x);                                      // image down
+  cam.R_CW.row(0) = x.transpose(), cam.R_CW.row(1) = y.transpose(), cam.R_CW.row(2) = z.transpose();
+  cam.p_CW = -cam.R_CW * C_W;
+  return cam;
+}
+
+// Two cameras in front of the subject at shoulder height, left and right; optionally a third
+// one higher up. All with mild, different lens distortion.
+CameraSet cameras(int n) {
+  Eigen::Matrix<double, 5, 1> d0, d1, d2;
+  d0 << -0.04, 0.01, 0.0004, -0.0002, 0.0;
+  d1 << 0.03, -0.008, -0.0003, 0.0001, 0.001;
+  d2 << -0.02, 0.0, 0.0, 0.0003, 0.0;
+  const Eigen::Vector3d target(0.0, 0.0, 1.0);
+  CameraSet cams = {lookAt("cam0", {3.0, -1.3, 1.4}, target, 900.0, d0), lookAt("cam1", {3.0, 1.3, 1.4}, target, 910.0, d1)};
+  if (n == 3) cams.push_back(lookAt("cam2", {2.6, 0.3, 2.3}, target, 890.0, d2));
+  return cams;
+}
+
+// A standing adult (world: z up, facing +x, left = +y), metres, moving its right arm with t.
+// MidHip sits 1 cm above the hips' mean on purpose (BODY_25B must use the mean, not MidHip).
+Points body(double t, const Eigen::Vector3d& offset = Eigen::Vector3d::Zero()) {
+  Points p;
+  auto put = [&](int i, double x, double y, double z) { p[static_cast<std::size_t>(i)] = offset + Eigen::Vector3d(x, y, z); };
+  put(kNose, 0.10, 0.0, 1.62), put(kNeck, 0.0, 0.0, 1.47), put(kRShoulder, 0.0, -0.19, 1.44);
+  put(kLShoulder, 0.0, 0.19, 1.44), put(kLElbow, 0.02, 0.23, 1.16), put(kLWrist, 0.08, 0.25, 0.91);
+  put(kMidHip, 0.0, 0.0, 0.98), put(kRHip, 0.0, -0.10, 0.97), put(kLHip, 0.0, 0.10, 0.97);
+  put(kRKnee, 0.03, -0.10, 0.53), put(kRAnkle, 0.0, -0.10, 0.09), put(kLKnee, 0.03, 0.10, 0.53);
+  put(kLAnkle, 0.0, 0.10, 0.09), put(kREye, 0.09, -0.035, 1.66), put(kLEye, 0.09, 0.035, 1.66);
+  put(kREar, 0.02, -0.075, 1.63), put(kLEar, 0.02, 0.075, 1.63), put(kLBigToe, 0.17, 0.12, 0.02);
+  put(kLSmallToe, 0.15, 0.16, 0.02), put(kLHeel, -0.04, 0.10, 0.03), put(kRBigToe, 0.17, -0.12, 0.02);
+  put(kRSmallToe, 0.15, -0.16, 0.02), put(kRHeel, -0.04, -0.10, 0.03);
+  const double elevation = 0.5 + 0.6 * std::sin(1.3 * t), flexion = 0.7 + 0.4 * std::cos(0.9 * t);
+  const Eigen::Vector3d upper = Eigen::Vector3d(std::sin(elevation), -0.15, -std::cos(elevation)).normalized();
+  const Eigen::Vector3d fore =
+      Eigen::Vector3d(std::sin(elevation + flexion), -0.05, -std::cos(elevation + flexion)).normalized();
+  const Eigen::Vector3d side = fore.cross(Eigen::Vector3d::UnitY()).normalized();
+  p[kRElbow] = p[kRShoulder] + 0.29 * upper;
+  p[kRWrist] = p[kRElbow] + 0.25 * fore;
+  p[kRHand0] = p[kRWrist] + 0.01 * fore;
+  p[kRHand5] = p[kRWrist] + 0.09 * fore + 0.03 * side;
+  p[kRHand9] = p[kRWrist] + 0.095 * fore + 0.005 * side;
+  p[kRHand17] = p[kRWrist] + 0.08 * fore - 0.035 * side;
+  return p;
+}
+
+double confidenceOf(int point, int frame, int camera) {
+  const double u = 0.37 * point + 0.23 * frame + 0.11 * camera;
+  return 0.55 + 0.4 * (u - std::floor(u));
+}
+
+// What camera `cam` sees of `points`: points outside the image are not detected.
+Person2d view(const Camera& cam, const Points& points, int frame, int camera, bool equal_confidence = false) {
+  Person2d person;
+  for (int i = 0; i < kNumSkeletonPoints; ++i) {
+    if (toCamera(cam, points[static_cast<std::size_t>(i)]).z() <= 0.0) continue;
+    const Eigen::Vector2d px = project(cam, points[static_cast<std::size_t>(i)]);
+    if (px.x() < 0.0 || px.y() < 0.0 || px.x() >= cam.width || px.y() >= cam.height) continue;
+    person.px[i] = px;
+    person.confidence[i] = equal_confidence ? 0.9 : confidenceOf(i, frame, camera);
+  }
+  return person;
+}
+
+struct Capture {
+  CameraSet cams;
+  std::vector<Points> truth;          // the subject, per frame
+  std::vector<FramePeople> people;    // per frame
+};
+
+// The subject alone in every view, frames at 30 Hz.
+Capture subjectOnly(int n_cameras, int n_frames, bool equal_confidence = false) {
+  Capture c;
+  c.cams = cameras(n_cameras);
+  for (int k = 0; k < n_frames; ++k) {
+    c.truth.push_back(body(k / 30.0, Eigen::Vector3d(0.0, 0.004 * k, 0.0)));
+    FramePeople people(c.cams.size());
+    for (std::size_t cam = 0; cam < c.cams.size(); ++cam)
+      people[cam].push_back(view(c.cams[cam], c.truth.back(), k, static_cast<int>(cam), equal_confidence));
+    c.people.push_back(people);
+  }
+  return c;
+}
+
+fs::path freshDir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / "nao_rt_tests" / "triangulate" / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+void writeText(const fs::path& path, const std::string& text) { std::ofstream(path) << text; }
+
+// A demonstration folder like the synthesiser's: calibration.json and cam<i>/ OpenPose files.
+fs::path writeDemo(const std::string& name, const Capture& c, PoseFormat format = PoseFormat::kBody25) {
+  const fs::path dir = freshDir(name);
+  writeText(dir / "calibration.json", formatCalibrationJson(c.cams));
+  for (std::size_t cam = 0; cam < c.cams.size(); ++cam) {
+    const fs::path cam_dir = dir / ("cam" + std::to_string(cam));
+    fs::create_directories(cam_dir);
+    for (std::size_t k = 0; k < c.people.size(); ++k) {
+      char file[64];
+      std::snprintf(file, sizeof file, "%s_%012zu_keypoints.json", name.c_str(), k);
+      writeText(cam_dir / file, formatOpenPoseJson(c.people[k][cam], format));
+    }
+  }
+  return dir;
+}
+
+TriangulateOptions captureRate() {
+  TriangulateOptions opt;
+  opt.rate_hz = opt.fps;  // one output sample per capture frame
+  return opt;
+}
+
+double error(const SkeletonFrame& f, const Points& truth, int i) {
+  return (f.p_W[static_cast<std::size_t>(i)] - truth[static_cast<std::size_t>(i)]).norm();
+}
+
+// Every point valid and within `tol` of the truth, except those listed as expected missing.
+void checkAgainstTruth(const Skeleton& s, const std::vector<Points>& truth, double tol,
+                       const std::vector<std::pair<int, int>>& expected_missing = {}) {
+  REQUIRE(s.size() == truth.size());
+  double worst = 0.0;
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    CHECK(s[k].t_s == doctest::Approx(static_cast<double>(k) / 30.0));
+    for (int i = 0; i < kNumSkeletonPoints; ++i) {
+      const bool missing = std::find(expected_missing.begin(), expected_missing.end(),
+                                     std::make_pair(static_cast<int>(k), i)) != expected_missing.end();
+      if (missing) {
+        CHECK_MESSAGE(!s[k].ok[i], "frame " << k << " point " << kSkeletonPointNames[i] << " should be missing");
+        continue;
+      }
+      CHECK_MESSAGE(s[k].ok[i], "frame " << k << " point " << kSkeletonPointNames[i] << " is missing");
+      if (!s[k].ok[i]) continue;
+      const double e = error(s[k], truth[k], i);
+      worst = std::max(worst, e);
+      CHECK_MESSAGE(e < tol, "frame " << k << " point " << kSkeletonPointNames[i] << " off by " << e * 1e3 << " mm");
+    }
+  }
+  MESSAGE("largest error " << worst * 1e3 << " mm");
+}
+
+}  // namespace
+
+TEST_CASE("undistortPixel inverts the camera's distortion and intrinsics") {
+  for (const Camera& cam : cameras(3))
+    for (double x = -0.6; x <= 0.6; x += 0.1)
+      for (double y = -0.4; y <= 0.4; y += 0.1) {
+        const Eigen::Vector2d xd = distort(cam, Eigen::Vector2d(x, y));
+        const Eigen::Vector2d px(cam.K(0, 0) * xd.x() + cam.K(0, 2), cam.K(1, 1) * xd.y() + cam.K(1, 2));
+        CHECK((undistortPixel(cam, px) - Eigen::Vector2d(x, y)).norm() < 1e-12);
+      }
+}
+
+TEST_CASE("DLT and the Ceres refinement each recover a noise-free point; the refinement converges from 10 cm off") {
+  const CameraSet cams = cameras(3);
+  const Eigen::Vector3d p_W(0.12, -0.3, 1.25);
+  std::vector<Observation> obs;
+  for (int c = 0; c < 3; ++c) obs.push_back({c, project(cams[static_cast<std::size_t>(c)], p_W), 0.5 + 0.2 * c});
+  const std::optional<Eigen::Vector3d> dlt = triangulateDlt(cams, obs);
+  REQUIRE(dlt);
+  CHECK((*dlt - p_W).norm() < 1e-9);
+  const Eigen::Vector3d refined = refineOnReprojection(cams, obs, p_W + Eigen::Vector3d(0.1, -0.05, 0.08), 30);
+  CHECK((refined - p_W).norm() < 1e-9);
+  CHECK_FALSE(triangulateDlt(cams, {obs[0]}));  // one view: nothing
+}
+
+TEST_CASE("noise-free views of a moving subject triangulate within 0.5 mm (2 and 3 cameras, via JSON files)") {
+  for (int n_cameras : {2, 3}) {
+    CAPTURE(n_cameras);
+    const Capture c = subjectOnly(n_cameras, 15);
+    TriangulationReport report;
+    const Skeleton s = triangulateDemo(writeDemo("exact" + std::to_string(n_cameras), c).string(), captureRate(), &report);
+    checkAgainstTruth(s, c.truth, kHalfMm);
+    CHECK(report.n_frames == 15);
+    CHECK(report.n_observations_rejected == 0);
+    CHECK(report.n_bone_rejections == 0);
+    CHECK(report.median_reprojection_px < 1e-6);
+  }
+}
+
+TEST_CASE("with sigma = 2 px pixel noise the median 3D error stays below the Cramer-Rao RMS bound") {
+  // Bound: for Gaussian pixel noise the maximum-likelihood point (what DLT + Ceres on equally
+  // weighted reprojection errors computes) has, to first order, covariance
+  // sigma^2 (sum_c J_c^T J_c)^-1 with J_c the 2x3 projection Jacobian. Its RMS 3D error
+  // sqrt(trace) is computed here per point from the geometry, independently of the
+  // triangulation code. The median of a 3D Gaussian error's norm is below its RMS (0.67 RMS
+  // for one dominant axis up to 0.89 RMS isotropic), so median(measured) <= median(RMS bound)
+  // must hold with margin; the lower bound 0.3 x catches a test that applies no noise.
+  // Here (2 cameras 3.3 m away, f = 900 px, 46 deg apart) the bound is ~1.4 cm, mostly depth.
+  const double sigma = 2.0;
+  Capture c = subjectOnly(2, 40, /*equal_confidence=*/true);
+  std::mt19937_64 rng(20261121);
+  std::normal_distribution<double> noise(0.0, sigma);
+  for (FramePeople& frame : c.people)
+    for (std::vector<Person2d>& cam : frame)
+      for (int i = 0; i < kNumSkeletonPoints; ++i) cam[0].px[i] += Eigen::Vector2d(noise(rng), noise(rng));
+  TriangulationReport report;
+  const Skeleton s = triangulateDemo(writeDemo("noisy", c).string(), captureRate(), &report);
+  REQUIRE(s.size() == c.truth.size());
+
+  std::vector<double> errors, bounds;
+  for (std::size_t k = 0; k < s.size(); ++k)
+    for (int i = 0; i < kNumSkeletonPoints; ++i) {
+      Eigen::Matrix3d fisher = Eigen::Matrix3d::Zero();
+      for (const Camera& cam : c.cams) {
+        Eigen::Matrix<double, 2, 3> J;
+        for (int a = 0; a < 3; ++a) {
+          Eigen::Vector3d h = Eigen::Vector3d::Zero();
+          h[a] = 1e-6;
+          J.col(a) = (project(cam, c.truth[k][static_cast<std::size_t>(i)] + h) -
+                      project(cam, c.truth[k][static_cast<std::size_t>(i)] - h)) / 2e-6;
+        }
+        fisher += J.transpose() * J / (sigma * sigma);
+      }
+      bounds.push_back(std::sqrt(fisher.inverse().trace()));
+      if (s[k].ok[i]) errors.push_back(error(s[k], c.truth[k], i));
+    }
+  const auto med = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const double median_error = med(errors), median_bound = med(bounds);
+  MESSAGE("sigma 2 px, 2 cameras: median 3D error " << median_error * 1e3 << " mm, median CRB RMS "
+                                                   << median_bound * 1e3 << " mm, valid " << errors.size() << "/"
+                                                   << bounds.size() << ", median reprojection "
+                                                   << report.median_reprojection_px << " px");
+  CHECK(median_error <= median_bound);
+  CHECK(median_error >= 0.3 * median_bound);
+  // Noise this small must not make points missing (outlier gate 10 px = 7 sigma of the
+  // residual, bone tolerance >= 5 cm = 3.5 x the bound): at most 1 % lost.
+  CHECK(static_cast<double>(errors.size()) >= 0.99 * static_cast<double>(bounds.size()));
+}
+
+TEST_CASE("the subject is chosen by multi-view consistency when it is not people[0]") {
+  // cam0: a bystander at the image edge (partly outside), a second person fully visible behind
+  // the subject, then the subject; cam1: a spurious partial body (three of the subject's
+  // points displaced), the background person, junk, and the subject. Order shuffled per frame.
+  Capture c = subjectOnly(2, 12);
+  std::mt19937_64 rng(7);
+  for (std::size_t k = 0; k < c.people.size(); ++k) {
+    const double t = static_cast<double>(k) / 30.0;
+    const Points edge_bystander = body(t + 1.0, Eigen::Vector3d(0.2, 2.6, 0.0));
+    const Points background = body(t + 2.0, Eigen::Vector3d(-1.5, 1.0, 0.0));
+    for (std::size_t cam = 0; cam < 2; ++cam) {
+      std::vector<Person2d>& people = c.people[k][cam];
+      people.push_back(view(c.cams[cam], edge_bystander, static_cast<int>(k), static_cast<int>(cam)));
+      people.push_back(view(c.cams[cam], background, static_cast<int>(k), static_cast<int>(cam)));
+      if (cam == 1) {
+        Person2d partial;
+        for (int i : {kRShoulder, kRElbow, kRWrist}) {
+          partial.px[i] = people[0].px[i] + Eigen::Vector2d(35.0, -20.0);
+          partial.confidence[i] = 0.6;
+        }
+        people.push_back(partial);
+        Person2d junk;
+        for (int i : {kNeck, kLHip, kNose}) junk.px[i] = Eigen::Vector2d(100.0 + 30 * i, 900.0), junk.confidence[i] = 0.3;
+        people.push_back(junk);
+      }
+      std::shuffle(people.begin(), people.end(), rng);
+      for (Person2d& p : people) p.person_id = -1;
+    }
+  }
+  const fs::path dir = writeDemo("multi", c);
+  const Skeleton s = triangulateDemo(dir.string(), captureRate());
+  checkAgainstTruth(s, c.truth, kHalfMm);
+
+  // Frame 0 on its own (no continuity): the same choice, by consistency and centrality.
+  const CameraKeypoints cam0 = readOpenPoseFolder((dir / "cam0").string(), PoseFormat::kBody25);
+  const CameraKeypoints cam1 = readOpenPoseFolder((dir / "cam1").string(), PoseFormat::kBody25);
+  const SubjectChoice choice = chooseSubject(c.cams, {&cam0.frames[0].people, &cam1.frames[0].people}, std::nullopt, {});
+  REQUIRE(choice.found);
+  CHECK((choice.centre_W - c.truth[0][kNeck]).norm() < 0.5);
+  // Continuity wins over centrality: starting from the background person, it is kept.
+  const Points background0 = body(2.0, Eigen::Vector3d(-1.5, 1.0, 0.0));
+  const SubjectChoice kept = chooseSubject(c.cams, {&cam0.frames[0].people, &cam1.frames[0].people},
+                                           background0[kNeck], {});
+  REQUIRE(kept.found);
+  CHECK((kept.centre_W - background0[kNeck]).norm() < 0.3);
+}
+
+TEST_CASE("0,0,0 keypoints and points seen by one camera are missing, never invented") {
+  SUBCASE("two cameras") {
+    Capture c = subjectOnly(2, 10);
+    std::vector<std::pair<int, int>> missing;
+    for (int k = 2; k <= 4; ++k) c.people[k][1][0].confidence[kRElbow] = 0.0, missing.emplace_back(k, kRElbow);
+    c.people[5][0][0].confidence[kLWrist] = 0.0, missing.emplace_back(5, kLWrist);
+    c.people[6][0][0].confidence[kRHand17] = 0.0, c.people[6][1][0].confidence[kRHand17] = 0.0;
+    missing.emplace_back(6, kRHand17);
+    c.people[7][1][0].confidence[kRWrist] = 0.01, missing.emplace_back(7, kRWrist);  // below min_confidence
+    c.people[8][0].clear(), c.people[8][1].clear();  // nobody detected in frame 8
+    for (int i = 0; i < kNumSkeletonPoints; ++i) missing.emplace_back(8, i);
+    TriangulationReport report;
+    const Skeleton s = triangulateDemo(writeDemo("undetected2", c).string(), captureRate(), &report);
+    checkAgainstTruth(s, c.truth, kHalfMm, missing);
+    CHECK(report.n_frames_without_subject == 1);
+    for (const auto& [k, i] : missing) CHECK(s[static_cast<std::size_t>(k)].p_W[static_cast<std::size_t>(i)] == Eigen::Vector3d::Zero());
+  }
+  SUBCASE("three cameras: one view lost is fine, two lost is missing") {
+    Capture c = subjectOnly(3, 6);
+    c.people[1][2][0].confidence[kRWrist] = 0.0;                                   // still 2 views
+    c.people[2][1][0].confidence[kRWrist] = 0.0, c.people[2][2][0].confidence[kRWrist] = 0.0;  // 1 view
+    const Skeleton s = triangulateDemo(writeDemo("undetected3", c).string(), captureRate());
+    checkAgainstTruth(s, c.truth, kHalfMm, {{2, kRWrist}});
+  }
+}
+
+TEST_CASE("BODY_25B files map onto BODY_25 names, MidHip from the 3D hips' mean") {
+  // Written with the test's own BODY_25B order (OpenPose's part list), not the library table.
+  const std::array<int, 25> b25b = {kNose,  kLEye,  kREye,   kLEar,   kREar,      kLShoulder, kRShoulder,
+                                    kLElbow, kRElbow, kLWrist, kRWrist, kLHip,      kRHip,      kLKnee,
+                                    kRKnee, kLAnkle, kRAnkle, -17 /* UpperNeck */, -18 /* HeadTop */,
+                                    kLBigToe, kLSmallToe, kLHeel, kRBigToe, kRSmallToe, kRHeel};
+  Capture c = subjectOnly(2, 8);
+  const fs::path dir = freshDir("body25b");
+  writeText(dir / "calibration.json", formatCalibrationJson(c.cams));
+  std::vector<Eigen::Vector3d> upper_neck;
+  for (std::size_t cam = 0; cam < 2; ++cam) {
+    fs::create_directories(dir / ("cam" + std::to_string(cam)));
+    for (std::size_t k = 0; k < c.truth.size(); ++k) {
+      const Points& t = c.truth[k];
+      if (cam == 0) upper_neck.push_back(t[kNeck] + Eigen::Vector3d(0.01, 0.0, 0.07));
+      nlohmann::json pose = nlohmann::json::array();
+      for (int slot : b25b) {
+        const Eigen::Vector3d p = slot == -17 ? upper_neck[k] : slot == -18 ? Eigen::Vector3d(t[kNose] + Eigen::Vector3d(-0.08, 0, 0.14))
+                                                                            : t[static_cast<std::size_t>(slot)];
+        const Eigen::Vector2d px = project(c.cams[cam], p);
+        pose.push_back(px.x()), pose.push_back(px.y()), pose.push_back(0.8);
+      }
+      nlohmann::json person = nlohmann::json::object();
+      person["person_id"] = nlohmann::json::array({-1});
+      person["pose_keypoints_2d"] = pose;
+      nlohmann::json doc = nlohmann::json::object();
+      doc["people"] = nlohmann::json::array({person});
+      writeText(dir / ("cam" + std::to_string(cam)) / ("b." + std::to_string(k) + ".json"), doc.dump());
+    }
+  }
+  TriangulateOptions opt = captureRate();
+  opt.format = PoseFormat::kBody25B;
+  const Skeleton s = triangulateDemo(dir.string(), opt);
+  REQUIRE(s.size() == c.truth.size());
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    for (int slot : b25b) {
+      if (slot < 0) continue;
+      REQUIRE(s[k].ok[slot]);
+      CHECK_MESSAGE(error(s[k], c.truth[k], slot) < kHalfMm, kSkeletonPointNames[slot] << " misplaced");
+    }
+    REQUIRE(s[k].ok[kNeck]);
+    CHECK((s[k].p_W[kNeck] - upper_neck[k]).norm() < kHalfMm);
+    REQUIRE(s[k].ok[kMidHip]);
+    const Eigen::Vector3d hips_mean = 0.5 * (c.truth[k][kRHip] + c.truth[k][kLHip]);
+    CHECK((s[k].p_W[kMidHip] - hips_mean).norm() < kHalfMm);
+    CHECK((c.truth[k][kMidHip] - hips_mean).norm() > 0.009);  // the truth's own MidHip differs
+    for (int h = 0; h < 4; ++h) CHECK_FALSE(s[k].ok[kRHand0 + h]);  // no hand array written
+  }
+  // Read as BODY_25 the same files put the right shoulder where BODY_25B has the right eye.
+  const Skeleton wrong = triangulateDemo(dir.string(), captureRate());
+  CHECK((wrong[0].p_W[kRShoulder] - c.truth[0][kRShoulder]).norm() > 0.1);
+}
+
+TEST_CASE("three cameras: a confident wrong keypoint in one camera is rejected and the point stays exact") {
+  Capture c = subjectOnly(3, 10);
+  for (FramePeople& frame : c.people) {
+    frame[2][0].px[kRWrist] += Eigen::Vector2d(45.0, -30.0);
+    frame[2][0].confidence[kRWrist] = 0.97;
+  }
+  c.people[3][0][0].px[kLElbow] += Eigen::Vector2d(0.0, 40.0);
+  TriangulationReport report;
+  const Skeleton s = triangulateDemo(writeDemo("outlier3", c).string(), captureRate(), &report);
+  checkAgainstTruth(s, c.truth, kHalfMm);
+  CHECK(report.n_observations_rejected == 11);
+  // Without the rule the same observations give a point centimetres off.
+  std::vector<Observation> obs;
+  for (int cam = 0; cam < 3; ++cam) {
+    const Person2d& p = c.people[0][static_cast<std::size_t>(cam)][0];
+    obs.push_back({cam, p.px[kRWrist], p.confidence[kRWrist]});
+  }
+  TriangulateOptions no_rule;
+  no_rule.outlier_px = 1e9;
+  const PointEstimate pulled = triangulatePoint(c.cams, obs, no_rule);
+  REQUIRE(pulled.ok);
+  CHECK((pulled.p_W - c.truth[0][kRWrist]).norm() > 0.01);
+  const PointEstimate kept = triangulatePoint(c.cams, obs, TriangulateOptions{});
+  CHECK(kept.n_rejected == 1);
+  CHECK(kept.n_used == 2);
+}
+
+TEST_CASE("two cameras: a wrong keypoint is marked missing, not triangulated to a wrong place") {
+  // Off the epipolar line the two rays miss each other (reprojection error): missing. Along the
+  // epipolar line geometry cannot see it; the bone-length rule does (forearm and hand bones).
+  Capture c = subjectOnly(2, 12);
+  c.people[4][1][0].px[kRWrist] += Eigen::Vector2d(0.0, 40.0);
+  const Camera& cam0 = c.cams[0];
+  const Eigen::Vector3d C0_W = -cam0.R_CW.transpose() * cam0.p_CW;
+  const Eigen::Vector3d true_wrist = c.truth[8][kRWrist];
+  const Eigen::Vector3d false_wrist = true_wrist + 0.3 * (true_wrist - C0_W).normalized();
+  c.people[8][1][0].px[kRWrist] = project(c.cams[1], false_wrist);
+  c.people[8][1][0].confidence[kRWrist] = 0.95;
+  const fs::path dir = writeDemo("outlier2", c);
+
+  TriangulationReport report;
+  const Skeleton s = triangulateDemo(dir.string(), captureRate(), &report);
+  checkAgainstTruth(s, c.truth, kHalfMm, {{4, kRWrist}, {8, kRWrist}});
+  CHECK(report.n_points_inconsistent == 1);
+  CHECK(report.n_bone_rejections == 1);
+
+  TriangulateOptions no_bones = captureRate();
+  no_bones.check_bone_lengths = false;
+  const Skeleton unchecked = triangulateDemo(dir.string(), no_bones);
+  REQUIRE(unchecked[8].ok[kRWrist]);  // consistent rays, so geometry alone accepts it ...
+  CHECK((unchecked[8].p_W[kRWrist] - false_wrist).norm() < kHalfMm);  // ... at the false place
+  CHECK_FALSE(unchecked[4].ok[kRWrist]);
+}
+
+TEST_CASE("resampling 30 -> 10 Hz keeps sample times and missing marks; between samples it interpolates") {
+  Skeleton in;
+  for (int k = 0; k <= 30; ++k) {
+    SkeletonFrame f;
+    f.t_s = k / 30.0;
+    for (int i = 0; i < kNumSkeletonPoints; ++i) {
+      f.p_W[static_cast<std::size_t>(i)] = Eigen::Vector3d(f.t_s, 2.0 * f.t_s + i, 3.0);
+      f.ok[static_cast<std::size_t>(i)] = true;
+    }
+    in.push_back(f);
+  }
+  in[6].ok[3] = false;   // t = 0.2: a 10 Hz sample
+  in[7].ok[4] = false;   // t = 0.2333: between 10 Hz samples, a neighbour of a 12 Hz sample
+  const Skeleton out10 = resampleSkeleton(in, 10.0);
+  REQUIRE(out10.size() == 11);
+  for (std::size_t j = 0; j < out10.size(); ++j) {
+    CHECK(out10[j].t_s == static_cast<double>(j) / 10.0);
+    for (int i = 0; i < kNumSkeletonPoints; ++i) {
+      const bool expect_ok = !(j == 2 && i == 3);
+      CHECK(out10[j].ok[i] == expect_ok);
+      if (expect_ok) CHECK(out10[j].p_W[i] == in[3 * j].p_W[i]);
+    }
+  }
+  const Skeleton out12 = resampleSkeleton(in, 12.0);
+  REQUIRE(out12.size() == 13);
+  CHECK_FALSE(out12[3].ok[4]);  // t = 0.25 lies between frames 7 (missing) and 8: stays missing
+  CHECK(out12[3].ok[3]);
+  CHECK((out12[3].p_W[3] - Eigen::Vector3d(0.25, 3.5, 3.0)).norm() < 1e-12);  // linear motion, exact
+  CHECK_THROWS_WITH_AS(resampleSkeleton(in, 0.0), doctest::Contains("--rate must be"), UserError);
+
+  // Through the whole pipeline: default options give 10 Hz samples equal to capture frames 0, 3, ...
+  const Capture c = subjectOnly(2, 31);
+  const Skeleton s = triangulateDemo(writeDemo("rate10", c).string(), TriangulateOptions{});
+  REQUIRE(s.size() == 11);
+  for (std::size_t j = 0; j < s.size(); ++j) {
+    CHECK(s[j].t_s == doctest::Approx(static_cast<double>(j) / 10.0));
+    for (int i = 0; i < kNumSkeletonPoints; ++i) CHECK(error(s[j], c.truth[3 * j], i) < kHalfMm);
+  }
+}
+
+TEST_CASE("noisy triangulation is deterministic: two runs give bitwise-equal skeletons") {
+  Capture c = subjectOnly(3, 10);
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> noise(0.0, 3.0);
+  for (FramePeople& frame : c.people)
+    for (std::vector<Person2d>& cam : frame)
+      for (int i = 0; i < kNumSkeletonPoints; ++i) cam[0].px[i] += Eigen::Vector2d(noise(rng), noise(rng));
+  const fs::path dir = writeDemo("determinism", c);
+  const Skeleton a = triangulateDemo(dir.string(), captureRate());
+  const Skeleton b = triangulateDemo(dir.string(), captureRate());
+  REQUIRE(a.size() == b.size());
+  for (std::size_t k = 0; k < a.size(); ++k)
+    for (int i = 0; i < kNumSkeletonPoints; ++i) {
+      CHECK(a[k].ok[i] == b[k].ok[i]);
+      CHECK(a[k].p_W[i] == b[k].p_W[i]);
+    }
+}
+
+TEST_CASE("an Anipose TOML calibration triangulates exactly like the JSON one") {
+  const Capture c = subjectOnly(2, 5);
+  const fs::path dir = writeDemo("toml", c);
+  std::ostringstream toml;
+  toml.precision(17);
+  toml << "[metadata]\nadjusted = false\n";
+  for (std::size_t i = 0; i < c.cams.size(); ++i) {
+    const Camera& cam = c.cams[i];
+    const Eigen::Vector3d r = rodriguesFromRotation(cam.R_CW);
+    toml << "\n[cam_" << i << "]\nname = \"" << cam.name << "\"\nsize = [ " << cam.width << ", " << cam.height << ",]\n"
+         << "matrix = [ [ " << cam.K(0, 0) << ", " << cam.K(0, 1) << ", " << cam.K(0, 2) << ",], [ 0.0, " << cam.K(1, 1)
+         << ", " << cam.K(1, 2) << ",], [ 0.0, 0.0, 1.0,],]\ndistortions = [ " << cam.dist[0] << ", " << cam.dist[1]
+         << ", " << cam.dist[2] << ", " << cam.dist[3] << ", " << cam.dist[4] << ",]\nrotation = [ " << r.x() << ", "
+         << r.y() << ", " << r.z() << ",]\ntranslation = [ " << cam.p_CW.x() << ", " << cam.p_CW.y() << ", "
+         << cam.p_CW.z() << ",]\n";
+  }
+  writeText(dir / "calibration.toml", toml.str());
+  const std::vector<std::string> dirs = {(dir / "cam0").string(), (dir / "cam1").string()};
+  const Skeleton from_toml = triangulateFolders(dirs, (dir / "calibration.toml").string(), captureRate());
+  const Skeleton from_json = triangulateFolders(dirs, (dir / "calibration.json").string(), captureRate());
+  checkAgainstTruth(from_toml, c.truth, kHalfMm);
+  for (std::size_t k = 0; k < from_toml.size(); ++k)
+    for (int i = 0; i < kNumSkeletonPoints; ++i) CHECK((from_toml[k].p_W[i] - from_json[k].p_W[i]).norm() < 1e-9);
+}
+
+TEST_CASE("input that cannot be triangulated gives one clear error") {
+  const Capture c = subjectOnly(2, 4);
+  const fs::path dir = writeDemo("errors", c);
+  const std::string cam0 = (dir / "cam0").string(), cam1 = (dir / "cam1").string();
+  const std::string calibration = (dir / "calibration.json").string();
+  const TriangulateOptions opt;
+  SUBCASE("camera count does not match folder count") {
+    CHECK_THROWS_WITH_AS(triangulateFolders({cam0, cam1, cam0}, calibration, opt),
+                         doctest::Contains("has 2 cameras but 3 keypoint folders were given"), UserError);
+  }
+  SUBCASE("one camera") {
+    const fs::path one = dir / "one.json";
+    writeText(one, formatCalibrationJson({c.cams[0]}));
+    CHECK_THROWS_WITH_AS(triangulateFolders({cam0}, one.string(), opt), doctest::Contains("at least 2 cameras"), UserError);
+  }
+  SUBCASE("folders with different frame counts") {
+    fs::remove(dir / "cam1" / "errors_000000000003_keypoints.json");
+    CHECK_THROWS_WITH_AS(triangulateFolders({cam0, cam1}, calibration, opt),
+                         doctest::Contains("different numbers of frames"), UserError);
+  }
+  SUBCASE("nobody in any frame of a camera") {
+    for (int k = 0; k < 4; ++k) {
+      char file[64];
+      std::snprintf(file, sizeof file, "errors_%012d_keypoints.json", k);
+      writeText(dir / "cam1" / file, "{\"version\": 1.3, \"people\": []}");
+    }
+    CHECK_THROWS_WITH_AS(triangulateFolders({cam0, cam1}, calibration, opt),
+                         doctest::Contains("no person detected in any of its 4 frames"), UserError);
+  }
+  SUBCASE("calibration that does not parse") {
+    writeText(dir / "calibration.json", "{\"cameras\": [}");
+    CHECK_THROWS_WITH_AS(triangulateDemo(dir.string(), opt), doctest::Contains("calibration JSON does not parse"), UserError);
+  }
+  SUBCASE("demo folder without cameras") {
+    const fs::path empty = freshDir("errors_empty");
+    CHECK_THROWS_WITH_AS(triangulateDemo(empty.string(), opt), doctest::Contains("no cam*/ keypoint folders"), UserError);
+  }
+}

@@ -1,0 +1,147 @@
+// Multi-camera triangulation of OpenPose keypoints into a 3D skeleton (DESIGN section 4).
+//
+// Per capture frame:
+//  1. Subject selection by multi-view consistency. For every pair of cameras and every pair of
+//     people in them, the upper-body points (Nose, Neck, shoulders, elbows, wrists, hips) seen
+//     by both are triangulated; a pairing is a candidate when >= 3 points agree (reprojection
+//     error <= outlier_px) and their median reprojection error is <= subject_px. Each further
+//     camera contributes the person whose points reproject best (median <= subject_px, >= 3
+//     points), or nobody. Among candidates, those whose 3D centre (torso points) lies within
+//     subject_max_jump_m of the last frame's subject are preferred (continuity). The score of a
+//     candidate is its number of consistent (camera, point) detections; among the candidates
+//     scoring >= 3/4 of the best, the winner is the one whose centre appears closest to the
+//     image centres (cameras frame their subject), then the higher score, then lower indices.
+//     No candidate -> the whole frame is missing. People order and person_id play no role.
+//  2. Per keypoint, the chosen people's detections with confidence >= min_confidence are
+//     triangulated: confidence-weighted DLT on undistorted points, then Ceres (TinySolver,
+//     autodiff, iteration cap) on the confidence-weighted pixel reprojection error.
+//  3. Outlier rule. A fit is consistent when every used camera sees the point in front of it
+//     and reprojects it within outlier_px. While a fit of n >= 3 cameras is inconsistent, the
+//     camera whose removal gives the smallest worst-case reprojection error of the others is
+//     dropped (counted as rejected). A fit of 2 cameras that is inconsistent (the two rays do
+//     not meet: a wrong keypoint off the epipolar line) makes the point missing: with two
+//     views one cannot tell which camera is wrong, so no point is invented.
+//     Fewer than 2 usable views -> missing.
+//  4. BODY_25B: MidHip = mean of the two 3D hips when both are valid.
+// Over the sequence (capture rate), the bone-length rule catches what geometry cannot with two
+// cameras (a wrong keypoint moved along its epipolar line): a bone whose length differs from
+// its sequence median by more than max(bone_tolerance * median, 5 cm) is bad; greedily, the
+// point with the most bad bones (all of its checked bones bad) is marked missing, until no
+// point has all its bones bad. Bones need >= 5 valid samples and a median >= 5 cm.
+// Finally the sequence is resampled from fps to rate_hz (resampleSkeleton).
+#pragma once
+
+#include "nao/body25.hpp"
+#include "nao/tools/camera.hpp"
+#include "nao/tools/openpose.hpp"
+#include "nao/tools/skeleton_csv.hpp"
+
+#include <Eigen/Core>
+
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace nao::tools {
+
+struct TriangulateOptions {
+  PoseFormat format = PoseFormat::kBody25;
+  double fps = 30.0;                ///< capture rate of the keypoint files, Hz
+  double rate_hz = 10.0;            ///< output rate, Hz
+  double min_confidence = 0.05;     ///< detections below are not used
+  double outlier_px = 10.0;         ///< max reprojection error of an accepted observation, px
+  double subject_px = 15.0;         ///< max median reprojection error of a person match, px
+  double subject_max_jump_m = 0.5;  ///< continuity gate for the subject's torso centre, m
+  bool check_bone_lengths = true;   ///< apply the bone-length rule over the sequence
+  double bone_tolerance = 0.25;     ///< relative bone-length deviation marked bad
+  int max_refine_iterations = 30;   ///< Ceres iteration cap per point
+  std::function<void(int done, int total)> progress;  ///< called after each capture frame
+};
+
+/// What happened, for the CLI summary and the tests.
+struct TriangulationReport {
+  int n_frames = 0;                 ///< capture frames
+  int n_frames_without_subject = 0; ///< no consistent person across >= 2 cameras
+  int n_points_valid = 0;           ///< valid points at capture rate (after the bone rule)
+  int n_points_missing = 0;
+  int n_points_inconsistent = 0;    ///< >= 2 views that never agreed -> missing
+  int n_observations_rejected = 0;  ///< camera observations dropped as outliers
+  int n_bone_rejections = 0;        ///< points marked missing by the bone-length rule
+  double median_reprojection_px = 0.0;  ///< over valid points, RMS over their cameras
+};
+
+/// One camera's detection of one point.
+struct Observation {
+  int camera = 0;                 ///< index into the CameraSet
+  Eigen::Vector2d px;             ///< pixel (distorted image)
+  double confidence = 1.0;        ///< weight, (0, 1]
+};
+
+/// A triangulated point.
+struct PointEstimate {
+  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();  ///< world frame, m (meaningless when !ok)
+  bool ok = false;
+  int n_used = 0;              ///< cameras in the final fit
+  int n_rejected = 0;          ///< cameras dropped by the outlier rule
+  bool inconsistent = false;   ///< had >= 2 views but none agreed
+  double rms_px = 0.0;         ///< RMS reprojection error over the used cameras
+};
+
+/// Normalised undistorted image coordinates (x/z, y/z) of pixel `px`: inverse of camera.hpp's
+/// distort() and K by Newton iteration (to 1e-14 or 50 iterations).
+Eigen::Vector2d undistortPixel(const Camera& cam, const Eigen::Vector2d& px);
+
+/// Confidence-weighted linear (DLT) triangulation from >= 2 observations (rows scaled by
+/// sqrt(confidence) * focal length). nullopt if degenerate (point at infinity).
+std::optional<Eigen::Vector3d> triangulateDlt(const CameraSet& cameras, const std::vector<Observation>& obs);
+
+/// Ceres refinement of p0_W on the confidence-weighted pixel reprojection error.
+Eigen::Vector3d refineOnReprojection(const CameraSet& cameras, const std::vector<Observation>& obs,
+                                     const Eigen::Vector3d& p0_W, int max_iterations);
+
+/// One point from all its observations, with the outlier rule of the file comment.
+PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt);
+
+/// Subject chosen in one frame: per camera the index into its people, or -1.
+struct SubjectChoice {
+  bool found = false;
+  std::vector<int> person;                          ///< per camera
+  int n_points = 0;                                 ///< consistent upper-body points
+  double median_px = 0.0;
+  Eigen::Vector3d centre_W = Eigen::Vector3d::Zero();  ///< torso centre, m
+};
+
+/// Subject selection of the file comment. `people[c]` is camera c's people of this frame;
+/// `previous_centre_W` is the last frame's subject centre, if any.
+SubjectChoice chooseSubject(const CameraSet& cameras, const std::vector<const std::vector<Person2d>*>& people,
+                            const std::optional<Eigen::Vector3d>& previous_centre_W, const TriangulateOptions& opt);
+
+/// Triangulates a whole capture (frames paired across cameras by sorted position, time
+/// k / fps), applying the bone-length rule when enabled; no resampling. Throws UserError if
+/// fewer than 2 cameras, the camera and folder counts differ, the folders hold different
+/// numbers of frames, or a camera detects nobody in any frame.
+Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKeypoints>& keypoints,
+                            const TriangulateOptions& opt, TriangulationReport* report = nullptr);
+
+/// Bone-length rule of the file comment; returns how many points it marked missing.
+int rejectBoneLengthOutliers(Skeleton& frames, double tolerance);
+
+/// Resamples to rate_hz: times t0 + j / rate_hz up to the last input time. A time that falls on
+/// an input sample (within 1e-9 s) copies it; otherwise each point is interpolated linearly
+/// between the two neighbouring samples when both are valid, and is missing otherwise.
+Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz);
+
+/// Folders (one per camera, in calibration order) + calibration file -> resampled skeleton.
+Skeleton triangulateFolders(const std::vector<std::string>& camera_dirs, const std::string& calibration_path,
+                            const TriangulateOptions& opt, TriangulationReport* report = nullptr);
+
+/// A synthesiser demonstration folder: its cam*/ folders (sorted by camera number) and
+/// calibration.json -> resampled skeleton.
+Skeleton triangulateDemo(const std::string& demo_dir, const TriangulateOptions& opt,
+                         TriangulationReport* report = nullptr);
+
+/// The cam*/ folders of a demonstration, sorted by camera number.
+std::vector<std::string> demoCameraDirs(const std::string& demo_dir);
+
+}  // namespace nao::tools

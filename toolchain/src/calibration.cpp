@@ -1,0 +1,248 @@
+#include "nao/tools/calibration.hpp"
+
+#include "nao/tools/command.hpp"
+
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+#include <toml++/toml.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+namespace nao::tools {
+namespace {
+
+using nlohmann::json;
+
+std::string shapeOf(const json& v) {
+  if (v.is_array()) return "an array of " + std::to_string(v.size());
+  if (v.is_number()) return "a number";
+  if (v.is_string()) return "a string";
+  if (v.is_object()) return "a table";
+  if (v.is_boolean()) return "a boolean";
+  return "null";
+}
+
+// Reads a flat array of numbers of one of the allowed lengths.
+std::vector<double> numbers(const json& cam, const char* field, std::initializer_list<std::size_t> lengths,
+                            const std::string& where, const char* meaning) {
+  const auto it = cam.find(field);
+  if (it == cam.end()) throw UserError(where + ": missing field '" + field + "' (" + meaning + ")");
+  const json& v = *it;
+  const bool length_ok = v.is_array() && std::find(lengths.begin(), lengths.end(), v.size()) != lengths.end();
+  const bool all_numbers = v.is_array() && std::all_of(v.begin(), v.end(), [](const json& e) { return e.is_number(); });
+  if (!length_ok || !all_numbers)
+    throw UserError(where + ": field '" + field + "' is " + shapeOf(v) + (all_numbers ? "" : " (not all numbers)") +
+                    ", expected " + meaning);
+  std::vector<double> out;
+  for (const json& e : v) {
+    out.push_back(e.get<double>());
+    if (!std::isfinite(out.back())) throw UserError(where + ": field '" + field + "' holds a non-finite value");
+  }
+  return out;
+}
+
+bool isMatrix3(const json& v) {
+  if (!v.is_array() || v.size() != 3) return false;
+  for (const json& row : v) {
+    if (!row.is_array() || row.size() != 3) return false;
+    for (const json& e : row)
+      if (!e.is_number()) return false;
+  }
+  return true;
+}
+
+Eigen::Matrix3d matrix3(const json& v, const std::string& where, const char* field) {
+  Eigen::Matrix3d M;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      M(r, c) = v[static_cast<std::size_t>(r)][static_cast<std::size_t>(c)].get<double>();
+      if (!std::isfinite(M(r, c))) throw UserError(where + ": field '" + field + "' holds a non-finite value");
+    }
+  return M;
+}
+
+std::string num(double v) {
+  std::ostringstream s;
+  s << v;
+  return s.str();
+}
+
+// One camera from a JSON object (TOML tables are converted to JSON first).
+Camera cameraFromJson(const json& cam_json, const std::string& where, const std::string& default_name) {
+  if (!cam_json.is_object()) throw UserError(where + ": a camera must be an object/table, got " + shapeOf(cam_json));
+  Camera cam;
+  const auto name = cam_json.find("name");
+  cam.name = (name != cam_json.end() && name->is_string()) ? name->get<std::string>() : default_name;
+
+  const std::vector<double> size = numbers(cam_json, "size", {2}, where, "[width, height] in pixels");
+  if (size[0] < 1.0 || size[1] < 1.0 || size[0] != std::floor(size[0]) || size[1] != std::floor(size[1]) ||
+      size[0] > 1e6 || size[1] > 1e6)
+    throw UserError(where + ": 'size' must be two positive integers [width, height], got [" + num(size[0]) + ", " +
+                    num(size[1]) + "]");
+  cam.width = static_cast<int>(size[0]);
+  cam.height = static_cast<int>(size[1]);
+
+  const auto matrix = cam_json.find("matrix");
+  if (matrix == cam_json.end()) throw UserError(where + ": missing field 'matrix' (3x3 intrinsics K, px)");
+  if (!isMatrix3(*matrix))
+    throw UserError(where + ": field 'matrix' is " + shapeOf(*matrix) + ", expected a 3x3 array of numbers (K, px)");
+  cam.K = matrix3(*matrix, where, "matrix");
+  if (!(cam.K(0, 0) > 0.0) || !(cam.K(1, 1) > 0.0))
+    throw UserError(where + ": focal lengths must be positive, got fx=" + num(cam.K(0, 0)) + ", fy=" + num(cam.K(1, 1)));
+  if (cam.K(1, 0) != 0.0 || cam.K(2, 0) != 0.0 || cam.K(2, 1) != 0.0 || cam.K(2, 2) != 1.0)
+    throw UserError(where + ": 'matrix' must have the form [[fx, s, cx], [0, fy, cy], [0, 0, 1]]");
+
+  const std::vector<double> dist =
+      numbers(cam_json, "distortions", {4, 5}, where, "OpenCV distortion [k1, k2, p1, p2] or [k1, k2, p1, p2, k3]");
+  for (std::size_t i = 0; i < dist.size(); ++i) cam.dist[static_cast<Eigen::Index>(i)] = dist[i];
+
+  const auto rotation = cam_json.find("rotation");
+  if (rotation == cam_json.end()) throw UserError(where + ": missing field 'rotation' (Rodrigues vector, world -> camera)");
+  if (isMatrix3(*rotation)) {
+    const Eigen::Matrix3d R = matrix3(*rotation, where, "rotation");
+    const double orthogonality = (R.transpose() * R - Eigen::Matrix3d::Identity()).norm();
+    if (orthogonality > 1e-6 || R.determinant() < 0.0)
+      throw UserError(where + ": 'rotation' matrix is not a rotation (|R^T R - I| = " + num(orthogonality) +
+                      ", det = " + num(R.determinant()) + ")");
+    cam.R_CW = R;
+  } else {
+    const std::vector<double> r =
+        numbers(cam_json, "rotation", {3}, where, "a Rodrigues vector [rx, ry, rz] or a 3x3 rotation matrix");
+    cam.R_CW = rotationFromRodrigues(Eigen::Vector3d(r[0], r[1], r[2]));
+  }
+  const std::vector<double> t = numbers(cam_json, "translation", {3}, where, "[tx, ty, tz] in metres, world -> camera");
+  cam.p_CW = Eigen::Vector3d(t[0], t[1], t[2]);
+  return cam;
+}
+
+json tomlToJson(const toml::node& node) {
+  if (const auto* t = node.as_table()) {
+    json out = json::object();
+    for (const auto& [key, value] : *t) out[std::string(key.str())] = tomlToJson(value);
+    return out;
+  }
+  if (const auto* a = node.as_array()) {
+    json out = json::array();
+    for (const toml::node& e : *a) out.push_back(tomlToJson(e));
+    return out;
+  }
+  if (const auto* i = node.as_integer()) return json(i->get());
+  if (const auto* f = node.as_floating_point()) return json(f->get());
+  if (const auto* s = node.as_string()) return json(s->get());
+  if (const auto* b = node.as_boolean()) return json(b->get());
+  return json("<date/time>");
+}
+
+}  // namespace
+
+Eigen::Matrix3d rotationFromRodrigues(const Eigen::Vector3d& r) {
+  const double angle = r.norm();
+  if (angle < 1e-12) {
+    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+    R(0, 1) = -r.z(), R(0, 2) = r.y(), R(1, 0) = r.z(), R(1, 2) = -r.x(), R(2, 0) = -r.y(), R(2, 1) = r.x();
+    return R;
+  }
+  return Eigen::AngleAxisd(angle, r / angle).toRotationMatrix();
+}
+
+Eigen::Vector3d rodriguesFromRotation(const Eigen::Matrix3d& R) {
+  const Eigen::AngleAxisd aa(R);
+  return aa.angle() * aa.axis();
+}
+
+CameraSet parseCalibrationJson(const std::string& text, const std::string& source) {
+  json doc;
+  try {
+    doc = json::parse(text);
+  } catch (const json::parse_error& e) {
+    std::string what = e.what();
+    const auto bracket = what.find("] ");
+    if (bracket != std::string::npos) what = what.substr(bracket + 2);
+    throw UserError(source + ": calibration JSON does not parse: " + what);
+  }
+  if (!doc.is_object() || !doc.contains("cameras"))
+    throw UserError(source + ": no 'cameras' array (expected {\"cameras\": [{...}, ...]})");
+  const json& cams = doc["cameras"];
+  if (!cams.is_array()) throw UserError(source + ": 'cameras' is " + shapeOf(cams) + ", expected an array");
+  if (cams.empty()) throw UserError(source + ": 'cameras' is empty");
+  CameraSet out;
+  for (std::size_t i = 0; i < cams.size(); ++i) {
+    const std::string name = (cams[i].is_object() && cams[i].contains("name") && cams[i]["name"].is_string())
+                                 ? cams[i]["name"].get<std::string>()
+                                 : "cam" + std::to_string(i);
+    out.push_back(cameraFromJson(cams[i], source + ": camera " + std::to_string(i) + " '" + name + "'", name));
+  }
+  return out;
+}
+
+CameraSet parseCalibrationToml(const std::string& text, const std::string& source) {
+  toml::table doc;
+  try {
+    doc = toml::parse(text, source);
+  } catch (const toml::parse_error& e) {
+    throw UserError(source + ":" + std::to_string(e.source().begin.line) + ":" + std::to_string(e.source().begin.column) +
+                    ": calibration TOML does not parse: " + std::string(e.description()));
+  }
+  // Camera tables in file order: toml++ keeps tables sorted by key, the source line does not.
+  struct Section {
+    std::uint32_t line;
+    std::string key;
+    const toml::table* table;
+  };
+  std::vector<Section> sections;
+  for (const auto& [key, value] : doc) {
+    const toml::table* t = value.as_table();
+    const std::string k(key.str());
+    const bool named_camera = k.size() > 4 && k.compare(0, 4, "cam_") == 0 &&
+                              std::all_of(k.begin() + 4, k.end(), [](char c) { return c >= '0' && c <= '9'; });
+    if (t == nullptr) {
+      if (named_camera) throw UserError(source + ": [" + k + "] must be a table of camera fields");
+      continue;
+    }
+    if (named_camera || t->contains("matrix")) sections.push_back({t->source().begin.line, k, t});
+  }
+  if (sections.empty())
+    throw UserError(source + ": no camera sections (expected [cam_0], [cam_1], ... with size, matrix, distortions, "
+                             "rotation, translation)");
+  std::stable_sort(sections.begin(), sections.end(), [](const Section& a, const Section& b) { return a.line < b.line; });
+  CameraSet out;
+  for (const Section& s : sections)
+    out.push_back(cameraFromJson(tomlToJson(*s.table), source + ": camera [" + s.key + "]", s.key));
+  return out;
+}
+
+CameraSet readCalibration(const std::string& path) {
+  const auto dot = path.find_last_of('.');
+  std::string ext = dot == std::string::npos ? "" : path.substr(dot + 1);
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (ext != "json" && ext != "toml")
+    throw UserError("calibration " + path + ": unknown file type, expected a .json or .toml file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw UserError("cannot open calibration file " + path);
+  std::ostringstream text;
+  text << in.rdbuf();
+  return ext == "json" ? parseCalibrationJson(text.str(), path) : parseCalibrationToml(text.str(), path);
+}
+
+std::string formatCalibrationJson(const CameraSet& cameras) {
+  json doc;
+  doc["cameras"] = json::array();
+  for (const Camera& c : cameras) {
+    json cam;
+    cam["name"] = c.name;
+    cam["size"] = {c.width, c.height};
+    cam["matrix"] = json::array();
+    for (int r = 0; r < 3; ++r) cam["matrix"].push_back({c.K(r, 0), c.K(r, 1), c.K(r, 2)});
+    cam["distortions"] = {c.dist[0], c.dist[1], c.dist[2], c.dist[3], c.dist[4]};
+    const Eigen::Vector3d r = rodriguesFromRotation(c.R_CW);
+    cam["rotation"] = {r.x(), r.y(), r.z()};
+    cam["translation"] = {c.p_CW.x(), c.p_CW.y(), c.p_CW.z()};
+    doc["cameras"].push_back(cam);
+  }
+  return doc.dump(1);
+}
+
+}  // namespace nao::tools

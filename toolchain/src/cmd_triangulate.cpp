@@ -1,0 +1,110 @@
+// nao_toolchain triangulate: OpenPose keypoints of >= 2 calibrated cameras -> 3D skeleton CSV.
+#include "nao/tools/command.hpp"
+#include "nao/tools/openpose.hpp"
+#include "nao/tools/skeleton_csv.hpp"
+#include "nao/tools/triangulate.hpp"
+
+#include <cstdio>
+#include <unistd.h>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace nao::tools {
+namespace {
+
+struct TriangulateArgs {
+  std::string demo;
+  std::vector<std::string> keypoints;
+  std::string calibration;
+  std::string format = "body25";
+  double fps = 30.0;
+  double rate = 10.0;
+  double min_confidence = 0.05;
+  double outlier_px = 10.0;
+  bool no_bone_check = false;
+  std::string out;
+};
+
+void run(const TriangulateArgs& args) {
+  if (args.demo.empty() && (args.keypoints.empty() || args.calibration.empty()))
+    throw UserError("give either --demo DEMO_DIR, or --keypoints CAM_DIR (once per camera) and --calibration FILE");
+  if (!args.demo.empty() && (!args.keypoints.empty() || !args.calibration.empty()))
+    throw UserError("--demo reads the demonstration's own cam*/ folders and calibration.json; "
+                    "do not combine it with --keypoints or --calibration");
+  if (args.demo.empty() && args.keypoints.size() < 2)
+    throw UserError("triangulation needs at least 2 cameras: give --keypoints once per camera folder");
+
+  TriangulateOptions opt;
+  opt.format = parsePoseFormat(args.format);
+  opt.fps = args.fps;
+  opt.rate_hz = args.rate;
+  opt.min_confidence = args.min_confidence;
+  opt.outlier_px = args.outlier_px;
+  opt.check_bone_lengths = !args.no_bone_check;
+  // On a terminal one line updated in place every 10 %; in a log one line every 25 %.
+  const bool tty = isatty(fileno(stderr)) != 0;
+  const int step = tty ? 10 : 25;
+  int last_step = -1;
+  opt.progress = [tty, step, &last_step](int done, int total) {
+    const int percent = 100 * done / total;
+    if (percent / step == last_step) return;
+    last_step = percent / step;
+    std::cerr << (tty ? "\r" : "") << "triangulating frame " << done << "/" << total << " (" << percent << "%)"
+              << (tty && done < total ? "" : "\n") << std::flush;
+  };
+
+  const std::vector<std::string> dirs = args.demo.empty() ? args.keypoints : demoCameraDirs(args.demo);
+  const std::string calibration = args.demo.empty() ? args.calibration : args.demo + "/calibration.json";
+  std::cerr << "reading " << dirs.size() << " camera folders (" << args.format << "), calibration " << calibration
+            << "\n";
+  TriangulationReport report;
+  const Skeleton skeleton = triangulateFolders(dirs, calibration, opt, &report);
+  writeSkeletonCsv(args.out, skeleton);
+
+  const int n_points = report.n_points_valid + report.n_points_missing;
+  std::printf("%d capture frames at %g Hz -> %zu samples at %g Hz in %s\n", report.n_frames, args.fps,
+              skeleton.size(), args.rate, args.out.c_str());
+  std::printf("valid points %d/%d (%.1f%%), frames without a subject %d, inconsistent points %d, "
+              "outlier observations rejected %d, bone-length rejections %d, median reprojection error %.2f px\n",
+              report.n_points_valid, n_points, n_points > 0 ? 100.0 * report.n_points_valid / n_points : 0.0,
+              report.n_frames_without_subject, report.n_points_inconsistent, report.n_observations_rejected,
+              report.n_bone_rejections, report.median_reprojection_px);
+}
+
+void setup(CLI::App& app) {
+  auto args = std::make_shared<TriangulateArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "triangulate",
+      "Triangulate OpenPose keypoints from two or more calibrated cameras into a 3D skeleton CSV\n"
+      "(confidence-weighted DLT, outlier cameras rejected by reprojection error, Ceres refinement;\n"
+      "points seen by fewer than two consistent cameras are written as missing, never invented).");
+  auto* demo = cmd->add_option("--demo", args->demo,
+                               "synthesiser demonstration folder: reads its cam*/ folders (sorted) and calibration.json");
+  auto* kp = cmd->add_option("--keypoints", args->keypoints,
+                             "OpenPose JSON folder of one camera; repeat once per camera, in calibration order");
+  auto* calib = cmd->add_option("--calibration", args->calibration, "calibration file, our .json or Anipose-style .toml");
+  demo->excludes(kp)->excludes(calib);
+  cmd->add_option("--format", args->format, "keypoint layout of pose_keypoints_2d")
+      ->check(CLI::IsMember({"body25", "body25b"}))
+      ->capture_default_str();
+  cmd->add_option("--fps", args->fps, "capture rate of the keypoint files, Hz")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--rate", args->rate, "output sample rate, Hz")->check(CLI::PositiveNumber)->capture_default_str();
+  cmd->add_option("--min-confidence", args->min_confidence, "ignore detections with a lower confidence")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--outlier-px", args->outlier_px, "max reprojection error of an accepted camera observation, px")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_flag("--no-bone-check", args->no_bone_check, "do not mark points whose bone lengths jump as missing");
+  cmd->add_option("--out", args->out, "skeleton CSV to write (docs/formats.md)")->required();
+  cmd->callback([args] { run(*args); });
+}
+
+}  // namespace
+}  // namespace nao::tools
+
+NAO_REGISTER_COMMAND(triangulate, nao::tools::setup)

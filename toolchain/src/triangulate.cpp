@@ -1,0 +1,502 @@
+#include "nao/tools/triangulate.hpp"
+
+#include "nao/tools/calibration.hpp"
+#include "nao/tools/command.hpp"
+
+#include <Eigen/SVD>
+#include <ceres/tiny_solver.h>
+#include <ceres/tiny_solver_autodiff_function.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+#include <utility>
+
+namespace nao::tools {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kTimeEps = 1e-9;  // s; two times closer than this are the same sample
+
+// Points that identify a person across cameras (upper body, present in both layouts).
+constexpr std::array<int, 11> kSubjectPoints = {kNose,      kNeck,   kRShoulder, kRElbow, kRWrist, kLShoulder,
+                                                kLElbow,    kLWrist, kMidHip,    kRHip,   kLHip};
+// Points whose mean is a person's centre (torso).
+constexpr std::array<int, 6> kTorsoPoints = {kNeck, kRShoulder, kLShoulder, kMidHip, kRHip, kLHip};
+
+// Bones of the bone-length rule (rigid segments of a human).
+constexpr std::array<std::pair<int, int>, 20> kBones = {{
+    {kNose, kNeck},       {kNeck, kRShoulder},  {kNeck, kLShoulder},   {kRShoulder, kLShoulder},
+    {kRShoulder, kRElbow}, {kRElbow, kRWrist},  {kLShoulder, kLElbow}, {kLElbow, kLWrist},
+    {kRShoulder, kRHip},  {kLShoulder, kLHip},  {kRHip, kLHip},        {kRHip, kRKnee},
+    {kRKnee, kRAnkle},    {kLHip, kLKnee},      {kLKnee, kLAnkle},     {kRWrist, kRHand9},
+    {kRHand0, kRHand5},   {kRHand0, kRHand9},   {kRHand0, kRHand17},   {kRHand5, kRHand17},
+}};
+constexpr int kMinBoneSamples = 5;
+constexpr double kMinBoneLength = 0.05;     // m; shorter bones are too noisy to judge
+constexpr double kMinBoneDeviation = 0.05;  // m; absolute floor of the tolerance (hand bones are short)
+
+// camera.hpp's project(), templated for automatic differentiation. False behind the camera.
+template <typename T>
+bool projectT(const Camera& cam, const T* p_W, T* px) {
+  T p_C[3];
+  for (int r = 0; r < 3; ++r)
+    p_C[r] = T(cam.R_CW(r, 0)) * p_W[0] + T(cam.R_CW(r, 1)) * p_W[1] + T(cam.R_CW(r, 2)) * p_W[2] + T(cam.p_CW(r));
+  if (p_C[2] <= T(1e-9)) return false;
+  const T x = p_C[0] / p_C[2], y = p_C[1] / p_C[2];
+  const double k1 = cam.dist[0], k2 = cam.dist[1], p1 = cam.dist[2], p2 = cam.dist[3], k3 = cam.dist[4];
+  const T r2 = x * x + y * y;
+  const T radial = T(1.0) + r2 * (T(k1) + r2 * (T(k2) + r2 * T(k3)));
+  const T xd = x * radial + T(2.0 * p1) * x * y + T(p2) * (r2 + T(2.0) * x * x);
+  const T yd = y * radial + T(p1) * (r2 + T(2.0) * y * y) + T(2.0 * p2) * x * y;
+  px[0] = T(cam.K(0, 0)) * xd + T(cam.K(0, 1)) * yd + T(cam.K(0, 2));
+  px[1] = T(cam.K(1, 1)) * yd + T(cam.K(1, 2));
+  return true;
+}
+
+// Pixel reprojection error of p_W in one observation; infinite behind the camera.
+double reprojectionError(const Camera& cam, const Eigen::Vector3d& p_W, const Eigen::Vector2d& px) {
+  if (toCamera(cam, p_W).z() <= 1e-9) return kInf;
+  return (project(cam, p_W) - px).norm();
+}
+
+struct ReprojectionCost {
+  const CameraSet* cameras;
+  const std::vector<Observation>* obs;
+  int NumResiduals() const { return 2 * static_cast<int>(obs->size()); }
+  template <typename T>
+  bool operator()(const T* p_W, T* residual) const {
+    for (std::size_t i = 0; i < obs->size(); ++i) {
+      const Observation& o = (*obs)[i];
+      T px[2];
+      if (!projectT((*cameras)[static_cast<std::size_t>(o.camera)], p_W, px)) return false;
+      const double w = std::sqrt(o.confidence);
+      residual[2 * i] = T(w) * (px[0] - T(o.px.x()));
+      residual[2 * i + 1] = T(w) * (px[1] - T(o.px.y()));
+    }
+    return true;
+  }
+};
+
+struct Fit {
+  bool ok = false;
+  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();
+  std::vector<double> err_px;
+  double max_err_px = kInf;
+};
+
+// DLT (+ optional refinement) and the per-camera reprojection errors.
+Fit fitPoint(const CameraSet& cameras, const std::vector<Observation>& obs, int refine_iterations) {
+  Fit fit;
+  const std::optional<Eigen::Vector3d> dlt = triangulateDlt(cameras, obs);
+  if (!dlt) return fit;
+  fit.p_W = *dlt;
+  if (refine_iterations > 0) {
+    const Eigen::Vector3d refined = refineOnReprojection(cameras, obs, *dlt, refine_iterations);
+    if (refined.allFinite()) fit.p_W = refined;
+  }
+  fit.max_err_px = 0.0;
+  for (const Observation& o : obs) {
+    fit.err_px.push_back(reprojectionError(cameras[static_cast<std::size_t>(o.camera)], fit.p_W, o.px));
+    fit.max_err_px = std::max(fit.max_err_px, fit.err_px.back());
+  }
+  fit.ok = std::isfinite(fit.max_err_px);
+  return fit;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  if (v.size() % 2 == 1) return *mid;
+  const double upper = *mid;
+  return 0.5 * (upper + *std::max_element(v.begin(), mid));
+}
+
+bool usable(const Person2d& p, int i, const TriangulateOptions& opt) {
+  return p.detected(i) && p.confidence[i] >= opt.min_confidence && p.px[i].allFinite();
+}
+
+// A subject candidate under construction.
+struct Candidate {
+  std::vector<int> person;
+  int score = 0;  // consistent (camera, point) detections
+  double median_px = kInf;
+  double off_centre = 0.0;  // mean distance of the centre's image from the image centres / diagonal
+  Eigen::Vector3d centre_W = Eigen::Vector3d::Zero();
+};
+
+}  // namespace
+
+Eigen::Vector2d undistortPixel(const Camera& cam, const Eigen::Vector2d& px) {
+  const double yd = (px.y() - cam.K(1, 2)) / cam.K(1, 1);
+  const double xd = (px.x() - cam.K(0, 2) - cam.K(0, 1) * yd) / cam.K(0, 0);
+  const Eigen::Vector2d target(xd, yd);
+  Eigen::Vector2d x = target;
+  // Newton on distort(x) = target with a central-difference Jacobian.
+  for (int it = 0; it < 50; ++it) {
+    const Eigen::Vector2d r = distort(cam, x) - target;
+    if (r.norm() < 1e-14) break;
+    Eigen::Matrix2d J;
+    const double h = 1e-7;
+    for (int c = 0; c < 2; ++c) {
+      Eigen::Vector2d dx = Eigen::Vector2d::Zero();
+      dx[c] = h;
+      J.col(c) = (distort(cam, x + dx) - distort(cam, x - dx)) / (2.0 * h);
+    }
+    const Eigen::Vector2d step = J.fullPivLu().solve(r);
+    if (!step.allFinite()) break;
+    x -= step;
+  }
+  return x;
+}
+
+std::optional<Eigen::Vector3d> triangulateDlt(const CameraSet& cameras, const std::vector<Observation>& obs) {
+  if (obs.size() < 2) return std::nullopt;
+  Eigen::Matrix<double, Eigen::Dynamic, 4> A(2 * static_cast<Eigen::Index>(obs.size()), 4);
+  for (std::size_t i = 0; i < obs.size(); ++i) {
+    const Camera& cam = cameras[static_cast<std::size_t>(obs[i].camera)];
+    const Eigen::Vector2d x = undistortPixel(cam, obs[i].px);
+    Eigen::Matrix<double, 3, 4> P;
+    P.leftCols<3>() = cam.R_CW;
+    P.col(3) = cam.p_CW;
+    // Rows scaled to pixels (focal length) and by sqrt(confidence), so the algebraic error
+    // approximates the same confidence-weighted pixel error the refinement minimises.
+    const double w = std::sqrt(obs[i].confidence) * 0.5 * (cam.K(0, 0) + cam.K(1, 1));
+    const auto r = static_cast<Eigen::Index>(2 * i);
+    A.row(r) = w * (x.x() * P.row(2) - P.row(0));
+    A.row(r + 1) = w * (x.y() * P.row(2) - P.row(1));
+  }
+  const Eigen::JacobiSVD<Eigen::Matrix<double, Eigen::Dynamic, 4>> svd(A, Eigen::ComputeFullV);
+  const Eigen::Vector4d X = svd.matrixV().col(3);
+  if (!X.allFinite() || std::abs(X[3]) <= 1e-12 * X.head<3>().norm()) return std::nullopt;
+  return Eigen::Vector3d(X.head<3>() / X[3]);
+}
+
+Eigen::Vector3d refineOnReprojection(const CameraSet& cameras, const std::vector<Observation>& obs,
+                                     const Eigen::Vector3d& p0_W, int max_iterations) {
+  const ReprojectionCost cost{&cameras, &obs};
+  using Function = ceres::TinySolverAutoDiffFunction<ReprojectionCost, Eigen::Dynamic, 3>;
+  const Function function(cost);
+  ceres::TinySolver<Function> solver;
+  solver.options.max_num_iterations = max_iterations;
+  solver.options.gradient_tolerance = 1e-14;
+  solver.options.parameter_tolerance = 1e-14;
+  solver.options.function_tolerance = 1e-14;
+  Eigen::Vector3d p_W = p0_W;
+  solver.Solve(function, &p_W);
+  return p_W;
+}
+
+PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt) {
+  obs.erase(std::remove_if(obs.begin(), obs.end(),
+                           [&](const Observation& o) {
+                             return !(o.confidence >= opt.min_confidence && o.confidence > 0.0) || !o.px.allFinite();
+                           }),
+            obs.end());
+  PointEstimate est;
+  if (obs.size() < 2) return est;
+  for (;;) {
+    const Fit fit = fitPoint(cameras, obs, opt.max_refine_iterations);
+    if (fit.ok && fit.max_err_px <= opt.outlier_px) {
+      est.ok = true;
+      est.p_W = fit.p_W;
+      est.n_used = static_cast<int>(obs.size());
+      double sum2 = 0.0;
+      for (double e : fit.err_px) sum2 += e * e;
+      est.rms_px = std::sqrt(sum2 / static_cast<double>(fit.err_px.size()));
+      return est;
+    }
+    if (obs.size() <= 2) {
+      est.inconsistent = true;
+      return est;
+    }
+    // Drop the camera whose removal leaves the most consistent fit.
+    std::size_t worst = 0;
+    double best_rest = kInf;
+    for (std::size_t j = 0; j < obs.size(); ++j) {
+      std::vector<Observation> rest = obs;
+      rest.erase(rest.begin() + static_cast<std::ptrdiff_t>(j));
+      const Fit f = fitPoint(cameras, rest, opt.max_refine_iterations);
+      const double score = f.ok ? f.max_err_px : kInf;
+      if (score < best_rest) best_rest = score, worst = j;
+    }
+    obs.erase(obs.begin() + static_cast<std::ptrdiff_t>(worst));
+    ++est.n_rejected;
+  }
+}
+
+SubjectChoice chooseSubject(const CameraSet& cameras, const std::vector<const std::vector<Person2d>*>& people,
+                            const std::optional<Eigen::Vector3d>& previous_centre_W, const TriangulateOptions& opt) {
+  const std::size_t n_cam = people.size();
+  std::vector<Candidate> candidates;
+  for (std::size_t a = 0; a < n_cam; ++a)
+    for (std::size_t b = a + 1; b < n_cam; ++b)
+      for (std::size_t pa = 0; pa < people[a]->size(); ++pa)
+        for (std::size_t pb = 0; pb < people[b]->size(); ++pb) {
+          const Person2d& A = (*people[a])[pa];
+          const Person2d& B = (*people[b])[pb];
+          // Upper-body points of this pairing, linear triangulation only (cheap).
+          std::vector<double> errors;
+          std::vector<std::pair<int, Eigen::Vector3d>> good;
+          for (int k : kSubjectPoints) {
+            if (!usable(A, k, opt) || !usable(B, k, opt)) continue;
+            const std::vector<Observation> obs = {{static_cast<int>(a), A.px[k], A.confidence[k]},
+                                                  {static_cast<int>(b), B.px[k], B.confidence[k]}};
+            const Fit fit = fitPoint(cameras, obs, 0);
+            errors.push_back(fit.max_err_px);
+            if (fit.ok && fit.max_err_px <= opt.outlier_px) good.emplace_back(k, fit.p_W);
+          }
+          if (good.size() < 3 || median(errors) > opt.subject_px) continue;
+          Candidate cand;
+          cand.person.assign(n_cam, -1);
+          cand.person[a] = static_cast<int>(pa);
+          cand.person[b] = static_cast<int>(pb);
+          cand.score = 2 * static_cast<int>(good.size());
+          cand.median_px = median(errors);
+          // Further cameras: the person whose points reproject best, if any agrees.
+          for (std::size_t c = 0; c < n_cam; ++c) {
+            if (c == a || c == b) continue;
+            int best = -1;
+            double best_median = kInf;
+            int best_count = 0;
+            for (std::size_t q = 0; q < people[c]->size(); ++q) {
+              const Person2d& Q = (*people[c])[q];
+              std::vector<double> e;
+              for (const auto& [k, p_W] : good)
+                if (usable(Q, k, opt)) e.push_back(reprojectionError(cameras[c], p_W, Q.px[k]));
+              if (e.size() < 3) continue;
+              const double m = median(e);
+              if (m <= opt.subject_px && m < best_median) {
+                best = static_cast<int>(q), best_median = m;
+                best_count = static_cast<int>(std::count_if(e.begin(), e.end(), [&](double v) { return v <= opt.outlier_px; }));
+              }
+            }
+            cand.person[c] = best;
+            cand.score += best_count;
+          }
+          Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+          int n = 0;
+          for (const auto& [k, p_W] : good)
+            if (std::find(kTorsoPoints.begin(), kTorsoPoints.end(), k) != kTorsoPoints.end()) sum += p_W, ++n;
+          if (n == 0)
+            for (const auto& [k, p_W] : good) sum += p_W, ++n;
+          cand.centre_W = sum / static_cast<double>(n);
+          // The cameras frame their subject: how far from the image centres it appears.
+          int n_seen = 0;
+          for (std::size_t c = 0; c < n_cam; ++c) {
+            if (cand.person[c] < 0) continue;
+            const Camera& cam = cameras[c];
+            const Eigen::Vector2d centre_px(0.5 * cam.width, 0.5 * cam.height);
+            const double diagonal = std::hypot(static_cast<double>(cam.width), static_cast<double>(cam.height));
+            const double d = toCamera(cam, cand.centre_W).z() > 0.0 ? (project(cam, cand.centre_W) - centre_px).norm() / diagonal
+                                                                  : 1.0;
+            cand.off_centre += d, ++n_seen;
+          }
+          cand.off_centre /= static_cast<double>(n_seen);
+          candidates.push_back(cand);
+        }
+
+  SubjectChoice choice;
+  if (candidates.empty()) return choice;
+  // Continuity first: keep only candidates near the last subject, if there are any.
+  std::vector<const Candidate*> pool;
+  if (previous_centre_W)
+    for (const Candidate& c : candidates)
+      if ((c.centre_W - *previous_centre_W).norm() <= opt.subject_max_jump_m) pool.push_back(&c);
+  if (pool.empty())
+    for (const Candidate& c : candidates) pool.push_back(&c);
+  // Nearly complete candidates (>= 3/4 of the best score) compete on centrality: a bystander
+  // or a spurious partial body has fewer consistent points or appears off-centre.
+  int max_score = 0;
+  for (const Candidate* c : pool) max_score = std::max(max_score, c->score);
+  const Candidate* best = nullptr;
+  for (const Candidate* c : pool) {
+    if (4 * c->score < 3 * max_score) continue;
+    if (best == nullptr || c->off_centre < best->off_centre ||
+        (c->off_centre == best->off_centre &&
+         (c->score > best->score || (c->score == best->score && c->person < best->person))))
+      best = c;
+  }
+  choice.found = true;
+  choice.person = best->person;
+  choice.n_points = best->score;
+  choice.median_px = best->median_px;
+  choice.centre_W = best->centre_W;
+  return choice;
+}
+
+int rejectBoneLengthOutliers(Skeleton& frames, double tolerance) {
+  std::array<double, kBones.size()> median_length{};
+  std::array<bool, kBones.size()> checked{};
+  for (std::size_t b = 0; b < kBones.size(); ++b) {
+    const auto [i, j] = kBones[b];
+    std::vector<double> lengths;
+    for (const SkeletonFrame& f : frames)
+      if (f.ok[i] && f.ok[j]) lengths.push_back((f.p_W[i] - f.p_W[j]).norm());
+    median_length[b] = median(lengths);
+    checked[b] = static_cast<int>(lengths.size()) >= kMinBoneSamples && median_length[b] >= kMinBoneLength;
+  }
+  int n_marked = 0;
+  for (SkeletonFrame& f : frames) {
+    for (;;) {
+      std::array<int, kNumSkeletonPoints> n_bones{}, n_bad{};
+      for (std::size_t b = 0; b < kBones.size(); ++b) {
+        const auto [i, j] = kBones[b];
+        if (!checked[b] || !f.ok[i] || !f.ok[j]) continue;
+        const double deviation = std::abs((f.p_W[i] - f.p_W[j]).norm() - median_length[b]);
+        const bool bad = deviation > std::max(tolerance * median_length[b], kMinBoneDeviation);
+        ++n_bones[i], ++n_bones[j];
+        if (bad) ++n_bad[i], ++n_bad[j];
+      }
+      int most = 0;
+      for (int p = 0; p < kNumSkeletonPoints; ++p)
+        if (n_bones[p] > 0 && n_bad[p] == n_bones[p]) most = std::max(most, n_bad[p]);
+      if (most == 0) break;
+      // Every point with the most bad bones goes; ties cannot be told apart, so none is kept.
+      for (int p = 0; p < kNumSkeletonPoints; ++p)
+        if (n_bones[p] > 0 && n_bad[p] == n_bones[p] && n_bad[p] == most) f.ok[p] = false, ++n_marked;
+    }
+  }
+  return n_marked;
+}
+
+Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKeypoints>& keypoints,
+                            const TriangulateOptions& opt, TriangulationReport* report) {
+  if (!(opt.fps > 0.0) || !std::isfinite(opt.fps)) throw UserError("--fps must be a positive number of frames per second");
+  if (cameras.size() < 2)
+    throw UserError("triangulation needs at least 2 cameras, the calibration has " + std::to_string(cameras.size()));
+  if (keypoints.size() != cameras.size())
+    throw UserError("the calibration has " + std::to_string(cameras.size()) + " cameras but " +
+                    std::to_string(keypoints.size()) + " keypoint folders were given (cameras pair with folders in order)");
+  const std::size_t n_frames = keypoints[0].frames.size();
+  for (const CameraKeypoints& cam : keypoints) {
+    if (cam.frames.size() != n_frames)
+      throw UserError("keypoint folders hold different numbers of frames (" + keypoints[0].dir + ": " +
+                      std::to_string(n_frames) + ", " + cam.dir + ": " + std::to_string(cam.frames.size()) +
+                      "); frames are paired by sorted index, so every camera needs the same frames");
+    const bool anyone = std::any_of(cam.frames.begin(), cam.frames.end(),
+                                    [](const KeypointFrame& f) { return !f.people.empty(); });
+    if (!anyone)
+      throw UserError(cam.dir + ": no person detected in any of its " + std::to_string(cam.frames.size()) + " frames");
+  }
+
+  TriangulationReport rep;
+  rep.n_frames = static_cast<int>(n_frames);
+  Skeleton frames(n_frames);
+  std::vector<double> rms;
+  std::optional<Eigen::Vector3d> previous_centre;
+  for (std::size_t k = 0; k < n_frames; ++k) {
+    SkeletonFrame& out = frames[k];
+    out.t_s = static_cast<double>(k) / opt.fps;
+    out.p_W.fill(Eigen::Vector3d::Zero());
+    out.ok.fill(false);
+    std::vector<const std::vector<Person2d>*> people;
+    for (const CameraKeypoints& cam : keypoints) people.push_back(&cam.frames[k].people);
+    const SubjectChoice subject = chooseSubject(cameras, people, previous_centre, opt);
+    if (!subject.found) {
+      ++rep.n_frames_without_subject;
+    } else {
+      previous_centre = subject.centre_W;
+      for (int i = 0; i < kNumSkeletonPoints; ++i) {
+        std::vector<Observation> obs;
+        for (std::size_t c = 0; c < cameras.size(); ++c) {
+          if (subject.person[c] < 0) continue;
+          const Person2d& p = (*people[c])[static_cast<std::size_t>(subject.person[c])];
+          if (usable(p, i, opt)) obs.push_back({static_cast<int>(c), p.px[i], p.confidence[i]});
+        }
+        const PointEstimate est = triangulatePoint(cameras, obs, opt);
+        rep.n_observations_rejected += est.n_rejected;
+        if (est.inconsistent) ++rep.n_points_inconsistent;
+        if (est.ok) {
+          out.p_W[i] = est.p_W;
+          out.ok[i] = true;
+          rms.push_back(est.rms_px);
+        }
+      }
+    }
+    if (opt.progress) opt.progress(static_cast<int>(k) + 1, static_cast<int>(n_frames));
+  }
+  if (opt.check_bone_lengths) rep.n_bone_rejections = rejectBoneLengthOutliers(frames, opt.bone_tolerance);
+  for (SkeletonFrame& f : frames) {
+    // BODY_25B has no MidHip: the mean of the 3D hips (exact, unlike averaging projections).
+    if (opt.format == PoseFormat::kBody25B && f.ok[kRHip] && f.ok[kLHip]) {
+      f.p_W[kMidHip] = 0.5 * (f.p_W[kRHip] + f.p_W[kLHip]);
+      f.ok[kMidHip] = true;
+    }
+    for (int i = 0; i < kNumSkeletonPoints; ++i) (f.ok[i] ? rep.n_points_valid : rep.n_points_missing) += 1;
+  }
+  rep.median_reprojection_px = median(rms);
+  if (report != nullptr) *report = rep;
+  return frames;
+}
+
+Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz) {
+  if (!(rate_hz > 0.0) || !std::isfinite(rate_hz)) throw UserError("--rate must be a positive number of samples per second");
+  Skeleton out;
+  if (frames.empty()) return out;
+  const double t0 = frames.front().t_s, t_last = frames.back().t_s;
+  const auto n_out = static_cast<std::size_t>(std::floor((t_last - t0) * rate_hz + kTimeEps)) + 1;
+  std::size_t k = 0;
+  for (std::size_t j = 0; j < n_out; ++j) {
+    const double t = t0 + static_cast<double>(j) / rate_hz;
+    while (k + 1 < frames.size() && frames[k + 1].t_s <= t + kTimeEps) ++k;
+    SkeletonFrame f;
+    if (std::abs(frames[k].t_s - t) <= kTimeEps || k + 1 == frames.size()) {
+      f = frames[k];
+    } else {
+      const SkeletonFrame& a = frames[k];
+      const SkeletonFrame& b = frames[k + 1];
+      const double w = (t - a.t_s) / (b.t_s - a.t_s);
+      for (int i = 0; i < kNumSkeletonPoints; ++i) {
+        f.ok[i] = a.ok[i] && b.ok[i];
+        f.p_W[i] = f.ok[i] ? Eigen::Vector3d((1.0 - w) * a.p_W[i] + w * b.p_W[i]) : Eigen::Vector3d::Zero();
+      }
+    }
+    f.t_s = t;
+    out.push_back(f);
+  }
+  return out;
+}
+
+Skeleton triangulateFolders(const std::vector<std::string>& camera_dirs, const std::string& calibration_path,
+                            const TriangulateOptions& opt, TriangulationReport* report) {
+  const CameraSet cameras = readCalibration(calibration_path);
+  if (cameras.size() != camera_dirs.size())
+    throw UserError("calibration " + calibration_path + " has " + std::to_string(cameras.size()) + " cameras but " +
+                    std::to_string(camera_dirs.size()) + " keypoint folders were given (cameras pair with folders in order)");
+  if (!(opt.rate_hz > 0.0) || !std::isfinite(opt.rate_hz))
+    throw UserError("--rate must be a positive number of samples per second");
+  std::vector<CameraKeypoints> keypoints;
+  for (const std::string& dir : camera_dirs) keypoints.push_back(readOpenPoseFolder(dir, opt.format));
+  return resampleSkeleton(triangulateCapture(cameras, keypoints, opt, report), opt.rate_hz);
+}
+
+std::vector<std::string> demoCameraDirs(const std::string& demo_dir) {
+  std::error_code ec;
+  if (!fs::is_directory(demo_dir, ec)) throw UserError("demonstration folder " + demo_dir + " does not exist");
+  std::vector<std::pair<long long, std::string>> dirs;
+  for (const fs::directory_entry& e : fs::directory_iterator(demo_dir)) {
+    const std::string name = e.path().filename().string();
+    if (!e.is_directory() || name.compare(0, 3, "cam") != 0) continue;
+    const std::string suffix = name.substr(3);
+    const bool numbered = !suffix.empty() && suffix.size() < 18 &&
+                          std::all_of(suffix.begin(), suffix.end(), [](char c) { return c >= '0' && c <= '9'; });
+    dirs.emplace_back(numbered ? std::stoll(suffix) : std::numeric_limits<long long>::max(), e.path().string());
+  }
+  if (dirs.empty()) throw UserError(demo_dir + ": no cam*/ keypoint folders (expected cam0/, cam1/, ...)");
+  std::sort(dirs.begin(), dirs.end());
+  std::vector<std::string> out;
+  for (auto& d : dirs) out.push_back(std::move(d.second));
+  return out;
+}
+
+Skeleton triangulateDemo(const std::string& demo_dir, const TriangulateOptions& opt, TriangulationReport* report) {
+  return triangulateFolders(demoCameraDirs(demo_dir), (fs::path(demo_dir) / "calibration.json").string(), opt, report);
+}
+
+}  // namespace nao::tools
