@@ -1,0 +1,151 @@
+#include "nao/retarget.hpp"
+
+#include <Eigen/Cholesky>
+
+#include <algorithm>
+#include <cmath>
+
+namespace nao {
+
+namespace {
+
+using JointMatrix = Eigen::Matrix<double, kNumJoints, kNumJoints>;
+
+// Damping never drops below this (keeps the normal matrix well scaled) and a run of rejected
+// steps that pushes it above the ceiling means no decrease is left in double precision.
+constexpr double kLambdaFloor = 1e-15;
+constexpr double kLambdaCeiling = 1e20;
+
+// The IK objective at the pose of the last forwardKinematics call in `arm`.
+struct IkProblem {
+  const Eigen::Vector3d& p_target_TH;
+  const Eigen::Vector3d* u_target_TH;
+  const JointVector& q_anchor;
+  double mu;
+  double w;
+
+  double cost(const ArmData& arm) const {
+    double c = (arm.p_TH - p_target_TH).squaredNorm() + mu * (arm.q - q_anchor).squaredNorm();
+    if (u_target_TH != nullptr) c += w * w * (arm.u_TH - *u_target_TH).squaredNorm();
+    return 0.5 * c;
+  }
+
+  // Gradient and Gauss-Newton normal matrix; needs handJacobian at the same pose.
+  void normalEquations(const ArmData& arm, JointVector& g, JointMatrix& H) const {
+    g.noalias() = arm.Jp_TH.transpose() * (arm.p_TH - p_target_TH);
+    H.noalias() = arm.Jp_TH.transpose() * arm.Jp_TH;
+    if (u_target_TH != nullptr) {
+      g.noalias() += (w * w) * (arm.Ju_TH.transpose() * (arm.u_TH - *u_target_TH));
+      H.noalias() += (w * w) * (arm.Ju_TH.transpose() * arm.Ju_TH);
+    }
+    g.noalias() += mu * (arm.q - q_anchor);
+    H.diagonal().array() += mu;
+  }
+};
+
+}  // namespace
+
+void resetRetarget(RetargetData& data) { data.has_warm_start = false; }
+
+void resetRetarget(const ArmModel& model, RetargetData& data, const JointVector& q_start) {
+  data.q_warm = clampToLimits(model, q_start);
+  data.has_warm_start = true;
+}
+
+const JointVector& solveHandIk(const ArmModel& model, const RetargetParams& params, RetargetData& data,
+                               const Eigen::Vector3d& p_target_TH, const JointVector& q_start,
+                               const JointVector& q_anchor, const Eigen::Vector3d* u_target_TH) {
+  IkResult& ik = data.ik;
+  ArmData& arm = data.arm;
+  const JointVector anchor = clampToLimits(model, q_anchor);
+  const IkProblem problem{p_target_TH, u_target_TH, anchor, params.mu, params.pointing_weight};
+
+  JointVector q = clampToLimits(model, q_start);
+  forwardKinematics(model, arm, q);
+  handJacobian(model, arm);
+  double cost = problem.cost(arm);
+  JointVector g;
+  JointMatrix H;
+  problem.normalEquations(arm, g, H);
+
+  double lambda = std::max(params.lambda_x, kLambdaFloor);
+  double nu = 2.0;
+  ik.converged = false;
+  int it = 0;
+  while (it < params.max_inner_iterations) {
+    // First-order optimality for the box: the projected gradient vanishes.
+    const JointVector q_pg = clampToLimits(model, q - g);
+    if ((q - q_pg).cwiseAbs().maxCoeff() <= params.gradient_tolerance) {
+      ik.converged = true;
+      break;
+    }
+    ++it;
+
+    // Joints at a limit whose descent direction points outward are held; the damped
+    // Gauss-Newton step (paper eq. 5) is solved for the others.
+    JointMatrix A = H;
+    JointVector b = -g;
+    for (int j = 0; j < kNumJoints; ++j) {
+      const bool held = (q[j] <= model.q_min[j] && g[j] > 0.0) || (q[j] >= model.q_max[j] && g[j] < 0.0);
+      if (held) {
+        A.row(j).setZero();
+        A.col(j).setZero();
+        A(j, j) = 1.0;
+        b[j] = 0.0;
+      } else {
+        A(j, j) += lambda;
+      }
+    }
+    const JointVector delta = A.ldlt().solve(b);
+    const JointVector q_new = clampToLimits(model, q + params.eta_x * delta);
+    const JointVector step = q_new - q;
+
+    // Gain ratio of the actual decrease over the model's prediction for the clamped step.
+    const double predicted = -(g.dot(step) + 0.5 * step.dot(H * step));
+    forwardKinematics(model, arm, q_new);
+    const double cost_new = problem.cost(arm);
+    if (predicted > 0.0 && cost_new < cost) {
+      const double rho = (cost - cost_new) / predicted;
+      q = q_new;
+      cost = cost_new;
+      handJacobian(model, arm);
+      problem.normalEquations(arm, g, H);
+      const double t = 2.0 * rho - 1.0;
+      lambda = std::max(kLambdaFloor, lambda * std::max(1.0 / 3.0, 1.0 - t * t * t));
+      nu = 2.0;
+      if (step.cwiseAbs().maxCoeff() < params.step_tolerance) {
+        ik.converged = true;
+        break;
+      }
+    } else {
+      lambda *= nu;
+      nu *= 2.0;
+      if (lambda > kLambdaCeiling) {
+        // No decrease left at double precision: a numerical minimum.
+        ik.converged = true;
+        break;
+      }
+    }
+  }
+  // Leave `arm` at the solution for callers that read it.
+  forwardKinematics(model, arm, q);
+  ik.q = q;
+  ik.cost = cost;
+  ik.iterations = it;
+  return ik.q;
+}
+
+const RetargetResult& solveRetarget(const ArmModel& model, const RetargetParams& params, RetargetData& data,
+                                    const Eigen::Vector3d& p_target_TH, const JointVector& q_target,
+                                    const Eigen::Vector3d* u_target_TH) {
+  auto ik = [&](const Eigen::Vector3d& p_goal, const Eigen::Vector3d* u_goal, const JointVector& q_start,
+                const JointVector& q_anchor, JointVector& q_out, int& iterations) {
+    q_out = solveHandIk(model, params, data, p_goal, q_start, q_anchor, u_goal);
+    iterations = data.ik.iterations;
+    return data.ik.converged;
+  };
+  return detail::runAlgorithm1(model, params, data.arm, data.q_warm, data.has_warm_start, data.result, p_target_TH,
+                               q_target, u_target_TH, ik);
+}
+
+}  // namespace nao
