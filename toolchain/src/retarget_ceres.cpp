@@ -10,6 +10,9 @@ namespace nao::tools {
 
 namespace {
 
+// Ceres' iteration cap per IK solve, in multiples of RetargetParams::max_inner_iterations.
+constexpr int kCeresIterationFactor = 4;
+
 constexpr int kPositionResiduals = 3 + kNumJoints;
 
 // Hand position error and the displacement term: [p_TH(q) - x_target; sqrt(mu) (q - q_start)].
@@ -116,7 +119,9 @@ ceres::Solver::Summary runCeres(const ArmModel& model, const RetargetParams& par
   options.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
   options.linear_solver_type = ceres::DENSE_QR;
   options.num_threads = 1;
-  options.max_num_iterations = params.max_inner_iterations;
+  // Offline, so afford more: in flat valleys (a straight elbow, joints pinned at limits) Ceres'
+  // trust-region steps converge more slowly than the online LM it is the reference for.
+  options.max_num_iterations = kCeresIterationFactor * params.max_inner_iterations;
   options.initial_trust_region_radius = 1.0 / std::max(params.lambda_x, 1e-15);
   options.gradient_tolerance = params.gradient_tolerance;
   options.parameter_tolerance = params.step_tolerance;

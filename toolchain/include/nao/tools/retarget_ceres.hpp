@@ -6,7 +6,7 @@
 // analytic-Jacobian SizedCostFunction<8, 5> for the hand position plus the displacement term
 // sqrt(mu) (q - q_start), and a SizedCostFunction<3, 5> for the pointing direction when given;
 // TRUST_REGION / LEVENBERG_MARQUARDT, DENSE_QR, one thread, initial trust region 1/lambda_x,
-// max_num_iterations = max_inner_iterations, gradient_tolerance and parameter_tolerance from
+// max_num_iterations = 4 x max_inner_iterations, gradient_tolerance and parameter_tolerance from
 // RetargetParams, function_tolerance 1e-16 (so it stops on optimality, not on a stalled cost).
 // Ceres' bounds work by projection, which crawls once a joint sits at a limit (it stopped
 // up to 1.5e-2 rad short there); so after the bounded solve, the joints at a limit whose
