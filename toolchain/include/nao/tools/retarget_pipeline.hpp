@@ -1,0 +1,59 @@
+// From a 3D human skeleton sequence to NAO joint trajectories: human kinematics with the
+// demonstration's own scale, paper eq. 2 scaling onto the robot, then Algorithm 1 per frame.
+#pragma once
+
+#include "nao/human_kinematics.hpp"
+#include "nao/retarget.hpp"
+#include "nao/tools/retarget_ceres.hpp"
+#include "nao/tools/skeleton_csv.hpp"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace nao::tools {
+
+/// Bits of RetargetRow::flags above the RetargetFlags byte.
+enum RetargetRowFlags : std::uint32_t {
+  kRowHumanMissing = 1u << 8,   ///< the human arm was not measured: previous solution held
+  kRowHandNotSeen = 1u << 9,    ///< no hand points: solved without a pointing-direction target
+};
+
+struct RetargetOptions {
+  RetargetParams params;
+  HumanKinematicsConfig human;
+  /// Add the hand's pointing direction as a target when the hand is seen. Off by default: x_target
+  /// of paper eq. 2 is a position, and NAO (no wrist pitch) cannot in general meet position and
+  /// direction together, which makes the weighted problem multimodal (tests/test_retarget.cpp).
+  bool use_pointing = false;
+  bool use_ceres = true;     ///< the offline Ceres solver (else the runtime's fixed-size LM)
+};
+
+/// One output row (docs/formats.md, retarget CSV).
+struct RetargetRow {
+  double t_s = 0.0;
+  RetargetFrame target;   ///< x_target (torso frame, m), q_target (rad), pointing direction
+  RetargetResult result;  ///< q_x, q_q, hands reached, solver flags
+  std::uint32_t flags = 0;  ///< RetargetFlags | RetargetRowFlags
+};
+
+/// Targets of every frame: human arm kinematics of `frames` with d_h fixed to the
+/// demonstration's median link lengths, x_target = robot shoulder + (d_r / d_h) p_h (paper
+/// eq. 2), q_target = the five NAO-mapped human angles. Frames where the human arm was not
+/// measured get `ok[i] = false`. Throws UserError when no frame has a measurable arm.
+std::vector<RetargetFrame> retargetTargets(const ArmModel& arm, const Skeleton& frames,
+                                           const RetargetOptions& options, std::vector<bool>& ok,
+                                           std::vector<bool>& hand_seen);
+
+/// Algorithm 1 over the whole sequence, warm-started frame to frame. A frame whose human arm
+/// was not measured holds the previous solution and is flagged.
+std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options);
+
+/// Header and rows of the retarget CSV. Throws UserError if the file cannot be written.
+void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& rows);
+
+/// Reads a retarget CSV back (t_s, q_x, q_q, x_target, hands reached, flags, q_target).
+/// Throws UserError naming the file, line and column for a missing column or a bad value.
+std::vector<RetargetRow> readRetargetCsv(const std::string& path);
+
+}  // namespace nao::tools

@@ -1,0 +1,173 @@
+#include "nao/tools/retarget_pipeline.hpp"
+
+#include "nao/tools/command.hpp"
+#include "nao/tools/human_scale.hpp"
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <unordered_map>
+
+namespace nao::tools {
+
+std::vector<RetargetFrame> retargetTargets(const ArmModel& arm, const Skeleton& frames,
+                                           const RetargetOptions& options, std::vector<bool>& ok,
+                                           std::vector<bool>& hand_seen) {
+  // One scale per demonstration: per-frame link lengths jitter with the keypoint noise, and
+  // that jitter would otherwise move the robot's target.
+  const HumanArmLengths lengths = estimateHumanArmLengths(frames, options.human);
+  if (lengths.n_arm_frames == 0)
+    throw UserError("no frame has a measurable right arm (RShoulder, RElbow, RWrist and the torso points)");
+  const HumanKinematicsConfig config = withDemoScale(options.human, lengths);
+  const double d_r = robotScale(arm);
+  const Eigen::Vector3d p_T_shoulder = arm.p_PJ[0];
+
+  std::vector<RetargetFrame> targets(frames.size());
+  ok.assign(frames.size(), false);
+  hand_seen.assign(frames.size(), false);
+  HumanArmData human;
+  resetHumanArm(human);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    humanArmKinematics(config, human, frames[i]);
+    if (!human.valid) continue;
+    ok[i] = true;
+    RetargetFrame& t = targets[i];
+    t.p_target_TH = p_T_shoulder + scaleHumanEndpoint(d_r, human.d_h_m, human.p_SH_T);
+    t.q_target = human.q.head<kNumJoints>();
+    // The human hand's x axis (wrist -> middle knuckle) is NAO's hand x axis.
+    hand_seen[i] = human.hand_seen;
+    t.has_pointing = options.use_pointing && human.hand_seen;
+    t.u_target_TH = human.R_TK.col(0);
+  }
+  return targets;
+}
+
+std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options) {
+  std::vector<bool> ok, hand_seen;
+  const std::vector<RetargetFrame> targets = retargetTargets(arm, frames, options, ok, hand_seen);
+
+  std::vector<RetargetRow> rows(frames.size());
+  RetargetData lm;
+  CeresRetargetData ceres;
+  resetRetarget(lm);
+  resetRetarget(ceres);
+  const RetargetRow* previous = nullptr;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    RetargetRow& row = rows[i];
+    row.t_s = frames[i].t_s;
+    if (!ok[i]) {
+      // Never invent a target: hold what was solved last (or wait for the first measurement).
+      if (previous) {
+        row.target = previous->target;
+        row.result = previous->result;
+      } else {
+        // Before the first measurement: the zero pose clamped, so every row stays inside the limits.
+        row.result.q_x = row.result.q_q = clampToLimits(arm, JointVector::Zero());
+        row.result.p_TH_x = row.result.p_TH_q = forwardKinematics(arm, lm.arm, row.result.q_x);
+      }
+      row.result.flags = 0;
+      row.flags = kRowHumanMissing;
+      continue;
+    }
+    row.target = targets[i];
+    const Eigen::Vector3d* u = row.target.has_pointing ? &row.target.u_target_TH : nullptr;
+    row.result = options.use_ceres ? solveRetargetCeres(arm, options.params, ceres, row.target.p_target_TH,
+                                                        row.target.q_target, u)
+                                   : solveRetarget(arm, options.params, lm, row.target.p_target_TH,
+                                                   row.target.q_target, u);
+    row.flags = row.result.flags | (hand_seen[i] ? 0u : kRowHandNotSeen);
+    previous = &row;
+  }
+  return rows;
+}
+
+void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& rows) {
+  std::ofstream out(path);
+  if (!out) throw UserError("cannot write " + path);
+  out.precision(10);
+  out << "t_s";
+  for (const char* name : {"qx", "qq"})
+    for (int j = 0; j < kNumJoints; ++j) out << ',' << name << '_' << j;
+  out << ",xt_x,xt_y,xt_z,ex_x,ex_y,ex_z,eq_x,eq_y,eq_z,flags";
+  for (int j = 0; j < kNumJoints; ++j) out << ",qt_" << j;
+  out << '\n';
+  for (const RetargetRow& r : rows) {
+    out << r.t_s;
+    for (int j = 0; j < kNumJoints; ++j) out << ',' << r.result.q_x[j];
+    for (int j = 0; j < kNumJoints; ++j) out << ',' << r.result.q_q[j];
+    for (const Eigen::Vector3d* v : {&r.target.p_target_TH, &r.result.p_TH_x, &r.result.p_TH_q})
+      out << ',' << v->x() << ',' << v->y() << ',' << v->z();
+    out << ',' << r.flags;
+    for (int j = 0; j < kNumJoints; ++j) out << ',' << r.target.q_target[j];
+    out << '\n';
+  }
+  if (!out) throw UserError("error while writing " + path);
+}
+
+std::vector<RetargetRow> readRetargetCsv(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw UserError("cannot open retarget CSV " + path);
+  auto split = [](const std::string& line) {
+    std::vector<std::string> cells;
+    std::string cell;
+    std::istringstream s(line);
+    while (std::getline(s, cell, ',')) cells.push_back(cell);
+    return cells;
+  };
+  std::string line;
+  if (!std::getline(in, line)) throw UserError(path + ": empty file, expected a retarget CSV header");
+  const std::vector<std::string> header = split(line);
+  std::unordered_map<std::string, std::size_t> column;
+  for (std::size_t c = 0; c < header.size(); ++c) column[header[c]] = c;
+  auto col = [&](const std::string& name) {
+    const auto it = column.find(name);
+    if (it == column.end()) throw UserError(path + ": missing column '" + name + "'");
+    return it->second;
+  };
+  const std::size_t c_t = col("t_s"), c_flags = col("flags");
+  std::array<std::size_t, kNumJoints> c_qx, c_qq, c_qt;
+  for (int j = 0; j < kNumJoints; ++j) {
+    c_qx[j] = col("qx_" + std::to_string(j));
+    c_qq[j] = col("qq_" + std::to_string(j));
+    c_qt[j] = col("qt_" + std::to_string(j));
+  }
+  std::array<std::size_t, 9> c_xyz;
+  int k = 0;
+  for (const char* p : {"xt", "ex", "eq"})
+    for (const char* a : {"_x", "_y", "_z"}) c_xyz[k++] = col(std::string(p) + a);
+
+  std::vector<RetargetRow> rows;
+  int line_no = 1;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty()) continue;
+    const std::vector<std::string> cells = split(line);
+    auto number = [&](std::size_t c) {
+      if (c >= cells.size()) throw UserError(path + ":" + std::to_string(line_no) + ": row too short");
+      char* end = nullptr;
+      const double v = std::strtod(cells[c].c_str(), &end);
+      if (cells[c].empty() || *end != '\0' || !std::isfinite(v))
+        throw UserError(path + ":" + std::to_string(line_no) + ": column '" + header[c] + "' holds '" + cells[c] +
+                        "', expected a finite number");
+      return v;
+    };
+    RetargetRow r;
+    r.t_s = number(c_t);
+    for (int j = 0; j < kNumJoints; ++j) {
+      r.result.q_x[j] = number(c_qx[j]);
+      r.result.q_q[j] = number(c_qq[j]);
+      r.target.q_target[j] = number(c_qt[j]);
+    }
+    for (int a = 0; a < 3; ++a) {
+      r.target.p_target_TH[a] = number(c_xyz[a]);
+      r.result.p_TH_x[a] = number(c_xyz[3 + a]);
+      r.result.p_TH_q[a] = number(c_xyz[6 + a]);
+    }
+    r.flags = static_cast<std::uint32_t>(number(c_flags));
+    r.result.flags = r.flags & 0xffu;
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+}  // namespace nao::tools
