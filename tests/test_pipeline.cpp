@@ -1,5 +1,6 @@
 // The offline front half end to end on the synthesiser's data: synth -> OpenPose files ->
 // triangulation -> human kinematics -> retargeting, checked against the synthesiser's truth.
+#include "nao/human_kinematics.hpp"
 #include "nao/tools/retarget_pipeline.hpp"
 #include "nao/tools/synth.hpp"
 #include "nao/tools/triangulate.hpp"
@@ -62,6 +63,21 @@ TEST_CASE("triangulating noise-free synthetic views reproduces the ground-truth 
     CHECK_MESSAGE(worst < 0.5e-3, "largest error " << worst * 1e3 << " mm");
     // Noise-free views lose only points that leave an image: nearly everything is kept.
     CHECK_MESSAGE(kept >= 0.97 * total, kept << " of " << total << " points kept");
+
+    // The human angles from the triangulated skeleton match the model's own joint values.
+    HumanKinematicsConfig config;
+    HumanArmData human;
+    resetHumanArm(human);
+    double worst_deg = 0.0;
+    int n_measured = 0;
+    for (std::size_t f = 0; f < measured.size(); ++f) {
+      humanArmKinematics(config, human, measured[f]);
+      if (!human.valid || !human.hand_seen || (human.flags & ~kHumanInvalidMask) != 0) continue;
+      ++n_measured;
+      worst_deg = std::max(worst_deg, (human.q - demo.q[f]).cwiseAbs().maxCoeff() / nao::test::kDeg);
+    }
+    CHECK_MESSAGE(n_measured >= 0.9 * static_cast<double>(measured.size()), n_measured << " frames measured");
+    CHECK_MESSAGE(worst_deg < 0.5, "largest angle error from triangulated noise-free views: " << worst_deg << " deg");
   }
 }
 
