@@ -1,12 +1,10 @@
 #include "nao/tools/retarget_pipeline.hpp"
 
 #include "nao/tools/command.hpp"
+#include "nao/tools/csv.hpp"
 #include "nao/tools/human_scale.hpp"
 
-#include <cmath>
 #include <fstream>
-#include <sstream>
-#include <unordered_map>
 
 namespace nao::tools {
 
@@ -105,65 +103,34 @@ void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& r
 }
 
 std::vector<RetargetRow> readRetargetCsv(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw UserError("cannot open retarget CSV " + path);
-  auto split = [](const std::string& line) {
-    std::vector<std::string> cells;
-    std::string cell;
-    std::istringstream s(line);
-    while (std::getline(s, cell, ',')) cells.push_back(cell);
-    return cells;
-  };
-  std::string line;
-  if (!std::getline(in, line)) throw UserError(path + ": empty file, expected a retarget CSV header");
-  const std::vector<std::string> header = split(line);
-  std::unordered_map<std::string, std::size_t> column;
-  for (std::size_t c = 0; c < header.size(); ++c) column[header[c]] = c;
-  auto col = [&](const std::string& name) {
-    const auto it = column.find(name);
-    if (it == column.end()) throw UserError(path + ": missing column '" + name + "'");
-    return it->second;
-  };
-  const std::size_t c_t = col("t_s"), c_flags = col("flags");
+  CsvReader csv(path, "retarget CSV");
+  const std::size_t c_t = csv.column("t_s"), c_flags = csv.column("flags");
   std::array<std::size_t, kNumJoints> c_qx, c_qq, c_qt;
   for (int j = 0; j < kNumJoints; ++j) {
-    c_qx[j] = col("qx_" + std::to_string(j));
-    c_qq[j] = col("qq_" + std::to_string(j));
-    c_qt[j] = col("qt_" + std::to_string(j));
+    c_qx[j] = csv.column("qx_" + std::to_string(j));
+    c_qq[j] = csv.column("qq_" + std::to_string(j));
+    c_qt[j] = csv.column("qt_" + std::to_string(j));
   }
   std::array<std::size_t, 9> c_xyz;
   int k = 0;
   for (const char* p : {"xt", "ex", "eq"})
-    for (const char* a : {"_x", "_y", "_z"}) c_xyz[k++] = col(std::string(p) + a);
+    for (const char* a : {"_x", "_y", "_z"}) c_xyz[k++] = csv.column(std::string(p) + a);
 
   std::vector<RetargetRow> rows;
-  int line_no = 1;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (line.empty()) continue;
-    const std::vector<std::string> cells = split(line);
-    auto number = [&](std::size_t c) {
-      if (c >= cells.size()) throw UserError(path + ":" + std::to_string(line_no) + ": row too short");
-      char* end = nullptr;
-      const double v = std::strtod(cells[c].c_str(), &end);
-      if (cells[c].empty() || *end != '\0' || !std::isfinite(v))
-        throw UserError(path + ":" + std::to_string(line_no) + ": column '" + header[c] + "' holds '" + cells[c] +
-                        "', expected a finite number");
-      return v;
-    };
+  while (csv.next()) {
     RetargetRow r;
-    r.t_s = number(c_t);
+    r.t_s = csv.number(c_t);
     for (int j = 0; j < kNumJoints; ++j) {
-      r.result.q_x[j] = number(c_qx[j]);
-      r.result.q_q[j] = number(c_qq[j]);
-      r.target.q_target[j] = number(c_qt[j]);
+      r.result.q_x[j] = csv.number(c_qx[j]);
+      r.result.q_q[j] = csv.number(c_qq[j]);
+      r.target.q_target[j] = csv.number(c_qt[j]);
     }
     for (int a = 0; a < 3; ++a) {
-      r.target.p_target_TH[a] = number(c_xyz[a]);
-      r.result.p_TH_x[a] = number(c_xyz[3 + a]);
-      r.result.p_TH_q[a] = number(c_xyz[6 + a]);
+      r.target.p_target_TH[a] = csv.number(c_xyz[a]);
+      r.result.p_TH_x[a] = csv.number(c_xyz[3 + a]);
+      r.result.p_TH_q[a] = csv.number(c_xyz[6 + a]);
     }
-    r.flags = static_cast<std::uint32_t>(number(c_flags));
+    r.flags = static_cast<std::uint32_t>(csv.number(c_flags));
     r.result.flags = r.flags & 0xffu;
     rows.push_back(r);
   }
