@@ -186,7 +186,8 @@ TEST_CASE("d_h is the sum of the sampled segment lengths and p_r has the length 
       CHECK(std::abs(lengths.hand_m - demo.body.hand_segment_m) < 1e-9);
     }
   }
-  CHECK(std::abs(scaleHumanEndpoint(d_r, 0.0, Eigen::Vector3d::Ones()).norm()) == 0.0);
+  // An unusable scale gives no target at all (NaN), never a plausible point like the shoulder.
+  CHECK_FALSE(scaleHumanEndpoint(d_r, 0.0, Eigen::Vector3d::Ones()).allFinite());
 }
 
 TEST_CASE("without the hand the endpoint extends the forearm by the configured hand length and the wrist DoFs are held") {
@@ -286,4 +287,38 @@ TEST_CASE("missing or non-finite keypoints give a fault flag, never NaN and neve
   humanArmKinematics(config, data, f);
   CHECK(data.valid);
   CHECK(angleDiff(data.q[kHumanShoulderPitch], demo.q[10][kHumanShoulderPitch]) < 1e-9);
+}
+
+TEST_CASE("ElbowYaw stays continuous when the forearm wobbles across the atan2 cut at +-pi") {
+  // Upper arm hanging (ShoulderPitch pi/2), elbow at 90 deg, forearm pointing straight out to
+  // the right (-y): ElbowYaw is +-pi, and a 1 deg wobble of the forearm crosses the cut.
+  SkeletonFrame f;
+  const Eigen::Vector3d p_WRS(0.0, -0.2, 1.4), p_WLS(0.0, 0.2, 1.4);
+  auto place = [&](int i, const Eigen::Vector3d& p) {
+    f.p_W[i] = p;
+    f.ok[i] = true;
+  };
+  place(kRShoulder, p_WRS);
+  place(kLShoulder, p_WLS);
+  place(kMidHip, Eigen::Vector3d(0.0, 0.0, 0.9));
+  const Eigen::Vector3d p_WE = p_WRS + Eigen::Vector3d(0.0, 0.0, -0.3);
+  place(kRElbow, p_WE);
+  HumanKinematicsConfig config;
+  HumanArmData data;
+  resetHumanArm(data);
+  double previous = 0.0, largest_step = 0.0;
+  for (int k = 0; k < 20; ++k) {
+    const double eps = (k % 2 == 0 ? 1.0 : -1.0) * kDeg;
+    place(kRWrist, p_WE + 0.25 * Eigen::Vector3d(std::sin(eps), -std::cos(eps), 0.0));
+    humanArmKinematics(config, data, f);
+    REQUIRE(data.valid);
+    const double yaw = data.q[kHumanElbowYaw];
+    const bool on_branch = std::abs(std::abs(yaw) - (3.14159265358979323846 - 1.0 * kDeg)) < 1e-6 ||
+                           std::abs(std::abs(yaw) - (3.14159265358979323846 + 1.0 * kDeg)) < 1e-6;
+    CHECK_MESSAGE(on_branch, "frame " << k << ": ElbowYaw " << yaw << " is not pi -+ 1 deg");
+    if (k > 0) largest_step = std::max(largest_step, std::abs(yaw - previous));
+    previous = yaw;
+  }
+  // A 2 deg wobble, not a 2 pi jump.
+  CHECK_MESSAGE(largest_step < 2.5 * kDeg, "ElbowYaw jumped by " << largest_step << " rad between frames");
 }

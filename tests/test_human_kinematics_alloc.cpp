@@ -31,7 +31,8 @@ TEST_CASE("10000 frames of human kinematics allocate nothing, including faulty f
   int n_valid = 0;
   for (int i = 0; i < 10000; ++i) {
     const HumanArmData& out = humanArmKinematics(config, data, frames[static_cast<std::size_t>(i) % frames.size()]);
-    sink += out.q.sum() + scaleHumanEndpoint(d_r, out.d_h_m, out.p_SH_T).x();
+    sink += out.q.sum();
+    if (out.valid) sink += scaleHumanEndpoint(d_r, out.d_h_m, out.p_SH_T).x();  // NaN without a valid d_h
     n_valid += out.valid ? 1 : 0;
   }
   const std::int64_t n_alloc = counter.count();

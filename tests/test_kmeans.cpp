@@ -126,24 +126,26 @@ TEST_CASE("k-means refuses fewer points than clusters and k below 1") {
 }
 
 TEST_CASE("the feature-extracted trajectory passes through each segment's key pose at the segment's middle") {
-  // Three plateaus of 10 samples at 10 Hz; the centroids are the plateau values.
+  // Three plateaus of 11 samples at 10 Hz, so each segment's middle falls on a sample
+  // (0.5 s, 1.6 s, 2.7 s); the centroids are the plateau values.
   std::vector<JointVector> centroids = {JointVector::Constant(0.0), JointVector::Constant(1.0),
                                         JointVector::Constant(-0.5)};
   std::vector<double> t;
   std::vector<JointVector> q;
-  for (int i = 0; i < 30; ++i) {
+  for (int i = 0; i < 33; ++i) {
     t.push_back(0.1 * i);
-    q.push_back(centroids[static_cast<std::size_t>(i / 10)] + JointVector::Constant(0.01 * ((i % 3) - 1)));
+    q.push_back(centroids[static_cast<std::size_t>(i / 11)] + JointVector::Constant(0.01 * ((i % 3) - 1)));
   }
   const std::vector<JointVector> f = featureTrajectory(centroids, t, q);
   REQUIRE(f.size() == q.size());
-  // Segment middles: t = 0.45, 1.45, 2.45 s. Before the first and after the last: held.
+  CHECK(f[5] == centroids[0]);
+  CHECK(f[16] == centroids[1]);
+  CHECK(f[27] == centroids[2]);
+  // Held before the first middle and after the last.
   CHECK(f[0] == centroids[0]);
-  CHECK(f[4] == centroids[0]);
-  CHECK(f[29] == centroids[2]);
-  CHECK((f[14] - centroids[1]).norm() < 0.05);  // 1.4 s, right next to the middle of segment 2
+  CHECK(f[32] == centroids[2]);
   // Between key poses the blend stays between them and moves monotonically.
-  for (int i = 5; i < 14; ++i) {
+  for (int i = 5; i < 16; ++i) {
     CHECK(f[static_cast<std::size_t>(i)][0] >= 0.0);
     CHECK(f[static_cast<std::size_t>(i)][0] <= 1.0);
     CHECK(f[static_cast<std::size_t>(i + 1)][0] >= f[static_cast<std::size_t>(i)][0]);

@@ -306,3 +306,20 @@ TEST_CASE("an unreachable target is flagged and q_x gets as close as the arm all
   const double best = (target - d.p_TJ[0]).norm() - reach;
   CHECK_MESSAGE(r.error_x_m < best + 1e-3, "expected error close to " << best << " m, got " << r.error_x_m << " m");
 }
+
+TEST_CASE("a non-finite target right after a reset to a measured pose holds that pose, inside the limits") {
+  const ArmModel& m = arm();
+  const RetargetParams params;
+  RetargetData data;
+  JointVector q_measured;
+  q_measured << 0.3, -0.4, 0.5, 0.0, 0.2;  // ElbowRoll 0 is below its 2 deg limit: clamped
+  resetRetarget(m, data, q_measured);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const RetargetResult& r = solveRetarget(m, params, data, Eigen::Vector3d(nan, 0.0, 0.0), JointVector::Zero());
+  CHECK((r.flags & kRetargetBadInput) != 0);
+  const JointVector expected = clampToLimits(m, q_measured);
+  CHECK(r.q_x == expected);
+  CHECK(r.q_q == expected);
+  ArmData d;
+  CHECK((r.p_TH_x - forwardKinematics(m, d, expected)).norm() < 1e-12);
+}

@@ -4,9 +4,18 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace nao {
 namespace {
+
+// atan2 answers in (-pi, pi]; a joint whose angle crosses +-pi (the forearm pointing straight
+// out from a hanging upper arm, for ElbowYaw) would jump by 2 pi between frames, and clamped
+// to NAO's limits that becomes a limit-to-limit jump. Take the 2 pi copy nearest the
+// previous value instead (0 before the first measurement).
+double unwrapNear(double raw, double previous) noexcept {
+  return previous + std::remainder(raw - previous, 2.0 * 3.14159265358979323846);
+}
 
 // Shorter than this (m) a segment or axis has no direction.
 constexpr double kMinLength_m = 1e-4;
@@ -123,7 +132,7 @@ const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, Huma
   if (std::sqrt(u_T.x() * u_T.x() + u_T.z() * u_T.z()) < config.shoulder_gimbal_cos)
     data.flags |= kHumanShoulderGimbal;
   else
-    q[kHumanShoulderPitch] = std::atan2(-u_T.z(), u_T.x());
+    q[kHumanShoulderPitch] = unwrapNear(std::atan2(-u_T.z(), u_T.x()), q[kHumanShoulderPitch]);
 
   // Elbow: in the upper-arm frame before the humeral rotation, the forearm direction is
   // Rx(yaw) Rz(flex) e_x = (cos flex, sin flex cos yaw, sin flex sin yaw).
@@ -133,7 +142,7 @@ const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, Huma
   if (q[kHumanElbowRoll] < config.elbow_straight_rad)
     data.flags |= kHumanElbowStraight;
   else
-    q[kHumanElbowYaw] = std::atan2(f_U0.z(), f_U0.y());
+    q[kHumanElbowYaw] = unwrapNear(std::atan2(f_U0.z(), f_U0.y()), q[kHumanElbowYaw]);
 
   // Hand: R_F0K = Rx(wrist yaw) Rz(flex) Ry(dev) relative to the forearm frame before the
   // forearm rotation. Row 0 = (cos b cos c, -sin b, cos b sin c); column 1 =
@@ -148,8 +157,8 @@ const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, Huma
     if (std::cos(q[kHumanWristFlex]) < config.wrist_gimbal_cos) {
       data.flags |= kHumanWristGimbal;
     } else {
-      q[kHumanWristDev] = std::atan2(M(0, 2), M(0, 0));
-      q[kHumanWristYaw] = std::atan2(M(2, 1), M(1, 1));
+      q[kHumanWristDev] = unwrapNear(std::atan2(M(0, 2), M(0, 0)), q[kHumanWristDev]);
+      q[kHumanWristYaw] = unwrapNear(std::atan2(M(2, 1), M(1, 1)), q[kHumanWristYaw]);
     }
     data.R_TK = R_TK;
     data.p_TH = p_TC;
@@ -175,7 +184,9 @@ const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, Huma
 }
 
 Eigen::Vector3d scaleHumanEndpoint(double d_r_m, double d_h_m, const Eigen::Vector3d& p_SH_T) noexcept {
-  if (!(d_h_m > 0.0) || !std::isfinite(d_h_m) || !std::isfinite(d_r_m)) return Eigen::Vector3d::Zero();
+  // Not a plausible finite point (the shoulder) but NaN, so a retarget solve flags it as bad input.
+  if (!(d_h_m > 0.0) || !std::isfinite(d_h_m) || !std::isfinite(d_r_m))
+    return Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   return (d_r_m / d_h_m) * p_SH_T;
 }
 

@@ -50,6 +50,11 @@ void resetRetarget(RetargetData& data) { data.has_warm_start = false; }
 void resetRetarget(const ArmModel& model, RetargetData& data, const JointVector& q_start) {
   data.q_warm = clampToLimits(model, q_start);
   data.has_warm_start = true;
+  // A frame with bad input holds data.result: make that the start pose, not a stale or zero one.
+  RetargetResult& r = data.result;
+  r = RetargetResult{};
+  r.q_x = r.q_q = data.q_warm;
+  r.p_TH_x = r.p_TH_q = forwardKinematics(model, data.arm, data.q_warm);
 }
 
 const JointVector& solveHandIk(const ArmModel& model, const RetargetParams& params, RetargetData& data,

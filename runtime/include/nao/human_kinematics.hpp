@@ -117,14 +117,16 @@ bool humanTorsoFrame(const SkeletonFrame& frame, Eigen::Matrix3d& R_WT, Eigen::V
 /// Human right-arm kinematics of one skeleton frame (world-frame points, m).
 /// Writes into `data`: flags, valid, hand_seen, the torso frame, the arm points in it, the
 /// hand frame, the link lengths, d_h, p_h = p_SH_T and the joint angles q (HumanJoint order,
-/// rad; the first five in NAO's convention). Angles that cannot be measured keep their
+/// rad; the first five in NAO's convention; angles from atan2 are unwrapped to the 2 pi copy
+/// nearest the previous frame, so they are continuous). Angles that cannot be measured keep their
 /// previous value and are flagged; when the frame is invalid nothing but `flags` and `valid`
 /// changes. Never invents a point, never produces NaN. Returns `data`. Real-time safe.
 const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, HumanArmData& data,
                                         const SkeletonFrame& frame) noexcept;
 
 /// Paper eq. 2: p_r = (d_r / d_h) * p_h, the robot's endpoint target relative to its shoulder
-/// in the torso frame (m). Returns zero when d_h <= 0 or non-finite. Real-time safe.
+/// in the torso frame (m). Returns NaN (which solveRetarget flags as bad input) when d_h <= 0
+/// or a scale is non-finite. Real-time safe.
 Eigen::Vector3d scaleHumanEndpoint(double d_r_m, double d_h_m, const Eigen::Vector3d& p_SH_T) noexcept;
 
 }  // namespace nao
