@@ -3,8 +3,9 @@
 #include <ceres/ceres.h>
 
 #include <algorithm>
-#include <cassert>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace nao::tools {
 
@@ -15,7 +16,7 @@ constexpr int kCeresIterationFactor = 4;
 
 constexpr int kPositionResiduals = 3 + kNumJoints;
 
-// Hand position error and the displacement term: [p_TH(q) - x_target; sqrt(mu) (q - q_start)].
+// Hand position error and the displacement term: [p_TH(q) - x_target; sqrt(mu) (q - q_anchor)].
 class HandPositionCost final : public ceres::SizedCostFunction<kPositionResiduals, kNumJoints> {
  public:
   HandPositionCost(const ArmModel& model, ArmData& arm, const Eigen::Vector3d& p_target_TH,
@@ -206,7 +207,9 @@ std::vector<RetargetResult> retargetSequenceCeres(const ArmModel& model, const R
 }
 
 RetargetAgreement compareRetarget(const std::vector<RetargetResult>& a, const std::vector<RetargetResult>& b) {
-  assert(a.size() == b.size());
+  if (a.size() != b.size())
+    throw std::invalid_argument("compareRetarget: " + std::to_string(a.size()) + " and " + std::to_string(b.size()) +
+                                " results cannot be compared frame by frame");
   RetargetAgreement agreement;
   double worst = -1.0;
   for (std::size_t i = 0; i < a.size() && i < b.size(); ++i) {

@@ -73,7 +73,7 @@ struct RetargetAgreement {
   int worst_frame = -1;      ///< frame of the larger of the two maxima (-1 if no frames)
 };
 
-/// Compares two result sequences of equal length (asserts equal length).
+/// Compares two result sequences frame by frame; throws std::invalid_argument if their lengths differ.
 RetargetAgreement compareRetarget(const std::vector<RetargetResult>& a, const std::vector<RetargetResult>& b);
 
 }  // namespace nao::tools
