@@ -166,6 +166,23 @@ TEST_CASE("0,0,0 keypoints and zero-confidence keypoints are not detected, never
   CHECK(p[0].px[kLWrist] == Eigen::Vector2d::Zero());
 }
 
+TEST_CASE("a confidence above 1 (real OpenPose output, e.g. 1.40701) is read as 1, the point kept") {
+  nlohmann::json pose = poseArray();
+  pose[3 * kRWrist + 2] = 1.40701;
+  pose[3 * kLElbow + 2] = 1.0000001;
+  nlohmann::json hand = nlohmann::json::array();
+  for (int k = 0; k < 21; ++k) hand.push_back(500.0 + k), hand.push_back(600.0 + k), hand.push_back(k == 9 ? 1.2 : 0.8);
+  nlohmann::json person = personWith("pose_keypoints_2d", pose);
+  person["hand_right_keypoints_2d"] = hand;
+  const std::vector<Person2d> p = parseOpenPoseJson(document({person}), PoseFormat::kBody25, "f.json");
+  REQUIRE(p.size() == 1);
+  CHECK(p[0].confidence[kRWrist] == 1.0);
+  CHECK(p[0].confidence[kLElbow] == 1.0);
+  CHECK(p[0].confidence[kRHand9] == 1.0);  // hand point 9 (middle-finger knuckle)
+  CHECK(p[0].px[kRWrist] == Eigen::Vector2d(104.0, 204.0));  // position untouched
+  CHECK(p[0].confidence[kRElbow] == doctest::Approx(0.53));  // others unchanged
+}
+
 TEST_CASE("BODY_25B is mapped onto BODY_25 names: COCO order, UpperNeck -> Neck, no MidHip, HeadTop dropped") {
   // Written from OpenPose's BODY_25B part list, independently of the reader's table.
   const std::vector<std::pair<std::string, int>> b25b = {
@@ -234,10 +251,16 @@ TEST_CASE("malformed OpenPose files give one clear line each") {
     pose[0] = "12";
     expectError(document({personWith("pose_keypoints_2d", pose)}), "expected a number");
   }
-  SUBCASE("confidence outside [0, 1]") {
+  SUBCASE("negative confidence") {
     nlohmann::json pose = poseArray();
-    pose[3 * kRElbow + 2] = 1.7;
-    expectError(document({personWith("pose_keypoints_2d", pose)}), "point 3 has confidence 1.7, expected a value in [0, 1]");
+    pose[3 * kRElbow + 2] = -0.2;
+    expectError(document({personWith("pose_keypoints_2d", pose)}), "point 3 has confidence -0.2, expected a value in [0, 1]");
+  }
+  SUBCASE("confidence too large for a double (no finite value): an error, not clamped") {
+    std::string text = document({personWith("pose_keypoints_2d", poseArray())});
+    const std::string first_confidence = "0.5,";  // point 0's confidence
+    text.replace(text.find(first_confidence), first_confidence.size() - 1, "1e999");
+    expectError(text, "not valid JSON: number overflow parsing '1e999'");
   }
   SUBCASE("hand array of the wrong length") {
     nlohmann::json person = good_person;

@@ -66,6 +66,9 @@ void run(const TriangulateArgs& args) {
   const int n_points = report.n_points_valid + report.n_points_missing;
   std::printf("%d capture frames at %g Hz -> %zu samples at %g Hz in %s\n", report.n_frames, args.fps,
               skeleton.size(), args.rate, args.out.c_str());
+  if (report.n_frames_absent > 0 || report.n_frames_incomplete > 0)
+    std::printf("frame indices missing from every camera %d, from some cameras %d\n", report.n_frames_absent,
+                report.n_frames_incomplete);
   std::printf("valid points %d/%d (%.1f%%), frames without a subject %d, inconsistent points %d, "
               "outlier observations rejected %d, bone-length rejections %d, median reprojection error %.2f px\n",
               report.n_points_valid, n_points, n_points > 0 ? 100.0 * report.n_points_valid / n_points : 0.0,

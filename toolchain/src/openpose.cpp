@@ -26,6 +26,7 @@ std::string personLabel(const std::string& source, std::size_t person) {
 
 // Reads `count` x, y, c triples from `array` (already checked to have 3*count entries).
 // Each triple either is a detection or counts as not detected (confidence 0, or pixel 0,0).
+// A finite confidence above 1 is clamped to 1; a negative or non-finite one is an error.
 void readTriples(const json& array, int count, const std::string& where,
                  std::vector<std::array<double, 3>>& out) {
   out.assign(static_cast<std::size_t>(count), {0.0, 0.0, 0.0});
@@ -41,9 +42,12 @@ void readTriples(const json& array, int count, const std::string& where,
       if (!std::isfinite(v[static_cast<std::size_t>(c)]))
         throw UserError(where + " point " + std::to_string(k) + " holds a non-finite value");
     }
-    if (v[2] < 0.0 || v[2] > 1.0)
+    if (v[2] < 0.0)
       throw UserError(where + " point " + std::to_string(k) + " has confidence " + json(v[2]).dump() +
                       ", expected a value in [0, 1]");
+    // Real OpenPose output holds confidences slightly above 1 (the heatmap peak is not
+    // normalised; e.g. 1.40701 in OpenPose's issue tracker): a full-confidence detection.
+    v[2] = std::min(v[2], 1.0);
     const bool not_detected = v[2] == 0.0 || (v[0] == 0.0 && v[1] == 0.0);
     out[static_cast<std::size_t>(k)] = not_detected ? std::array<double, 3>{0.0, 0.0, 0.0} : v;
   }
@@ -87,7 +91,7 @@ std::vector<Person2d> parseOpenPoseJson(const std::string& text, PoseFormat form
   json doc;
   try {
     doc = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for a number overflowing a double
     std::string what = e.what();
     const auto bracket = what.find("] ");
     if (bracket != std::string::npos) what = what.substr(bracket + 2);

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
+#include <map>
 #include <utility>
 
 namespace nao::tools {
@@ -21,6 +22,8 @@ namespace fs = std::filesystem;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kTimeEps = 1e-9;  // s; two times closer than this are the same sample
+constexpr double kMaxCaptureSpan_s = 24.0 * 3600.0;  // longest capture accepted
+constexpr long long kMaxCaptureFrames = 3000000;    // ... and most frames (27 h at 30 fps)
 
 // Points that identify a person across cameras (upper body, present in both layouts).
 constexpr std::array<int, 11> kSubjectPoints = {kNose,      kNeck,   kRShoulder, kRElbow, kRWrist, kLShoulder,
@@ -64,6 +67,13 @@ double reprojectionError(const Camera& cam, const Eigen::Vector3d& p_W, const Ei
   return (project(cam, p_W) - px).norm();
 }
 
+// Residual (px) of an observation whose camera has the point behind it.
+constexpr double kBehindCameraPx = 1e6;
+
+// Confidence-weighted pixel residuals. Always succeeds: ceres::TinySolver ignores a false return
+// (it would go on with stale or uninitialised residuals and could accept a step behind a
+// camera), so a camera that has the point behind it writes a large finite constant instead,
+// which makes any step there far worse than every step in front of all cameras.
 struct ReprojectionCost {
   const CameraSet* cameras;
   const std::vector<Observation>* obs;
@@ -72,11 +82,15 @@ struct ReprojectionCost {
   bool operator()(const T* p_W, T* residual) const {
     for (std::size_t i = 0; i < obs->size(); ++i) {
       const Observation& o = (*obs)[i];
-      T px[2];
-      if (!projectT((*cameras)[static_cast<std::size_t>(o.camera)], p_W, px)) return false;
       const double w = std::sqrt(o.confidence);
-      residual[2 * i] = T(w) * (px[0] - T(o.px.x()));
-      residual[2 * i + 1] = T(w) * (px[1] - T(o.px.y()));
+      T px[2];
+      if (projectT((*cameras)[static_cast<std::size_t>(o.camera)], p_W, px)) {
+        residual[2 * i] = T(w) * (px[0] - T(o.px.x()));
+        residual[2 * i + 1] = T(w) * (px[1] - T(o.px.y()));
+      } else {
+        residual[2 * i] = T(w * kBehindCameraPx);
+        residual[2 * i + 1] = T(w * kBehindCameraPx);
+      }
     }
     return true;
   }
@@ -89,22 +103,41 @@ struct Fit {
   double max_err_px = kInf;
 };
 
-// DLT (+ optional refinement) and the per-camera reprojection errors.
-Fit fitPoint(const CameraSet& cameras, const std::vector<Observation>& obs, int refine_iterations) {
+// Per-camera reprojection errors of p_W (infinite behind a camera).
+Fit evaluateFit(const CameraSet& cameras, const std::vector<Observation>& obs, const Eigen::Vector3d& p_W) {
   Fit fit;
-  const std::optional<Eigen::Vector3d> dlt = triangulateDlt(cameras, obs);
-  if (!dlt) return fit;
-  fit.p_W = *dlt;
-  if (refine_iterations > 0) {
-    const Eigen::Vector3d refined = refineOnReprojection(cameras, obs, *dlt, refine_iterations);
-    if (refined.allFinite()) fit.p_W = refined;
-  }
+  fit.p_W = p_W;
   fit.max_err_px = 0.0;
   for (const Observation& o : obs) {
-    fit.err_px.push_back(reprojectionError(cameras[static_cast<std::size_t>(o.camera)], fit.p_W, o.px));
+    fit.err_px.push_back(reprojectionError(cameras[static_cast<std::size_t>(o.camera)], p_W, o.px));
     fit.max_err_px = std::max(fit.max_err_px, fit.err_px.back());
   }
-  fit.ok = std::isfinite(fit.max_err_px);
+  fit.ok = p_W.allFinite() && std::isfinite(fit.max_err_px);
+  return fit;
+}
+
+// The refinement's objective: confidence-weighted sum of squared pixel errors (infinite when
+// the point is behind a used camera).
+double weightedCost(const std::vector<Observation>& obs, const Fit& fit) {
+  if (!fit.ok) return kInf;
+  double sum = 0.0;
+  for (std::size_t i = 0; i < obs.size(); ++i) sum += obs[i].confidence * fit.err_px[i] * fit.err_px[i];
+  return sum;
+}
+
+// DLT (+ optional refinement) and the per-camera reprojection errors. The refined point is kept
+// only when it is in front of every used camera and its objective is not worse than the DLT
+// point's: a refinement that went astray must not replace the linear estimate. (Not the largest
+// error: the least-squares optimum has a larger largest error than the DLT point for ~half of
+// the points under Gaussian pixel noise, and is still the better estimate.)
+Fit fitPoint(const CameraSet& cameras, const std::vector<Observation>& obs, int refine_iterations) {
+  const std::optional<Eigen::Vector3d> dlt = triangulateDlt(cameras, obs);
+  if (!dlt) return Fit{};
+  Fit fit = evaluateFit(cameras, obs, *dlt);
+  if (refine_iterations > 0) {
+    Fit refined = evaluateFit(cameras, obs, refineOnReprojection(cameras, obs, *dlt, refine_iterations));
+    if (refined.ok && weightedCost(obs, refined) <= weightedCost(obs, fit)) fit = std::move(refined);
+  }
   return fit;
 }
 
@@ -373,30 +406,56 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
   if (keypoints.size() != cameras.size())
     throw UserError("the calibration has " + std::to_string(cameras.size()) + " cameras but " +
                     std::to_string(keypoints.size()) + " keypoint folders were given (cameras pair with folders in order)");
-  const std::size_t n_frames = keypoints[0].frames.size();
   for (const CameraKeypoints& cam : keypoints) {
-    if (cam.frames.size() != n_frames)
-      throw UserError("keypoint folders hold different numbers of frames (" + keypoints[0].dir + ": " +
-                      std::to_string(n_frames) + ", " + cam.dir + ": " + std::to_string(cam.frames.size()) +
-                      "); frames are paired by sorted index, so every camera needs the same frames");
     const bool anyone = std::any_of(cam.frames.begin(), cam.frames.end(),
                                     [](const KeypointFrame& f) { return !f.people.empty(); });
     if (!anyone)
       throw UserError(cam.dir + ": no person detected in any of its " + std::to_string(cam.frames.size()) + " frames");
   }
 
+  // Frames pair across cameras by their file index, never by position: a frame file missing in
+  // one folder must not shift the others. The capture frames are the union of the indices; a
+  // camera without a file for an index sees nobody in that frame.
+  std::map<long long, std::vector<const KeypointFrame*>> by_index;
+  for (std::size_t c = 0; c < keypoints.size(); ++c)
+    for (const KeypointFrame& f : keypoints[c].frames) {
+      std::vector<const KeypointFrame*>& slot = by_index[f.index];
+      slot.resize(keypoints.size(), nullptr);
+      if (slot[c] != nullptr)
+        throw UserError(keypoints[c].dir + ": two files for frame " + std::to_string(f.index) + ": " + slot[c]->file +
+                        " and " + f.file);
+      slot[c] = &f;
+    }
+  const long long first_index = by_index.begin()->first;
+  const long long last_index = by_index.rbegin()->first;
+  const std::size_t n_frames = by_index.size();
+  // Output samples and report counts span the indices; an absurd span (a stray file) would
+  // allocate without bound and overflow the counts.
+  if (last_index - first_index >= kMaxCaptureFrames || static_cast<double>(last_index - first_index) / opt.fps > kMaxCaptureSpan_s)
+    throw UserError("frame indices run from " + std::to_string(first_index) + " to " + std::to_string(last_index) +
+                    ": more than 3 million frames or 24 h at --fps (a stray file in a keypoint folder?)");
+  const std::vector<Person2d> nobody;  // a camera without a file for a frame
+
   TriangulationReport rep;
-  rep.n_frames = static_cast<int>(n_frames);
+  // Frames absent from every folder are capture frames nobody was seen in: the report counts
+  // them (no subject, every point missing) so its totals match the resampled output's time span.
+  rep.n_frames_absent = static_cast<int>(last_index - first_index + 1 - static_cast<long long>(n_frames));
+  rep.n_frames = static_cast<int>(n_frames) + rep.n_frames_absent;
+  rep.n_frames_without_subject = rep.n_frames_absent;
+  rep.n_points_missing = rep.n_frames_absent * kNumSkeletonPoints;
   Skeleton frames(n_frames);
   std::vector<double> rms;
   std::optional<Eigen::Vector3d> previous_centre;
-  for (std::size_t k = 0; k < n_frames; ++k) {
+  std::size_t k = 0;
+  for (const auto& [index, files] : by_index) {
     SkeletonFrame& out = frames[k];
-    out.t_s = static_cast<double>(k) / opt.fps;
+    // Time from the file index, so frames absent from every folder keep their gap.
+    out.t_s = static_cast<double>(index - first_index) / opt.fps;
     out.p_W.fill(Eigen::Vector3d::Zero());
     out.ok.fill(false);
     std::vector<const std::vector<Person2d>*> people;
-    for (const CameraKeypoints& cam : keypoints) people.push_back(&cam.frames[k].people);
+    for (const KeypointFrame* f : files) people.push_back(f != nullptr ? &f->people : &nobody);
+    if (std::find(files.begin(), files.end(), nullptr) != files.end()) ++rep.n_frames_incomplete;
     const SubjectChoice subject = chooseSubject(cameras, people, previous_centre, opt);
     if (!subject.found) {
       ++rep.n_frames_without_subject;
@@ -419,7 +478,8 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
         }
       }
     }
-    if (opt.progress) opt.progress(static_cast<int>(k) + 1, static_cast<int>(n_frames));
+    ++k;
+    if (opt.progress) opt.progress(static_cast<int>(k), static_cast<int>(n_frames));
   }
   if (opt.check_bone_lengths) rep.n_bone_rejections = rejectBoneLengthOutliers(frames, opt.bone_tolerance);
   for (SkeletonFrame& f : frames) {
@@ -435,10 +495,15 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
   return frames;
 }
 
-Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz) {
+Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz, double capture_fps) {
   if (!(rate_hz > 0.0) || !std::isfinite(rate_hz)) throw UserError("--rate must be a positive number of samples per second");
+  if (!(capture_fps > 0.0) || !std::isfinite(capture_fps))
+    throw UserError("--fps must be a positive number of frames per second");
   Skeleton out;
   if (frames.empty()) return out;
+  // Neighbours further apart than one capture period have absent frames between them: nothing
+  // was measured there, so nothing is interpolated across.
+  const double max_step_s = 1.0 / capture_fps + kTimeEps;
   const double t0 = frames.front().t_s, t_last = frames.back().t_s;
   const auto n_out = static_cast<std::size_t>(std::floor((t_last - t0) * rate_hz + kTimeEps)) + 1;
   std::size_t k = 0;
@@ -446,9 +511,11 @@ Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz) {
     const double t = t0 + static_cast<double>(j) / rate_hz;
     while (k + 1 < frames.size() && frames[k + 1].t_s <= t + kTimeEps) ++k;
     SkeletonFrame f;
+    f.p_W.fill(Eigen::Vector3d::Zero());
+    f.ok.fill(false);
     if (std::abs(frames[k].t_s - t) <= kTimeEps || k + 1 == frames.size()) {
       f = frames[k];
-    } else {
+    } else if (frames[k + 1].t_s - frames[k].t_s <= max_step_s) {
       const SkeletonFrame& a = frames[k];
       const SkeletonFrame& b = frames[k + 1];
       const double w = (t - a.t_s) / (b.t_s - a.t_s);
@@ -473,7 +540,7 @@ Skeleton triangulateFolders(const std::vector<std::string>& camera_dirs, const s
     throw UserError("--rate must be a positive number of samples per second");
   std::vector<CameraKeypoints> keypoints;
   for (const std::string& dir : camera_dirs) keypoints.push_back(readOpenPoseFolder(dir, opt.format));
-  return resampleSkeleton(triangulateCapture(cameras, keypoints, opt, report), opt.rate_hz);
+  return resampleSkeleton(triangulateCapture(cameras, keypoints, opt, report), opt.rate_hz, opt.fps);
 }
 
 std::vector<std::string> demoCameraDirs(const std::string& demo_dir) {

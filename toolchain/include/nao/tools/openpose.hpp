@@ -40,7 +40,7 @@ inline constexpr std::array<int, kNumBody25> kBody25bToSkeleton = {
 struct Person2d {
   int person_id = -1;                                    ///< OpenPose's id, -1 when untracked
   std::array<Eigen::Vector2d, kNumSkeletonPoints> px;    ///< pixel coordinates (distorted image)
-  std::array<double, kNumSkeletonPoints> confidence{};   ///< [0, 1]; 0 = not detected
+  std::array<double, kNumSkeletonPoints> confidence{};   ///< [0, 1] (file values > 1 clamped); 0 = not detected
   Person2d() { px.fill(Eigen::Vector2d::Zero()); }
   bool detected(int i) const { return confidence[i] > 0.0; }
 };
@@ -65,7 +65,8 @@ std::optional<long long> openPoseFrameIndex(const std::string& file_name);
 /// Parses one OpenPose JSON document. `source` names it in error messages. Throws UserError
 /// (one line naming the source, the person and the problem) for malformed JSON, NaN/Infinity,
 /// a missing or non-array `people`, a keypoint array of the wrong length, a non-number or
-/// non-finite value, or a confidence outside [0, 1]. An empty `people` array is valid.
+/// non-finite value, or a negative confidence. A confidence above 1 (real OpenPose output holds
+/// values slightly above 1) is read as 1. An empty `people` array is valid.
 std::vector<Person2d> parseOpenPoseJson(const std::string& text, PoseFormat format, const std::string& source);
 
 /// Reads one OpenPose JSON file (see parseOpenPoseJson).

@@ -14,7 +14,9 @@
 //     No candidate -> the whole frame is missing. People order and person_id play no role.
 //  2. Per keypoint, the chosen people's detections with confidence >= min_confidence are
 //     triangulated: confidence-weighted DLT on undistorted points, then Ceres (TinySolver,
-//     autodiff, iteration cap) on the confidence-weighted pixel reprojection error.
+//     autodiff, iteration cap) on the confidence-weighted pixel reprojection error; the refined
+//     point replaces the DLT point only if it is in front of every camera and that error is
+//     not higher.
 //  3. Outlier rule. A fit is consistent when every used camera sees the point in front of it
 //     and reprojects it within outlier_px. While a fit of n >= 3 cameras is inconsistent, the
 //     camera whose removal gives the smallest worst-case reprojection error of the others is
@@ -28,7 +30,8 @@
 // its sequence median by more than max(bone_tolerance * median, 5 cm) is bad; greedily, the
 // point with the most bad bones (all of its checked bones bad) is marked missing, until no
 // point has all its bones bad. Bones need >= 5 valid samples and a median >= 5 cm.
-// Finally the sequence is resampled from fps to rate_hz (resampleSkeleton).
+// Frames pair across cameras by their file index (triangulateCapture); finally the sequence is
+// resampled from fps to rate_hz (resampleSkeleton), never interpolating across absent frames.
 #pragma once
 
 #include "nao/body25.hpp"
@@ -56,15 +59,17 @@ struct TriangulateOptions {
   bool check_bone_lengths = true;   ///< apply the bone-length rule over the sequence
   double bone_tolerance = 0.25;     ///< relative bone-length deviation marked bad
   int max_refine_iterations = 30;   ///< Ceres iteration cap per point
-  std::function<void(int done, int total)> progress;  ///< called after each capture frame
+  std::function<void(int done, int total)> progress;  ///< after each frame read; total = frames read
 };
 
 /// What happened, for the CLI summary and the tests.
 struct TriangulationReport {
-  int n_frames = 0;                 ///< capture frames
-  int n_frames_without_subject = 0; ///< no consistent person across >= 2 cameras
+  int n_frames = 0;                 ///< capture frames: indices from the first to the last frame file
+  int n_frames_absent = 0;          ///< of those, indices no camera folder has a file for
+  int n_frames_incomplete = 0;      ///< indices some camera folders have a file for and others not
+  int n_frames_without_subject = 0; ///< no consistent person across >= 2 cameras (absent frames included)
   int n_points_valid = 0;           ///< valid points at capture rate (after the bone rule)
-  int n_points_missing = 0;
+  int n_points_missing = 0;         ///< missing points at capture rate (absent frames included)
   int n_points_inconsistent = 0;    ///< >= 2 views that never agreed -> missing
   int n_observations_rejected = 0;  ///< camera observations dropped as outliers
   int n_bone_rejections = 0;        ///< points marked missing by the bone-length rule
@@ -117,20 +122,26 @@ struct SubjectChoice {
 SubjectChoice chooseSubject(const CameraSet& cameras, const std::vector<const std::vector<Person2d>*>& people,
                             const std::optional<Eigen::Vector3d>& previous_centre_W, const TriangulateOptions& opt);
 
-/// Triangulates a whole capture (frames paired across cameras by sorted position, time
-/// k / fps), applying the bone-length rule when enabled; no resampling. Throws UserError if
-/// fewer than 2 cameras, the camera and folder counts differ, the folders hold different
-/// numbers of frames, or a camera detects nobody in any frame.
+/// Triangulates a whole capture, applying the bone-length rule when enabled; no resampling.
+/// Frames pair across cameras by KeypointFrame::index: one output frame per index present in
+/// any camera (sorted), at t_s = (index - first index) / fps, so indices absent from every
+/// folder leave a gap in time. A camera without a file for an index sees nobody in that frame
+/// (with 2 cameras the frame has no subject; with 3+ the others still triangulate). Throws
+/// UserError if fewer than 2 cameras, the camera and folder counts differ, a camera detects
+/// nobody in any frame, a camera holds two frames with one index, or the indices span more
+/// than 3 million frames or 24 h at fps.
 Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKeypoints>& keypoints,
                             const TriangulateOptions& opt, TriangulationReport* report = nullptr);
 
 /// Bone-length rule of the file comment; returns how many points it marked missing.
 int rejectBoneLengthOutliers(Skeleton& frames, double tolerance);
 
-/// Resamples to rate_hz: times t0 + j / rate_hz up to the last input time. A time that falls on
-/// an input sample (within 1e-9 s) copies it; otherwise each point is interpolated linearly
-/// between the two neighbouring samples when both are valid, and is missing otherwise.
-Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz);
+/// Resamples to rate_hz: times t0 + j / rate_hz up to the last input time. `frames` are capture
+/// frames at capture_fps, possibly with gaps (absent frames). A time that falls on an input
+/// sample (within 1e-9 s) copies it; otherwise each point is interpolated linearly between the
+/// two neighbouring samples when both are valid and they are adjacent capture frames (at most
+/// 1 / capture_fps apart), and is missing otherwise: nothing is invented inside a gap.
+Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz, double capture_fps);
 
 /// Folders (one per camera, in calibration order) + calibration file -> resampled skeleton.
 Skeleton triangulateFolders(const std::vector<std::string>& camera_dirs, const std::string& calibration_path,
