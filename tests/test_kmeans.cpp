@@ -151,3 +151,35 @@ TEST_CASE("the feature-extracted trajectory passes through each segment's key po
     CHECK(f[static_cast<std::size_t>(i + 1)][0] >= f[static_cast<std::size_t>(i)][0]);
   }
 }
+
+TEST_CASE("the feature-extracted trajectory on a grid with unmeasured samples equals the measured-only one where both exist") {
+  // Same plateaus as above on a 10 Hz grid; every 4th sample is "not measured" and left out of
+  // the segments. Evaluated on the whole grid, the measured times must give the poses of the
+  // measured-only trajectory, and unmeasured times lie on the same smooth blend.
+  std::vector<JointVector> centroids = {JointVector::Constant(0.0), JointVector::Constant(1.0),
+                                        JointVector::Constant(-0.5)};
+  std::vector<double> t_grid, t_meas;
+  std::vector<JointVector> q_meas;
+  for (int i = 0; i < 33; ++i) {
+    t_grid.push_back(0.1 * i);
+    if (i % 4 == 3) continue;
+    t_meas.push_back(0.1 * i);
+    q_meas.push_back(centroids[static_cast<std::size_t>(i / 11)]);
+  }
+  const std::vector<JointVector> f_meas = featureTrajectory(centroids, t_meas, q_meas);
+  const std::vector<JointVector> f_grid = featureTrajectory(centroids, t_meas, q_meas, t_grid);
+  REQUIRE(f_grid.size() == t_grid.size());
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < t_grid.size(); ++i) {
+    if (i % 4 == 3) continue;
+    CHECK(f_grid[i] == f_meas[k++]);
+  }
+  // An unmeasured sample between two measured ones on a monotone blend lies between them.
+  for (std::size_t i = 3; i + 1 < t_grid.size(); i += 4) {
+    const double lo = std::min(f_grid[i - 1][0], f_grid[i + 1][0]);
+    const double hi = std::max(f_grid[i - 1][0], f_grid[i + 1][0]);
+    CHECK(f_grid[i][0] >= lo);
+    CHECK(f_grid[i][0] <= hi);
+  }
+  CHECK_THROWS_AS(featureTrajectory(centroids, {}, {}, t_grid), UserError);
+}

@@ -17,8 +17,10 @@ namespace fs = std::filesystem;
 
 struct Demo {
   std::string name;
-  std::vector<double> t_s;
+  std::vector<double> t_s;      ///< measured samples only (they are clustered)
   std::vector<JointVector> q;
+  std::vector<double> t_grid;   ///< every row of retarget.csv (the 10 Hz grid)
+  std::vector<bool> measured;   ///< per grid row: a human arm was measured
 };
 
 void setup(CLI::App& app) {
@@ -26,8 +28,9 @@ void setup(CLI::App& app) {
       "cluster",
       "k-means++ key poses (paper §3.3, Algorithm 2) of every movement in a data set. Reads\n"
       "DATA/<movement>_<index>/retarget.csv (nao_toolchain retarget), clusters the joint poses of all\n"
-      "demonstrations of a movement (samples without a measured human arm are left out), writes DATA/<demo>/features.csv (t_s, label, f_0..4: the\n"
-      "feature-extracted trajectory) and the centroids of every movement as JSON.");
+      "demonstrations of a movement (samples without a measured human arm are left out), writes\n"
+      "DATA/<demo>/features.csv (t_s, label, measured, f_0..4: the feature-extracted trajectory on\n"
+      "the whole 10 Hz grid) and the centroids of every movement as JSON.");
   struct Args {
     std::string data, out, update = "mean", trajectory = "qq";
     int k = 10, max_iterations = 300;
@@ -63,10 +66,14 @@ void setup(CLI::App& app) {
       Demo demo;
       demo.name = name;
       for (const RetargetRow& r : readRetargetCsv((dir / "retarget.csv").string())) {
-        if (r.flags & kRowHumanMissing) continue;  // a held pose is not a measured one
+        const bool measured = (r.flags & kRowHumanMissing) == 0;
+        demo.t_grid.push_back(r.t_s);
+        demo.measured.push_back(measured);
+        if (!measured) continue;  // a held pose is not a measured one
         demo.t_s.push_back(r.t_s);
         demo.q.push_back(args->trajectory == "qq" ? r.result.q_q : r.result.q_x);
       }
+      if (demo.q.empty()) throw UserError(dir.string() + "/retarget.csv: no sample with a measured human arm");
       movements[name.substr(0, cut)].push_back(std::move(demo));
     }
 
@@ -97,14 +104,20 @@ void setup(CLI::App& app) {
       for (const JointVector& c : r.centroids) m["centroids"].push_back(std::vector<double>(c.data(), c.data() + kNumJoints));
 
       for (const Demo& d : demos) {
-        const std::vector<JointVector> f = featureTrajectory(r.centroids, d.t_s, d.q);
+        // Segments come from the measured samples; the trajectory covers the whole grid. A row
+        // without a measurement carries the label of the last measured one (the runtime holds
+        // its last reference the same way); leading ones the first measured label.
+        const std::vector<JointVector> f = featureTrajectory(r.centroids, d.t_s, d.q, d.t_grid);
         const fs::path path = fs::path(args->data) / d.name / "features.csv";
         std::ofstream csv(path);
         if (!csv) throw UserError("cannot write " + path.string());
         csv.precision(10);
-        csv << "t_s,label,f_0,f_1,f_2,f_3,f_4\n";
+        csv << "t_s,label,measured,f_0,f_1,f_2,f_3,f_4\n";
+        std::size_t next_measured = 0;
+        int label = nearestCentroid(r.centroids, d.q[0]);
         for (std::size_t i = 0; i < f.size(); ++i) {
-          csv << d.t_s[i] << ',' << nearestCentroid(r.centroids, d.q[i]);
+          if (d.measured[i]) label = nearestCentroid(r.centroids, d.q[next_measured++]);
+          csv << d.t_grid[i] << ',' << label << ',' << (d.measured[i] ? 1 : 0);
           for (int j = 0; j < kNumJoints; ++j) csv << ',' << f[i][j];
           csv << '\n';
         }

@@ -129,9 +129,15 @@ KMeansResult kmeansPlusPlus(const std::vector<JointVector>& points, const KMeans
 
 std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
                                            const std::vector<JointVector>& q) {
+  return featureTrajectory(centroids, t_s, q, t_s);
+}
+
+std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
+                                           const std::vector<JointVector>& q, const std::vector<double>& t_eval) {
   if (t_s.size() != q.size()) throw UserError("featureTrajectory: times and poses differ in length");
-  std::vector<JointVector> out(q.size());
-  if (q.empty()) return out;
+  std::vector<JointVector> out(t_eval.size());
+  if (t_eval.empty()) return out;
+  if (q.empty()) throw UserError("featureTrajectory: no measured samples to build segments from");
   // Segments: runs of equal nearest-centroid labels; key pose at the segment's middle time.
   std::vector<double> t_key;
   std::vector<int> key;
@@ -146,16 +152,17 @@ std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centr
       label = next;
     }
   }
+  // t_eval is expected in increasing order; s only moves forward.
   std::size_t s = 0;
-  for (std::size_t i = 0; i < q.size(); ++i) {
-    while (s + 1 < t_key.size() && t_s[i] >= t_key[s + 1]) ++s;
+  for (std::size_t i = 0; i < t_eval.size(); ++i) {
+    while (s + 1 < t_key.size() && t_eval[i] >= t_key[s + 1]) ++s;
     const JointVector& a = centroids[static_cast<std::size_t>(key[s])];
-    if (t_s[i] <= t_key[s] || s + 1 == t_key.size()) {
+    if (t_eval[i] <= t_key[s] || s + 1 == t_key.size()) {
       out[i] = a;
       continue;
     }
     const JointVector& b = centroids[static_cast<std::size_t>(key[s + 1])];
-    const double u = (t_s[i] - t_key[s]) / (t_key[s + 1] - t_key[s]);
+    const double u = (t_eval[i] - t_key[s]) / (t_key[s + 1] - t_key[s]);
     const double w = u * u * (3.0 - 2.0 * u);
     out[i] = (1.0 - w) * a + w * b;
   }

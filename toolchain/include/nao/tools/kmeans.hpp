@@ -47,4 +47,10 @@ KMeansResult kmeansPlusPlus(const std::vector<JointVector>& points, const KMeans
 std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
                                            const std::vector<JointVector>& q);
 
+/// As above, with the segments taken from the measured samples (t_s, q) and the trajectory
+/// evaluated at the times t_eval (e.g. the whole 10 Hz grid, including samples where no human
+/// was measured): one output pose per entry of t_eval.
+std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
+                                           const std::vector<JointVector>& q, const std::vector<double>& t_eval);
+
 }  // namespace nao::tools
