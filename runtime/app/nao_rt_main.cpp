@@ -7,6 +7,11 @@
 #include "nao/arm_model.hpp"
 #include "nao/kinematics.hpp"
 #include "nao/sim_arm.hpp"
+#include "rt_info.hpp"
+
+#if NAO_HAVE_COMPILED_MODEL
+#include "nao/compiled_model.hpp"
+#endif
 
 #include <CLI/CLI.hpp>
 
@@ -69,7 +74,25 @@ int main(int argc, char** argv) {
   app.add_option("--servo-gain", gain, "Servo gain K of the simulated position servos, 1/s")
       ->check(CLI::Range(1.0, 500.0))
       ->capture_default_str();
+  bool info = false;
+  std::string weights_path;
+  auto* info_flag = app.add_flag("--info", info,
+                                 "Check the policy model (compiled-in, or --weights) against the URDF, print it as "
+                                 "one JSON object and exit");
+  app.add_option("--weights", weights_path, "model.bin to use instead of the compiled-in model")->needs(info_flag);
   CLI11_PARSE(app, argc, argv);
+
+  if (info) {
+    nao::rt::InfoOptions options;
+    options.weights_path = weights_path;
+    options.urdf_path = urdf_path;
+#if NAO_HAVE_COMPILED_MODEL
+    const nao::compiled::ModelBytes compiled = nao::compiled::modelBytes();
+    options.compiled = compiled.data;
+    options.compiled_size = compiled.size;
+#endif
+    return nao::rt::runInfo(options, std::cout, std::cerr);
+  }
 
   const int script_ticks = static_cast<int>(std::lround(kSegmentS * (kKeyPoses.size() - 1) / kTickS)) + 10;
   const int n_ticks = ticks > 0 ? ticks : seconds > 0.0 ? static_cast<int>(std::lround(seconds / kTickS)) : script_ticks;

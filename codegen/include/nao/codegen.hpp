@@ -1,0 +1,49 @@
+// nao_codegen: turns a checked model.bin into the sources that compile it into nao_rt
+// (docs/policy.md "codegen", DESIGN §8): a constexpr config header, a header with the
+// PolicyDims alias, and an assembler file that .incbin's a copy of the model into .rodata.
+// Build-time code: allocates, throws, does I/O.
+#pragma once
+
+#include "nao/model_file.hpp"
+
+#include <string>
+#include <vector>
+
+namespace nao::codegen {
+
+inline constexpr const char* kConfigHeader = "nao_model_config.hpp";
+inline constexpr const char* kDimsHeader = "nao_model_dims.hpp";
+inline constexpr const char* kWeightsAsm = "nao_model_weights.S";
+inline constexpr const char* kModelCopy = "model.bin";
+/// Symbols of the embedded bytes (first byte, one past the last), 64-byte aligned.
+inline constexpr const char* kBlobSymbol = "nao_model_blob";
+inline constexpr const char* kBlobEndSymbol = "nao_model_blob_end";
+
+/// nao_model_config.hpp for `model`: namespace nao::compiled, every dimension, the
+/// conditioning, checksum, parameter count, tensor names/offsets/counts in manifest order,
+/// joint names and limits, movement names. `source` is named in the banner comment only.
+std::string configHeader(const ModelFile& model, const std::string& source);
+
+/// nao_model_dims.hpp: `using Dims = nao::PolicyDims<...>` (needs nao/policy.hpp and
+/// exactly three FFN widths; otherwise a header that fails with #error when included).
+std::string dimsHeader(const ModelFile& model);
+
+/// nao_model_weights.S: `.incbin` of `blob_path` (absolute) into .rodata, 64-byte aligned,
+/// between kBlobSymbol and kBlobEndSymbol.
+std::string weightsAsm(const ModelFile& model, const std::string& blob_path);
+
+/// Writes `content` to `path` unless the file already holds exactly that (temporary file +
+/// rename). Returns whether it wrote. Throws std::runtime_error naming the path.
+bool writeIfChanged(const std::string& path, const std::string& content);
+
+struct Result {
+  ModelFile model;
+  std::vector<std::string> written;    ///< paths whose content changed
+  std::vector<std::string> unchanged;  ///< paths left as they were
+};
+
+/// readModelFile(model_path) (throws ModelFileError), then writes the three sources and the
+/// model copy into `out_dir` (created if missing), each only if its content changed.
+Result generate(const std::string& model_path, const std::string& out_dir);
+
+}  // namespace nao::codegen

@@ -1,0 +1,87 @@
+#include "rt_info.hpp"
+
+#include "nao/arm_model.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <ostream>
+#include <vector>
+
+namespace nao::rt {
+namespace {
+
+/// One line, whatever the message holds.
+std::string oneLine(std::string s) {
+  for (char& c : s)
+    if (c == '\n' || c == '\r') c = ' ';
+  return s;
+}
+
+}  // namespace
+
+std::string modelInfoJson(const ModelFile& model, const std::string& source) {
+  using nlohmann::ordered_json;
+  const ModelHeader& h = model.header;
+  const PolicyArch& a = h.arch;
+  char checksum[32];
+  std::snprintf(checksum, sizeof checksum, "0x%016llx", static_cast<unsigned long long>(model.checksum));
+
+  ordered_json j;
+  j["format_version"] = kModelFormatVersion;
+  j["d_model"] = a.d_model;
+  j["heads"] = a.heads;
+  j["encoder_layers"] = a.encoder_layers;
+  j["decoder_layers"] = a.decoder_layers;
+  j["ffn_hidden"] = a.ffn_hidden;
+  j["tokens"] = a.tokens;
+  j["features"] = a.features;
+  j["conditioning"] = conditioningName(h.conditioning);
+  j["clusters"] = a.clusters;
+  j["movements"] = h.movement_names;
+  j["max_steps"] = a.max_steps;
+  j["parameters"] = parameterCount(a);
+  j["tensors"] = model.tensors.size();
+  j["bytes"] = model.bytes.size();
+  j["checksum"] = checksum;
+  ordered_json joints = ordered_json::array();
+  for (const TrainedJoint& t : h.joints)
+    joints.push_back({{"name", t.name}, {"lower", t.lower}, {"upper", t.upper}, {"velocity", t.velocity}});
+  j["joints"] = std::move(joints);
+  ordered_json metadata = ordered_json::parse(h.metadata_json, nullptr, /*allow_exceptions=*/false);
+  j["metadata"] = metadata.is_discarded() ? ordered_json(h.metadata_json) : std::move(metadata);
+  j["source"] = source;
+  // Metadata is whatever the file holds: replace invalid UTF-8 rather than throw.
+  return j.dump(2, ' ', false, ordered_json::error_handler_t::replace);
+}
+
+int runInfo(const InfoOptions& options, std::ostream& out, std::ostream& err) {
+  try {
+    ModelFile model;
+    std::string source;
+    if (!options.weights_path.empty()) {
+      source = options.weights_path;
+      model = readModelFile(source);
+    } else if (options.compiled != nullptr) {
+      source = "compiled-in";
+      model = decodeModel(std::vector<std::uint8_t>(options.compiled, options.compiled + options.compiled_size),
+                          "compiled-in model");
+    } else {
+      err << "nao_rt: no model is compiled into this build; pass --weights FILE\n";
+      return 1;
+    }
+    const ArmModel arm = loadArmModel(options.urdf_path);
+    try {
+      checkJointsMatch(model, arm, source == "compiled-in" ? "compiled-in model" : source);
+    } catch (const ModelFileError& e) {
+      throw ModelFileError(std::string(e.what()) + " (" + options.urdf_path + ")");
+    }
+    out << modelInfoJson(model, source) << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    err << "nao_rt: " << oneLine(e.what()) << "\n";
+    return 1;
+  }
+}
+
+}  // namespace nao::rt

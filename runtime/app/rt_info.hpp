@@ -1,0 +1,32 @@
+// `nao_rt --info`: describes a model (the compiled-in one or --weights FILE) as one JSON
+// object after checking it like start-up does (model.bin validation, joints against the URDF).
+// Configure-time code: allocates, reads files.
+#pragma once
+
+#include "nao/model_file.hpp"
+
+#include <cstddef>
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+
+namespace nao::rt {
+
+struct InfoOptions {
+  std::string weights_path;                 ///< model.bin to describe; empty: the compiled-in model
+  std::string urdf_path;                    ///< the URDF the joints must match
+  const std::uint8_t* compiled = nullptr;   ///< compiled-in model bytes, nullptr if the build has none
+  std::size_t compiled_size = 0;
+};
+
+/// The JSON description of a checked model (pretty-printed, no trailing newline): format_version,
+/// dimensions, conditioning, movements, parameters, checksum ("0x%016x"), tensors, joints,
+/// metadata (parsed JSON if it parses, else the string), source.
+std::string modelInfoJson(const ModelFile& model, const std::string& source);
+
+/// Checks the model and prints modelInfoJson + newline on `out`: returns 0. On any problem
+/// (no model, a bad file, joints that differ from the URDF, an unusable URDF) prints exactly
+/// one line "nao_rt: <message>" on `err` and returns 1.
+int runInfo(const InfoOptions& options, std::ostream& out, std::ostream& err);
+
+}  // namespace nao::rt

@@ -1,0 +1,93 @@
+// model.bin: one versioned little-endian file holding a trained policy (docs/policy.md,
+// DESIGN §8). Written by `nao_toolchain train`, read by nao_rt, nao_codegen and the tests.
+// Configure-time code: reading and writing allocate and may throw.
+#pragma once
+
+#include "nao/arm_model.hpp"
+#include "nao/policy_config.hpp"
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace nao {
+
+inline constexpr char kModelMagic[8] = {'N', 'A', 'O', 'P', 'O', 'L', 'C', 'Y'};
+inline constexpr std::uint32_t kModelFormatVersion = 1;
+inline constexpr std::size_t kModelAlignment = 64;  ///< tensor data offsets are multiples of this
+
+/// A model.bin that cannot be used: the message names the file and the problem.
+class ModelFileError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct TrainedJoint {
+  std::string name;       ///< URDF joint name
+  double lower = 0.0;     ///< rad
+  double upper = 0.0;     ///< rad
+  double velocity = 0.0;  ///< rad/s
+};
+
+/// Everything in model.bin but the tensor data.
+struct ModelHeader {
+  PolicyArch arch;
+  Conditioning conditioning = Conditioning::kReference;
+  std::vector<TrainedJoint> joints;          ///< arch.tokens entries, joint order
+  std::vector<std::string> movement_names;   ///< arch.movements entries, index order
+  std::string metadata_json;                 ///< training config, seed, fingerprint, losses
+};
+
+/// Tensor table entry as stored: manifest name and shape, where its floats start.
+struct TensorEntry {
+  TensorSpec spec;
+  std::uint64_t offset = 0;  ///< bytes from the start of the file
+};
+
+struct ModelFile {
+  ModelHeader header;
+  std::vector<TensorEntry> tensors;  ///< manifest order
+  std::vector<std::uint8_t> bytes;   ///< the whole file as read (tensor data at the offsets)
+  std::uint64_t checksum = 0;        ///< FNV-1a 64 stored at the end (verified)
+
+  /// Pointer to tensor `index`'s floats inside `bytes` (unaligned access is fine for Eigen::Map).
+  const float* data(std::size_t index) const;
+  /// Index of the tensor named `name`; throws ModelFileError if absent.
+  std::size_t find(const std::string& name) const;
+};
+
+/// FNV-1a 64 over a byte range (the model checksum).
+std::uint64_t fnv1a64(const std::uint8_t* data, std::size_t size, std::uint64_t seed = 0xcbf29ce484222325ull);
+
+/// Builds the file bytes: `tensors` holds one float vector per manifest entry, in manifest order,
+/// each of the manifest's element count. Throws ModelFileError on a size mismatch or an
+/// unusable architecture.
+std::vector<std::uint8_t> encodeModel(const ModelHeader& header, const std::vector<std::vector<float>>& tensors);
+
+/// encodeModel + write to `path` (whole file, then rename, so a crash leaves no half file).
+/// Returns the checksum.
+std::uint64_t writeModelFile(const std::string& path, const ModelHeader& header,
+                             const std::vector<std::vector<float>>& tensors);
+
+/// Parses and validates file bytes; `origin` names the source in messages. Rejects: wrong
+/// magic, unknown version, truncation, checksum mismatch, an unusable architecture, a tensor
+/// table that differs from the manifest (name, shape, order, offset), NaN/Inf weights.
+/// Checked in that order; each ModelFileError reads "<origin>: <problem>". The checksum is
+/// verified before any header field is believed: a file whose checksum fails is reported as
+/// truncated only if its header is consistent with itself and describes a longer file, and
+/// as a checksum mismatch otherwise (so one flipped byte after the version always reads
+/// "checksum mismatch"). Every header read is bounded; counts are capped before use.
+ModelFile decodeModel(std::vector<std::uint8_t> bytes, const std::string& origin);
+
+/// Reads and validates `path` (decodeModel); an unreadable file throws ModelFileError too.
+ModelFile readModelFile(const std::string& path);
+
+/// Throws ModelFileError unless the joints the model was trained for are the arm's (names in
+/// kJointNames order, limits within 1e-9 rad or rad/s).
+void checkJointsMatch(const ModelFile& model, const ArmModel& arm, const std::string& origin);
+
+/// The joints of `arm` as model.bin stores them.
+std::vector<TrainedJoint> trainedJoints(const ArmModel& arm);
+
+}  // namespace nao

@@ -1,0 +1,173 @@
+// nao_codegen: the generated sources describe exactly the model they embed, and an
+// unchanged model rewrites nothing (cheap rebuilds).
+#include "nao/codegen.hpp"
+
+#include "support/test_util.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+nao::ModelHeader makeHeader(const nao::PolicyArch& arch) {
+  nao::ModelHeader h;
+  h.arch = arch;
+  h.conditioning = nao::Conditioning::kAutonomous;
+  h.joints = nao::trainedJoints(nao::loadArmModel(nao::test::kUrdfPath));
+  h.movement_names = {"elbow", "whole_arm", "wrist"};
+  h.metadata_json = R"({"seed":11})";
+  return h;
+}
+
+std::vector<std::vector<float>> randomTensors(const nao::PolicyArch& arch, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<std::vector<float>> out;
+  for (const nao::TensorSpec& t : nao::policyManifest(arch)) {
+    std::vector<float> v(t.count());
+    for (float& x : v) x = u(rng);
+    out.push_back(std::move(v));
+  }
+  return out;
+}
+
+fs::path freshDir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / "nao_rt_tests" / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+/// The numbers of `inline constexpr std::array<...> name = { ... };` in `text`.
+std::vector<std::string> arrayItems(const std::string& text, const std::string& name) {
+  const std::size_t at = text.find(" " + name + " = {");
+  REQUIRE_MESSAGE(at != std::string::npos, name << " not in the generated header");
+  const std::size_t open = text.find('{', at), close = text.find('}', at);
+  std::vector<std::string> items;
+  std::string item;
+  for (std::size_t i = open + 1; i < close; ++i) {
+    const char c = text[i];
+    if (c == ',') {
+      items.push_back(item);
+      item.clear();
+    } else if (c != ' ' && c != '\n') {
+      item += c;
+    }
+  }
+  if (!item.empty()) items.push_back(item);
+  return items;
+}
+
+}  // namespace
+
+TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S and a copy of the model") {
+  const fs::path dir = freshDir("codegen");
+  const std::string model_path = (dir / "in.bin").string();
+  const nao::PolicyArch arch = nao::smallArch();
+  nao::writeModelFile(model_path, makeHeader(arch), randomTensors(arch, 5));
+  const fs::path out = dir / "gen";
+
+  const nao::codegen::Result r = nao::codegen::generate(model_path, out.string());
+  CHECK(r.written.size() == 4);
+  CHECK(r.unchanged.empty());
+  const nao::ModelFile& m = r.model;
+
+  // The copy is the model, byte for byte.
+  const std::string copy = nao::test::readFile((out / "model.bin").string());
+  CHECK(copy == std::string(m.bytes.begin(), m.bytes.end()));
+
+  const std::string config = nao::test::readFile((out / "nao_model_config.hpp").string());
+  for (const std::string line : {"namespace nao::compiled {", "inline constexpr int kDModel = 32;",
+                                 "inline constexpr int kHeads = 4;", "inline constexpr int kHeadDim = 8;",
+                                 "inline constexpr int kEncoderLayers = 2;", "inline constexpr int kDecoderLayers = 2;",
+                                 "inline constexpr int kFfn0 = 64;", "inline constexpr int kFfn2 = 64;",
+                                 "inline constexpr int kTokens = 5;", "inline constexpr int kMovements = 3;",
+                                 "inline constexpr int kClusters = 10;", "inline constexpr int kMaxSteps = 256;",
+                                 "inline constexpr Conditioning kConditioning = Conditioning::kAutonomous;"})
+    CHECK_MESSAGE(config.find(line) != std::string::npos, line);
+  char checksum[64];
+  std::snprintf(checksum, sizeof checksum, "kChecksum = 0x%016llxull;", static_cast<unsigned long long>(m.checksum));
+  CHECK(config.find(checksum) != std::string::npos);
+  CHECK(config.find("kParameterCount = " + std::to_string(nao::parameterCount(arch)) + ";") != std::string::npos);
+
+  // Tensor names, offsets and counts: the file's table, in manifest order.
+  const auto names = arrayItems(config, "kTensorNames");
+  const auto offsets = arrayItems(config, "kTensorOffsets");
+  const auto counts = arrayItems(config, "kTensorCounts");
+  REQUIRE(names.size() == m.tensors.size());
+  REQUIRE(offsets.size() == m.tensors.size());
+  REQUIRE(counts.size() == m.tensors.size());
+  for (std::size_t i = 0; i < m.tensors.size(); ++i) {
+    CHECK(names[i] == "\"" + m.tensors[i].spec.name + "\"");
+    CHECK(offsets[i] == std::to_string(m.tensors[i].offset) + "u");
+    CHECK(counts[i] == std::to_string(m.tensors[i].spec.count()) + "u");
+  }
+
+  // Joint limits are written so that they read back exactly.
+  const nao::ArmModel arm = nao::loadArmModel(nao::test::kUrdfPath);
+  const auto lower = arrayItems(config, "kJointLower");
+  const auto velocity = arrayItems(config, "kJointVelocity");
+  REQUIRE(lower.size() == 5);
+  for (int j = 0; j < nao::kNumJoints; ++j) {
+    CHECK(std::strtod(lower[static_cast<std::size_t>(j)].c_str(), nullptr) == arm.q_min[j]);
+    CHECK(std::strtod(velocity[static_cast<std::size_t>(j)].c_str(), nullptr) == arm.v_max[j]);
+  }
+  CHECK(arrayItems(config, "kMovementNames") == std::vector<std::string>{"\"elbow\"", "\"whole_arm\"", "\"wrist\""});
+
+  const std::string dims = nao::test::readFile((out / "nao_model_dims.hpp").string());
+  CHECK(dims.find("using Dims = nao::PolicyDims<kDModel, kHeads, kEncoderLayers, kDecoderLayers, kFfn0, kFfn1, kFfn2") !=
+        std::string::npos);
+
+  const std::string s = nao::test::readFile((out / "nao_model_weights.S").string());
+  const std::string abs_copy = fs::absolute(out / "model.bin").lexically_normal().string();
+  for (const std::string& line : {std::string(".section .rodata\n"), std::string(".balign 64\n"),
+                                 std::string(".globl nao_model_blob\n"), std::string("nao_model_blob:\n"),
+                                 ".incbin \"" + abs_copy + "\"\n", std::string("nao_model_blob_end:\n"),
+                                 std::string(".section .note.GNU-stack,\"\",@progbits\n")})
+    CHECK_MESSAGE(s.find(line) != std::string::npos, line);
+}
+
+TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new model changes") {
+  const fs::path dir = freshDir("codegen_rerun");
+  const std::string model_path = (dir / "in.bin").string();
+  const nao::PolicyArch arch = nao::smallArch();
+  nao::writeModelFile(model_path, makeHeader(arch), randomTensors(arch, 5));
+  const fs::path out = dir / "gen";
+  nao::codegen::generate(model_path, out.string());
+  const auto stamp = fs::last_write_time(out / "nao_model_config.hpp");
+
+  const nao::codegen::Result again = nao::codegen::generate(model_path, out.string());
+  CHECK(again.written.empty());
+  CHECK(again.unchanged.size() == 4);
+  CHECK(fs::last_write_time(out / "nao_model_config.hpp") == stamp);
+
+  // Other weights, same architecture: the model copy, the checksum in the config and the .S
+  // comment change; the dims header does not.
+  nao::writeModelFile(model_path, makeHeader(arch), randomTensors(arch, 6));
+  const nao::codegen::Result changed = nao::codegen::generate(model_path, out.string());
+  CHECK(changed.written.size() == 3);
+  REQUIRE(changed.unchanged.size() == 1);
+  CHECK(fs::path(changed.unchanged[0]).filename() == "nao_model_dims.hpp");
+}
+
+TEST_CASE("nao_codegen refuses a bad model and writes nothing") {
+  const fs::path dir = freshDir("codegen_bad");
+  const std::string model_path = nao::test::writeTempFile("codegen_bad.bin", "NAOPOLCY not really a model at all........");
+  const fs::path out = dir / "gen";
+  CHECK_THROWS_AS(nao::codegen::generate(model_path, out.string()), nao::ModelFileError);
+  CHECK_FALSE(fs::exists(out));
+}
+
+TEST_CASE("the dims header refuses an FFN depth nao::PolicyDims cannot express") {
+  nao::PolicyArch arch = nao::smallArch();
+  arch.ffn_hidden = {64, 64};
+  const nao::ModelFile m = nao::decodeModel(nao::encodeModel(makeHeader(arch), randomTensors(arch, 1)), "two.bin");
+  const std::string dims = nao::codegen::dimsHeader(m);
+  CHECK(dims.find("#error \"nao::PolicyDims supports exactly 3 FFN hidden layers; this model has 2\"") != std::string::npos);
+  CHECK(dims.find("using Dims") == std::string::npos);
+}

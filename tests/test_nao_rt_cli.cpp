@@ -1,0 +1,169 @@
+// nao_rt --info (runInfo): one JSON object for a good model, exactly one stderr line and exit
+// status 1 for anything else.
+#include "rt_info.hpp"
+
+#include "support/test_util.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <random>
+#include <sstream>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+nao::ModelHeader makeHeader() {
+  nao::ModelHeader h;
+  h.arch = nao::smallArch();
+  h.joints = nao::trainedJoints(nao::loadArmModel(nao::test::kUrdfPath));
+  h.movement_names = {"elbow", "whole_arm", "wrist"};
+  h.metadata_json = R"({"seed":3,"epochs":2})";
+  return h;
+}
+
+std::vector<std::vector<float>> randomTensors(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<std::vector<float>> out;
+  for (const nao::TensorSpec& t : nao::policyManifest(nao::smallArch())) {
+    std::vector<float> v(t.count());
+    for (float& x : v) x = u(rng);
+    out.push_back(std::move(v));
+  }
+  return out;
+}
+
+std::string modelPath(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / "nao_rt_tests" / "rt_info";
+  fs::create_directories(dir);
+  return (dir / name).string();
+}
+
+struct Run {
+  int status;
+  std::string out, err;
+};
+
+Run info(const nao::rt::InfoOptions& options) {
+  std::ostringstream out, err;
+  const int status = nao::rt::runInfo(options, out, err);
+  return {status, out.str(), err.str()};
+}
+
+nao::rt::InfoOptions withWeights(const std::string& path) {
+  nao::rt::InfoOptions o;
+  o.weights_path = path;
+  o.urdf_path = nao::test::kUrdfPath;
+  return o;
+}
+
+/// Exactly one line: text ending in the only newline.
+bool oneLine(const std::string& s) { return !s.empty() && s.find('\n') == s.size() - 1; }
+
+}  // namespace
+
+TEST_CASE("nao_rt --info --weights prints one JSON object describing the model") {
+  const std::string path = modelPath("good.bin");
+  const std::uint64_t checksum = nao::writeModelFile(path, makeHeader(), randomTensors(1));
+  const Run r = info(withWeights(path));
+  CHECK(r.status == 0);
+  CHECK(r.err.empty());
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  CHECK(j["format_version"] == 1);
+  CHECK(j["d_model"] == 32);
+  CHECK(j["heads"] == 4);
+  CHECK(j["encoder_layers"] == 2);
+  CHECK(j["decoder_layers"] == 2);
+  CHECK(j["ffn_hidden"] == nlohmann::json::array({64, 64, 64}));
+  CHECK(j["tokens"] == 5);
+  CHECK(j["conditioning"] == "reference");
+  CHECK(j["clusters"] == 10);
+  CHECK(j["movements"] == nlohmann::json::array({"elbow", "whole_arm", "wrist"}));
+  CHECK(j["parameters"] == nao::parameterCount(nao::smallArch()));
+  CHECK(j["tensors"] == nao::policyManifest(nao::smallArch()).size());
+  CHECK(j["max_steps"] == 256);
+  char hex[32];
+  std::snprintf(hex, sizeof hex, "0x%016llx", static_cast<unsigned long long>(checksum));
+  CHECK(j["checksum"] == hex);
+  REQUIRE(j["joints"].size() == 5);
+  const nao::ArmModel arm = nao::loadArmModel(nao::test::kUrdfPath);
+  CHECK(j["joints"][3]["name"] == "RElbowRoll");
+  CHECK(j["joints"][3]["lower"].get<double>() == arm.q_min[3]);
+  CHECK(j["joints"][3]["velocity"].get<double>() == arm.v_max[3]);
+  CHECK(j["metadata"]["seed"] == 3);
+  CHECK(j["source"] == path);
+}
+
+TEST_CASE("nao_rt --info describes the compiled-in model, and says when there is none") {
+  const std::vector<std::uint8_t> bytes = nao::encodeModel(makeHeader(), randomTensors(2));
+  nao::rt::InfoOptions o;
+  o.urdf_path = nao::test::kUrdfPath;
+  Run r = info(o);
+  CHECK(r.status == 1);
+  CHECK(r.out.empty());
+  CHECK(r.err == "nao_rt: no model is compiled into this build; pass --weights FILE\n");
+
+  o.compiled = bytes.data();
+  o.compiled_size = bytes.size();
+  r = info(o);
+  CHECK(r.status == 0);
+  CHECK(nlohmann::json::parse(r.out)["source"] == "compiled-in");
+}
+
+TEST_CASE("nao_rt --info fails with exactly one stderr line on a bad model, joints or URDF") {
+  const std::string good = modelPath("good2.bin");
+  nao::writeModelFile(good, makeHeader(), randomTensors(1));
+
+  SUBCASE("a damaged file") {
+    std::string bytes = nao::test::readFile(good);
+    bytes[bytes.size() / 2] ^= 0x55;
+    const std::string path = nao::test::writeTempFile("rt_info_damaged.bin", bytes);
+    const Run r = info(withWeights(path));
+    CHECK(r.status == 1);
+    CHECK(r.out.empty());
+    CHECK(oneLine(r.err));
+    CHECK(r.err.rfind("nao_rt: " + path + ": checksum mismatch (stored 0x", 0) == 0);
+  }
+  SUBCASE("a missing file") {
+    const Run r = info(withWeights(modelPath("does_not_exist.bin")));
+    CHECK(r.status == 1);
+    CHECK(oneLine(r.err));
+    CHECK(r.err.find("does_not_exist.bin: cannot open") != std::string::npos);
+  }
+  SUBCASE("not a model") {
+    const std::string path = nao::test::writeTempFile("rt_info_text.bin", "hello, world\n");
+    const Run r = info(withWeights(path));
+    CHECK(r.err == "nao_rt: " + path + ": not a nao-rt model (bad magic)\n");
+  }
+  SUBCASE("joints that differ from the URDF") {
+    nao::ModelHeader h = makeHeader();
+    h.joints[0].upper += 1e-3;
+    const std::string path = modelPath("other_limits.bin");
+    nao::writeModelFile(path, h, randomTensors(1));
+    const Run r = info(withWeights(path));
+    CHECK(r.status == 1);
+    CHECK(oneLine(r.err));
+    CHECK(r.err.find("joint 'RShoulderPitch' upper limit") != std::string::npos);
+    CHECK(r.err.find(nao::test::kUrdfPath) != std::string::npos);
+  }
+  SUBCASE("an unusable URDF") {
+    nao::rt::InfoOptions o = withWeights(good);
+    o.urdf_path = modelPath("no_such.urdf");
+    const Run r = info(o);
+    CHECK(r.status == 1);
+    CHECK(oneLine(r.err));
+  }
+}
+
+TEST_CASE("nao_rt --info shows metadata that is not JSON as a string") {
+  nao::ModelHeader h = makeHeader();
+  h.metadata_json = "trained by hand \xff";
+  const std::string path = modelPath("text_meta.bin");
+  nao::writeModelFile(path, h, randomTensors(1));
+  const Run r = info(withWeights(path));
+  REQUIRE(r.status == 0);
+  CHECK(nlohmann::json::parse(r.out)["metadata"].is_string());
+}
