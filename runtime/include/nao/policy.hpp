@@ -1,0 +1,613 @@
+// The imitation policy's forward pass (docs/policy.md): a pre-layer-norm encoder-decoder
+// Transformer with one token per robot joint, run as fixed-size float Eigen code.
+//
+// Model/data split (STYLE 1): PolicyWeights<Dims> holds fixed-size Eigen::Map views of the
+// manifest tensors (model.bin data, .incbin'd by codegen or copied into static storage);
+// PolicyWorkspace<Dims> holds every intermediate and the attention record. stepPolicy reads the
+// first, writes the second, and allocates nothing, throws nothing, does no I/O.
+//
+// Notation: d = d_model, J = 5 tokens (robot joints, proximal to distal), H heads,
+// d_h = d / H, M movements, K key poses (clusters) per movement, S step-embedding rows.
+// Layout: a manifest matrix [in, out] row-major is the same bytes as a column-major Eigen
+// [out, in] matrix, so y = W x with W the view (the docs' row-vector `x W`). Activations are
+// [d, J] matrices, one column per token, and a product W X runs over W once for all J tokens:
+// the weights (24 MB for the paper config) are nearly all of the memory traffic of a step.
+#pragma once
+
+#include "nao/policy_config.hpp"
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <memory>
+#include <new>
+#include <string>
+#include <vector>
+
+namespace nao {
+
+/// Compile-time dimensions of a policy (STYLE 3). The runtime supports exactly three FFN hidden
+/// layers; a model.bin with another count has a different PolicyArch and is rejected by
+/// checkPolicyArch.
+template <int D, int H, int LE, int LD, int F0, int F1, int F2, int M = 3, int K = 10, int S = 256>
+struct PolicyDims {
+  static constexpr int kDModel = D;
+  static constexpr int kHeads = H;
+  static constexpr int kHeadDim = D / H;
+  static constexpr int kEncoderLayers = LE;
+  static constexpr int kDecoderLayers = LD;
+  static constexpr int kFfn0 = F0;
+  static constexpr int kFfn1 = F1;
+  static constexpr int kFfn2 = F2;
+  static constexpr int kTokens = 5;
+  static constexpr int kFeatures = kPolicyFeatures;
+  static constexpr int kMovements = M;
+  static constexpr int kClusters = K;
+  static constexpr int kMaxSteps = S;
+
+  static_assert(D >= 1 && H >= 1 && D % H == 0, "d_model must be a positive multiple of heads");
+  static_assert(LE >= 1 && LD >= 1, "at least one encoder and one decoder layer");
+  static_assert(F0 >= 1 && F1 >= 1 && F2 >= 1, "FFN hidden widths must be positive");
+  static_assert(M >= 1 && K >= 1 && S >= 1, "movements, clusters and max_steps must be positive");
+  static_assert(kFeatures == 3, "token features are q, a(t-1), r");
+  // Workspace buffers are fixed-size Eigen matrices, which Eigen caps at 128 KiB each.
+  static_assert(static_cast<std::size_t>(std::max({D, F0, F1, F2})) * kTokens * sizeof(float) <=
+                    EIGEN_STACK_ALLOCATION_LIMIT,
+                "a [width, J] activation buffer exceeds Eigen's fixed-size limit");
+
+  /// The same dimensions as a runtime PolicyArch (allocates; configure time only).
+  static PolicyArch arch() {
+    PolicyArch a;
+    a.d_model = D;
+    a.heads = H;
+    a.encoder_layers = LE;
+    a.decoder_layers = LD;
+    a.ffn_hidden = {F0, F1, F2};
+    a.tokens = kTokens;
+    a.features = kFeatures;
+    a.movements = M;
+    a.clusters = K;
+    a.max_steps = S;
+    return a;
+  }
+};
+
+/// paperArch() (paper §4.1) and smallArch() (tests) as compiled dimensions.
+using PaperPolicyDims = PolicyDims<128, 4, 4, 4, 512, 512, 512>;
+using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64>;
+
+/// Read-only fixed-size view of one manifest tensor, Eigen shape [rows, cols] column-major.
+template <int R, int C>
+using WeightView = Eigen::Map<const Eigen::Matrix<float, R, C>>;
+
+template <class Dims>
+struct LayerNormWeights {
+  WeightView<Dims::kDModel, 1> gain{nullptr};
+  WeightView<Dims::kDModel, 1> bias{nullptr};
+};
+
+/// One multi-head attention block; matrices [out = d, in = d].
+template <class Dims>
+struct AttentionWeights {
+  static constexpr int D = Dims::kDModel;
+  WeightView<D, D> wq{nullptr}, wk{nullptr}, wv{nullptr}, wo{nullptr};
+  WeightView<D, 1> bq{nullptr}, bk{nullptr}, bv{nullptr}, bo{nullptr};
+};
+
+/// d -> F0 -> F1 -> F2 -> d, ReLU after each hidden layer.
+template <class Dims>
+struct FfnWeights {
+  static constexpr int D = Dims::kDModel, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
+  WeightView<F0, D> w0{nullptr};
+  WeightView<F0, 1> b0{nullptr};
+  WeightView<F1, F0> w1{nullptr};
+  WeightView<F1, 1> b1{nullptr};
+  WeightView<F2, F1> w2{nullptr};
+  WeightView<F2, 1> b2{nullptr};
+  WeightView<D, F2> w3{nullptr};
+  WeightView<D, 1> b3{nullptr};
+};
+
+template <class Dims>
+struct EncoderLayerWeights {
+  LayerNormWeights<Dims> ln1;
+  AttentionWeights<Dims> attn;
+  LayerNormWeights<Dims> ln2;
+  FfnWeights<Dims> ffn;
+};
+
+template <class Dims>
+struct DecoderLayerWeights {
+  LayerNormWeights<Dims> ln1;
+  AttentionWeights<Dims> self;   ///< causal self-attention of the action tokens
+  LayerNormWeights<Dims> ln2;
+  AttentionWeights<Dims> cross;  ///< queries: action tokens; keys/values: encoder memory
+  LayerNormWeights<Dims> ln3;
+  FfnWeights<Dims> ffn;
+};
+
+/// The immutable model: views of every manifest tensor (the bytes stay where they were bound)
+/// plus the conditioning mode. Built by bindPolicyWeights.
+template <class Dims>
+struct PolicyWeights {
+  static constexpr int D = Dims::kDModel, J = Dims::kTokens, M = Dims::kMovements;
+  static constexpr int K = Dims::kClusters, S = Dims::kMaxSteps;
+
+  WeightView<D, 3> embed_in_weight{nullptr};   ///< columns: q, a(t-1), r features
+  WeightView<D, 1> embed_in_bias{nullptr};
+  WeightView<D, J> embed_joint_enc{nullptr};   ///< column j: encoder embedding of joint j
+  WeightView<D, M> embed_movement{nullptr};    ///< column m: movement m
+  WeightView<D, S> embed_step{nullptr};        ///< column s: step s (zero in reference mode)
+  WeightView<D, 1> embed_act_weight{nullptr};
+  WeightView<D, 1> embed_act_bias{nullptr};
+  WeightView<D, J> embed_joint_dec{nullptr};   ///< column j: decoder embedding of joint j
+  std::array<EncoderLayerWeights<Dims>, Dims::kEncoderLayers> enc;
+  LayerNormWeights<Dims> enc_norm;
+  std::array<DecoderLayerWeights<Dims>, Dims::kDecoderLayers> dec;
+  LayerNormWeights<Dims> dec_norm;
+  WeightView<1, D> head_weight{nullptr};
+  WeightView<1, 1> head_bias{nullptr};
+  WeightView<J, 1> q_mean{nullptr}, q_std{nullptr};  ///< rad
+  WeightView<J, 1> a_mean{nullptr}, a_std{nullptr};  ///< rad per step
+  WeightView<J, 1> r_mean{nullptr}, r_std{nullptr};  ///< rad
+  WeightView<J, M * K> centroids{nullptr};  ///< column m*K + k: key pose k of movement m, rad
+  Conditioning conditioning = Conditioning::kReference;
+};
+
+/// Everything stepPolicy writes: intermediates and the attention record of the last step.
+/// About 70 KB for the paper dimensions; build it once at configure time (makePolicyWorkspace),
+/// not as a stack object in the loop.
+template <class Dims>
+struct PolicyWorkspace {
+  static constexpr int D = Dims::kDModel, J = Dims::kTokens, H = Dims::kHeads;
+  static constexpr int Dh = Dims::kHeadDim, LD = Dims::kDecoderLayers;
+  using Tokens = Eigen::Matrix<float, D, J>;  ///< one column per token
+  using JointVec = Eigen::Matrix<float, J, 1>;
+
+  // Inputs as used: normalised features, clamped movement and step.
+  JointVec qn = JointVec::Zero(), an = JointVec::Zero(), rn = JointVec::Zero();
+  int movement = 0;
+  int step = 0;
+
+  Tokens x = Tokens::Zero();       ///< encoder residual stream
+  Tokens memory = Tokens::Zero();  ///< M = LN_enc(x), the cross-attention keys/values input
+  Tokens y = Tokens::Zero();       ///< decoder residual stream
+  Tokens h = Tokens::Zero();       ///< layer-norm output (sublayer input)
+  Tokens q = Tokens::Zero(), k = Tokens::Zero(), v = Tokens::Zero();  ///< attention Q, K, V
+  Tokens o = Tokens::Zero();       ///< heads' outputs [O_0 ... O_{H-1}] before Wo
+  Tokens out = Tokens::Zero();     ///< sublayer output before the residual add
+  Eigen::Matrix<float, Dims::kFfn0, J> f0 = Eigen::Matrix<float, Dims::kFfn0, J>::Zero();
+  Eigen::Matrix<float, Dims::kFfn1, J> f1 = Eigen::Matrix<float, Dims::kFfn1, J>::Zero();
+  Eigen::Matrix<float, Dims::kFfn2, J> f2 = Eigen::Matrix<float, Dims::kFfn2, J>::Zero();
+  Eigen::Matrix<float, Dh, J> v_head = Eigen::Matrix<float, Dh, J>::Zero();  ///< V_h, contiguous
+  std::array<Tokens, H> f_head{};  ///< column j of [h]: f_h(M_j) of the score
+  Eigen::Matrix<float, D, 1> contribution = Eigen::Matrix<float, D, 1>::Zero();
+  float alpha[H][J][J] = {};       ///< α of the latest unrecorded attention (scratch)
+
+  /// Attention record. cross[l][h][i][j]: α of decoder layer l's cross-attention, head h,
+  /// action token i (query), body part j (key); every row sums to 1.
+  float cross[LD][H][J][J] = {};
+  /// Norm-based score of body part j in the last decoder layer's cross-attention
+  /// (Kobayashi et al. 2020, docs/policy.md).
+  JointVec score = JointVec::Zero();
+  /// Column i: the last decoder layer's cross-attention output of action token i (after Wo, bo,
+  /// before the residual add).
+  Tokens cross_out = Tokens::Zero();
+
+  JointVec action_n = JointVec::Zero();  ///< normalised actions an'
+  JointVec action = JointVec::Zero();    ///< actions a(t), rad per step
+};
+
+/// A heap-allocated workspace (configure time).
+template <class Dims>
+std::unique_ptr<PolicyWorkspace<Dims>> makePolicyWorkspace() {
+  return std::make_unique<PolicyWorkspace<Dims>>();
+}
+
+/// One step's inputs, joint order (DESIGN §3).
+struct PolicyInput {
+  Eigen::Matrix<float, 5, 1> q = Eigen::Matrix<float, 5, 1>::Zero();       ///< joint state, rad
+  Eigen::Matrix<float, 5, 1> a_prev = Eigen::Matrix<float, 5, 1>::Zero();  ///< previous action, rad
+  Eigen::Matrix<float, 5, 1> r = Eigen::Matrix<float, 5, 1>::Zero();  ///< snapped reference, rad (ignored in autonomous mode)
+  int movement = 0;  ///< movement index (sorted names); clamped to 0..M-1
+  int step = 0;      ///< step index; clamped to 0..S-1
+};
+
+namespace detail {
+
+/// One view of PolicyWeights as the binder sees it.
+struct WeightSlot {
+  std::string name;  ///< manifest name
+  int rows;          ///< Eigen shape of the view
+  int cols;
+  void* view;        ///< the WeightView<rows, cols> to point at the tensor
+  void (*rebind)(void* view, const float* data);
+};
+
+template <int R, int C>
+void rebindView(void* view, const float* data) {
+  // Eigen's documented way to change the array a Map views.
+  new (view) WeightView<R, C>(data);
+}
+
+template <int R, int C>
+void addSlot(std::vector<WeightSlot>& slots, std::string name, WeightView<R, C>& view) {
+  slots.push_back({std::move(name), R, C, &view, &rebindView<R, C>});
+}
+
+template <class Dims>
+void addNormSlots(std::vector<WeightSlot>& s, const std::string& p, LayerNormWeights<Dims>& n) {
+  addSlot(s, p + ".gain", n.gain);
+  addSlot(s, p + ".bias", n.bias);
+}
+
+template <class Dims>
+void addAttentionSlots(std::vector<WeightSlot>& s, const std::string& p, AttentionWeights<Dims>& a) {
+  addSlot(s, p + ".wq", a.wq);
+  addSlot(s, p + ".bq", a.bq);
+  addSlot(s, p + ".wk", a.wk);
+  addSlot(s, p + ".bk", a.bk);
+  addSlot(s, p + ".wv", a.wv);
+  addSlot(s, p + ".bv", a.bv);
+  addSlot(s, p + ".wo", a.wo);
+  addSlot(s, p + ".bo", a.bo);
+}
+
+template <class Dims>
+void addFfnSlots(std::vector<WeightSlot>& s, const std::string& p, FfnWeights<Dims>& f) {
+  addSlot(s, p + ".0.weight", f.w0);
+  addSlot(s, p + ".0.bias", f.b0);
+  addSlot(s, p + ".1.weight", f.w1);
+  addSlot(s, p + ".1.bias", f.b1);
+  addSlot(s, p + ".2.weight", f.w2);
+  addSlot(s, p + ".2.bias", f.b2);
+  addSlot(s, p + ".3.weight", f.w3);
+  addSlot(s, p + ".3.bias", f.b3);
+}
+
+/// Every view of `w` with its manifest name (any order: binding matches by name).
+template <class Dims>
+std::vector<WeightSlot> weightSlots(PolicyWeights<Dims>& w) {
+  std::vector<WeightSlot> s;
+  addSlot(s, "embed.in.weight", w.embed_in_weight);
+  addSlot(s, "embed.in.bias", w.embed_in_bias);
+  addSlot(s, "embed.joint_enc", w.embed_joint_enc);
+  addSlot(s, "embed.movement", w.embed_movement);
+  addSlot(s, "embed.step", w.embed_step);
+  addSlot(s, "embed.act.weight", w.embed_act_weight);
+  addSlot(s, "embed.act.bias", w.embed_act_bias);
+  addSlot(s, "embed.joint_dec", w.embed_joint_dec);
+  for (int l = 0; l < Dims::kEncoderLayers; ++l) {
+    EncoderLayerWeights<Dims>& e = w.enc[static_cast<std::size_t>(l)];
+    const std::string p = "enc." + std::to_string(l);
+    addNormSlots(s, p + ".ln1", e.ln1);
+    addAttentionSlots(s, p + ".attn", e.attn);
+    addNormSlots(s, p + ".ln2", e.ln2);
+    addFfnSlots(s, p + ".ffn", e.ffn);
+  }
+  addNormSlots(s, "enc.norm", w.enc_norm);
+  for (int l = 0; l < Dims::kDecoderLayers; ++l) {
+    DecoderLayerWeights<Dims>& d = w.dec[static_cast<std::size_t>(l)];
+    const std::string p = "dec." + std::to_string(l);
+    addNormSlots(s, p + ".ln1", d.ln1);
+    addAttentionSlots(s, p + ".self", d.self);
+    addNormSlots(s, p + ".ln2", d.ln2);
+    addAttentionSlots(s, p + ".cross", d.cross);
+    addNormSlots(s, p + ".ln3", d.ln3);
+    addFfnSlots(s, p + ".ffn", d.ffn);
+  }
+  addNormSlots(s, "dec.norm", w.dec_norm);
+  addSlot(s, "head.weight", w.head_weight);
+  addSlot(s, "head.bias", w.head_bias);
+  addSlot(s, "norm.q_mean", w.q_mean);
+  addSlot(s, "norm.q_std", w.q_std);
+  addSlot(s, "norm.a_mean", w.a_mean);
+  addSlot(s, "norm.a_std", w.a_std);
+  addSlot(s, "norm.r_mean", w.r_mean);
+  addSlot(s, "norm.r_std", w.r_std);
+  addSlot(s, "centroids", w.centroids);
+  return s;
+}
+
+/// Points every slot at its manifest tensor, matched by name; checks that the manifest and the
+/// slots name the same tensors with the same shapes. Throws std::invalid_argument naming the
+/// tensor (runtime/src/policy.cpp).
+void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<TensorSpec>& manifest,
+                     const float* const* tensors, std::size_t count);
+
+/// Throws std::invalid_argument describing both architectures if they differ.
+void requireArch(const PolicyArch& compiled, const PolicyArch& given);
+
+using Packet = Eigen::internal::packet_traits<float>::type;
+inline constexpr int kPacketSize = Eigen::internal::packet_traits<float>::size;
+
+/// Y(:, t) += W(:, k0 .. k0+NK-1) X(k0 .. k0+NK-1, t) for all t, in k order.
+/// W column-major [Out, In], X [In, J] and Y [Out, J] column-major. Blocks of 2 packets of
+/// rows keep 2J accumulators in registers while NK consecutive columns of W stream by, so the
+/// panel (NK·Out contiguous floats) is read once for all J tokens.
+template <int Out, int In, int J, int NK>
+inline void accumulatePanel(const float* W, const float* X, float* Y, int k0) {
+  using Eigen::internal::padd;
+  using Eigen::internal::pmul;
+  using Eigen::internal::ploadu;
+  using Eigen::internal::pstoreu;
+  constexpr int P = kPacketSize;
+  constexpr int kRows = 2 * P;
+  Packet x_splat[NK][J];
+  for (int kk = 0; kk < NK; ++kk)
+    for (int t = 0; t < J; ++t) x_splat[kk][t] = Eigen::internal::pset1<Packet>(X[t * In + k0 + kk]);
+  const float* Wp = W + static_cast<std::ptrdiff_t>(k0) * Out;
+  int r = 0;
+  for (; r + kRows <= Out; r += kRows) {
+#if defined(__GNUC__)
+    // Pull the next panel (or, after the last one, the next tensor of model.bin) toward the
+    // cache in step with this one: the hardware prefetcher alone left the streamed weights
+    // ~2x slower than the arithmetic (measured, 24 MB sweep).
+    {
+      const char* next = reinterpret_cast<const char*>(Wp + NK * Out) +
+                         static_cast<std::ptrdiff_t>(r / kRows) * NK * kRows * static_cast<int>(sizeof(float));
+      for (int byte = 0; byte < NK * kRows * static_cast<int>(sizeof(float)); byte += 64) __builtin_prefetch(next + byte);
+    }
+#endif
+    Packet acc0[J], acc1[J];
+#pragma GCC unroll 8
+    for (int t = 0; t < J; ++t) {
+      acc0[t] = ploadu<Packet>(Y + t * Out + r);
+      acc1[t] = ploadu<Packet>(Y + t * Out + r + P);
+    }
+#pragma GCC unroll 16
+    for (int kk = 0; kk < NK; ++kk) {
+      const Packet w0 = ploadu<Packet>(Wp + kk * Out + r);
+      const Packet w1 = ploadu<Packet>(Wp + kk * Out + r + P);
+#pragma GCC unroll 8
+      for (int t = 0; t < J; ++t) {
+        // Multiply then add, never fused: the same rounding as the scalar rows below.
+        acc0[t] = padd(acc0[t], pmul(w0, x_splat[kk][t]));
+        acc1[t] = padd(acc1[t], pmul(w1, x_splat[kk][t]));
+      }
+    }
+#pragma GCC unroll 8
+    for (int t = 0; t < J; ++t) {
+      pstoreu(Y + t * Out + r, acc0[t]);
+      pstoreu(Y + t * Out + r + P, acc1[t]);
+    }
+  }
+  // Rows left over when Out is not a multiple of the block: same order of operations.
+  for (; r < Out; ++r)
+    for (int t = 0; t < J; ++t) {
+      float s = Y[t * Out + r];
+      for (int kk = 0; kk < NK; ++kk) s += Wp[kk * Out + r] * X[t * In + k0 + kk];
+      Y[t * Out + r] = s;
+    }
+}
+
+/// Y = W X + b (b may be null: zero), then ReLU if kRelu; every column an independent token.
+/// Each Y(r, t) is b(r) + W(r,0) X(0,t) + W(r,1) X(1,t) + ... summed in that order, whatever
+/// the packet width. W is read once. Real-time safe: no temporaries, no Eigen GEMM (whose
+/// fixed-size blocking buffers land on the stack and whose dynamic ones may allocate).
+template <int Out, int In, int J, bool kRelu>
+inline void affineTokens(const float* W, const float* b, const float* X, float* Y) {
+  // 4 columns x 2 packets x J tokens: measured fastest of 2-16 columns, 1-3 packets (SSE2).
+  constexpr int kPanel = 4;
+  for (int t = 0; t < J; ++t)
+    for (int r = 0; r < Out; ++r) Y[t * Out + r] = b != nullptr ? b[r] : 0.0f;
+  for (int k0 = 0; k0 + kPanel <= In; k0 += kPanel) accumulatePanel<Out, In, J, kPanel>(W, X, Y, k0);
+  if constexpr (In % kPanel != 0) accumulatePanel<Out, In, J, In % kPanel>(W, X, Y, In - In % kPanel);
+  if constexpr (kRelu)
+    for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
+}
+
+template <bool kRelu, int Out, int In, int J>
+inline void affine(const WeightView<Out, In>& W, const WeightView<Out, 1>& b, const Eigen::Matrix<float, In, J>& X,
+                   Eigen::Matrix<float, Out, J>& Y) {
+  affineTokens<Out, In, J, kRelu>(W.data(), b.data(), X.data(), Y.data());
+}
+
+/// out(:, j) = LN(x(:, j)): biased variance over d, eps 1e-5.
+template <class Dims>
+inline void layerNorm(const typename PolicyWorkspace<Dims>::Tokens& x, const LayerNormWeights<Dims>& n,
+                      typename PolicyWorkspace<Dims>::Tokens& out) {
+  constexpr float kInvD = 1.0f / static_cast<float>(Dims::kDModel);
+  for (int j = 0; j < Dims::kTokens; ++j) {
+    const float mean = x.col(j).sum() * kInvD;
+    const float var = (x.col(j).array() - mean).square().sum() * kInvD;
+    const float inv_std = 1.0f / std::sqrt(var + 1e-5f);
+    out.col(j) = ((x.col(j).array() - mean) * inv_std * n.gain.array() + n.bias.array()).matrix();
+  }
+}
+
+/// ws.out = MHA(x_q, x_kv) with α written to `alpha`; ws.q, ws.k, ws.v, ws.o hold the
+/// intermediates afterwards. Causal: query i sees keys 0..i only (masked α are 0).
+template <class Dims>
+inline void multiHeadAttention(const AttentionWeights<Dims>& A, const typename PolicyWorkspace<Dims>::Tokens& x_q,
+                               const typename PolicyWorkspace<Dims>::Tokens& x_kv, bool causal,
+                               float (&alpha)[Dims::kHeads][Dims::kTokens][Dims::kTokens], PolicyWorkspace<Dims>& ws) {
+  constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim;
+  affine<false>(A.wq, A.bq, x_q, ws.q);
+  affine<false>(A.wk, A.bk, x_kv, ws.k);
+  affine<false>(A.wv, A.bv, x_kv, ws.v);
+  const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
+  for (int hd = 0; hd < Dims::kHeads; ++hd) {
+    const int c0 = hd * Dh;
+    for (int i = 0; i < J; ++i) {
+      // Masked keys are skipped, not added as exp(-inf) = 0: query i never reads keys > i.
+      const int n_keys = causal ? i + 1 : J;
+      float s[J];
+      float s_max = -std::numeric_limits<float>::infinity();
+      for (int j = 0; j < n_keys; ++j) {
+        s[j] = ws.q.col(i).template segment<Dh>(c0).dot(ws.k.col(j).template segment<Dh>(c0)) * scale;
+        s_max = std::max(s_max, s[j]);
+      }
+      float sum = 0.0f;
+      for (int j = 0; j < n_keys; ++j) {
+        s[j] = std::exp(s[j] - s_max);
+        sum += s[j];
+      }
+      ws.o.col(i).template segment<Dh>(c0).setZero();
+      for (int j = 0; j < J; ++j) {
+        alpha[hd][i][j] = j < n_keys ? s[j] / sum : 0.0f;
+        if (j < n_keys) ws.o.col(i).template segment<Dh>(c0) += alpha[hd][i][j] * ws.v.col(j).template segment<Dh>(c0);
+      }
+    }
+  }
+  affine<false>(A.wo, A.bo, ws.o, ws.out);
+}
+
+/// ws.score from the last cross-attention (α in `alpha`, V in ws.v):
+/// score[j] = Σ_i ‖Σ_h α_h[i][j] f_h(M_j)‖, f_h(M_j) = Wo_h V_h(:, j).
+template <class Dims>
+inline void crossAttentionScore(const AttentionWeights<Dims>& A,
+                                const float (&alpha)[Dims::kHeads][Dims::kTokens][Dims::kTokens],
+                                PolicyWorkspace<Dims>& ws) {
+  constexpr int D = Dims::kDModel, J = Dims::kTokens, Dh = Dims::kHeadDim;
+  for (int hd = 0; hd < Dims::kHeads; ++hd) {
+    // Wo_h (rows h·d_h... of the [in, out] tensor) is d_h contiguous columns of the view.
+    ws.v_head = ws.v.template middleRows<Dh>(hd * Dh);
+    affineTokens<D, Dh, J, false>(A.wo.data() + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr,
+                                  ws.v_head.data(), ws.f_head[static_cast<std::size_t>(hd)].data());
+  }
+  for (int j = 0; j < J; ++j) {
+    float score = 0.0f;
+    for (int i = 0; i < J; ++i) {
+      ws.contribution.setZero();
+      for (int hd = 0; hd < Dims::kHeads; ++hd)
+        ws.contribution += alpha[hd][i][j] * ws.f_head[static_cast<std::size_t>(hd)].col(j);
+      score += ws.contribution.norm();
+    }
+    ws.score[j] = score;
+  }
+}
+
+template <class Dims>
+inline void feedForward(const FfnWeights<Dims>& F, PolicyWorkspace<Dims>& ws) {
+  affine<true>(F.w0, F.b0, ws.h, ws.f0);
+  affine<true>(F.w1, F.b1, ws.f0, ws.f1);
+  affine<true>(F.w2, F.b2, ws.f1, ws.f2);
+  affine<false>(F.w3, F.b3, ws.f2, ws.out);
+}
+
+}  // namespace detail
+
+/// Throws std::invalid_argument (naming both) if `arch`, e.g. the header of a model.bin, is not
+/// the compiled Dims (another FFN depth included). Configure time.
+template <class Dims>
+void checkPolicyArch(const PolicyArch& arch) {
+  detail::requireArch(Dims::arch(), arch);
+}
+
+/// Binds the views of a PolicyWeights to tensor data. Configure time (allocates).
+/// @param tensors tensors[i] points to the floats of entry i of policyManifest(Dims::arch()),
+///                row-major as in model.bin; the data must outlive the returned weights
+/// @param count   number of pointers; must equal the manifest size
+/// @param c       the conditioning mode of the model
+/// @throws std::invalid_argument on a wrong count or a null pointer; a manifest entry without a
+///         view of the same name and shape (a programming error) is reported the same way.
+template <class Dims>
+PolicyWeights<Dims> bindPolicyWeights(const float* const* tensors, std::size_t count, Conditioning c) {
+  PolicyWeights<Dims> w;
+  // By name against the manifest itself, so its order can change without a silent mismatch.
+  detail::bindWeightSlots(detail::weightSlots(w), policyManifest(Dims::arch()), tensors, count);
+  w.conditioning = c;
+  return w;
+}
+
+/// One policy step (docs/policy.md): normalise the inputs, run the encoder over the J joint
+/// tokens and the decoder over the J action tokens, de-normalise the head's output.
+/// Movement and step are clamped to 0..M-1 and 0..S-1 (a caller's index out of range picks
+/// the nearest embedding rather than reading out of bounds). rn = 0 in autonomous mode;
+/// embed.step is added in both modes (zero in reference-mode files). Non-finite inputs give
+/// non-finite actions (the caller checks). Writes the attention record (ws.cross, ws.score,
+/// ws.cross_out) and the intermediates into ws.
+/// @return ws.action: a_j(t), rad per step, joint order. Real-time safe: no allocation, no
+///         exception, no I/O; deterministic (fixed summation order, no FMA contraction).
+template <class Dims>
+const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws,
+                                              const PolicyInput& in) {
+  constexpr int J = Dims::kTokens;
+  static_assert(J == 5, "PolicyInput carries 5 joints");
+  ws.movement = std::clamp(in.movement, 0, Dims::kMovements - 1);
+  ws.step = std::clamp(in.step, 0, Dims::kMaxSteps - 1);
+  ws.qn = ((in.q - w.q_mean).array() / w.q_std.array()).matrix();
+  ws.an = ((in.a_prev - w.a_mean).array() / w.a_std.array()).matrix();
+  if (w.conditioning == Conditioning::kAutonomous)
+    ws.rn.setZero();
+  else
+    ws.rn = ((in.r - w.r_mean).array() / w.r_std.array()).matrix();
+
+  for (int j = 0; j < J; ++j) {
+    ws.x.col(j) = w.embed_in_weight.col(0) * ws.qn[j] + w.embed_in_weight.col(1) * ws.an[j] +
+                  w.embed_in_weight.col(2) * ws.rn[j] + w.embed_in_bias + w.embed_joint_enc.col(j) +
+                  w.embed_movement.col(ws.movement) + w.embed_step.col(ws.step);
+    ws.y.col(j) = w.embed_act_weight * ws.an[j] + w.embed_act_bias + w.embed_joint_dec.col(j);
+  }
+
+  for (const EncoderLayerWeights<Dims>& L : w.enc) {
+    detail::layerNorm<Dims>(ws.x, L.ln1, ws.h);
+    detail::multiHeadAttention<Dims>(L.attn, ws.h, ws.h, false, ws.alpha, ws);
+    ws.x += ws.out;
+    detail::layerNorm<Dims>(ws.x, L.ln2, ws.h);
+    detail::feedForward<Dims>(L.ffn, ws);
+    ws.x += ws.out;
+  }
+  detail::layerNorm<Dims>(ws.x, w.enc_norm, ws.memory);
+
+  for (int l = 0; l < Dims::kDecoderLayers; ++l) {
+    const DecoderLayerWeights<Dims>& L = w.dec[static_cast<std::size_t>(l)];
+    detail::layerNorm<Dims>(ws.y, L.ln1, ws.h);
+    detail::multiHeadAttention<Dims>(L.self, ws.h, ws.h, true, ws.alpha, ws);
+    ws.y += ws.out;
+    detail::layerNorm<Dims>(ws.y, L.ln2, ws.h);
+    detail::multiHeadAttention<Dims>(L.cross, ws.h, ws.memory, false, ws.cross[l], ws);
+    if (l == Dims::kDecoderLayers - 1) {
+      ws.cross_out = ws.out;
+      detail::crossAttentionScore<Dims>(L.cross, ws.cross[l], ws);
+    }
+    ws.y += ws.out;
+    detail::layerNorm<Dims>(ws.y, L.ln3, ws.h);
+    detail::feedForward<Dims>(L.ffn, ws);
+    ws.y += ws.out;
+  }
+  detail::layerNorm<Dims>(ws.y, w.dec_norm, ws.h);
+
+  for (int j = 0; j < J; ++j) ws.action_n[j] = w.head_weight.row(0).dot(ws.h.col(j).transpose()) + w.head_bias(0, 0);
+  ws.action = (ws.action_n.array() * w.a_std.array() + w.a_mean.array()).matrix();
+  return ws.action;
+}
+
+/// Index of the key pose of `movement` nearest to q (Euclidean, rad; ties to the lower index,
+/// the rule of toolchain kmeans nearestCentroid). Movement clamped to 0..M-1; a non-finite q
+/// gives 0. Real-time safe.
+/// @param q joint angles, rad (5; float or double)
+template <class Dims, class Derived>
+int snapToCentroid(const PolicyWeights<Dims>& w, int movement, const Eigen::MatrixBase<Derived>& q) {
+  static_assert(Derived::SizeAtCompileTime == Dims::kTokens, "q must have one entry per joint");
+  const int m = std::clamp(movement, 0, Dims::kMovements - 1);
+  int best = 0;
+  double best_d = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < Dims::kClusters; ++k) {
+    double d = 0.0;
+    for (int j = 0; j < Dims::kTokens; ++j) {
+      const double diff = static_cast<double>(w.centroids(j, m * Dims::kClusters + k)) - static_cast<double>(q[j]);
+      d += diff * diff;
+    }
+    if (d < best_d) {
+      best_d = d;
+      best = k;
+    }
+  }
+  return best;
+}
+
+/// Key pose k of `movement`, rad (both indices clamped). Real-time safe.
+template <class Dims>
+Eigen::Matrix<float, 5, 1> centroid(const PolicyWeights<Dims>& w, int movement, int k) {
+  const int m = std::clamp(movement, 0, Dims::kMovements - 1);
+  const int kc = std::clamp(k, 0, Dims::kClusters - 1);
+  return w.centroids.col(m * Dims::kClusters + kc);
+}
+
+}  // namespace nao

@@ -1,0 +1,569 @@
+// The policy forward pass (nao/policy.hpp) against an independent double-precision reference
+// written here from docs/policy.md (plain loops over the manifest tensors by name, row-vector
+// convention, no Eigen), plus the properties the architecture promises: attention rows sum to
+// 1, the decoder is causal, the conditioning inputs that must not matter do not.
+#include "nao/policy.hpp"
+
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+using namespace nao;
+
+namespace {
+
+// Uniform in [lo, hi) from the generator's raw bits (std distributions differ between
+// standard libraries).
+float uniform(std::mt19937_64& rng, double lo, double hi) {
+  return static_cast<float>(lo + (hi - lo) * (static_cast<double>(rng() >> 11) * 0x1.0p-53));
+}
+
+bool startsWith(const std::string& s, const char* p) { return s.rfind(p, 0) == 0; }
+bool endsWith(const std::string& s, const std::string& e) {
+  return s.size() >= e.size() && s.compare(s.size() - e.size(), e.size(), e) == 0;
+}
+
+/// Every manifest tensor as its own std::vector<float>, found by name.
+struct TestModel {
+  std::vector<TensorSpec> manifest;
+  std::vector<std::vector<float>> data;
+  std::map<std::string, std::size_t> index;
+
+  std::vector<float>& operator[](const std::string& name) { return data.at(index.at(name)); }
+  const std::vector<float>& operator[](const std::string& name) const { return data.at(index.at(name)); }
+  const TensorSpec& spec(const std::string& name) const { return manifest.at(index.at(name)); }
+  std::vector<const float*> pointers() const {
+    std::vector<const float*> p;
+    for (const std::vector<float>& t : data) p.push_back(t.data());
+    return p;
+  }
+};
+
+/// Random weights shaped like a real initialisation (Xavier-uniform matrices), with non-zero
+/// biases, layer-norm parameters and embeddings large enough that every term shows in the output.
+TestModel randomModel(const PolicyArch& arch, std::uint64_t seed, bool zero_step_embedding) {
+  TestModel m;
+  m.manifest = policyManifest(arch);
+  std::mt19937_64 rng(seed);
+  for (std::size_t i = 0; i < m.manifest.size(); ++i) {
+    const TensorSpec& s = m.manifest[i];
+    m.index[s.name] = i;
+    std::vector<float> v(s.count());
+    const std::string& n = s.name;
+    for (float& x : v) {
+      if (startsWith(n, "norm.") && endsWith(n, "_std"))
+        x = uniform(rng, 0.05, 0.5);
+      else if (startsWith(n, "norm."))
+        x = uniform(rng, -0.3, 0.3);
+      else if (n == "centroids")
+        x = uniform(rng, -1.5, 1.5);
+      else if (startsWith(n, "embed.joint") || n == "embed.movement" || n == "embed.step")
+        x = uniform(rng, -0.5, 0.5);
+      else if (endsWith(n, ".gain"))
+        x = uniform(rng, 0.8, 1.2);
+      else if (s.shape.size() == 2) {
+        const double a = std::sqrt(6.0 / (s.shape[0] + s.shape[1]));
+        x = uniform(rng, -a, a);
+      } else {
+        x = uniform(rng, -0.1, 0.1);  // biases, layer-norm biases
+      }
+    }
+    if (n == "embed.step" && zero_step_embedding) std::fill(v.begin(), v.end(), 0.0f);
+    m.data.push_back(std::move(v));
+  }
+  return m;
+}
+
+PolicyInput randomInput(std::mt19937_64& rng, int movement, int step) {
+  PolicyInput in;
+  for (int j = 0; j < 5; ++j) {
+    in.q[j] = uniform(rng, -1.5, 1.5);
+    in.a_prev[j] = uniform(rng, -0.1, 0.1);
+    in.r[j] = uniform(rng, -1.5, 1.5);
+  }
+  in.movement = movement;
+  in.step = step;
+  return in;
+}
+
+// ---- The reference: docs/policy.md, literally, in double. ----
+
+using Tokens = std::vector<std::vector<double>>;  // [token][feature]
+
+struct Reference {
+  std::vector<double> action;     // [J]
+  std::vector<double> cross;      // [l][h][i][j]
+  std::vector<double> score;      // [J]
+  Tokens cross_out;               // [i][d]
+};
+
+class ReferencePolicy {
+ public:
+  ReferencePolicy(const TestModel& m, const PolicyArch& a) : m_(m), a_(a), d_(a.d_model), J_(a.tokens) {}
+
+  Reference run(const PolicyInput& in, Conditioning c) const {
+    Reference out;
+    const int m_idx = std::clamp(in.movement, 0, a_.movements - 1);
+    const int s_idx = std::clamp(in.step, 0, a_.max_steps - 1);
+    std::vector<double> qn(5), an(5), rn(5);
+    for (int j = 0; j < J_; ++j) {
+      qn[j] = (in.q[j] - double(t("norm.q_mean")[j])) / double(t("norm.q_std")[j]);
+      an[j] = (in.a_prev[j] - double(t("norm.a_mean")[j])) / double(t("norm.a_std")[j]);
+      rn[j] = c == Conditioning::kAutonomous ? 0.0 : (in.r[j] - double(t("norm.r_mean")[j])) / double(t("norm.r_std")[j]);
+    }
+    Tokens x(J_, std::vector<double>(d_)), y(J_, std::vector<double>(d_));
+    const auto& w_in = t("embed.in.weight");  // [3, d]
+    for (int j = 0; j < J_; ++j)
+      for (int k = 0; k < d_; ++k) {
+        x[j][k] = qn[j] * w_in[0 * d_ + k] + an[j] * w_in[1 * d_ + k] + rn[j] * w_in[2 * d_ + k] +
+                  t("embed.in.bias")[k] + t("embed.joint_enc")[j * d_ + k] + t("embed.movement")[m_idx * d_ + k] +
+                  t("embed.step")[s_idx * d_ + k];
+        y[j][k] = an[j] * t("embed.act.weight")[k] + t("embed.act.bias")[k] + t("embed.joint_dec")[j * d_ + k];
+      }
+    for (int l = 0; l < a_.encoder_layers; ++l) {
+      const std::string p = "enc." + std::to_string(l);
+      Tokens h = layerNorm(p + ".ln1", x);
+      add(x, attention(p + ".attn", h, h, false, nullptr, nullptr));
+      add(x, ffn(p + ".ffn", layerNorm(p + ".ln2", x)));
+    }
+    const Tokens memory = layerNorm("enc.norm", x);
+    const int H = a_.heads;
+    out.cross.assign(static_cast<std::size_t>(a_.decoder_layers * H * J_ * J_), 0.0);
+    for (int l = 0; l < a_.decoder_layers; ++l) {
+      const std::string p = "dec." + std::to_string(l);
+      Tokens h = layerNorm(p + ".ln1", y);
+      add(y, attention(p + ".self", h, h, true, nullptr, nullptr));
+      std::vector<double> alpha;
+      Tokens v;
+      const Tokens co = attention(p + ".cross", layerNorm(p + ".ln2", y), memory, false, &alpha, &v);
+      std::copy(alpha.begin(), alpha.end(), out.cross.begin() + static_cast<std::ptrdiff_t>(l) * H * J_ * J_);
+      if (l == a_.decoder_layers - 1) {
+        out.cross_out = co;
+        out.score = score(p + ".cross", alpha, v);
+      }
+      add(y, co);
+      add(y, ffn(p + ".ffn", layerNorm(p + ".ln3", y)));
+    }
+    const Tokens yn = layerNorm("dec.norm", y);
+    for (int j = 0; j < J_; ++j) {
+      double a = t("head.bias")[0];
+      for (int k = 0; k < d_; ++k) a += yn[j][k] * t("head.weight")[k];
+      out.action.push_back(a * t("norm.a_std")[j] + t("norm.a_mean")[j]);
+    }
+    return out;
+  }
+
+ private:
+  const std::vector<float>& t(const std::string& name) const { return m_[name]; }
+
+  static void add(Tokens& x, const Tokens& dx) {
+    for (std::size_t j = 0; j < x.size(); ++j)
+      for (std::size_t k = 0; k < x[j].size(); ++k) x[j][k] += dx[j][k];
+  }
+
+  // x W + b, W [in, out] row-major.
+  Tokens linear(const std::string& w_name, const std::string& b_name, const Tokens& x) const {
+    const TensorSpec& s = m_.spec(w_name);
+    const int n_in = s.shape[0], n_out = s.shape[1];
+    const auto& W = t(w_name);
+    const auto& b = t(b_name);
+    Tokens y(x.size(), std::vector<double>(n_out));
+    for (std::size_t j = 0; j < x.size(); ++j)
+      for (int o = 0; o < n_out; ++o) {
+        double acc = b[o];
+        for (int i = 0; i < n_in; ++i) acc += x[j][i] * double(W[i * n_out + o]);
+        y[j][o] = acc;
+      }
+    return y;
+  }
+
+  Tokens layerNorm(const std::string& p, const Tokens& x) const {
+    Tokens y = x;
+    for (std::size_t j = 0; j < x.size(); ++j) {
+      double mean = 0.0, var = 0.0;
+      for (double v : x[j]) mean += v;
+      mean /= d_;
+      for (double v : x[j]) var += (v - mean) * (v - mean);
+      var /= d_;
+      for (int k = 0; k < d_; ++k)
+        y[j][k] = (x[j][k] - mean) / std::sqrt(var + 1e-5) * t(p + ".gain")[k] + t(p + ".bias")[k];
+    }
+    return y;
+  }
+
+  Tokens ffn(const std::string& p, const Tokens& x) const {
+    Tokens h = x;
+    for (int k = 0; k < 4; ++k) {
+      h = linear(p + "." + std::to_string(k) + ".weight", p + "." + std::to_string(k) + ".bias", h);
+      if (k < 3)
+        for (auto& row : h)
+          for (double& v : row) v = std::max(v, 0.0);
+    }
+    return h;
+  }
+
+  // MHA; alpha_out [h][i][j], v_out = Z Wv + bv.
+  Tokens attention(const std::string& p, const Tokens& X, const Tokens& Z, bool causal, std::vector<double>* alpha_out,
+                   Tokens* v_out) const {
+    const Tokens Q = linear(p + ".wq", p + ".bq", X), K = linear(p + ".wk", p + ".bk", Z),
+                 V = linear(p + ".wv", p + ".bv", Z);
+    const int H = a_.heads, dh = d_ / H;
+    Tokens O(X.size(), std::vector<double>(d_, 0.0));
+    std::vector<double> alpha(static_cast<std::size_t>(H * J_ * J_), 0.0);
+    for (int h = 0; h < H; ++h)
+      for (int i = 0; i < J_; ++i) {
+        std::vector<double> s(J_, -INFINITY);
+        double s_max = -INFINITY;
+        for (int j = 0; j < J_; ++j) {
+          if (causal && j > i) continue;  // mask −inf above the diagonal
+          double dot = 0.0;
+          for (int c = h * dh; c < (h + 1) * dh; ++c) dot += Q[i][c] * K[j][c];
+          s[j] = dot / std::sqrt(double(dh));
+          s_max = std::max(s_max, s[j]);
+        }
+        double sum = 0.0;
+        for (int j = 0; j < J_; ++j) sum += std::exp(s[j] - s_max);
+        for (int j = 0; j < J_; ++j) {
+          const double a = std::exp(s[j] - s_max) / sum;
+          alpha[(h * J_ + i) * J_ + j] = a;
+          for (int c = h * dh; c < (h + 1) * dh; ++c) O[i][c] += a * V[j][c];
+        }
+      }
+    if (alpha_out) *alpha_out = alpha;
+    if (v_out) *v_out = V;
+    return linear(p + ".wo", p + ".bo", O);
+  }
+
+  // score[j] = Σ_i ‖Σ_h α_h[i][j] f_h(M_j)‖, f_h(M_j) = V_h(j) · Wo_h (rows h·d_h... of Wo).
+  std::vector<double> score(const std::string& p, const std::vector<double>& alpha, const Tokens& V) const {
+    const int H = a_.heads, dh = d_ / H;
+    const auto& Wo = t(p + ".wo");
+    std::vector<double> sc(J_, 0.0);
+    for (int j = 0; j < J_; ++j)
+      for (int i = 0; i < J_; ++i) {
+        double sq = 0.0;
+        for (int o = 0; o < d_; ++o) {
+          double v = 0.0;
+          for (int h = 0; h < H; ++h) {
+            double f = 0.0;
+            for (int c = h * dh; c < (h + 1) * dh; ++c) f += V[j][c] * Wo[c * d_ + o];
+            v += alpha[(h * J_ + i) * J_ + j] * f;
+          }
+          sq += v * v;
+        }
+        sc[j] += std::sqrt(sq);
+      }
+    return sc;
+  }
+
+  const TestModel& m_;
+  PolicyArch a_;
+  int d_, J_;
+};
+
+// Largest |got - want| / max(1, |want|) over a comparison, and where it was.
+struct Worst {
+  double err = 0.0;
+  std::string where;
+  void note(double got, double want, const std::string& what) {
+    const double e = std::abs(got - want) / std::max(1.0, std::abs(want));
+    if (!(e <= err)) {  // also catches NaN
+      err = std::isnan(e) ? INFINITY : e;
+      where = what + ": got " + std::to_string(got) + ", reference " + std::to_string(want);
+    }
+  }
+};
+
+template <class Dims>
+void checkAgainstReference(std::uint64_t seed) {
+  constexpr int J = Dims::kTokens, H = Dims::kHeads, LD = Dims::kDecoderLayers, D = Dims::kDModel;
+  const PolicyArch arch = Dims::arch();
+  const TestModel model = randomModel(arch, seed, false);
+  const std::vector<const float*> ptrs = model.pointers();
+  std::mt19937_64 rng(seed + 1);
+  for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
+    const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c);
+    const auto ws = makePolicyWorkspace<Dims>();
+    const ReferencePolicy ref(model, arch);
+    // Every movement, steps inside and outside the table (clamped by both sides).
+    const int steps[] = {0, 17, Dims::kMaxSteps - 1, Dims::kMaxSteps + 40, -5};
+    for (int n = 0; n < 5; ++n) {
+      const PolicyInput in = randomInput(rng, n % Dims::kMovements, steps[n]);
+      const Eigen::Matrix<float, 5, 1> action = stepPolicy(w, *ws, in);
+      const Reference r = ref.run(in, c);
+      Worst wa, wc, ws_, wo;
+      for (int j = 0; j < J; ++j) wa.note(action[j], r.action[j], "action " + std::to_string(j));
+      for (int l = 0; l < LD; ++l)
+        for (int h = 0; h < H; ++h)
+          for (int i = 0; i < J; ++i)
+            for (int j = 0; j < J; ++j)
+              wc.note(ws->cross[l][h][i][j], r.cross[((l * H + h) * J + i) * J + j],
+                      "cross[" + std::to_string(l) + "][" + std::to_string(h) + "][" + std::to_string(i) + "][" +
+                          std::to_string(j) + "]");
+      for (int j = 0; j < J; ++j) ws_.note(ws->score[j], r.score[j], "score " + std::to_string(j));
+      for (int i = 0; i < J; ++i)
+        for (int k = 0; k < D; ++k)
+          wo.note(ws->cross_out(k, i), r.cross_out[i][k], "cross_out[" + std::to_string(i) + "][" + std::to_string(k) + "]");
+      INFO(conditioningName(c), " input ", n, " (movement ", in.movement, ", step ", in.step, ")");
+      CHECK_MESSAGE(wa.err <= 1e-5, "actions: worst ", wa.where);
+      CHECK_MESSAGE(wc.err <= 1e-5, "cross α: worst ", wc.where);
+      CHECK_MESSAGE(ws_.err <= 1e-5, "score: worst ", ws_.where);
+      CHECK_MESSAGE(wo.err <= 1e-5, "cross_out: worst ", wo.where);
+      // The comparison is not vacuous: the actions are not all equal to one value.
+      CHECK(action.maxCoeff() - action.minCoeff() > 1e-3f);
+    }
+  }
+}
+
+template <class Dims>
+struct Fixture {
+  TestModel model;
+  std::vector<const float*> ptrs;
+  PolicyWeights<Dims> w;
+  std::unique_ptr<PolicyWorkspace<Dims>> ws = makePolicyWorkspace<Dims>();
+
+  Fixture(std::uint64_t seed, Conditioning c, bool zero_step)
+      : model(randomModel(Dims::arch(), seed, zero_step)),
+        ptrs(model.pointers()),
+        w(bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c)) {}
+
+  Eigen::Matrix<float, 5, 1> run(const PolicyInput& in) { return stepPolicy(w, *ws, in); }
+};
+
+bool bitwiseEqual(const Eigen::Matrix<float, 5, 1>& a, const Eigen::Matrix<float, 5, 1>& b) {
+  return std::memcmp(a.data(), b.data(), sizeof(float) * 5) == 0;
+}
+
+}  // namespace
+
+TEST_CASE("compiled dimensions equal the runtime architectures") {
+  CHECK(SmallPolicyDims::arch() == smallArch());
+  CHECK(PaperPolicyDims::arch() == paperArch());
+  CHECK(archProblem(PaperPolicyDims::arch()).empty());
+  CHECK(PaperPolicyDims::kHeadDim == 32);
+  CHECK(parameterCount(paperArch()) > 6'000'000);
+}
+
+TEST_CASE("stepPolicy matches the double-precision reference of docs/policy.md, small dims") {
+  checkAgainstReference<SmallPolicyDims>(101);
+}
+
+TEST_CASE("stepPolicy matches the double-precision reference of docs/policy.md, paper dims") {
+  checkAgainstReference<PaperPolicyDims>(202);
+}
+
+TEST_CASE("odd dimensions (no multiple of the packet width) match the reference too") {
+  // d_model 36 / head dim 9 / FFN 20-13-7 exercise the kernel's leftover rows and columns.
+  checkAgainstReference<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>>(303);
+}
+
+TEST_CASE("bindPolicyWeights views each tensor in place: Eigen [out, in] is the manifest's [in, out]") {
+  Fixture<SmallPolicyDims> f(5, Conditioning::kReference, false);
+  const std::vector<float>& wo = f.model["dec.1.cross.wo"];
+  const std::vector<float>& w1 = f.model["enc.0.ffn.1.weight"];  // [64, 64]
+  const std::vector<float>& w3 = f.model["enc.1.ffn.3.weight"];  // [64, 32]
+  const std::vector<float>& c = f.model["centroids"];            // [3, 10, 5]
+  CHECK(f.w.dec[1].cross.wo.data() == wo.data());
+  CHECK(f.w.dec[1].cross.wo(3, 7) == wo[7 * 32 + 3]);
+  CHECK(f.w.enc[0].ffn.w1(5, 60) == w1[60 * 64 + 5]);
+  CHECK(f.w.enc[1].ffn.w3(31, 2) == w3[2 * 32 + 31]);
+  CHECK(f.w.centroids(4, 2 * 10 + 7) == c[(2 * 10 + 7) * 5 + 4]);
+  CHECK(f.w.embed_step.data() == f.model["embed.step"].data());
+  CHECK(f.w.head_bias(0, 0) == f.model["head.bias"][0]);
+  CHECK(f.w.conditioning == Conditioning::kReference);
+}
+
+TEST_CASE("bindPolicyWeights rejects a wrong tensor count, a null tensor and another architecture") {
+  const TestModel m = randomModel(smallArch(), 7, false);
+  const std::vector<const float*> p = m.pointers();
+  CHECK_NOTHROW(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), Conditioning::kReference));
+  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size() - 1, Conditioning::kReference),
+                  std::invalid_argument);
+  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size() + 1, Conditioning::kReference),
+                  std::invalid_argument);
+  // The small model's tensors are not a paper model.
+  CHECK_THROWS_AS(bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), Conditioning::kReference),
+                  std::invalid_argument);
+  std::vector<const float*> with_null = p;
+  with_null[10] = nullptr;
+  CHECK_THROWS_WITH_AS(bindPolicyWeights<SmallPolicyDims>(with_null.data(), with_null.size(), Conditioning::kReference),
+                       doctest::Contains(m.manifest[10].name.c_str()), std::invalid_argument);
+
+  CHECK_NOTHROW(checkPolicyArch<SmallPolicyDims>(smallArch()));
+  CHECK_THROWS_AS(checkPolicyArch<PaperPolicyDims>(smallArch()), std::invalid_argument);
+  PolicyArch four_ffn = paperArch();
+  four_ffn.ffn_hidden = {512, 512, 512, 512};
+  CHECK(archProblem(four_ffn).empty());  // a valid architecture, just not a compiled one
+  CHECK_THROWS_WITH_AS(checkPolicyArch<PaperPolicyDims>(four_ffn), doctest::Contains("512-512-512-512"),
+                       std::invalid_argument);
+}
+
+TEST_CASE("every cross-attention row is a distribution: α in [0, 1], rows sum to 1") {
+  Fixture<PaperPolicyDims> f(11, Conditioning::kReference, false);
+  std::mt19937_64 rng(12);
+  double worst = 0.0;
+  for (int n = 0; n < 4; ++n) {
+    f.run(randomInput(rng, n % 3, n * 30));
+    for (int l = 0; l < PaperPolicyDims::kDecoderLayers; ++l)
+      for (int h = 0; h < PaperPolicyDims::kHeads; ++h)
+        for (int i = 0; i < 5; ++i) {
+          double sum = 0.0;
+          for (int j = 0; j < 5; ++j) {
+            const float a = f.ws->cross[l][h][i][j];
+            CHECK((a >= 0.0f && a <= 1.0f));
+            sum += a;
+          }
+          worst = std::max(worst, std::abs(sum - 1.0));
+        }
+  }
+  CHECK_MESSAGE(worst < 1e-6, "largest |row sum - 1| = ", worst);
+}
+
+TEST_CASE("the decoder is causal: action token i does not depend on the decoder inputs of joints after i") {
+  // a(t-1) also feeds the encoder (so every token), but embed.joint_dec enters only the decoder
+  // input of its own joint: changing joint k's row may change actions k..4, never 0..k-1.
+  Fixture<SmallPolicyDims> f(21, Conditioning::kReference, false);
+  std::mt19937_64 rng(22);
+  const PolicyInput in = randomInput(rng, 1, 3);
+  const Eigen::Matrix<float, 5, 1> base = f.run(in);
+  std::vector<float>& joint_dec = f.model["embed.joint_dec"];  // [J, d], viewed in place
+  constexpr int D = SmallPolicyDims::kDModel;
+  for (int k = 0; k < 5; ++k) {
+    const std::vector<float> saved = joint_dec;
+    // Random, not constant: layer norm removes a constant offset of a token entirely.
+    for (int c = 0; c < D; ++c) joint_dec[k * D + c] += uniform(rng, -0.5, 0.5);
+    const Eigen::Matrix<float, 5, 1> changed = f.run(in);
+    joint_dec = saved;
+    for (int i = 0; i < k; ++i)
+      CHECK_MESSAGE(changed[i] == base[i], "joint ", k, "'s decoder input changed action ", i, ": ", base[i], " -> ",
+                    changed[i]);
+    // Not vacuous: the perturbation reaches its own token and every later one.
+    for (int i = k; i < 5; ++i)
+      CHECK_MESSAGE(changed[i] != base[i], "joint ", k, "'s decoder input did not reach action ", i);
+  }
+  CHECK(bitwiseEqual(f.run(in), base));
+}
+
+TEST_CASE("reference mode ignores the step when embed.step is zero; autonomous mode ignores r") {
+  std::mt19937_64 rng(31);
+  const PolicyInput in = randomInput(rng, 2, 5);
+  PolicyInput other_step = in;
+  other_step.step = 200;
+  PolicyInput other_r = in;
+  for (int j = 0; j < 5; ++j) other_r.r[j] += 0.7f;
+
+  SUBCASE("reference mode, zero step embedding: the step changes nothing, r does") {
+    Fixture<SmallPolicyDims> f(32, Conditioning::kReference, true);
+    const Eigen::Matrix<float, 5, 1> a = f.run(in);
+    const Eigen::Matrix<float, 5, 1> score = f.ws->score;
+    CHECK(bitwiseEqual(f.run(other_step), a));
+    CHECK(bitwiseEqual(f.ws->score, score));
+    CHECK_FALSE(bitwiseEqual(f.run(other_r), a));
+  }
+  SUBCASE("autonomous mode: r changes nothing, the step does") {
+    Fixture<SmallPolicyDims> f(33, Conditioning::kAutonomous, false);
+    const Eigen::Matrix<float, 5, 1> a = f.run(in);
+    const Eigen::Matrix<float, 5, 1> score = f.ws->score;
+    CHECK(bitwiseEqual(f.run(other_r), a));
+    CHECK(bitwiseEqual(f.ws->score, score));
+    CHECK_FALSE(bitwiseEqual(f.run(other_step), a));
+  }
+}
+
+TEST_CASE("movement and step out of range are clamped to the nearest embedding") {
+  Fixture<SmallPolicyDims> f(41, Conditioning::kAutonomous, false);
+  std::mt19937_64 rng(42);
+  PolicyInput in = randomInput(rng, 2, 255);
+  const Eigen::Matrix<float, 5, 1> last = f.run(in);
+  in.movement = 9;
+  in.step = 100000;
+  CHECK(bitwiseEqual(f.run(in), last));
+  CHECK(f.ws->movement == 2);
+  CHECK(f.ws->step == 255);
+  in.movement = 0;
+  in.step = 0;
+  const Eigen::Matrix<float, 5, 1> first = f.run(in);
+  in.movement = -4;
+  in.step = -1;
+  CHECK(bitwiseEqual(f.run(in), first));
+  CHECK_FALSE(bitwiseEqual(first, last));
+}
+
+TEST_CASE("stepPolicy is deterministic: two workspaces, repeated calls, bitwise-equal outputs") {
+  Fixture<PaperPolicyDims> f(51, Conditioning::kReference, false);
+  const auto ws2 = makePolicyWorkspace<PaperPolicyDims>();
+  std::mt19937_64 rng(52);
+  const PolicyInput a = randomInput(rng, 0, 10), b = randomInput(rng, 1, 20);
+  const Eigen::Matrix<float, 5, 1> first = f.run(a);
+  const Eigen::Matrix<float, 5, 1> cross_first = f.ws->score;
+  f.run(b);  // a different step in between leaves nothing behind
+  const Eigen::Matrix<float, 5, 1> again = f.run(a);
+  const Eigen::Matrix<float, 5, 1> other = stepPolicy(f.w, *ws2, a);
+  CHECK(bitwiseEqual(again, first));
+  CHECK(bitwiseEqual(other, first));
+  CHECK(bitwiseEqual(ws2->score, cross_first));
+  CHECK(std::memcmp(ws2->cross, f.ws->cross, sizeof(ws2->cross)) == 0);
+  CHECK(std::memcmp(ws2->cross_out.data(), f.ws->cross_out.data(), sizeof(float) * ws2->cross_out.size()) == 0);
+}
+
+TEST_CASE("snapToCentroid picks the nearest key pose of the movement, ties to the lower index") {
+  Fixture<SmallPolicyDims> f(61, Conditioning::kReference, false);
+  std::vector<float>& c = f.model["centroids"];  // [M=3, K=10, J=5]
+  constexpr int K = SmallPolicyDims::kClusters;
+  std::mt19937_64 rng(62);
+  // Brute force in double over the tensor itself.
+  auto nearest = [&](int m, const Eigen::Matrix<double, 5, 1>& q) {
+    int best = -1;
+    double best_d = 0.0;
+    for (int k = 0; k < K; ++k) {
+      double d = 0.0;
+      for (int j = 0; j < 5; ++j) d += std::pow(double(c[(m * K + k) * 5 + j]) - q[j], 2);
+      if (best < 0 || d < best_d) {
+        best = k;
+        best_d = d;
+      }
+    }
+    return best;
+  };
+  std::vector<int> hits(K, 0);
+  for (int n = 0; n < 2000; ++n) {
+    const int m = n % 3;
+    Eigen::Matrix<double, 5, 1> q;
+    for (int j = 0; j < 5; ++j) q[j] = uniform(rng, -1.5, 1.5);
+    const int k = snapToCentroid(f.w, m, q);
+    REQUIRE_MESSAGE(k == nearest(m, q), "movement ", m, " sample ", n);
+    ++hits[k];
+    // The float overload agrees; centroid() returns that key pose.
+    CHECK(snapToCentroid(f.w, m, q.cast<float>().eval()) == nearest(m, q.cast<float>().cast<double>()));
+  }
+  CHECK(std::count(hits.begin(), hits.end(), 0) == 0);  // every key pose won somewhere
+
+  const Eigen::Matrix<float, 5, 1> c27 = centroid(f.w, 2, 7);
+  for (int j = 0; j < 5; ++j) CHECK(c27[j] == c[(2 * K + 7) * 5 + j]);
+  CHECK(snapToCentroid(f.w, 2, c27) == 7);
+  CHECK(snapToCentroid(f.w, 7, c27) == 7);  // movement clamped to 2
+
+  // Ties: key poses 3 and 6 of movement 1 exactly 0.25 rad on either side of q, every other
+  // key pose far away: the lower index wins, whichever side it is on.
+  Eigen::Matrix<float, 5, 1> q = Eigen::Matrix<float, 5, 1>::Constant(0.5f);
+  for (int k = 0; k < K; ++k)
+    for (int j = 0; j < 5; ++j) c[(1 * K + k) * 5 + j] = 10.0f + float(k);
+  for (int j = 0; j < 5; ++j) c[(1 * K + 3) * 5 + j] = c[(1 * K + 6) * 5 + j] = 0.5f;
+  c[(1 * K + 3) * 5 + 2] = 0.75f;
+  c[(1 * K + 6) * 5 + 2] = 0.25f;
+  CHECK(snapToCentroid(f.w, 1, q) == 3);
+  c[(1 * K + 3) * 5 + 2] = 0.25f;
+  c[(1 * K + 6) * 5 + 2] = 0.75f;
+  CHECK(snapToCentroid(f.w, 1, q) == 3);
+  c[(1 * K + 6) * 5 + 2] = 0.5f;  // now 6 is strictly nearer
+  CHECK(snapToCentroid(f.w, 1, q) == 6);
+}
