@@ -1,0 +1,284 @@
+// The 10 Hz imitation controller (DESIGN §9): human frame -> human kinematics + scaling ->
+// fixed-size LM retargeting (Algorithm 1) -> snap to the model's key pose -> policy ->
+// command q_t + a_t within the position and velocity limits -> ODE arm, 100 x 1 ms -> record.
+//
+// Lifecycle (STYLE 6): configureController builds everything that allocates (ControllerModel,
+// ControllerData); activateController puts the arm at its start pose; updateController runs one
+// tick; deactivateController ends the run. Between activate and deactivate nothing allocates,
+// blocks, throws or does I/O: in-loop anomalies are fault bits in the tick record, counted, each
+// with the fallback documented at ControllerFault.
+#pragma once
+
+#include "nao/arm_model.hpp"
+#include "nao/body25.hpp"
+#include "nao/human_kinematics.hpp"
+#include "nao/kinematics.hpp"
+#include "nao/policy.hpp"
+#include "nao/retarget.hpp"
+#include "nao/sim_arm.hpp"
+
+#include <Eigen/Core>
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <memory>
+
+namespace nao {
+
+/// Fault bits of a tick (ticks.csv column `fault`). None of them stops the loop.
+enum ControllerFault : std::uint32_t {
+  /// No usable human arm this tick (no frame, torso/arm keypoints missing): the last
+  /// reference is held.
+  kFaultNoHuman = 1u << 0,
+  /// No usable human for longer than ControllerParams::no_human_timeout_s: the policy is
+  /// bypassed and the arm returns to the home pose at half its velocity limits.
+  kFaultHumanTimeout = 1u << 1,
+  /// NaN/Inf among the keypoints the arm needs (also sets kFaultNoHuman).
+  kFaultNonFiniteKeypoints = 1u << 2,
+  /// Algorithm 1 hit an iteration cap: the last reference is kept.
+  kFaultIkNotConverged = 1u << 3,
+  /// The policy produced a NaN/Inf action: the arm holds its position (a = 0).
+  kFaultPolicyNonFinite = 1u << 4,
+  /// The tick's work took longer than the period (counted; the loop stays on the grid).
+  kFaultOverrun = 1u << 5,
+  /// Informational: the command was cut to the position or velocity limits.
+  kFaultCommandLimited = 1u << 6,
+};
+inline constexpr int kNumControllerFaults = 7;
+inline constexpr std::array<const char*, kNumControllerFaults> kControllerFaultNames = {
+    "no_human", "human_timeout", "nonfinite_keypoints", "ik_not_converged", "policy_nonfinite", "overrun",
+    "command_limited"};
+
+/// Injected monotonic clock (STYLE 6): the real one reads CLOCK_MONOTONIC, tests drive time.
+struct ControllerClock {
+  virtual ~ControllerClock() = default;
+  /// Nanoseconds on a monotonic scale. Real-time safe.
+  virtual std::int64_t nowNs() = 0;
+};
+
+/// CLOCK_MONOTONIC.
+struct SteadyClock final : ControllerClock {
+  std::int64_t nowNs() override;
+};
+
+struct ControllerParams {
+  double period_s = 0.1;             ///< control period (10 Hz)
+  double no_human_timeout_s = 3.0;   ///< hold the last reference this long, then go home
+  /// NAO's rest pose (arm down, elbow slightly bent), rad; clamped to the limits.
+  JointVector home = (JointVector() << 1.40, -0.20, 1.20, 0.50, 0.00).finished();
+  RetargetParams retarget;
+  HumanKinematicsConfig human;       ///< scale_m > 0 fixes the human scale d_h (else per frame)
+  /// Test hook for the fault-injection tests: ticks in [first, last] replace the policy's
+  /// action with NaN before the non-finite check. -1: never.
+  int inject_policy_nan_first = -1;
+  int inject_policy_nan_last = -1;
+};
+
+/// One tick as recorded (ticks.csv; angles rad, positions m in the torso frame).
+struct TickRecord {
+  std::int64_t tick = 0;
+  double t_s = 0.0;                    ///< tick start time on the grid
+  JointVector q_ref = JointVector::Zero();   ///< retargeted reference (q_q of Algorithm 1)
+  JointVector r = JointVector::Zero();       ///< snapped key pose fed to the policy
+  JointVector a = JointVector::Zero();       ///< policy action a_t (0 when bypassed)
+  JointVector q_cmd = JointVector::Zero();   ///< command sent to the servos
+  JointVector q = JointVector::Zero();       ///< measured joint angles at the end of the tick
+  Eigen::Vector3d ee = Eigen::Vector3d::Zero();  ///< hand point of q
+  Eigen::Vector3d ee_ref = Eigen::Vector3d::Constant(std::nan(""));  ///< evaluation target (driver fills)
+  std::array<float, kNumJoints> att{};  ///< per-body-part attention score
+  std::uint32_t fault = 0;             ///< ControllerFault bits
+  int key_pose = 0;                    ///< index of r among the movement's key poses
+  double tick_us = 0.0, retarget_us = 0.0, policy_us = 0.0, sim_us = 0.0;
+};
+
+/// The immutable part: arm, simulation, policy views, parameters.
+template <class Dims>
+struct ControllerModel {
+  ArmModel arm;
+  SimModel sim;
+  PolicyWeights<Dims> policy;
+  ControllerParams params;
+  double d_r_m = 0.0;             ///< robot scale (paper eq. 1)
+  JointVector home = JointVector::Zero();  ///< params.home clamped
+};
+
+/// Everything a tick writes. Built once by configureController.
+template <class Dims>
+struct ControllerData {
+  ControllerData(const SimModel& sim_model, const JointVector& q0) : sim(sim_model, q0) {}
+
+  SimData sim;
+  ArmData kin;
+  HumanArmData human;
+  RetargetData retarget;
+  std::unique_ptr<PolicyWorkspace<Dims>> policy = makePolicyWorkspace<Dims>();
+  ControllerClock* clock = nullptr;
+  int movement = 0;
+  bool active = false;
+  std::int64_t tick = 0;
+  std::int64_t last_human_tick = -1;     ///< last tick with a usable human (-1: none yet)
+  JointVector q_ref = JointVector::Zero();
+  JointVector a_prev = JointVector::Zero();
+  std::array<std::int64_t, kNumControllerFaults> fault_counts{};
+  TickRecord record;                     ///< the last tick
+};
+
+/// Builds the model (configure time, allocates; throws std::invalid_argument for bad
+/// parameters). `policy` must already be bound; the arm is the one the policy was checked
+/// against.
+template <class Dims>
+ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeights<Dims>& policy,
+                                          const ControllerParams& params, const SimParams& sim_params = {}) {
+  if (!(params.period_s > 0.0)) throw std::invalid_argument("controller: period must be positive");
+  if (!(params.no_human_timeout_s >= 0.0)) throw std::invalid_argument("controller: negative no-human timeout");
+  if (std::abs(sim_params.dt_s * sim_params.substeps_per_tick - params.period_s) > 1e-9)
+    throw std::invalid_argument("controller: physics substeps do not add up to the control period");
+  ControllerModel<Dims> m{arm, makeSimModel(arm, sim_params), policy, params, robotScale(arm),
+                          clampToLimits(arm, params.home)};
+  return m;
+}
+
+namespace detail {
+inline double microseconds(std::int64_t from_ns, std::int64_t to_ns) {
+  return static_cast<double>(to_ns - from_ns) * 1e-3;
+}
+}  // namespace detail
+
+/// Puts the arm at rest at q0 (clamped), resets the retargeting warm start to it, clears the
+/// counters and the previous action, and selects `movement` (index into the model's movement
+/// names) and the clock. Real-time safe (no allocation): may be called again to restart.
+template <class Dims>
+void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q0,
+                        int movement, ControllerClock& clock) {
+  const JointVector q = clampToLimits(model.arm, q0);
+  resetSim(model.sim, data.sim, q);
+  resetHumanArm(data.human);
+  resetRetarget(model.arm, data.retarget, q);
+  data.clock = &clock;
+  data.movement = movement;
+  data.tick = 0;
+  data.last_human_tick = -1;
+  data.q_ref = q;
+  data.a_prev.setZero();
+  data.fault_counts.fill(0);
+  data.record = TickRecord{};
+  data.active = true;
+}
+
+/// One 100 ms tick. `frame` is the human skeleton of this tick in the world frame (nullptr: no
+/// human detected); it is ignored by autonomous-mode models. Returns data.record.
+/// Real-time safe: no allocation, no exception, no I/O.
+template <class Dims>
+const TickRecord& updateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data,
+                                   const SkeletonFrame* frame) {
+  TickRecord& rec = data.record;
+  const ControllerParams& p = model.params;
+  const std::int64_t t0 = data.clock->nowNs();
+  rec.tick = data.tick;
+  rec.t_s = static_cast<double>(data.tick) * p.period_s;
+  rec.fault = 0;
+  rec.a.setZero();
+
+  // 1. Reference: human kinematics -> scaled hand target -> Algorithm 1 (reference mode).
+  const bool autonomous = model.policy.conditioning == Conditioning::kAutonomous;
+  bool have_human = false;
+  if (!autonomous) {
+    if (frame != nullptr) {
+      humanArmKinematics(p.human, data.human, *frame);
+      if (data.human.flags & kHumanNotFinite) rec.fault |= kFaultNonFiniteKeypoints;
+      have_human = data.human.valid;
+    }
+    if (have_human) {
+      const Eigen::Vector3d p_target = model.arm.p_PJ[0] + scaleHumanEndpoint(model.d_r_m, data.human.d_h_m,
+                                                                               data.human.p_SH_T);
+      const JointVector q_target = data.human.q.template head<kNumJoints>();
+      const RetargetResult& r = solveRetarget(model.arm, p.retarget, data.retarget, p_target, q_target);
+      constexpr std::uint32_t kCaps = kRetargetXCapHit | kRetargetQCapHit | kRetargetInnerCapHit;
+      if (r.flags & kCaps)
+        rec.fault |= kFaultIkNotConverged;
+      else if (r.flags & kRetargetBadInput)
+        have_human = false;
+      else
+        data.q_ref = r.q_q;
+    }
+    if (have_human) {
+      data.last_human_tick = data.tick;
+    } else {
+      rec.fault |= kFaultNoHuman;
+      const double since_s = static_cast<double>(data.tick - data.last_human_tick) * p.period_s;
+      if (since_s > p.no_human_timeout_s) rec.fault |= kFaultHumanTimeout;
+    }
+  }
+  const std::int64_t t1 = data.clock->nowNs();
+
+  // 2. Snap to the model's key pose, 3. policy (bypassed while returning home).
+  const JointVector& q = data.sim.q;
+  rec.key_pose = snapToCentroid(model.policy, data.movement, data.q_ref);
+  rec.r = centroid(model.policy, data.movement, rec.key_pose).template cast<double>();
+  JointVector a = JointVector::Zero();
+  if (rec.fault & kFaultHumanTimeout) {
+    // Toward home at half the velocity limits: no policy input is trustworthy any more.
+    for (int j = 0; j < kNumJoints; ++j) {
+      const double step = 0.5 * model.arm.v_max[j] * p.period_s;
+      a[j] = std::clamp(model.home[j] - q[j], -step, step);
+    }
+  } else {
+    PolicyInput in;
+    in.q = q.cast<float>();
+    in.a_prev = data.a_prev.template cast<float>();
+    in.r = rec.r.template cast<float>();
+    in.movement = data.movement;
+    in.step = static_cast<int>(std::min<std::int64_t>(data.tick, Dims::kMaxSteps - 1));
+    a = stepPolicy(model.policy, *data.policy, in).template cast<double>();
+    if (data.tick >= p.inject_policy_nan_first && data.tick <= p.inject_policy_nan_last)
+      a[0] = std::nan("");
+    if (!a.allFinite()) {
+      rec.fault |= kFaultPolicyNonFinite;
+      a.setZero();
+    }
+    for (int j = 0; j < kNumJoints; ++j) rec.att[static_cast<std::size_t>(j)] = data.policy->score[j];
+  }
+  const std::int64_t t2 = data.clock->nowNs();
+
+  // 4. Command q + a inside the position limits and what the servos can do in one period.
+  JointVector q_cmd = q + a;
+  for (int j = 0; j < kNumJoints; ++j) {
+    const double step = model.arm.v_max[j] * p.period_s;
+    const double lo = std::max(model.arm.q_min[j], q[j] - step);
+    const double hi = std::min(model.arm.q_max[j], q[j] + step);
+    const double c = std::clamp(q_cmd[j], std::min(lo, hi), std::max(lo, hi));
+    if (c != q_cmd[j]) rec.fault |= kFaultCommandLimited;
+    q_cmd[j] = c;
+  }
+  rec.a = a;
+  rec.q_cmd = q_cmd;
+  rec.q_ref = data.q_ref;
+  data.a_prev = q_cmd - q;  // the action as applied is the next tick's a(t-1)
+
+  // 5. The arm advances one period.
+  stepSim(model.sim, data.sim, q_cmd);
+  rec.q = data.sim.q;
+  rec.ee = forwardKinematics(model.arm, data.kin, rec.q);
+  const std::int64_t t3 = data.clock->nowNs();
+
+  rec.retarget_us = detail::microseconds(t0, t1);
+  rec.policy_us = detail::microseconds(t1, t2);
+  rec.sim_us = detail::microseconds(t2, t3);
+  rec.tick_us = detail::microseconds(t0, t3);
+  if (rec.tick_us > p.period_s * 1e6) rec.fault |= kFaultOverrun;
+  for (int b = 0; b < kNumControllerFaults; ++b)
+    if (rec.fault & (1u << b)) ++data.fault_counts[static_cast<std::size_t>(b)];
+  ++data.tick;
+  return rec;
+}
+
+/// Ends the run: the arm is commanded to hold where it is. Real-time safe.
+template <class Dims>
+void deactivateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data) {
+  (void)model;
+  data.sim.q_cmd = data.sim.q;
+  data.active = false;
+}
+
+}  // namespace nao

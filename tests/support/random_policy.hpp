@@ -1,0 +1,57 @@
+// A policy with seeded random weights shaped like a fresh initialisation, for tests of code
+// around the policy (controller, ring buffer): actions of a few mrad, key poses inside the arm's
+// limits. Not a trained model: closed-loop imitation quality is tested with trained ones.
+#pragma once
+
+#include "nao/arm_model.hpp"
+#include "nao/policy.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <random>
+#include <vector>
+
+namespace nao::test {
+
+struct RandomPolicy {
+  std::vector<std::vector<float>> tensors;  ///< manifest order
+  std::vector<const float*> pointers;
+};
+
+inline RandomPolicy makeRandomPolicy(const PolicyArch& arch, const ArmModel& arm, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  auto uniform = [&rng](double lo, double hi) {
+    return static_cast<float>(lo + (hi - lo) * static_cast<double>(rng() >> 11) * 0x1.0p-53);
+  };
+  RandomPolicy p;
+  for (const TensorSpec& t : policyManifest(arch)) {
+    std::vector<float> v(t.count());
+    const std::string& n = t.name;
+    auto ends = [&n](const char* s) {
+      const std::string e(s);
+      return n.size() >= e.size() && n.compare(n.size() - e.size(), e.size(), e) == 0;
+    };
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      if (n == "centroids") {
+        const int j = static_cast<int>(i % kNumJoints);
+        v[i] = uniform(arm.q_min[j], arm.q_max[j]);
+      } else if (ends("_std")) {
+        v[i] = n == "norm.a_std" ? 0.01f : 0.5f;
+      } else if (ends("_mean") || n == "embed.step") {
+        v[i] = 0.0f;
+      } else if (ends(".gain")) {
+        v[i] = 1.0f;
+      } else if (t.shape.size() == 2) {
+        const double a = std::sqrt(6.0 / (t.shape[0] + t.shape[1]));
+        v[i] = uniform(-a, a);
+      } else {
+        v[i] = uniform(-0.1, 0.1);
+      }
+    }
+    p.tensors.push_back(std::move(v));
+  }
+  for (const auto& t : p.tensors) p.pointers.push_back(t.data());
+  return p;
+}
+
+}  // namespace nao::test

@@ -1,0 +1,220 @@
+// The 10 Hz controller as a hardware-in-the-loop substitute: it drives the ODE arm exactly as it
+// would drive the robot. Behaviour around the policy (faults, limits, determinism) is tested
+// here with a random small policy; imitation quality with trained models elsewhere.
+#include "nao/controller.hpp"
+#include "nao/tools/reference_source.hpp"
+#include "support/random_policy.hpp"
+#include "support/test_util.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <cstring>
+#include <vector>
+
+using namespace nao;
+using Dims = SmallPolicyDims;
+
+namespace {
+
+// Deterministic clock: 1 µs per reading, plus a jump at a chosen reading.
+struct FakeClock final : ControllerClock {
+  std::int64_t now = 0;
+  std::int64_t jump_at_reading = -1, jump_ns = 0, readings = 0;
+  std::int64_t nowNs() override {
+    if (readings++ == jump_at_reading) now += jump_ns;
+    return now += 1000;
+  }
+};
+
+struct Fixture {
+  ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  test::RandomPolicy random = test::makeRandomPolicy(Dims::arch(), arm, 5);
+  PolicyWeights<Dims> weights =
+      bindPolicyWeights<Dims>(random.pointers.data(), random.pointers.size(), Conditioning::kReference);
+  tools::ReferenceStream ref;
+  Fixture() {
+    std::vector<JointVector> centroids;
+    for (int k = 0; k < Dims::kClusters; ++k) centroids.push_back(centroid(weights, 0, k).cast<double>());
+    ref = tools::makeSyntheticReference(arm, tools::Movement::kElbow, 1, 0, centroids);
+  }
+};
+
+Fixture& fixture() {
+  static Fixture f;
+  return f;
+}
+
+struct Run {
+  std::vector<TickRecord> records;
+  std::array<std::int64_t, kNumControllerFaults> faults{};
+};
+
+// Runs the reference once; `drop(tick)` true removes the human from that tick, `corrupt` puts
+// NaN into the right shoulder of that tick's frame.
+template <class Drop, class Corrupt>
+Run run(const ControllerParams& params, FakeClock& clock, Drop drop, Corrupt corrupt, int n_ticks = -1) {
+  Fixture& f = fixture();
+  const ControllerModel<Dims> model = configureController(f.arm, f.weights, params);
+  ControllerData<Dims> data(model.sim, f.ref.target.front());
+  activateController(model, data, f.ref.target.front(), 0, clock);
+  Run r;
+  const int n = n_ticks > 0 ? n_ticks : static_cast<int>(f.ref.frames.size());
+  SkeletonFrame frame;
+  for (int t = 0; t < n; ++t) {
+    const std::size_t i = static_cast<std::size_t>(t) % f.ref.frames.size();
+    frame = f.ref.frames[i];
+    if (corrupt(t)) frame.p_W[kRShoulder].x() = std::nan("");
+    const bool present = f.ref.present[i] && !drop(t);
+    r.records.push_back(updateController(model, data, present ? &frame : nullptr));
+  }
+  deactivateController(model, data);
+  r.faults = data.fault_counts;
+  return r;
+}
+
+auto never = [](int) { return false; };
+
+bool insideLimits(const ArmModel& arm, const JointVector& q, double margin) {
+  for (int j = 0; j < kNumJoints; ++j)
+    if (q[j] < arm.q_min[j] - margin || q[j] > arm.q_max[j] + margin) return false;
+  return true;
+}
+
+}  // namespace
+
+TEST_CASE("the controller keeps every command inside the URDF limits and the measured arm within the sim's margin") {
+  FakeClock clock;
+  const Run r = run(ControllerParams{}, clock, never, never);
+  const ArmModel& arm = fixture().arm;
+  REQUIRE(r.records.size() > 50);
+  for (const TickRecord& t : r.records) {
+    CHECK(insideLimits(arm, t.q_cmd, 0.0));
+    // The servo law keeps the joints inside the limits; allow ODE's constraint slack.
+    CHECK(insideLimits(arm, t.q, 1e-3));
+  }
+  // And every command is reachable in one period at the velocity limits.
+  for (std::size_t i = 1; i < r.records.size(); ++i)
+    for (int j = 0; j < kNumJoints; ++j)
+      CHECK(std::abs(r.records[i].q_cmd[j] - r.records[i - 1].q[j]) <= arm.v_max[j] * 0.1 + 1e-12);
+}
+
+TEST_CASE("two runs with the same inputs give bitwise-equal tick records") {
+  FakeClock c1, c2;
+  const Run a = run(ControllerParams{}, c1, never, never);
+  const Run b = run(ControllerParams{}, c2, never, never);
+  REQUIRE(a.records.size() == b.records.size());
+  for (std::size_t i = 0; i < a.records.size(); ++i) {
+    CHECK(std::memcmp(a.records[i].q.data(), b.records[i].q.data(), sizeof(double) * kNumJoints) == 0);
+    CHECK(std::memcmp(a.records[i].a.data(), b.records[i].a.data(), sizeof(double) * kNumJoints) == 0);
+    CHECK(std::memcmp(a.records[i].att.data(), b.records[i].att.data(), sizeof(float) * kNumJoints) == 0);
+    CHECK(a.records[i].fault == b.records[i].fault);
+  }
+}
+
+TEST_CASE("a 2 s reference dropout mid-movement holds the last reference, is counted, and the run recovers") {
+  FakeClock clock;
+  const int first = 30, last = 49;  // 20 ticks = 2 s
+  const Run r = run(ControllerParams{}, clock, [&](int t) { return t >= first && t <= last; }, never);
+  const Run clean = [&] {
+    FakeClock c;
+    return run(ControllerParams{}, c, never, never);
+  }();
+  REQUIRE(r.records.size() > static_cast<std::size_t>(last + 10));
+  // Every dropped tick is flagged; none reaches the home-return timeout (3 s).
+  for (int t = first; t <= last; ++t) {
+    const TickRecord& rec = r.records[static_cast<std::size_t>(t)];
+    CHECK((rec.fault & kFaultNoHuman) != 0);
+    CHECK((rec.fault & kFaultHumanTimeout) == 0);
+    CHECK(rec.q_ref == r.records[static_cast<std::size_t>(first - 1)].q_ref);
+  }
+  // Counted once per dropped tick (ticks the synthesiser had already dropped count once).
+  int newly_dropped = 0;
+  for (int t = first; t <= last; ++t)
+    newly_dropped += (clean.records[static_cast<std::size_t>(t)].fault & kFaultNoHuman) ? 0 : 1;
+  CHECK(newly_dropped > 10);
+  CHECK(r.faults[0] - clean.faults[0] == newly_dropped);
+  CHECK(r.faults[1] == 0);
+  // After the dropout the reference follows the human again.
+  bool moved = false;
+  for (std::size_t t = last + 1; t < r.records.size(); ++t)
+    moved = moved || r.records[t].q_ref != r.records[static_cast<std::size_t>(first - 1)].q_ref;
+  CHECK(moved);
+}
+
+TEST_CASE("a dropout longer than the timeout sends the arm home at half speed, bypassing the policy") {
+  FakeClock clock;
+  ControllerParams params;
+  params.no_human_timeout_s = 1.0;
+  const int first = 10;
+  const Run r = run(params, clock, [&](int t) { return t >= first; }, never, 120);
+  const ArmModel& arm = fixture().arm;
+  const JointVector home = clampToLimits(arm, params.home);
+  int timeouts = 0;
+  for (std::size_t t = first; t < r.records.size(); ++t) {
+    const TickRecord& rec = r.records[t];
+    // Timeout once more than 1 s has passed since the last human (tick first - 1).
+    const bool expected = static_cast<double>(static_cast<int>(t) - (first - 1)) * 0.1 > 1.0 + 1e-9;
+    CHECK(((rec.fault & kFaultHumanTimeout) != 0) == expected);
+    if (!expected) continue;
+    ++timeouts;
+    for (int j = 0; j < kNumJoints; ++j) CHECK(std::abs(rec.a[j]) <= 0.5 * arm.v_max[j] * 0.1 + 1e-12);
+  }
+  CHECK(timeouts == r.faults[1]);
+  CHECK(timeouts > 50);
+  // 10 s later the arm is home (within the servo's settling).
+  CHECK((r.records.back().q - home).cwiseAbs().maxCoeff() < 0.02);
+}
+
+TEST_CASE("NaN keypoints are counted as a fault, treated as no human, and the run continues") {
+  FakeClock clock;
+  const Run r = run(ControllerParams{}, clock, never, [](int t) { return t == 20 || t == 21; });
+  for (int t : {20, 21}) {
+    const TickRecord& rec = r.records[static_cast<std::size_t>(t)];
+    CHECK((rec.fault & kFaultNonFiniteKeypoints) != 0);
+    CHECK((rec.fault & kFaultNoHuman) != 0);
+    CHECK(rec.q_ref.allFinite());
+    CHECK(rec.q_cmd.allFinite());
+  }
+  CHECK(r.faults[2] == 2);
+  CHECK(r.records.back().q.allFinite());
+}
+
+TEST_CASE("a non-finite policy output holds the position and is counted") {
+  FakeClock clock;
+  ControllerParams params;
+  params.inject_policy_nan_first = 15;
+  params.inject_policy_nan_last = 17;
+  const Run r = run(params, clock, never, never);
+  for (int t = 15; t <= 17; ++t) {
+    const TickRecord& rec = r.records[static_cast<std::size_t>(t)];
+    CHECK((rec.fault & kFaultPolicyNonFinite) != 0);
+    CHECK(rec.a == JointVector::Zero());
+    // Hold position: the command is where the arm was at the start of the tick.
+    CHECK(rec.q_cmd == r.records[static_cast<std::size_t>(t - 1)].q);
+  }
+  CHECK(r.faults[4] == 3);
+  CHECK(r.records.size() == fixture().ref.frames.size());
+}
+
+TEST_CASE("an overrun forced through the injected clock is counted once and the loop continues") {
+  FakeClock clock;
+  // Four readings per tick: a 150 ms jump inside tick 7's policy stage.
+  clock.jump_at_reading = 7 * 4 + 2;
+  clock.jump_ns = 150'000'000;
+  const Run r = run(ControllerParams{}, clock, never, never);
+  CHECK(r.faults[5] == 1);
+  CHECK((r.records[7].fault & kFaultOverrun) != 0);
+  CHECK(r.records[7].policy_us > 1e5);
+  CHECK(r.records.size() == fixture().ref.frames.size());
+}
+
+TEST_CASE("the synthetic reference is not a training demonstration and has a target for every tick") {
+  const tools::ReferenceStream& ref = fixture().ref;
+  CHECK(ref.description.find("seed 1000001") != std::string::npos);
+  CHECK(ref.target.size() == ref.frames.size());
+  CHECK(ref.retargeted.size() == ref.frames.size());
+  int measured = 0;
+  for (bool m : ref.measured) measured += m ? 1 : 0;
+  CHECK(measured > static_cast<int>(ref.frames.size()) / 2);
+}

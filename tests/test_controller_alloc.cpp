@@ -1,0 +1,70 @@
+// Real-time property of the whole tick: from activate through 6,000 ticks (10 simulated
+// minutes: retargeting, policy, ODE, faults included) nothing is allocated.
+#include "nao/controller.hpp"
+#include "nao/tools/reference_source.hpp"
+#include "support/alloc_counter.hpp"
+#include "support/random_policy.hpp"
+#include "support/test_util.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <vector>
+
+using namespace nao;
+
+namespace {
+
+template <class Dims>
+void checkNoAllocation(std::uint64_t seed) {
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const test::RandomPolicy random = test::makeRandomPolicy(Dims::arch(), arm, seed);
+  const PolicyWeights<Dims> weights =
+      bindPolicyWeights<Dims>(random.pointers.data(), random.pointers.size(), Conditioning::kReference);
+  std::vector<JointVector> centroids;
+  for (int k = 0; k < Dims::kClusters; ++k) centroids.push_back(centroid(weights, 1, k).template cast<double>());
+  const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, tools::Movement::kWholeArm, 2, 0, centroids);
+  ControllerParams params;
+  params.inject_policy_nan_first = 100;  // exercise the fault paths too
+  params.inject_policy_nan_last = 102;
+  const ControllerModel<Dims> model = configureController(arm, weights, params);
+  ControllerData<Dims> data(model.sim, ref.target.front());
+  SteadyClock clock;
+  // Frames prepared before counting: dropouts of 5 s every 60 s (home-return path), NaN
+  // keypoints every 97th tick.
+  constexpr int kTicks = 6000;
+  std::vector<SkeletonFrame> frames(kTicks);
+  std::vector<bool> present(kTicks);
+  for (int t = 0; t < kTicks; ++t) {
+    const std::size_t i = static_cast<std::size_t>(t) % ref.frames.size();
+    frames[static_cast<std::size_t>(t)] = ref.frames[i];
+    if (t % 97 == 0) frames[static_cast<std::size_t>(t)].p_W[kRElbow].y() = std::nan("");
+    present[static_cast<std::size_t>(t)] = ref.present[i] && (t % 600) < 550;
+  }
+
+  std::int64_t allocations = 0;
+  std::uint32_t faults_seen = 0;
+  {
+    nao::test::CountAllocations count;
+    activateController(model, data, ref.target.front(), 1, clock);
+    for (int t = 0; t < kTicks; ++t) {
+      const std::size_t i = static_cast<std::size_t>(t);
+      faults_seen |= updateController(model, data, present[i] ? &frames[i] : nullptr).fault;
+    }
+    deactivateController(model, data);
+    allocations = count.count();
+  }
+  CHECK(allocations == 0);
+  CHECK(data.tick == kTicks);
+  // The fault paths ran inside the counted window.
+  CHECK((faults_seen & kFaultNoHuman) != 0);
+  CHECK((faults_seen & kFaultHumanTimeout) != 0);
+  CHECK((faults_seen & kFaultNonFiniteKeypoints) != 0);
+  CHECK((faults_seen & kFaultPolicyNonFinite) != 0);
+}
+
+}  // namespace
+
+TEST_CASE("6,000 controller ticks with the small policy allocate nothing") { checkNoAllocation<SmallPolicyDims>(3); }
+
+TEST_CASE("6,000 controller ticks with the paper policy allocate nothing") { checkNoAllocation<PaperPolicyDims>(4); }
