@@ -1,0 +1,326 @@
+// The policy's training data (docs/policy.md "Data"): samples checked by hand, the split is by
+// demonstration, statistics come from the training split only, baselines match an independent
+// computation, the split and the fingerprint are deterministic, bad files are named.
+#include "nao/tools/command.hpp"
+#include "nao/tools/policy_dataset.hpp"
+#include "support/test_util.hpp"
+
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+
+using namespace nao;
+using namespace nao::tools;
+
+namespace {
+
+JointVector jv(double a, double b, double c, double d, double e) {
+  JointVector v;
+  v << a, b, c, d, e;
+  return v;
+}
+
+PolicyDemo demo(const std::string& name, const std::vector<JointVector>& f, const std::vector<int>& label) {
+  PolicyDemo d;
+  d.name = name;
+  d.f = f;
+  d.label = label;
+  for (std::size_t t = 0; t < f.size(); ++t) d.t_s.push_back(0.1 * static_cast<double>(t));
+  return d;
+}
+
+// A smooth deterministic trajectory per (movement, index): n samples.
+std::vector<JointVector> wave(int movement, int index, int n) {
+  std::vector<JointVector> f;
+  for (int t = 0; t < n; ++t) {
+    JointVector q;
+    for (int j = 0; j < kNumJoints; ++j)
+      q[j] = 0.3 * std::sin(0.05 * (t + 1) * (j + 1) + 0.7 * index + 1.3 * movement) + 0.1 * j;
+    f.push_back(q);
+  }
+  return f;
+}
+
+// n_per demonstrations of each of the three standard movements, K = 2 centroids each.
+PolicyData standardSet(int n_per) {
+  std::map<std::string, std::vector<JointVector>> centroids;
+  std::vector<PolicyDemo> demos;
+  const char* names[] = {"whole_arm", "elbow", "wrist"};
+  for (int m = 0; m < 3; ++m) {
+    centroids[names[m]] = {JointVector::Constant(0.1 * m), JointVector::Constant(-0.1 * m)};
+    for (int i = 0; i < n_per; ++i) {
+      char name[64];
+      std::snprintf(name, sizeof name, "%s_%03d", names[m], i);
+      const std::vector<JointVector> f = wave(m, i, 20 + 3 * i);
+      std::vector<int> label;
+      for (std::size_t t = 0; t < f.size(); ++t) label.push_back(static_cast<int>((t / 4) % 2));
+      demos.push_back(demo(name, f, label));
+    }
+  }
+  return makePolicyData(centroids, demos);
+}
+
+std::vector<int> allDemos(const PolicyData& data) {
+  std::vector<int> all(data.demos.size());
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+  return all;
+}
+
+void writeText(const std::filesystem::path& path, const std::string& text) {
+  std::filesystem::create_directories(path.parent_path());
+  std::ofstream(path) << text;
+}
+
+std::string centroidsJson() {
+  return R"({"k": 2, "movements": {
+    "wrist": {"centroids": [[0,0,0,0,0],[1,1,1,1,1]]},
+    "elbow": {"centroids": [[0.5,0.5,0.5,0.5,0.5],[-1,-1,-1,-1,-1]]}}})";
+}
+
+std::string loadError(const std::string& dir) {
+  try {
+    loadPolicyData(dir);
+  } catch (const UserError& e) {
+    return e.what();
+  }
+  FAIL("loading " << dir << " should have thrown UserError");
+  return {};
+}
+
+}  // namespace
+
+TEST_CASE("samples of a tiny two-demo set are q(t), a(t-1), r(t), m, s and a(t) as worked out by hand") {
+  const JointVector c0 = jv(0, 0, 0, 0, 0), c1 = jv(1, 2, 3, 4, 5);
+  const JointVector f0 = jv(0.1, 0.2, 0.3, 0.4, 0.5), f1 = jv(0.2, 0.2, 0.1, 0.4, 0.9), f2 = jv(0.0, 0.5, 0.1, 0.3, 0.9);
+  // "b_000" sorts after "a_000": the first movement (by name) is "a" -> index 0.
+  const PolicyData data =
+      makePolicyData({{"b", {c0, c1}}, {"a", {c1, c0}}}, {demo("b_000", {f0, f1, f2}, {0, 1, 1}), demo("a_000", {f2, f0}, {1, 0})});
+  REQUIRE(data.movement_names == std::vector<std::string>{"a", "b"});
+  REQUIRE(data.demos.size() == 2);
+  CHECK(data.demos[0].name == "a_000");
+  CHECK(data.demos[0].movement == 0);
+  CHECK(data.demos[1].movement == 1);
+  CHECK(data.demos[1].measured == std::vector<std::uint8_t>{1, 1, 1});  // missing column = all measured
+
+  const std::vector<PolicySample> a = buildSamples(data, 0, 256);
+  REQUIRE(a.size() == 1);  // 2 samples, 1 with a successor
+  CHECK(a[0].q == f2);
+  CHECK(a[0].a_prev == JointVector::Zero());
+  CHECK(a[0].r == c0);  // label 1 of movement "a" = c0
+  CHECK(a[0].a == f0 - f2);
+  CHECK(a[0].movement == 0);
+  CHECK(a[0].step == 0);
+
+  const std::vector<PolicySample> b = buildSamples(data, 1, 256);
+  REQUIRE(b.size() == 2);
+  CHECK(b[0].q == f0);
+  CHECK(b[0].a_prev == JointVector::Zero());
+  CHECK(b[0].r == c0);
+  CHECK(b[0].a == f1 - f0);
+  CHECK(b[1].q == f1);
+  CHECK(b[1].a_prev == f1 - f0);
+  CHECK(b[1].r == c1);
+  CHECK(b[1].a == f2 - f1);
+  CHECK(b[1].movement == 1);
+  CHECK(b[1].step == 1);
+  CHECK(b[1].demo == 1);
+
+  // Steps clamp at max_steps - 1.
+  CHECK(buildSamples(data, 1, 1)[1].step == 0);
+}
+
+TEST_CASE("the standard movements get indices elbow = 0, whole_arm = 1, wrist = 2") {
+  const PolicyData data = standardSet(1);
+  CHECK(data.movement_names == std::vector<std::string>{"elbow", "whole_arm", "wrist"});
+  for (const PolicyDemo& d : data.demos)
+    CHECK(data.movement_names[static_cast<std::size_t>(d.movement)] + "_000" == d.name);
+}
+
+TEST_CASE("the split is by demonstration: every demo in exactly one part, round(0.2 n) validation per movement") {
+  const PolicyData data = standardSet(10);
+  const PolicySplit split = splitByDemonstration(data, 0.2, 7);
+  std::set<int> train(split.train.begin(), split.train.end()), val(split.val.begin(), split.val.end());
+  CHECK(train.size() + val.size() == data.demos.size());
+  for (int d : val) CHECK_MESSAGE(train.count(d) == 0, data.demos[static_cast<std::size_t>(d)].name << " in both");
+  for (int m = 0; m < 3; ++m) {
+    int n_val = 0;
+    for (int d : val) n_val += data.demos[static_cast<std::size_t>(d)].movement == m;
+    CHECK(n_val == 2);
+  }
+  // No frame of a validation demo is among the training samples.
+  for (const PolicySample& s : buildSamples(data, split.train, 256)) CHECK(val.count(s.demo) == 0);
+
+  // Small movements: 2 demos -> 1 validation; 1 demo -> training only.
+  const PolicySplit two = splitByDemonstration(standardSet(2), 0.2, 7);
+  CHECK(two.val.size() == 3);
+  CHECK(two.train.size() == 3);
+  const PolicySplit one = splitByDemonstration(standardSet(1), 0.2, 7);
+  CHECK(one.val.empty());
+  CHECK(one.train.size() == 3);
+  CHECK_THROWS_AS(splitByDemonstration(data, 1.0, 7), UserError);
+}
+
+TEST_CASE("the split is a function of the seed: equal seeds give equal splits, the seed changes it") {
+  const PolicyData data = standardSet(10);
+  const PolicySplit a = splitByDemonstration(data, 0.2, 42), b = splitByDemonstration(data, 0.2, 42);
+  CHECK(a.train == b.train);
+  CHECK(a.val == b.val);
+  int differing = 0;
+  for (std::uint64_t seed = 1; seed <= 5; ++seed) differing += splitByDemonstration(data, 0.2, seed).val != a.val;
+  CHECK_MESSAGE(differing >= 4, differing << " of 5 other seeds gave a different split");
+}
+
+TEST_CASE("normalisation statistics come from the training split only and match a hand computation") {
+  PolicyData data = standardSet(5);
+  const PolicySplit split = splitByDemonstration(data, 0.2, 3);
+  REQUIRE(!split.val.empty());
+  const NormStats before = normStats(buildSamples(data, split.train, 256));
+
+  // Independent computation straight from f: mean and population std of f(t), t < n-1.
+  for (int j = 0; j < kNumJoints; ++j) {
+    double sum = 0.0, sum_a = 0.0, count = 0.0;
+    for (int d : split.train) {
+      const auto& f = data.demos[static_cast<std::size_t>(d)].f;
+      for (std::size_t t = 0; t + 1 < f.size(); ++t) {
+        sum += f[t][j];
+        sum_a += f[t + 1][j] - f[t][j];
+        count += 1;
+      }
+    }
+    const double mean = sum / count, mean_a = sum_a / count;
+    double var = 0.0, var_a = 0.0;
+    for (int d : split.train) {
+      const auto& f = data.demos[static_cast<std::size_t>(d)].f;
+      for (std::size_t t = 0; t + 1 < f.size(); ++t) {
+        var += (f[t][j] - mean) * (f[t][j] - mean);
+        var_a += (f[t + 1][j] - f[t][j] - mean_a) * (f[t + 1][j] - f[t][j] - mean_a);
+      }
+    }
+    CHECK(before.q_mean[j] == doctest::Approx(mean).epsilon(1e-12));
+    CHECK(before.q_std[j] == doctest::Approx(std::sqrt(var / count)).epsilon(1e-12));
+    CHECK(before.a_mean[j] == doctest::Approx(mean_a).epsilon(1e-12));
+    CHECK(before.a_std[j] == doctest::Approx(std::sqrt(var_a / count)).epsilon(1e-12));
+  }
+
+  // Wildly different validation demos leave the statistics bit-for-bit unchanged.
+  for (int d : split.val)
+    for (JointVector& q : data.demos[static_cast<std::size_t>(d)].f) q *= 100.0;
+  const NormStats after = normStats(buildSamples(data, splitByDemonstration(data, 0.2, 3).train, 256));
+  CHECK(after.q_mean == before.q_mean);
+  CHECK(after.q_std == before.q_std);
+  CHECK(after.a_mean == before.a_mean);
+  CHECK(after.a_std == before.a_std);
+  CHECK(after.r_mean == before.r_mean);
+  CHECK(after.r_std == before.r_std);
+}
+
+TEST_CASE("a constant joint gets the floored standard deviation, never 0") {
+  const PolicyData data = makePolicyData({{"m", {JointVector::Zero()}}},
+                                         {demo("m_0", {JointVector::Ones(), JointVector::Ones(), JointVector::Ones()}, {0, 0, 0})});
+  const NormStats st = normStats(buildSamples(data, 0, 256));
+  CHECK(st.q_std == JointVector::Constant(kMinStd));
+  CHECK(st.a_std == JointVector::Constant(kMinStd));
+  CHECK(st.r_std == JointVector::Constant(kMinStd));
+}
+
+TEST_CASE("baselines equal an independent hand computation from the trajectories") {
+  const PolicyData data = standardSet(3);
+  double zero = 0.0, repeat = 0.0, count = 0.0;
+  for (const PolicyDemo& d : data.demos)
+    for (std::size_t t = 0; t + 1 < d.f.size(); ++t)
+      for (int j = 0; j < kNumJoints; ++j) {
+        const double a = d.f[t + 1][j] - d.f[t][j];
+        const double a_prev = t == 0 ? 0.0 : d.f[t][j] - d.f[t - 1][j];
+        zero += a * a;
+        repeat += (a - a_prev) * (a - a_prev);
+        count += 1;
+      }
+  const Baselines b = baselines(buildSamples(data, allDemos(data), 256));
+  CHECK(b.zero_action == doctest::Approx(zero / count).epsilon(1e-12));
+  CHECK(b.repeat_last == doctest::Approx(repeat / count).epsilon(1e-12));
+  // Smooth trajectories: repeating the last action beats predicting none.
+  CHECK(b.repeat_last < b.zero_action);
+}
+
+TEST_CASE("the data fingerprint is deterministic and changes with any value") {
+  const PolicyData a = standardSet(2);
+  PolicyData b = standardSet(2);
+  CHECK(dataFingerprint(a) == dataFingerprint(b));
+  b.demos[3].f[5][2] += 1e-12;
+  CHECK(dataFingerprint(a) != dataFingerprint(b));
+  PolicyData c = standardSet(2);
+  c.demos[0].measured[1] = 0;
+  CHECK(dataFingerprint(a) != dataFingerprint(c));
+  CHECK(hex64(0x0123456789abcdefull) == "0123456789abcdef");
+  CHECK(hex64(dataFingerprint(a)).size() == 16);
+}
+
+TEST_CASE("a data directory reads with and without the measured column") {
+  const auto dir = std::filesystem::temp_directory_path() / "nao_rt_tests" / "policy_data_ok";
+  std::filesystem::remove_all(dir);
+  writeText(dir / "centroids.json", centroidsJson());
+  writeText(dir / "wrist_000" / "features.csv",
+            "t_s,label,measured,f_0,f_1,f_2,f_3,f_4\n0,0,1,0,0,0,0,0\n0.1,1,0,0.1,0.2,0.3,0.4,0.5\n0.2,1,1,0.2,0.2,0.2,0.2,0.2\n");
+  writeText(dir / "elbow_000" / "features.csv", "t_s,label,f_0,f_1,f_2,f_3,f_4\n0.1,1,1,1,1,1,1\n0.2,0,2,2,2,2,2\n");
+  writeText(dir / "notes" / "readme.txt", "not a demonstration");
+  const PolicyData data = loadPolicyData(dir.string());
+  REQUIRE(data.movement_names == std::vector<std::string>{"elbow", "wrist"});
+  REQUIRE(data.clusters() == 2);
+  CHECK(data.centroids[0][0] == JointVector::Constant(0.5));
+  REQUIRE(data.demos.size() == 2);
+  CHECK(data.demos[0].name == "elbow_000");
+  CHECK(data.demos[0].measured == std::vector<std::uint8_t>{1, 1});
+  CHECK(data.demos[1].measured == std::vector<std::uint8_t>{1, 0, 1});
+  CHECK(data.demos[1].label == std::vector<int>{0, 1, 1});
+  CHECK(data.demos[1].f[1] == jv(0.1, 0.2, 0.3, 0.4, 0.5));
+  CHECK(buildSamples(data, 1, 256)[1].r == JointVector::Ones());
+}
+
+TEST_CASE("a broken data directory is rejected with the file and line") {
+  const auto root = std::filesystem::temp_directory_path() / "nao_rt_tests" / "policy_data_bad";
+  std::filesystem::remove_all(root);
+  CHECK(loadError((root / "nope").string()).find("not a directory") != std::string::npos);
+
+  const auto no_json = root / "no_json";
+  writeText(no_json / "elbow_000" / "features.csv", "t_s,label,f_0,f_1,f_2,f_3,f_4\n0,0,0,0,0,0,0\n");
+  CHECK(loadError(no_json.string()).find("centroids.json") != std::string::npos);
+
+  const auto bad_json = root / "bad_json";
+  writeText(bad_json / "centroids.json", R"({"movements": {"elbow": {"centroids": [[1,2,3]]}}})");
+  CHECK(loadError(bad_json.string()).find("movements/elbow/centroids/0") != std::string::npos);
+
+  const auto no_demos = root / "no_demos";
+  writeText(no_demos / "centroids.json", centroidsJson());
+  CHECK(loadError(no_demos.string()).find("features.csv") != std::string::npos);
+
+  const auto bad_value = root / "bad_value";
+  writeText(bad_value / "centroids.json", centroidsJson());
+  writeText(bad_value / "elbow_000" / "features.csv", "t_s,label,f_0,f_1,f_2,f_3,f_4\n0,0,0,0,0,0,0\n0.1,0,0,x,0,0,0\n");
+  const std::string e1 = loadError(bad_value.string());
+  CHECK_MESSAGE(e1.find("elbow_000/features.csv:3") != std::string::npos, e1);
+
+  const auto bad_label = root / "bad_label";
+  writeText(bad_label / "centroids.json", centroidsJson());
+  writeText(bad_label / "wrist_000" / "features.csv", "t_s,label,f_0,f_1,f_2,f_3,f_4\n0,0,0,0,0,0,0\n0.1,2,0,0,0,0,0\n");
+  const std::string e2 = loadError(bad_label.string());
+  CHECK_MESSAGE(e2.find("wrist_000/features.csv:3: label") != std::string::npos, e2);
+
+  const auto bad_movement = root / "bad_movement";
+  writeText(bad_movement / "centroids.json", centroidsJson());
+  writeText(bad_movement / "knee_000" / "features.csv", "t_s,label,f_0,f_1,f_2,f_3,f_4\n0,0,0,0,0,0,0\n0.1,0,0,0,0,0,0\n");
+  CHECK(loadError(bad_movement.string()).find("'knee' has no centroids") != std::string::npos);
+
+  const auto missing_column = root / "missing_column";
+  writeText(missing_column / "centroids.json", centroidsJson());
+  writeText(missing_column / "wrist_000" / "features.csv", "t_s,label,f_0,f_1,f_2,f_3\n0,0,0,0,0,0\n");
+  CHECK(loadError(missing_column.string()).find("missing column 'f_4'") != std::string::npos);
+
+  const auto one_sample = root / "one_sample";
+  writeText(one_sample / "centroids.json", centroidsJson());
+  writeText(one_sample / "wrist_000" / "features.csv", "t_s,label,f_0,f_1,f_2,f_3,f_4\n0,0,0,0,0,0,0\n");
+  CHECK(loadError(one_sample.string()).find("at least 2") != std::string::npos);
+}

@@ -1,0 +1,149 @@
+// nao_toolchain train: the body-part Transformer policy on a clustered data set -> model.bin.
+#include "nao/arm_model.hpp"
+#include "nao/model_file.hpp"
+#include "nao/tools/command.hpp"
+#include "nao/tools/policy_dataset.hpp"
+#include "policy_train.hpp"
+
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+
+namespace nao::tools {
+namespace {
+
+struct TrainArgs {
+  std::string config = "paper", out, data, conditioning = "reference", urdf = NAO_DEFAULT_URDF, card;
+  std::uint64_t seed = 1;
+  int epochs = 200, patience = 10, batch = 32;
+  double val_fraction = 0.2, lr = 6e-5;
+};
+
+// The process's own argv (Linux), shell-quoted where needed; empty if unavailable.
+std::string ownCommandLine() {
+  std::ifstream in("/proc/self/cmdline", std::ios::binary);
+  std::string raw((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::string out, arg;
+  const auto flush = [&] {
+    const bool plain = !arg.empty() && arg.find_first_not_of(
+                                           "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-_./=:,+@%") ==
+                                           std::string::npos;
+    if (!out.empty()) out += ' ';
+    if (plain) {
+      out += arg;
+    } else {
+      out += '\'';
+      for (char c : arg) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+      out += '\'';
+    }
+    arg.clear();
+  };
+  for (char c : raw) {
+    if (c == '\0')
+      flush();
+    else
+      arg += c;
+  }
+  if (!arg.empty()) flush();
+  return out;
+}
+
+void run(const TrainArgs& a) {
+  const PolicyData data = loadPolicyData(a.data);
+  TrainOptions o;
+  o.config_name = a.config;
+  o.arch = a.config == "paper" ? paperArch() : smallArch();
+  if (o.arch.movements != data.movements() || o.arch.clusters != data.clusters())
+    std::printf("train: architecture follows the data: %d movements (config %d), %d clusters (config %d)\n",
+                data.movements(), o.arch.movements, data.clusters(), o.arch.clusters);
+  o.arch.movements = data.movements();
+  o.arch.clusters = data.clusters();
+  o.conditioning = a.conditioning == "reference" ? Conditioning::kReference : Conditioning::kAutonomous;
+  o.seed = a.seed;
+  o.max_epochs = a.epochs;
+  o.patience = a.patience;
+  o.val_fraction = a.val_fraction;
+  o.batch = a.batch;
+  o.lr = a.lr;
+
+  // The URDF first: a bad path should fail before minutes of training.
+  std::vector<TrainedJoint> joints;
+  try {
+    joints = trainedJoints(loadArmModel(a.urdf));
+  } catch (const ArmModelError& e) {
+    throw UserError(e.what());
+  }
+
+  std::printf("train: %s, %s conditioning, seed %llu; data %s: %zu demos, movements", a.config.c_str(),
+              a.conditioning.c_str(), static_cast<unsigned long long>(a.seed), hex64(dataFingerprint(data)).c_str(),
+              data.demos.size());
+  for (std::size_t m = 0; m < data.movement_names.size(); ++m) std::printf(" %zu=%s", m, data.movement_names[m].c_str());
+  std::printf(", K %d; %zu parameters\n", data.clusters(), parameterCount(o.arch));
+  std::fflush(stdout);
+
+  const TrainResult r = trainPolicy(data, o, &std::cout);
+  const ModelHeader header = modelHeader(data, o, r, joints);
+  std::uint64_t checksum = 0;
+  try {
+    checksum = writeModelFile(a.out, header, manifestFloats(r.net));
+  } catch (const ModelFileError& e) {
+    throw UserError(e.what());
+  }
+  std::printf("train: %zu epochs, best %d: val MSE %.4e rad^2 (zero action %.4e, repeat last %.4e), train %.4e rad^2\n",
+              r.history.size(), r.best_epoch, r.val.mse_rad2, r.val_baselines.zero_action,
+              r.val_baselines.repeat_last, r.train.mse_rad2);
+  std::printf("train: %zu train / %zu val samples -> %s (checksum %s), %.1f s\n", r.train_samples, r.val_samples,
+              a.out.c_str(), hex64(checksum).c_str(), r.seconds);
+  if (!a.card.empty()) {
+    std::string command = ownCommandLine();
+    if (command.empty()) command = "nao_toolchain train --config " + a.config + " --out " + a.out + " --data " + a.data;
+    std::ofstream card(a.card);
+    if (!card) throw UserError("cannot write " + a.card);
+    card << modelCard(data, o, r, command, a.out);
+    if (!card) throw UserError("cannot write " + a.card);
+    std::printf("train: model card -> %s\n", a.card.c_str());
+  }
+}
+
+void setup(CLI::App& app) {
+  auto args = std::make_shared<TrainArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "train",
+      "Trains the body-part Transformer policy (docs/policy.md) on a clustered data set: DATA/centroids.json\n"
+      "and DATA/<movement>_<index>/features.csv (nao_toolchain cluster). Split by demonstration, normalisation\n"
+      "from the training split, Adam, early stopping on the validation loss (the best weights are exported).\n"
+      "Single-threaded and seeded: two equal runs write byte-identical model.bin files.");
+  cmd->add_option("--config", args->config, "Architecture: paper (4+4 layers, d_model 128) or small (tests)")
+      ->check(CLI::IsMember({"paper", "small"}))
+      ->capture_default_str();
+  cmd->add_option("--out", args->out, "model.bin to write")->required();
+  cmd->add_option("--data", args->data, "Clustered data set directory")->required()->check(CLI::ExistingDirectory);
+  cmd->add_option("--conditioning", args->conditioning,
+                  "reference (snapped human key pose r(t)) or autonomous (paper §4.1: movement + step)")
+      ->check(CLI::IsMember({"reference", "autonomous"}))
+      ->capture_default_str();
+  cmd->add_option("--seed", args->seed, "Seed of the weights, the split and the batch order")->capture_default_str();
+  cmd->add_option("--epochs", args->epochs, "Maximum epochs (early stopping usually ends sooner)")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  cmd->add_option("--patience", args->patience, "Epochs without a new best validation loss before stopping")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  cmd->add_option("--val-fraction", args->val_fraction, "Validation share of each movement's demonstrations")
+      ->check(CLI::Range(0.01, 0.99))
+      ->capture_default_str();
+  cmd->add_option("--batch", args->batch, "Batch size")->check(CLI::Range(1, 1 << 20))->capture_default_str();
+  cmd->add_option("--lr", args->lr, "Adam learning rate")->check(CLI::PositiveNumber)->capture_default_str();
+  cmd->add_option("--urdf", args->urdf, "Robot description (joint names and limits stored in the model)")
+      ->check(CLI::ExistingFile)
+      ->capture_default_str();
+  cmd->add_option("--card", args->card, "Also write a Markdown model card here");
+  cmd->callback([args] { run(*args); });
+}
+
+}  // namespace
+}  // namespace nao::tools
+
+NAO_REGISTER_COMMAND(train, nao::tools::setup)

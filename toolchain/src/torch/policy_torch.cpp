@@ -1,0 +1,285 @@
+#include "policy_torch.hpp"
+
+#include <cmath>
+#include <limits>
+#include <map>
+#include <stdexcept>
+
+namespace nao::tools {
+namespace {
+
+std::string lastComponent(const std::string& name) { return name.substr(name.rfind('.') + 1); }
+
+std::vector<std::int64_t> shape64(const std::vector<int>& shape) { return {shape.begin(), shape.end()}; }
+
+// Every parameter and buffer of the module tree by its dotted name.
+std::map<std::string, torch::Tensor> namedTensors(const torch::nn::Module& m) {
+  std::map<std::string, torch::Tensor> out;
+  for (const auto& p : m.named_parameters()) out.emplace(p.key(), p.value());
+  for (const auto& b : m.named_buffers()) out.emplace(b.key(), b.value());
+  return out;
+}
+
+std::vector<std::pair<std::string, torch::Tensor>> inManifestOrder(const torch::nn::Module& m, const PolicyArch& arch) {
+  std::map<std::string, torch::Tensor> named = namedTensors(m);
+  std::vector<std::pair<std::string, torch::Tensor>> out;
+  for (const TensorSpec& spec : policyManifest(arch)) {
+    const auto it = named.find(spec.name);
+    if (it == named.end()) throw std::logic_error("policy module has no tensor '" + spec.name + "'");
+    if (it->second.sizes().vec() != shape64(spec.shape))
+      throw std::logic_error("policy module tensor '" + spec.name + "' has shape " +
+                             c10::str(it->second.sizes()) + ", the manifest says " + c10::str(shape64(spec.shape)));
+    out.emplace_back(spec.name, it->second);
+    named.erase(it);
+  }
+  if (!named.empty()) throw std::logic_error("policy module tensor '" + named.begin()->first + "' is not in the manifest");
+  return out;
+}
+
+}  // namespace
+
+AffineImpl::AffineImpl(int in, int out) {
+  weight = register_parameter("weight", torch::empty({in, out}));
+  bias = register_parameter("bias", torch::empty({out}));
+}
+
+LayerNormImpl::LayerNormImpl(int d) {
+  gain = register_parameter("gain", torch::empty({d}));
+  bias = register_parameter("bias", torch::empty({d}));
+}
+
+torch::Tensor LayerNormImpl::forward(const torch::Tensor& x) const {
+  // Biased variance over d, eps 1e-5: exactly docs/policy.md's LN.
+  return torch::layer_norm(x, {gain.size(0)}, gain, bias, 1e-5);
+}
+
+AttentionImpl::AttentionImpl(int d, int n_heads) : heads(n_heads) {
+  wq = register_parameter("wq", torch::empty({d, d}));
+  bq = register_parameter("bq", torch::empty({d}));
+  wk = register_parameter("wk", torch::empty({d, d}));
+  bk = register_parameter("bk", torch::empty({d}));
+  wv = register_parameter("wv", torch::empty({d, d}));
+  bv = register_parameter("bv", torch::empty({d}));
+  wo = register_parameter("wo", torch::empty({d, d}));
+  bo = register_parameter("bo", torch::empty({d}));
+}
+
+torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor& z, bool causal, torch::Tensor* alpha,
+                                     torch::Tensor* values) const {
+  const std::int64_t n_batch = x.size(0), n_query = x.size(1), n_key = z.size(1), d = wq.size(0);
+  const std::int64_t d_h = d / heads;
+  // [B,J,d] -> [B,H,J,d_h]: head h owns columns h*d_h .. (h+1)*d_h - 1.
+  const auto split = [&](const torch::Tensor& t, std::int64_t n) { return t.view({n_batch, n, heads, d_h}).transpose(1, 2); };
+  const torch::Tensor q = split(x.matmul(wq).add(bq), n_query);
+  const torch::Tensor k = split(z.matmul(wk).add(bk), n_key);
+  const torch::Tensor v = split(z.matmul(wv).add(bv), n_key);
+  torch::Tensor scores = q.matmul(k.transpose(-2, -1)).div(std::sqrt(static_cast<double>(d_h)));
+  if (causal) {
+    const torch::Tensor above = torch::ones({n_query, n_key}, torch::kBool).triu(1);
+    scores = scores.masked_fill(above, -std::numeric_limits<float>::infinity());
+  }
+  const torch::Tensor a = torch::softmax(scores, -1);
+  if (alpha) *alpha = a;
+  if (values) *values = v;
+  const torch::Tensor o = a.matmul(v).transpose(1, 2).reshape({n_batch, n_query, d});
+  return o.matmul(wo).add(bo);
+}
+
+FfnImpl::FfnImpl(int d, const std::vector<int>& hidden) {
+  int in = d;
+  for (std::size_t k = 0; k <= hidden.size(); ++k) {
+    const int out = k < hidden.size() ? hidden[k] : d;
+    layers.push_back(register_module(std::to_string(k), Affine(in, out)));
+    in = out;
+  }
+}
+
+torch::Tensor FfnImpl::forward(torch::Tensor x) const {
+  for (std::size_t k = 0; k < layers.size(); ++k) {
+    x = layers[k]->forward(x);
+    if (k + 1 < layers.size()) x = torch::relu(x);
+  }
+  return x;
+}
+
+EncoderLayerImpl::EncoderLayerImpl(const PolicyArch& arch) {
+  ln1 = register_module("ln1", LayerNorm(arch.d_model));
+  attn = register_module("attn", Attention(arch.d_model, arch.heads));
+  ln2 = register_module("ln2", LayerNorm(arch.d_model));
+  ffn = register_module("ffn", Ffn(arch.d_model, arch.ffn_hidden));
+}
+
+torch::Tensor EncoderLayerImpl::forward(torch::Tensor x) const {
+  const torch::Tensor h = ln1->forward(x);
+  x = x + attn->forward(h, h, false);
+  return x + ffn->forward(ln2->forward(x));
+}
+
+DecoderLayerImpl::DecoderLayerImpl(const PolicyArch& arch) {
+  ln1 = register_module("ln1", LayerNorm(arch.d_model));
+  self = register_module("self", Attention(arch.d_model, arch.heads));
+  ln2 = register_module("ln2", LayerNorm(arch.d_model));
+  cross = register_module("cross", Attention(arch.d_model, arch.heads));
+  ln3 = register_module("ln3", LayerNorm(arch.d_model));
+  ffn = register_module("ffn", Ffn(arch.d_model, arch.ffn_hidden));
+}
+
+torch::Tensor DecoderLayerImpl::forward(torch::Tensor y, const torch::Tensor& memory, torch::Tensor* alpha,
+                                        torch::Tensor* values, torch::Tensor* cross_out) const {
+  const torch::Tensor h = ln1->forward(y);
+  y = y + self->forward(h, h, true);
+  const torch::Tensor c = cross->forward(ln2->forward(y), memory, false, alpha, values);
+  if (cross_out) *cross_out = c;
+  y = y + c;
+  return y + ffn->forward(ln3->forward(y));
+}
+
+PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
+    : arch_(arch), conditioning_(conditioning) {
+  const std::string problem = archProblem(arch);
+  if (!problem.empty()) throw std::invalid_argument("policy architecture: " + problem);
+  const int d = arch.d_model, n_joints = arch.tokens;
+
+  embed = register_module("embed", std::make_shared<torch::nn::Module>());
+  embed_in = embed->register_module("in", Affine(arch.features, d));
+  joint_enc = embed->register_parameter("joint_enc", torch::empty({n_joints, d}));
+  movement_emb = embed->register_parameter("movement", torch::empty({arch.movements, d}));
+  step_emb = embed->register_parameter("step", torch::empty({arch.max_steps, d}),
+                                       conditioning == Conditioning::kAutonomous);
+  embed_act = embed->register_module("act", Affine(1, d));
+  joint_dec = embed->register_parameter("joint_dec", torch::empty({n_joints, d}));
+
+  auto enc_holder = register_module("enc", std::make_shared<torch::nn::Module>());
+  for (int l = 0; l < arch.encoder_layers; ++l)
+    enc.push_back(enc_holder->register_module(std::to_string(l), EncoderLayer(arch)));
+  enc_norm = enc_holder->register_module("norm", LayerNorm(d));
+  auto dec_holder = register_module("dec", std::make_shared<torch::nn::Module>());
+  for (int l = 0; l < arch.decoder_layers; ++l)
+    dec.push_back(dec_holder->register_module(std::to_string(l), DecoderLayer(arch)));
+  dec_norm = dec_holder->register_module("norm", LayerNorm(d));
+  head = register_module("head", Affine(d, 1));
+
+  auto norm = register_module("norm", std::make_shared<torch::nn::Module>());
+  q_mean = norm->register_buffer("q_mean", torch::zeros({n_joints}));
+  q_std = norm->register_buffer("q_std", torch::ones({n_joints}));
+  a_mean = norm->register_buffer("a_mean", torch::zeros({n_joints}));
+  a_std = norm->register_buffer("a_std", torch::ones({n_joints}));
+  r_mean = norm->register_buffer("r_mean", torch::zeros({n_joints}));
+  r_std = norm->register_buffer("r_std", torch::ones({n_joints}));
+  centroids = register_buffer("centroids", torch::zeros({arch.movements, arch.clusters, n_joints}));
+
+  // Initialise in manifest order, so the draws from the seeded generator do not depend on how
+  // the module tree happens to be registered.
+  torch::NoGradGuard no_grad;
+  for (auto& [name, t] : inManifestOrder(*this, arch_)) {
+    const std::string last = lastComponent(name);
+    if (name.rfind("norm.", 0) == 0 || name == "centroids") continue;  // buffers, set above
+    if (name == "embed.step" && conditioning == Conditioning::kReference)
+      t.zero_();
+    else if (name == "embed.joint_enc" || name == "embed.movement" || name == "embed.step" || name == "embed.joint_dec")
+      t.normal_(0.0, 0.02);
+    else if (last == "gain")
+      t.fill_(1.0);
+    else if (last == "bias" || last == "bq" || last == "bk" || last == "bv" || last == "bo")
+      t.zero_();
+    else if (last == "weight" || last == "wq" || last == "wk" || last == "wv" || last == "wo")
+      torch::nn::init::xavier_uniform_(t);
+    else
+      throw std::logic_error("no initialisation rule for '" + name + "'");
+  }
+}
+
+torch::Tensor PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttention* attention) const {
+  const torch::Tensor rn =
+      conditioning_ == Conditioning::kAutonomous ? torch::zeros_like(batch.qn) : batch.rn;
+  // Encoder input: [qn, an, rn] per token, shared embedding + joint, movement and step rows.
+  torch::Tensor x = embed_in->forward(torch::stack({batch.qn, batch.an, rn}, -1));
+  x = x + joint_enc + movement_emb.index_select(0, batch.movement).unsqueeze(1) +
+      step_emb.index_select(0, batch.step).unsqueeze(1);
+  for (const EncoderLayer& layer : enc) x = layer->forward(x);
+  const torch::Tensor memory = enc_norm->forward(x);
+
+  torch::Tensor y = embed_act->forward(batch.an.unsqueeze(-1)) + joint_dec;
+  torch::Tensor alpha, values, cross_out;
+  if (attention) attention->cross.clear();
+  for (const DecoderLayer& layer : dec) {
+    y = layer->forward(y, memory, attention ? &alpha : nullptr, attention ? &values : nullptr,
+                       attention ? &cross_out : nullptr);
+    if (attention) attention->cross.push_back(alpha);
+  }
+  if (attention) {
+    // Norm-based score (Kobayashi et al. 2020): f_h(M_j) = V_h[j] Wo_h, a d-vector per head and
+    // body part; score[j] = sum_i || sum_h α_h[i][j] f_h(M_j) ||.
+    const std::int64_t n_heads = arch_.heads, d = arch_.d_model;
+    const torch::Tensor wo = dec.back()->cross->wo.view({n_heads, d / n_heads, d});
+    const torch::Tensor f = values.matmul(wo);                              // [B,H,J,d]
+    const torch::Tensor g = torch::einsum("bhij,bhjd->bijd", {alpha, f});  // [B,i,j,d]
+    attention->score = g.norm(2, -1).sum(1);                                // [B,J]
+    attention->cross_out = cross_out;
+  }
+  return head->forward(dec_norm->forward(y)).squeeze(-1);
+}
+
+torch::Tensor PolicyNetImpl::act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
+                                 const torch::Tensor& movement, const torch::Tensor& step,
+                                 PolicyAttention* attention) const {
+  PolicyBatch batch;
+  batch.qn = (q - q_mean) / q_std;
+  batch.an = (a_prev - a_mean) / a_std;
+  batch.rn = (r - r_mean) / r_std;
+  batch.movement = movement;
+  batch.step = step;
+  return forward(batch, attention) * a_std + a_mean;
+}
+
+void PolicyNetImpl::setNormalisation(const NormStats& s) {
+  torch::NoGradGuard no_grad;
+  const auto put = [](torch::Tensor& t, const JointVector& v) {
+    for (int j = 0; j < kNumJoints; ++j) t[j] = static_cast<float>(v[j]);
+  };
+  put(q_mean, s.q_mean);
+  put(q_std, s.q_std);
+  put(a_mean, s.a_mean);
+  put(a_std, s.a_std);
+  put(r_mean, s.r_mean);
+  put(r_std, s.r_std);
+}
+
+void PolicyNetImpl::setCentroids(const std::vector<std::vector<JointVector>>& c) {
+  if (static_cast<std::int64_t>(c.size()) != centroids.size(0))
+    throw std::invalid_argument("centroids of " + std::to_string(c.size()) + " movements, the architecture has " +
+                                std::to_string(centroids.size(0)));
+  torch::NoGradGuard no_grad;
+  auto acc = centroids.accessor<float, 3>();
+  for (std::size_t m = 0; m < c.size(); ++m) {
+    if (static_cast<std::int64_t>(c[m].size()) != centroids.size(1))
+      throw std::invalid_argument("movement " + std::to_string(m) + " has " + std::to_string(c[m].size()) +
+                                  " centroids, the architecture has " + std::to_string(centroids.size(1)));
+    for (std::size_t k = 0; k < c[m].size(); ++k)
+      for (int j = 0; j < kNumJoints; ++j)
+        acc[static_cast<std::int64_t>(m)][static_cast<std::int64_t>(k)][j] = static_cast<float>(c[m][k][j]);
+  }
+}
+
+std::vector<torch::Tensor> PolicyNetImpl::trainableParameters() const {
+  std::vector<torch::Tensor> out;
+  for (const auto& [name, t] : inManifestOrder(*this, arch_))
+    if (t.requires_grad()) out.push_back(t);
+  return out;
+}
+
+std::vector<std::pair<std::string, torch::Tensor>> manifestTensors(const PolicyNet& net) {
+  return inManifestOrder(*net, net->arch());
+}
+
+std::vector<std::vector<float>> manifestFloats(const PolicyNet& net) {
+  std::vector<std::vector<float>> out;
+  for (const auto& [name, t] : manifestTensors(net)) {
+    const torch::Tensor c = t.detach().to(torch::kFloat).contiguous();
+    const float* p = c.data_ptr<float>();
+    out.emplace_back(p, p + c.numel());
+  }
+  return out;
+}
+
+}  // namespace nao::tools

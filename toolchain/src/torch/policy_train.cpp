@@ -1,0 +1,326 @@
+#include "policy_train.hpp"
+
+#include "nao/tools/command.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <ostream>
+#include <sstream>
+
+namespace nao::tools {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// Samples as tensors, normalised with the net's norm.* buffers (the statistics it will carry).
+struct SampleTensors {
+  PolicyBatch in;
+  torch::Tensor target;  ///< normalised a(t) [N,J]
+  std::int64_t size = 0;
+};
+
+SampleTensors toTensors(const PolicyNet& net, const std::vector<PolicySample>& samples) {
+  const auto n = static_cast<std::int64_t>(samples.size());
+  torch::Tensor q = torch::empty({n, kNumJoints}), a_prev = torch::empty({n, kNumJoints}),
+                r = torch::empty({n, kNumJoints}), a = torch::empty({n, kNumJoints});
+  torch::Tensor movement = torch::empty({n}, torch::kInt64), step = torch::empty({n}, torch::kInt64);
+  auto q_acc = q.accessor<float, 2>(), ap_acc = a_prev.accessor<float, 2>(), r_acc = r.accessor<float, 2>(),
+       a_acc = a.accessor<float, 2>();
+  auto m_acc = movement.accessor<std::int64_t, 1>(), s_acc = step.accessor<std::int64_t, 1>();
+  for (std::int64_t i = 0; i < n; ++i) {
+    const PolicySample& s = samples[static_cast<std::size_t>(i)];
+    for (int j = 0; j < kNumJoints; ++j) {
+      q_acc[i][j] = static_cast<float>(s.q[j]);
+      ap_acc[i][j] = static_cast<float>(s.a_prev[j]);
+      r_acc[i][j] = static_cast<float>(s.r[j]);
+      a_acc[i][j] = static_cast<float>(s.a[j]);
+    }
+    m_acc[i] = s.movement;
+    s_acc[i] = s.step;
+  }
+  SampleTensors t;
+  t.in.qn = (q - net->q_mean) / net->q_std;
+  t.in.an = (a_prev - net->a_mean) / net->a_std;
+  t.in.rn = (r - net->r_mean) / net->r_std;
+  t.in.movement = movement;
+  t.in.step = step;
+  t.target = (a - net->a_mean) / net->a_std;
+  t.size = n;
+  return t;
+}
+
+PolicyBatch rows(const PolicyBatch& b, const torch::Tensor& index) {
+  return {b.qn.index_select(0, index), b.an.index_select(0, index), b.rn.index_select(0, index),
+          b.movement.index_select(0, index), b.step.index_select(0, index)};
+}
+
+SplitLoss evaluate(const PolicyNet& net, const SampleTensors& t) {
+  torch::NoGradGuard no_grad;
+  SplitLoss loss;
+  if (t.size == 0) return loss;
+  const std::int64_t chunk = 4096;
+  double sum_n = 0.0, sum_rad2 = 0.0;
+  for (std::int64_t b = 0; b < t.size; b += chunk) {
+    const std::int64_t e = std::min(b + chunk, t.size);
+    const PolicyBatch in{t.in.qn.slice(0, b, e), t.in.an.slice(0, b, e), t.in.rn.slice(0, b, e),
+                         t.in.movement.slice(0, b, e), t.in.step.slice(0, b, e)};
+    const torch::Tensor err = net->forward(in) - t.target.slice(0, b, e);
+    sum_n += err.square().sum().item<double>();
+    sum_rad2 += (err * net->a_std).square().sum().item<double>();
+  }
+  const double count = static_cast<double>(t.size) * kNumJoints;
+  loss.normalised = sum_n / count;
+  loss.mse_rad2 = sum_rad2 / count;
+  return loss;
+}
+
+std::string duration(double s) {
+  char buf[32];
+  if (s < 90)
+    std::snprintf(buf, sizeof buf, "%.0f s", s);
+  else if (s < 5400)
+    std::snprintf(buf, sizeof buf, "%.0f min", s / 60);
+  else
+    std::snprintf(buf, sizeof buf, "%.1f h", s / 3600);
+  return buf;
+}
+
+void check(const PolicyData& data, const TrainOptions& o) {
+  const std::string problem = archProblem(o.arch);
+  if (!problem.empty()) throw UserError("architecture: " + problem);
+  if (o.arch.movements != data.movements())
+    throw UserError("the architecture has " + std::to_string(o.arch.movements) + " movements, the data " +
+                    std::to_string(data.movements()));
+  if (o.arch.clusters != data.clusters())
+    throw UserError("the architecture has " + std::to_string(o.arch.clusters) + " clusters, the data " +
+                    std::to_string(data.clusters()));
+  if (o.max_epochs < 1) throw UserError("epochs must be at least 1");
+  if (o.patience < 1) throw UserError("patience must be at least 1");
+  if (o.batch < 1) throw UserError("batch must be at least 1");
+  if (!(o.lr > 0.0)) throw UserError("learning rate must be positive");
+}
+
+}  // namespace
+
+SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySample>& samples) {
+  return evaluate(net, toTensors(net, samples));
+}
+
+TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostream* progress) {
+  check(data, o);
+  const Clock::time_point t_start = Clock::now();
+  // Determinism: one thread (no reduction-order races), deterministic kernels, seeded init.
+  torch::set_num_threads(1);
+  at::globalContext().setDeterministicAlgorithms(true, false);
+  torch::manual_seed(o.seed);
+
+  TrainResult res;
+  res.fingerprint = dataFingerprint(data);
+  res.split = splitByDemonstration(data, o.val_fraction, o.seed);
+  if (res.split.val.empty())
+    throw UserError("no validation demonstration: early stopping needs a movement with at least 2 demonstrations "
+                    "and a positive validation fraction");
+  const std::vector<PolicySample> train_samples = buildSamples(data, res.split.train, o.arch.max_steps);
+  const std::vector<PolicySample> val_samples = buildSamples(data, res.split.val, o.arch.max_steps);
+  res.train_samples = train_samples.size();
+  res.val_samples = val_samples.size();
+  res.stats = normStats(train_samples);
+  res.train_baselines = baselines(train_samples);
+  res.val_baselines = baselines(val_samples);
+
+  PolicyNet net(o.arch, o.conditioning);
+  net->setNormalisation(res.stats);
+  net->setCentroids(data.centroids);
+  const SampleTensors train = toTensors(net, train_samples);
+  const SampleTensors val = toTensors(net, val_samples);
+
+  std::vector<torch::Tensor> params = net->trainableParameters();
+  torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
+  std::vector<torch::Tensor> best;
+  double best_val = std::numeric_limits<double>::infinity();
+  double epoch_seconds_sum = 0.0;
+
+  for (int epoch = 1; epoch <= o.max_epochs; ++epoch) {
+    const Clock::time_point t_epoch = Clock::now();
+    net->train();
+    // Batch order: one stream per (seed, epoch), independent of torch's generator.
+    const std::vector<std::size_t> order =
+        shuffledIndices(train_samples.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
+    const torch::Tensor perm =
+        torch::tensor(std::vector<std::int64_t>(order.begin(), order.end()), torch::kInt64);
+    double loss_sum = 0.0;
+    for (std::int64_t b = 0; b < train.size; b += o.batch) {
+      const torch::Tensor index = perm.slice(0, b, std::min<std::int64_t>(b + o.batch, train.size));
+      const torch::Tensor loss = torch::mse_loss(net->forward(rows(train.in, index)), train.target.index_select(0, index));
+      optimiser.zero_grad();
+      loss.backward();
+      optimiser.step();
+      loss_sum += loss.item<double>() * static_cast<double>(index.size(0));
+    }
+    net->eval();
+    EpochStats st;
+    st.epoch = epoch;
+    st.train_loss = loss_sum / static_cast<double>(train.size);
+    const SplitLoss v = evaluate(net, val);
+    st.val_loss = v.normalised;
+    st.val_mse_rad2 = v.mse_rad2;
+    if (st.val_loss < best_val) {
+      best_val = st.val_loss;
+      res.best_epoch = epoch;
+      best.clear();
+      for (const torch::Tensor& p : params) best.push_back(p.detach().clone());
+    }
+    st.seconds = secondsSince(t_epoch);
+    epoch_seconds_sum += st.seconds;
+    res.history.push_back(st);
+    const bool stop = epoch - res.best_epoch >= o.patience || epoch == o.max_epochs;
+    if (progress) {
+      char line[200];
+      std::snprintf(line, sizeof line, "epoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  ", epoch,
+                    o.max_epochs, st.train_loss, st.val_loss, best_val, res.best_epoch, st.seconds);
+      *progress << line
+                << (stop ? std::string(epoch == o.max_epochs ? "epoch cap reached" : "early stop")
+                         : "~" + duration(epoch_seconds_sum / epoch * (o.max_epochs - epoch)) + " left")
+                << std::endl;
+    }
+    if (stop) break;
+  }
+
+  {
+    torch::NoGradGuard no_grad;
+    for (std::size_t i = 0; i < params.size(); ++i) params[i].copy_(best[i]);
+  }
+  net->eval();
+  res.net = net;
+  res.train = evaluate(net, train);
+  res.val = evaluate(net, val);
+  res.seconds = secondsSince(t_start);
+  return res;
+}
+
+std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const TrainResult& r) {
+  nlohmann::ordered_json j;
+  j["format"] = "nao-rt policy metadata 1";
+  auto& c = j["config"];
+  c["name"] = o.config_name;
+  c["d_model"] = o.arch.d_model;
+  c["heads"] = o.arch.heads;
+  c["encoder_layers"] = o.arch.encoder_layers;
+  c["decoder_layers"] = o.arch.decoder_layers;
+  c["ffn_hidden"] = o.arch.ffn_hidden;
+  c["tokens"] = o.arch.tokens;
+  c["movements"] = o.arch.movements;
+  c["clusters"] = o.arch.clusters;
+  c["max_steps"] = o.arch.max_steps;
+  c["layer_norm"] = "pre";
+  c["conditioning"] = conditioningName(o.conditioning);
+  auto& t = j["training"];
+  t["seed"] = o.seed;
+  t["max_epochs"] = o.max_epochs;
+  t["patience"] = o.patience;
+  t["val_fraction"] = o.val_fraction;
+  t["batch"] = o.batch;
+  t["optimizer"] = "adam";
+  t["lr"] = o.lr;
+  t["loss"] = "mse of normalised actions";
+  auto& d = j["data"];
+  d["fingerprint"] = hex64(r.fingerprint);
+  d["demos"] = data.demos.size();
+  d["train_samples"] = r.train_samples;
+  d["val_samples"] = r.val_samples;
+  j["split"]["train"] = demoNames(data, r.split.train);
+  j["split"]["val"] = demoNames(data, r.split.val);
+  auto& res = j["result"];
+  res["epochs_run"] = r.history.size();
+  res["best_epoch"] = r.best_epoch;
+  res["train_loss"] = r.train.normalised;
+  res["val_loss"] = r.val.normalised;
+  res["train_mse_rad2"] = r.train.mse_rad2;
+  res["val_mse_rad2"] = r.val.mse_rad2;
+  auto& b = j["baselines_rad2"];
+  b["train"]["zero_action"] = r.train_baselines.zero_action;
+  b["train"]["repeat_last"] = r.train_baselines.repeat_last;
+  b["val"]["zero_action"] = r.val_baselines.zero_action;
+  b["val"]["repeat_last"] = r.val_baselines.repeat_last;
+  return j.dump();
+}
+
+ModelHeader modelHeader(const PolicyData& data, const TrainOptions& o, const TrainResult& r,
+                        const std::vector<TrainedJoint>& joints) {
+  ModelHeader h;
+  h.arch = o.arch;
+  h.conditioning = o.conditioning;
+  h.joints = joints;
+  h.movement_names = data.movement_names;
+  h.metadata_json = modelMetadata(data, o, r);
+  return h;
+}
+
+std::string modelCard(const PolicyData& data, const TrainOptions& o, const TrainResult& r,
+                      const std::string& command_line, const std::string& model_path) {
+  std::ostringstream s;
+  char buf[256];
+  const auto ffn = [&] {
+    std::string w = std::to_string(o.arch.d_model);
+    for (int h : o.arch.ffn_hidden) w += "-" + std::to_string(h);
+    return w + "-" + std::to_string(o.arch.d_model);
+  };
+  s << "# Model card: " << model_path << "\n\n";
+  s << "Body-part Transformer policy (docs/policy.md), trained by `nao_toolchain train`.\n\n";
+  s << "## Configuration\n\n";
+  s << "| | |\n|---|---|\n";
+  s << "| config | " << o.config_name << " |\n";
+  s << "| conditioning | " << conditioningName(o.conditioning) << " |\n";
+  s << "| d_model / heads | " << o.arch.d_model << " / " << o.arch.heads << " |\n";
+  s << "| encoder / decoder layers | " << o.arch.encoder_layers << " / " << o.arch.decoder_layers << " |\n";
+  s << "| FFN | " << ffn() << " (ReLU) |\n";
+  s << "| layer norm | pre-LN (LN before every sub-layer, final LN on encoder memory and decoder output) |\n";
+  s << "| tokens / movements / clusters / max_steps | " << o.arch.tokens << " / " << o.arch.movements << " / "
+    << o.arch.clusters << " / " << o.arch.max_steps << " |\n";
+  s << "| parameters (manifest floats) | " << parameterCount(o.arch) << " |\n";
+  s << "| optimiser | Adam, lr " << o.lr << ", batch " << o.batch << " |\n";
+  s << "| seed | " << o.seed << " |\n";
+  s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs << ", patience " << o.patience
+    << "), best " << r.best_epoch << " (exported) |\n";
+  std::snprintf(buf, sizeof buf, "%.1f s (%.2f s per epoch)", r.seconds,
+                r.history.empty() ? 0.0 : r.seconds / static_cast<double>(r.history.size()));
+  s << "| wall time | " << buf << ", single thread |\n\n";
+
+  s << "## Data\n\n";
+  s << "- fingerprint " << hex64(r.fingerprint) << ", movements";
+  for (std::size_t m = 0; m < data.movement_names.size(); ++m) s << (m ? ", " : " ") << m << " = " << data.movement_names[m];
+  s << "\n- " << data.demos.size() << " demonstrations: " << r.split.train.size() << " training (" << r.train_samples
+    << " samples), " << r.split.val.size() << " validation (" << r.val_samples << " samples, val fraction "
+    << o.val_fraction << ")\n";
+  s << "- validation demonstrations:";
+  for (const std::string& n : demoNames(data, r.split.val)) s << ' ' << n;
+  s << "\n\n";
+
+  s << "## Validation MSE (rad^2, same split)\n\n";
+  s << "| predictor | train | validation |\n|---|---|---|\n";
+  std::snprintf(buf, sizeof buf, "| this model (epoch %d) | %.4e | %.4e |\n", r.best_epoch, r.train.mse_rad2, r.val.mse_rad2);
+  s << buf;
+  std::snprintf(buf, sizeof buf, "| zero action | %.4e | %.4e |\n", r.train_baselines.zero_action, r.val_baselines.zero_action);
+  s << buf;
+  std::snprintf(buf, sizeof buf, "| repeat last action | %.4e | %.4e |\n", r.train_baselines.repeat_last,
+                r.val_baselines.repeat_last);
+  s << buf << "\n";
+
+  s << "## Per-epoch loss (normalised MSE)\n\n";
+  s << "| epoch | train | val | val (rad^2) | s |\n|---|---|---|---|---|\n";
+  for (const EpochStats& e : r.history) {
+    std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e | %.1f |\n", e.epoch, e.epoch == r.best_epoch ? " *" : "",
+                  e.train_loss, e.val_loss, e.val_mse_rad2, e.seconds);
+    s << buf;
+  }
+  s << "\n## Command\n\n```\n" << command_line << "\n```\n";
+  return s.str();
+}
+
+}  // namespace nao::tools

@@ -1,0 +1,80 @@
+// Training the policy (docs/policy.md): seeded, single-threaded, deterministic; early stopping
+// on the validation loss keeps the best weights; export to model.bin and a model card.
+// Offline only (libtorch).
+#pragma once
+
+#include "nao/model_file.hpp"
+#include "nao/policy_config.hpp"
+#include "nao/tools/policy_dataset.hpp"
+#include "policy_torch.hpp"
+
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+namespace nao::tools {
+
+struct TrainOptions {
+  std::string config_name = "paper";  ///< recorded in the metadata ("paper" | "small" | ...)
+  PolicyArch arch = paperArch();      ///< movements and clusters must match the data
+  Conditioning conditioning = Conditioning::kReference;
+  std::uint64_t seed = 1;             ///< weights, split and batch order
+  int max_epochs = 200;               ///< iteration cap; early stopping usually ends sooner
+  int patience = 10;                  ///< epochs without a new best validation loss before stopping
+  double val_fraction = 0.2;          ///< of each movement's demonstrations
+  int batch = 32;
+  double lr = 6e-5;                   ///< Adam
+};
+
+struct EpochStats {
+  int epoch = 0;             ///< 1-based
+  double train_loss = 0.0;   ///< mean normalised MSE over the epoch's batches (weighted by size)
+  double val_loss = 0.0;     ///< normalised MSE on the validation split after the epoch
+  double val_mse_rad2 = 0.0; ///< the same in rad^2
+  double seconds = 0.0;      ///< wall time of the epoch (never written to model.bin)
+};
+
+/// Loss of a model on a split, normalised (what is optimised) and in rad^2.
+struct SplitLoss {
+  double normalised = 0.0;
+  double mse_rad2 = 0.0;
+};
+
+struct TrainResult {
+  PolicyNet net{nullptr};       ///< best-validation weights, norm.* and centroids set
+  PolicySplit split;
+  NormStats stats;
+  std::uint64_t fingerprint = 0;
+  std::size_t train_samples = 0, val_samples = 0;
+  std::vector<EpochStats> history;
+  int best_epoch = 0;           ///< 1-based epoch whose weights were kept
+  SplitLoss train, val;         ///< of the kept weights
+  Baselines train_baselines, val_baselines;  ///< rad^2
+  double seconds = 0.0;         ///< total wall time
+};
+
+/// Trains a policy on `data`. Sets torch to one thread and deterministic algorithms, seeds
+/// torch's generator with options.seed before initialisation, shuffles batches with a local
+/// generator. Prints one line per epoch to `progress` (if not null, flushed). Throws UserError
+/// for options that do not fit the data (architecture movements/clusters differ from the
+/// data's, no validation demonstration, bad batch/epochs/patience/lr).
+TrainResult trainPolicy(const PolicyData& data, const TrainOptions& options, std::ostream* progress);
+
+/// Normalised and rad^2 MSE of `net` on `samples` (evaluation mode, no gradients).
+SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySample>& samples);
+
+/// The metadata JSON stored in model.bin: config, seed, data fingerprint, split, epochs run,
+/// best epoch, final losses, baselines. No wall time or date: equal runs give equal text.
+std::string modelMetadata(const PolicyData& data, const TrainOptions& options, const TrainResult& result);
+
+/// Header of the model.bin for `result` (joints: nao::trainedJoints of the URDF in use).
+ModelHeader modelHeader(const PolicyData& data, const TrainOptions& options, const TrainResult& result,
+                        const std::vector<TrainedJoint>& joints);
+
+/// Markdown model card: configuration, layer-norm placement, seed, data fingerprint, epochs,
+/// wall time, per-epoch losses, validation MSE vs the baselines, the command line.
+std::string modelCard(const PolicyData& data, const TrainOptions& options, const TrainResult& result,
+                      const std::string& command_line, const std::string& model_path);
+
+}  // namespace nao::tools
