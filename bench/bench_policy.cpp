@@ -1,0 +1,63 @@
+// Policy inference latency on the paper configuration (the committed models/default.bin):
+//   BM_Policy_StaticEigen  the runtime's fixed-size float stepPolicy (nao/policy.hpp)
+//   BM_WeightStream        the physical limit: one read of the same weight bytes (a vectorised
+//                          sum over the model's tensor data), i.e. weight bytes / single-core
+//                          read bandwidth, measured in the same run
+// BM_Policy_Libtorch (bench_policy_torch.cpp) is libtorch eager on the same weights.
+// One inference (or one sweep) per iteration, each timed on its own; single thread.
+#include "bench_policy_common.hpp"
+
+#include <Eigen/Core>
+
+namespace {
+
+using namespace nao;
+using namespace nao::bench;
+
+void BM_Policy_StaticEigen(benchmark::State& state) {
+  if (!haveModel(state)) return;
+  const ModelFile& model = paperModel();
+  std::vector<const float*> p;
+  for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
+  const PolicyWeights<PaperPolicyDims> w =
+      bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
+  auto ws = makePolicyWorkspace<PaperPolicyDims>();
+  const std::vector<PolicyInput>& inputs = benchInputs();
+  Percentiles rec;
+  std::size_t i = 0;
+  for (auto _ : state) {
+    const PolicyInput& in = inputs[i++ % inputs.size()];
+    const BenchClock::time_point t0 = BenchClock::now();
+    const auto& a = stepPolicy(w, *ws, in);
+    benchmark::DoNotOptimize(a.data());
+    const double s = secondsSince(t0);
+    state.SetIterationTime(s);
+    rec.add(s);
+  }
+  rec.report(state);
+}
+
+void BM_WeightStream(benchmark::State& state) {
+  if (!haveModel(state)) return;
+  const ModelFile& model = paperModel();
+  // The tensor data is one contiguous region (64-byte aligned tensors back to back).
+  const float* first = model.data(0);
+  const float* last = model.data(model.tensors.size() - 1) + model.tensors.back().spec.count();
+  const Eigen::Map<const Eigen::ArrayXf> all(first, last - first);
+  Percentiles rec;
+  for (auto _ : state) {
+    const BenchClock::time_point t0 = BenchClock::now();
+    float s = all.sum();
+    benchmark::DoNotOptimize(s);
+    const double sec = secondsSince(t0);
+    state.SetIterationTime(sec);
+    rec.add(sec);
+  }
+  rec.report(state);
+  state.counters["GB_per_s"] = static_cast<double>((last - first) * 4) / 1e3 / state.counters["p50_us"];
+}
+
+}  // namespace
+
+BENCHMARK(BM_Policy_StaticEigen)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
+BENCHMARK(BM_WeightStream)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
