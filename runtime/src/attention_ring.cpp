@@ -1,0 +1,285 @@
+#include "nao/attention_ring.hpp"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <utility>
+#include <vector>
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+// attention.bin stores the payload bytes as they are in memory, and docs/attention_bin.md
+// promises little-endian: only true on a little-endian host.
+static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "attention.bin copies payloads as stored: little-endian host");
+
+namespace nao {
+
+static_assert(offsetof(AttentionRingHeader, magic) == 0 && offsetof(AttentionRingHeader, layout_version) == 8 &&
+                  offsetof(AttentionRingHeader, header_bytes) == 12 && offsetof(AttentionRingHeader, capacity) == 16 &&
+                  offsetof(AttentionRingHeader, payload_bytes) == 24 &&
+                  offsetof(AttentionRingHeader, payload_offset) == 32 && offsetof(AttentionRingHeader, slot_bytes) == 40 &&
+                  offsetof(AttentionRingHeader, total_bytes) == 48 && offsetof(AttentionRingHeader, descriptor) == 56 &&
+                  offsetof(AttentionRingHeader, n_written) == 128 && offsetof(AttentionRingHeader, closed) == 136 &&
+                  offsetof(AttentionRingHeader, writer_next) == 192 && sizeof(AttentionRingHeader) == 256,
+              "ring header layout documented in docs/attention_bin.md");
+
+namespace {
+
+[[noreturn]] void fail(const std::string& origin, const std::string& what) {
+  throw std::runtime_error(origin + ": " + what);
+}
+
+std::string errnoText(int err) { return std::string(" (") + std::strerror(err) + ")"; }
+
+std::string hex64(std::uint64_t v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "0x%016llx", static_cast<unsigned long long>(v));
+  return buf;
+}
+
+bool isPowerOfTwo(std::uint64_t v) { return v != 0 && (v & (v - 1)) == 0; }
+
+void putU32(unsigned char* p, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
+}
+void putU64(unsigned char* p, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = static_cast<unsigned char>(v >> (8 * i));
+}
+
+std::string ringOrigin(const std::string& shm_name) { return "attention ring " + shm_name; }
+
+}  // namespace
+
+const char* attentionReadName(AttentionRead status) {
+  switch (status) {
+    case AttentionRead::kOk: return "ok";
+    case AttentionRead::kNotYetWritten: return "not yet written";
+    case AttentionRead::kOverwritten: return "overwritten";
+    case AttentionRead::kTorn: return "torn";
+  }
+  return "unknown";
+}
+
+std::string attentionShmName(const std::string& name) {
+  if (name.empty() || name == "/") throw std::runtime_error("attention shared-memory name is empty");
+  std::string out = name.front() == '/' ? name : "/" + name;
+  if (out.find('/', 1) != std::string::npos)
+    throw std::runtime_error("attention shared-memory name '" + name + "' holds a '/' after the leading one");
+  if (out.size() > 255) throw std::runtime_error("attention shared-memory name '" + name + "' is longer than 255 characters");
+  return out;
+}
+
+AttentionRingView validateAttentionRing(const void* bytes, std::size_t region_bytes, const std::string& origin) {
+  if (region_bytes < sizeof(AttentionRingHeader))
+    fail(origin, "region of " + std::to_string(region_bytes) + " bytes is smaller than an attention ring header (" +
+                     std::to_string(sizeof(AttentionRingHeader)) + " bytes): not a nao-rt attention ring");
+  const auto* h = std::launder(static_cast<const AttentionRingHeader*>(bytes));
+  // Acquire: pairs with the constructor's release, so the fields below are complete.
+  const std::uint64_t magic = h->magic.load(std::memory_order_acquire);
+  if (magic != kAttentionRingMagic)
+    fail(origin, "not a nao-rt attention ring (magic " + hex64(magic) + ", expected " + hex64(kAttentionRingMagic) +
+                     " \"NAORING1\"; or its writer is still creating it)");
+  if (h->layout_version != kAttentionRingLayoutVersion)
+    fail(origin, "ring layout version " + std::to_string(h->layout_version) + ", this program reads version " +
+                     std::to_string(kAttentionRingLayoutVersion));
+  auto bad = [&](const std::string& what) { fail(origin, "corrupt ring header: " + what); };
+  if (h->header_bytes < sizeof(AttentionRingHeader) || h->header_bytes % kCacheLineBytes != 0)
+    bad("header size " + std::to_string(h->header_bytes));
+  if (!isPowerOfTwo(h->capacity) || h->capacity > (std::uint64_t{1} << 32))
+    bad("capacity " + std::to_string(h->capacity) + " is not a power of two up to 2^32");
+  if (h->slot_bytes == 0 || h->slot_bytes % kCacheLineBytes != 0 || h->slot_bytes > (std::uint64_t{1} << 32))
+    bad("slot size " + std::to_string(h->slot_bytes));
+  if (h->payload_offset < sizeof(std::uint64_t) || h->payload_bytes == 0 ||
+      h->payload_offset + h->payload_bytes > h->slot_bytes)
+    bad("payload of " + std::to_string(h->payload_bytes) + " bytes at offset " + std::to_string(h->payload_offset) +
+        " does not fit a slot of " + std::to_string(h->slot_bytes) + " bytes");
+  // Both factors are capped at 2^32 above: the product cannot overflow.
+  const std::uint64_t total = h->header_bytes + h->capacity * h->slot_bytes;
+  if (h->total_bytes != total)
+    bad("total size " + std::to_string(h->total_bytes) + " != header + capacity x slot = " + std::to_string(total));
+  if (total > region_bytes)
+    fail(origin, "region is " + std::to_string(region_bytes) + " bytes, its header describes a ring of " +
+                     std::to_string(total) + " bytes");
+  return {h, static_cast<const unsigned char*>(bytes) + h->header_bytes};
+}
+
+AttentionShm AttentionShm::create(const std::string& name, std::size_t bytes, bool try_mlock) {
+  AttentionShm shm;
+  shm.name_ = attentionShmName(name);
+  const std::string origin = ringOrigin(shm.name_);
+  if (bytes < sizeof(AttentionRingHeader)) fail(origin, "cannot create a region of " + std::to_string(bytes) + " bytes");
+  // A region left by a run that crashed before unlinking: replace it, do not attach to it.
+  if (::shm_unlink(shm.name_.c_str()) != 0 && errno != ENOENT)
+    fail(origin, "cannot remove the stale region of that name" + errnoText(errno));
+  const int fd = ::shm_open(shm.name_.c_str(), O_CREAT | O_EXCL | O_RDWR, 0644);
+  if (fd < 0) fail(origin, "shm_open(O_CREAT | O_EXCL) failed" + errnoText(errno));
+  auto abandon = [&](const std::string& what) {
+    const int err = errno;
+    ::close(fd);
+    ::shm_unlink(shm.name_.c_str());
+    fail(origin, what + errnoText(err));
+  };
+  if (::ftruncate(fd, static_cast<off_t>(bytes)) != 0) abandon("cannot size the region to " + std::to_string(bytes) + " bytes");
+  void* data = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
+  if (data == MAP_FAILED) abandon("cannot map the region");
+  ::close(fd);  // the mapping keeps the region
+  shm.data_ = data;
+  shm.size_ = bytes;
+  shm.creator_ = true;
+  // Keeps the writer's pages resident: a page fault in pushFromRT would be a deadline risk.
+  // Not permitted (RLIMIT_MEMLOCK) is fine: the caller may warn via locked().
+  shm.locked_ = try_mlock && ::mlock(data, bytes) == 0;
+  return shm;
+}
+
+AttentionShm AttentionShm::openReadOnly(const std::string& name) {
+  AttentionShm shm;
+  shm.name_ = attentionShmName(name);
+  const std::string origin = ringOrigin(shm.name_);
+  const int fd = ::shm_open(shm.name_.c_str(), O_RDONLY, 0);
+  if (fd < 0) {
+    const int err = errno;
+    if (err == ENOENT) fail(origin, "no shared-memory region of that name (no writer created it, or it has exited)");
+    fail(origin, "cannot open the region" + errnoText(err));
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    const int err = errno;
+    ::close(fd);
+    fail(origin, "cannot stat the region" + errnoText(err));
+  }
+  const auto bytes = static_cast<std::size_t>(st.st_size);
+  if (bytes < sizeof(AttentionRingHeader)) {
+    ::close(fd);
+    validateAttentionRing(nullptr, bytes, origin);  // throws "smaller than a header"
+  }
+  // PROT_READ: a reader cannot store into the writer's memory, even by mistake.
+  void* data = ::mmap(nullptr, bytes, PROT_READ, MAP_SHARED, fd, 0);
+  const int map_err = errno;
+  ::close(fd);
+  if (data == MAP_FAILED) fail(origin, "cannot map the region read-only" + errnoText(map_err));
+  shm.data_ = data;
+  shm.size_ = bytes;
+  validateAttentionRing(data, bytes, origin);  // on a throw, ~AttentionShm unmaps
+  return shm;
+}
+
+AttentionShm::AttentionShm(AttentionShm&& other) noexcept
+    : name_(std::move(other.name_)),
+      data_(std::exchange(other.data_, nullptr)),
+      size_(std::exchange(other.size_, 0)),
+      creator_(std::exchange(other.creator_, false)),
+      locked_(std::exchange(other.locked_, false)) {}
+
+AttentionShm& AttentionShm::operator=(AttentionShm&& other) noexcept {
+  if (this != &other) {
+    release();
+    name_ = std::move(other.name_);
+    data_ = std::exchange(other.data_, nullptr);
+    size_ = std::exchange(other.size_, 0);
+    creator_ = std::exchange(other.creator_, false);
+    locked_ = std::exchange(other.locked_, false);
+  }
+  return *this;
+}
+
+AttentionShm::~AttentionShm() { release(); }
+
+void AttentionShm::release() noexcept {
+  if (data_ != nullptr) {
+    if (locked_) ::munlock(data_, size_);
+    ::munmap(data_, size_);
+    // Readers keep their mappings (and the records in them) after the name is gone.
+    if (creator_) ::shm_unlink(name_.c_str());
+  }
+  data_ = nullptr;
+  size_ = 0;
+  creator_ = false;
+  locked_ = false;
+}
+
+AttentionRingView AttentionShm::view() const {
+  const auto* h = std::launder(static_cast<const AttentionRingHeader*>(data_));
+  return {h, static_cast<const unsigned char*>(data_) + h->header_bytes};
+}
+
+AttentionFileSummary writeAttentionFile(const std::string& path, const AttentionRingView& view) {
+  const AttentionRingHeader& h = *view.header;
+  const std::uint64_t n = recordsWritten(h);
+  const std::size_t payload_bytes = static_cast<std::size_t>(h.payload_bytes);
+  AttentionFileSummary summary;
+  summary.records_written = n;
+  summary.first_record = n > h.capacity ? n - h.capacity : 0;
+
+  std::vector<unsigned char> bytes(kAttentionFileHeaderBytes + static_cast<std::size_t>(n - summary.first_record) * payload_bytes);
+  for (std::uint64_t r = summary.first_record; r < n; ++r) {
+    unsigned char* dst = bytes.data() + kAttentionFileHeaderBytes + static_cast<std::size_t>(summary.record_count) * payload_bytes;
+    switch (readFromNonRT(view, r, dst)) {
+      case AttentionRead::kOk: ++summary.record_count; break;
+      // A writer still running replaced it: keep the file contiguous, start after it.
+      case AttentionRead::kOverwritten:
+        summary.first_record = r + 1;
+        summary.record_count = 0;
+        break;
+      case AttentionRead::kTorn:
+        fail(path, "record " + std::to_string(r) + " of the attention ring stayed half-written (writer stopped mid-push?)");
+      case AttentionRead::kNotYetWritten:
+        fail(path, "record " + std::to_string(r) + " vanished from the attention ring during the dump");
+    }
+  }
+  bytes.resize(kAttentionFileHeaderBytes + static_cast<std::size_t>(summary.record_count) * payload_bytes);
+
+  // Header (docs/attention_bin.md), little-endian byte by byte.
+  unsigned char* p = bytes.data();
+  std::memset(p, 0, kAttentionFileHeaderBytes);
+  std::memcpy(p, kAttentionFileMagic, 8);
+  putU32(p + 8, kAttentionFileVersion);
+  putU32(p + 12, kAttentionFileHeaderBytes);
+  putU64(p + 16, summary.record_count);
+  putU64(p + 24, summary.first_record);
+  putU64(p + 32, h.payload_bytes);
+  putU64(p + 40, h.capacity);
+  putU64(p + 48, summary.records_written);
+  for (int i = 0; i < kAttentionDescriptorFields; ++i) putU32(p + 56 + 4 * i, h.descriptor[i]);
+  // p + 88 .. 96: reserved, zero.
+
+  // Temporary file next to the target, renamed over it: readers see a whole file or none.
+  const std::filesystem::path target(path);
+  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : std::filesystem::path(".");
+  std::string tmp = (dir / ("." + target.filename().string() + ".tmp-XXXXXX")).string();
+  const int fd = ::mkstemp(tmp.data());
+  if (fd < 0) fail(path, "cannot create a temporary file in " + dir.string() + errnoText(errno));
+  auto abandon = [&](const std::string& what) {
+    const int err = errno;
+    ::close(fd);
+    ::unlink(tmp.c_str());
+    fail(path, what + errnoText(err));
+  };
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t k = ::write(fd, bytes.data() + done, bytes.size() - done);
+    if (k < 0 && errno == EINTR) continue;
+    if (k <= 0) abandon("cannot write " + tmp);
+    done += static_cast<std::size_t>(k);
+  }
+  // mkstemp creates 0600; attention.bin is an ordinary run artefact.
+  if (::fchmod(fd, 0644) != 0) abandon("cannot set the permissions of " + tmp);
+  if (::fsync(fd) != 0) abandon("cannot flush " + tmp);
+  if (::close(fd) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    fail(path, "cannot close " + tmp + errnoText(err));
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    fail(path, "cannot rename the temporary file into place" + errnoText(err));
+  }
+  return summary;
+}
+
+}  // namespace nao
