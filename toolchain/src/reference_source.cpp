@@ -65,7 +65,11 @@ void prepareReference(const ArmModel& arm, ReferenceStream& s, const std::vector
 
 ReferenceStream makeSyntheticReference(const ArmModel& arm, Movement movement, std::uint64_t seed, int index,
                                        const std::vector<JointVector>& centroids) {
-  const std::uint64_t run_seed = kReferenceSeedBase + seed;
+  return makeDemoReference(arm, movement, kReferenceSeedBase + seed, index, centroids);
+}
+
+ReferenceStream makeDemoReference(const ArmModel& arm, Movement movement, std::uint64_t run_seed, int index,
+                                  const std::vector<JointVector>& centroids) {
   const SynthDemo demo = generateDemo(movement, index, run_seed, false);
   std::vector<CameraKeypoints> cams(demo.cameras.size());
   for (std::size_t c = 0; c < demo.cameras.size(); ++c) {

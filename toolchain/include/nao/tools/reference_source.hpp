@@ -41,6 +41,13 @@ struct ReferenceStream {
 ReferenceStream makeSyntheticReference(const ArmModel& arm, Movement movement, std::uint64_t seed, int index,
                                        const std::vector<JointVector>& centroids);
 
+/// Demonstration `index` of `movement` exactly as `nao_toolchain synth --seed run_seed` makes
+/// it (no kReferenceSeedBase offset: with the training run seed this IS a training or
+/// validation demonstration), streamed and prepared like makeSyntheticReference. nao_rt uses
+/// it to regenerate a model's validation demonstrations (--reference none). Throws UserError.
+ReferenceStream makeDemoReference(const ArmModel& arm, Movement movement, std::uint64_t run_seed, int index,
+                                  const std::vector<JointVector>& centroids);
+
 /// Reads a skeleton CSV (docs/formats.md) sampled at 10 Hz and prepares it for `movement`.
 /// Throws UserError naming the file and the problem.
 ReferenceStream makeFileReference(const ArmModel& arm, const std::string& path, const std::string& movement,

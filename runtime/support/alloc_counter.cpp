@@ -89,10 +89,10 @@ void operator delete[](void* p, std::align_val_t) noexcept { __libc_free(p); }
 void operator delete(void* p, std::size_t, std::align_val_t) noexcept { __libc_free(p); }
 void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { __libc_free(p); }
 
-namespace nao::test {
+namespace nao {
 
 CountAllocations::CountAllocations() : start_(t_count) { ++t_armed; }
 CountAllocations::~CountAllocations() { --t_armed; }
 std::int64_t CountAllocations::count() const { return t_count - start_; }
 
-}  // namespace nao::test
+}  // namespace nao

@@ -1,0 +1,76 @@
+#include "rt_cli.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <ostream>
+
+namespace nao::rt {
+
+int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::ostream& out, std::ostream& err) {
+  RunOptions& o = cl.run;
+  CLI::App app{
+      "nao_rt: the NAO V6 right-arm imitation controller (DESIGN section 9) on the ODE-simulated arm.\n"
+      "Configures everything (URDF, policy, reference, attention ring, run buffers), then runs the\n"
+      "deterministic 10 Hz loop - human frame -> retarget -> snap to key pose -> policy -> command ->\n"
+      "100 x 1 ms of physics - with no heap allocation, and writes the run directory (docs/nao_rt.md).",
+      "nao_rt"};
+  app.get_formatter()->column_width(28);
+  app.add_option("--weights", o.weights_path,
+                 "Policy model.bin to load into static storage after checking that its\n"
+                 "architecture is the compiled one (default: the compiled-in model)")
+      ->type_name("FILE");
+  app.add_option("--urdf", o.urdf_path, "Robot description (torso + right arm); the model's joints must match it")
+      ->type_name("FILE")
+      ->capture_default_str();
+  app.add_option("--reference", o.reference,
+                 "synthetic:whole_arm|elbow|wrist  a fresh synthesised demonstration (run seed\n"
+                 "                                 1000000 + --seed: never a training demonstration)\n"
+                 "file:PATH  a 10 Hz triangulated BODY25 skeleton CSV (nao_toolchain triangulate)\n"
+                 "none       autonomous-mode models: rollout from s_0 (the mean start of the\n"
+                 "           model's validation demonstrations of --movement)")
+      ->type_name("SRC")
+      ->capture_default_str();
+  app.add_option("--movement", o.movement,
+                 "Movement as named in model.bin: required for file: and none, implied by synthetic:")
+      ->type_name("M");
+  app.add_option("--seed", o.seed, "Seed of the synthetic reference")->type_name("N")->capture_default_str();
+  auto* ticks = app.add_option("--ticks", o.ticks,
+                               "Ticks (100 ms each) to run (default: the reference's length; none: the mean\n"
+                               "length of the validation demonstrations). Past a reference's end no human is seen")
+                    ->type_name("N")
+                    ->check(CLI::PositiveNumber);
+  app.add_option("--seconds", o.seconds, "Run time in seconds, rounded to whole ticks (instead of --ticks)")
+      ->type_name("S")
+      ->check(CLI::PositiveNumber)
+      ->excludes(ticks);
+  app.add_flag("--realtime", o.realtime,
+               "Pace ticks on absolute 100 ms deadlines (clock_nanosleep, CLOCK_MONOTONIC), with\n"
+               "SCHED_FIFO + mlockall when permitted (one warning line when not); a missed deadline\n"
+               "is an overrun and the loop skips to the next grid point. Without it ticks run back\n"
+               "to back with identical results");
+  app.add_option("--log", o.log_dir, "Run directory (created if missing): ticks.csv, attention.bin, summary.json")
+      ->type_name("DIR");
+  app.add_option("--attention-shm", o.attention_shm,
+                 "Put the attention ring into POSIX shared memory NAME (watch it live with\n"
+                 "nao_attn_tail NAME); default: in process")
+      ->type_name("NAME");
+  app.add_flag("--zero-timing", o.zero_timing,
+               "Write ticks.csv's timing columns (the *_us ones) as 0, so that two identical runs\n"
+               "give byte-identical files");
+  app.add_flag("--info", cl.info,
+               "Check the model (compiled-in, or --weights) against the URDF, print it as one JSON\n"
+               "object (architecture, tensor count, checksum, trained-for joints) and exit");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e, out, err);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e, out, err);
+  } catch (const CLI::ParseError& e) {
+    err << "nao_rt: " << oneLine(e.what()) << " (nao_rt --help lists the flags)\n";
+    return 2;
+  }
+  return -1;
+}
+
+}  // namespace nao::rt

@@ -1,0 +1,382 @@
+// One nao_rt run (DESIGN §9, issue 5): configure everything (URDF, model, reference, controller,
+// attention ring, run buffers), activate, run the 10 Hz loop, deactivate, then write the run
+// directory (ticks.csv, attention.bin, summary.json; docs/nao_rt.md) and print a summary.
+//
+// A library (nao_rt_run) so that tests run it in process. runController is a template on the
+// policy's compiled dimensions: nao_rt instantiates it with the compiled-in model's Dims
+// (PaperPolicyDims when the build has no model), tests with SmallPolicyDims. Everything that
+// does not depend on Dims lives in rt_run.cpp.
+//
+// Threads and time: configure and the file output run before and after the loop; between
+// activate and deactivate the control thread only calls updateController, forward kinematics,
+// and pushFromRT into preallocated memory — no allocation (counted through AllocationProbe),
+// no I/O, no lock.
+#pragma once
+
+#include "nao/arm_model.hpp"
+#include "nao/attention_ring.hpp"
+#include "nao/controller.hpp"
+#include "nao/kinematics.hpp"
+#include "nao/model_file.hpp"
+#include "nao/policy.hpp"
+#include "nao/tools/reference_source.hpp"
+#include "rt_metrics.hpp"
+
+#include <Eigen/Core>
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <cstring>
+#include <iosfwd>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace nao::rt {
+
+/// Everything a run is told (the nao_rt command line, rt_cli.hpp).
+struct RunOptions {
+  std::string weights_path;                ///< model.bin; empty: the compiled-in model
+  const std::uint8_t* compiled = nullptr;  ///< compiled-in model bytes, nullptr if the build has none
+  std::size_t compiled_size = 0;
+  std::string urdf_path = NAO_DEFAULT_URDF;
+  /// synthetic:whole_arm|elbow|wrist, file:PATH or none.
+  std::string reference = "synthetic:whole_arm";
+  std::string movement;        ///< required for file: and none; implied by synthetic:
+  std::uint64_t seed = 1;      ///< synthetic reference: run seed kReferenceSeedBase + seed
+  std::int64_t ticks = 0;      ///< > 0: run this many ticks
+  double seconds = 0.0;        ///< > 0: run this long (rounded to whole ticks); else the default length
+  bool realtime = false;       ///< absolute 10 Hz deadlines (clock_nanosleep), SCHED_FIFO + mlockall if permitted
+  std::string log_dir;         ///< run directory; empty: no files
+  std::string attention_shm;   ///< POSIX shared-memory name of the attention ring; empty: in process
+  bool zero_timing = false;    ///< write the *_us columns of ticks.csv as 0 (byte-comparable files)
+  ControllerParams controller; ///< fault timeouts, home pose, retargeting (defaults: DESIGN §9)
+  SimParams sim;
+  ControllerClock* clock = nullptr;  ///< stage timings; nullptr: CLOCK_MONOTONIC (tests inject)
+};
+
+/// A command-line problem (unknown reference, missing --movement, ...): exit status 2.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Counts heap allocations on the calling thread between start and stop (nao_rt and the
+/// *_alloc tests back it with CountAllocations; without one the summary says null).
+struct AllocationProbe {
+  virtual ~AllocationProbe() = default;
+  virtual void start() = 0;
+  virtual std::int64_t stop() = 0;
+};
+
+/// What a run produced (also in summary.json).
+struct RunReport {
+  int status = 1;              ///< exit status: 0 done, 1 configure/load/output error, 2 usage error
+  std::string error;           ///< one line (without "nao_rt: ") when status != 0
+  std::int64_t ticks = 0;
+  std::int64_t overruns = 0;   ///< ticks that missed their deadline (--realtime only)
+  std::array<std::int64_t, kNumControllerFaults> faults{};  ///< ticks with each fault bit
+  std::int64_t allocations_after_activate = -1;            ///< -1: not counted
+  double ee_rmse_m = std::numeric_limits<double>::quiet_NaN();
+  double ee_dtw_m = std::numeric_limits<double>::quiet_NaN();
+  LatencyStats tick_us, retarget_us, policy_us, sim_us;
+  std::string summary_json;    ///< the text of summary.json (also without --log)
+};
+
+// ---------------------------------------------------------------------------------------------
+// Configure-time pieces that do not depend on the compiled dimensions (rt_run.cpp).
+
+enum class ReferenceKind { kSynthetic, kFile, kNone };
+
+struct ReferenceSpec {
+  ReferenceKind kind = ReferenceKind::kSynthetic;
+  std::string movement;  ///< movement name as in model.bin
+  std::string path;      ///< file: only
+};
+
+/// Parses --reference / --movement. Throws UsageError: unknown source, unknown movement,
+/// --movement missing for file: and none, or contradicting synthetic:<movement>.
+ReferenceSpec parseReferenceSpec(const std::string& reference, const std::string& movement);
+
+/// The validation demonstrations of one movement named in a model's metadata (split.val,
+/// written by nao_toolchain train), to be regenerated with the synthesiser.
+struct ValidationSet {
+  std::uint64_t seed = 1;      ///< synthesiser run seed of the data set
+  bool seed_assumed = true;    ///< the metadata does not say it: the training set's seed 1 assumed
+  std::vector<std::string> names;  ///< e.g. "elbow_003"
+  std::vector<int> indices;        ///< demonstration index within the movement
+};
+
+/// Reads split.val (and data.synth_seed when present) from a model's metadata JSON and keeps the
+/// demonstrations of `movement`. Throws std::runtime_error naming `origin` when there are none.
+ValidationSet validationDemos(const std::string& metadata_json, const std::string& movement, const std::string& origin);
+
+/// Everything configured before the policy is bound.
+struct PreparedRun {
+  ArmModel arm;
+  ModelFile model;                     ///< validated, joints checked against `arm`
+  std::string model_source;            ///< "compiled-in" or the --weights path
+  const std::uint8_t* model_bytes = nullptr;  ///< compiled-in: the embedded bytes to bind to; else nullptr
+  ReferenceSpec spec;
+  int movement_index = 0;              ///< into model.header.movement_names
+  std::vector<JointVector> centroids;  ///< the movement's key poses, rad
+  tools::ReferenceStream reference;    ///< synthetic/file (empty for none)
+  ValidationSet validation;            ///< none only
+  std::vector<tools::ReferenceStream> validation_demos;  ///< none only
+  JointVector q_start = JointVector::Zero();  ///< activate pose
+  std::int64_t ticks = 0;
+  bool has_targets = false;            ///< the reference has a feature-extracted target per tick
+};
+
+/// Configure-time checks and preparation, in the order that fails fastest: reference syntax,
+/// URDF, model (file checks, joints against the URDF, architecture against `compiled_arch`),
+/// movement, conditioning, then the reference stream or the validation demonstrations, the
+/// tick count and the run directory. Throws UsageError or another std::exception with a
+/// one-line message.
+PreparedRun prepareRun(const RunOptions& options, const PolicyArch& compiled_arch);
+
+/// ticks.csv's header line (no newline): the issue's columns in order.
+std::string ticksCsvHeader();
+
+/// One ticks.csv row (no newline): doubles in shortest round-trip form, `_us` columns 0 when
+/// zero_timing.
+std::string ticksCsvRow(const TickRecord& r, bool zero_timing);
+
+/// Result of trying real-time scheduling (SCHED_FIFO + mlockall).
+struct RealtimeScheduling {
+  bool fifo = false;
+  bool locked = false;
+  int old_policy = 0;
+  int old_priority = 0;
+  std::string warning;  ///< one line when something was not permitted
+};
+RealtimeScheduling enterRealtime();
+void leaveRealtime(const RealtimeScheduling& s);
+/// CLOCK_MONOTONIC now, ns. Real-time safe.
+std::int64_t monotonicNs();
+/// Sleeps until the absolute CLOCK_MONOTONIC time t_ns (clock_nanosleep TIMER_ABSTIME; resumes
+/// after signals). Real-time safe.
+void sleepUntilNs(std::int64_t t_ns);
+
+/// What the loop measured beyond the records.
+struct LoopTotals {
+  std::int64_t allocations = -1;
+  std::int64_t skipped_periods = 0;  ///< --realtime: whole periods skipped after overruns
+  double wall_s = 0.0;
+  std::string realtime_scheduling;   ///< "SCHED_FIFO + mlockall", or what was not permitted
+};
+
+/// After the loop: metrics, summary.json, ticks.csv, attention.bin (from `ring`), the printed
+/// summary on `out`. Throws std::runtime_error on output errors.
+void finishRun(const RunOptions& options, const PreparedRun& prepared, const std::vector<TickRecord>& records,
+               const AttentionRingView& ring, const LoopTotals& totals, std::ostream& out, RunReport& report);
+
+/// Replaces line breaks so a message stays one line.
+std::string oneLine(std::string s);
+
+// ---------------------------------------------------------------------------------------------
+// Weights in static storage (DESIGN §8: --weights is copied into static storage).
+
+/// Floats of static storage for every manifest tensor of Dims, each padded to 64 bytes (the
+/// manifest of policy_config.cpp, counted at compile time; prepareRun's binder checks it).
+template <class Dims>
+constexpr std::size_t policyStorageFloats() {
+  constexpr std::size_t D = Dims::kDModel, J = Dims::kTokens, M = Dims::kMovements, K = Dims::kClusters;
+  constexpr std::size_t S = Dims::kMaxSteps, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
+  constexpr auto pad = [](std::size_t n) { return (n + 15) / 16 * 16; };
+  const std::size_t norm = 2 * pad(D);
+  const std::size_t attention = 4 * (pad(D * D) + pad(D));
+  const std::size_t ffn = pad(D * F0) + pad(F0) + pad(F0 * F1) + pad(F1) + pad(F1 * F2) + pad(F2) + pad(F2 * D) + pad(D);
+  std::size_t n = pad(Dims::kFeatures * D) + pad(D) + pad(J * D) + pad(M * D) + pad(S * D) + pad(D) + pad(D) + pad(J * D);
+  n += Dims::kEncoderLayers * (norm + attention + norm + ffn) + norm;
+  n += Dims::kDecoderLayers * (norm + attention + norm + attention + norm + ffn) + norm;
+  n += pad(D) + pad(1) + 6 * pad(J) + pad(M * K * J);
+  return n;
+}
+
+/// The static, 64-byte aligned float array --weights is copied into (one per Dims, in .bss:
+/// untouched pages cost nothing when the compiled-in model is used).
+template <class Dims>
+float* policyStaticStorage() {
+  alignas(64) static float storage[policyStorageFloats<Dims>()];
+  return storage;
+}
+
+/// Tensor pointers of the prepared model: into the compiled-in bytes, or (a --weights file) into
+/// policyStaticStorage<Dims> after copying each tensor there. Configure time; throws
+/// std::logic_error if the storage is too small (a programming error in policyStorageFloats).
+template <class Dims>
+std::vector<const float*> policyTensorPointers(const PreparedRun& p) {
+  std::vector<const float*> pointers;
+  pointers.reserve(p.model.tensors.size());
+  if (p.model_bytes != nullptr) {
+    for (const TensorEntry& t : p.model.tensors)
+      pointers.push_back(reinterpret_cast<const float*>(p.model_bytes + t.offset));
+    return pointers;
+  }
+  float* storage = policyStaticStorage<Dims>();
+  std::size_t used = 0;
+  for (std::size_t i = 0; i < p.model.tensors.size(); ++i) {
+    const std::size_t n = p.model.tensors[i].spec.count();
+    if (used + n > policyStorageFloats<Dims>())
+      throw std::logic_error("nao_rt: static weight storage is smaller than the model's manifest");
+    std::memcpy(storage + used, p.model.data(i), n * sizeof(float));
+    pointers.push_back(storage + used);
+    used += (n + 15) / 16 * 16;
+  }
+  return pointers;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The run.
+
+template <class Dims>
+using RunPayload = AttentionPayload<Dims::kDecoderLayers, Dims::kHeads, Dims::kDModel>;
+template <class Dims>
+using RunRing = AttentionRing<RunPayload<Dims>, kDefaultAttentionCapacity>;
+
+namespace detail {
+
+/// The attention ring, in process or in shared memory (--attention-shm).
+template <class Ring>
+struct RingHolder {
+  std::unique_ptr<Ring> local;
+  std::unique_ptr<SharedAttentionRing<Ring>> shared;
+  Ring& ring() { return shared ? shared->ring() : *local; }
+};
+
+/// Fills and seals the tick's attention record from the record and the policy workspace.
+/// Real-time safe.
+template <class Dims>
+void fillPayload(const TickRecord& rec, const PolicyWorkspace<Dims>& ws, RunPayload<Dims>& payload) {
+  using P = RunPayload<Dims>;
+  static_assert(sizeof(P::cross) == sizeof(ws.cross), "payload and workspace cross-attention differ in shape");
+  static_assert(sizeof(P::cross_out) == sizeof(float) * Dims::kDModel * Dims::kTokens,
+                "payload and workspace cross-attention output differ in shape");
+  payload.tick = static_cast<std::uint64_t>(rec.tick);
+  payload.fault = rec.fault;
+  payload.reserved = 0;
+  for (int j = 0; j < Dims::kTokens; ++j) payload.score[j] = rec.att[static_cast<std::size_t>(j)];
+  std::memcpy(payload.cross, ws.cross, sizeof(payload.cross));
+  // Column i of the workspace's [D, J] column-major matrix is action token i: row i of cross_out.
+  std::memcpy(payload.cross_out, ws.cross_out.data(), sizeof(payload.cross_out));
+  sealPayload(payload);
+}
+
+}  // namespace detail
+
+/// Runs nao_rt once with the policy compiled as Dims (see the top of this file). Never throws:
+/// a problem ends the run with report.status != 0 and report.error set (one line).
+/// @param out   the human summary (and the configuration line)
+/// @param err   warnings (--realtime not permitted)
+/// @param probe allocation counter around activate ... deactivate; nullptr: not counted
+template <class Dims>
+RunReport runController(const RunOptions& options, std::ostream& out, std::ostream& err,
+                        AllocationProbe* probe = nullptr) {
+  RunReport report;
+  try {
+    // Configure: everything that can fail or allocate.
+    PreparedRun p = prepareRun(options, Dims::arch());
+    const std::vector<const float*> tensors = policyTensorPointers<Dims>(p);
+    const PolicyWeights<Dims> weights =
+        bindPolicyWeights<Dims>(tensors.data(), tensors.size(), p.model.header.conditioning);
+    const ControllerModel<Dims> model = configureController(p.arm, weights, options.controller, options.sim);
+    auto data = std::make_unique<ControllerData<Dims>>(model.sim, p.q_start);
+    detail::RingHolder<RunRing<Dims>> rings;
+    const AttentionDescriptor descriptor = attentionPayloadDescriptor<RunPayload<Dims>>();
+    if (options.attention_shm.empty())
+      rings.local = std::make_unique<RunRing<Dims>>(descriptor);
+    else
+      rings.shared = std::make_unique<SharedAttentionRing<RunRing<Dims>>>(options.attention_shm, descriptor);
+    RunRing<Dims>& ring = rings.ring();
+    auto payload = std::make_unique<RunPayload<Dims>>();
+    std::vector<TickRecord> records(static_cast<std::size_t>(p.ticks));
+    ArmData kin_ref;
+    SteadyClock steady;
+    ControllerClock& clock = options.clock != nullptr ? *options.clock : steady;
+    const std::size_t n_frames = p.reference.frames.size();
+    const std::int64_t period_ns = static_cast<std::int64_t>(options.controller.period_s * 1e9 + 0.5);
+
+    LoopTotals totals;
+    RealtimeScheduling rt;
+    if (options.realtime) {
+      rt = enterRealtime();
+      if (!rt.warning.empty()) err << "nao_rt: warning: " << rt.warning << "\n";
+      totals.realtime_scheduling = rt.warning.empty() ? "SCHED_FIFO + mlockall" : rt.warning;
+    }
+    out << "nao_rt: " << p.reference.description << " -> movement " << p.spec.movement << ", model " << p.model_source << ", " << p.ticks << " ticks ("
+        << static_cast<double>(p.ticks) * options.controller.period_s << " s), "
+        << (options.realtime ? "real time" : "back to back") << "\n";
+    out.flush();
+
+    // The loop: no allocation, no I/O, no exception from here to deactivate.
+    if (probe != nullptr) probe->start();
+    const std::int64_t wall0 = monotonicNs();
+    activateController(model, *data, p.q_start, p.movement_index, clock);
+    std::int64_t next_ns = monotonicNs();
+    for (std::int64_t t = 0; t < p.ticks; ++t) {
+      if (options.realtime) sleepUntilNs(next_ns);
+      const std::size_t i = static_cast<std::size_t>(t);
+      const SkeletonFrame* frame = i < n_frames && p.reference.present[i] ? &p.reference.frames[i] : nullptr;
+      TickRecord& rec = records[i];
+      rec = updateController(model, *data, frame);
+      // Where the arm should be at the end of the tick: the reference's feature-extracted pose
+      // of the next sample (the last one held at the end).
+      if (p.has_targets && i < n_frames)
+        rec.ee_ref = forwardKinematics(p.arm, kin_ref, p.reference.target[std::min(i + 1, n_frames - 1)]);
+      else
+        rec.ee_ref.setConstant(std::numeric_limits<double>::quiet_NaN());
+      if (options.realtime) {
+        // Overrun: the tick ended after the next grid point. Stay on the grid: the next tick
+        // starts at the first grid point still ahead.
+        const std::int64_t deadline = next_ns + period_ns;
+        const std::int64_t now = monotonicNs();
+        if (now > deadline) {
+          rec.fault |= kFaultOverrun;
+          const std::int64_t missed = (now - deadline) / period_ns + 1;
+          totals.skipped_periods += missed;
+          next_ns = deadline + missed * period_ns;
+        } else {
+          next_ns = deadline;
+        }
+      } else {
+        // Back to back there is no deadline to miss: the fault column stays free of timing.
+        rec.fault &= ~static_cast<std::uint32_t>(kFaultOverrun);
+      }
+      detail::fillPayload<Dims>(rec, *data->policy, *payload);
+      pushFromRT(ring, *payload);
+    }
+    deactivateController(model, *data);
+    closeFromRT(ring);
+    totals.wall_s = static_cast<double>(monotonicNs() - wall0) * 1e-9;
+    if (probe != nullptr) totals.allocations = probe->stop();
+    if (options.realtime) leaveRealtime(rt);
+
+    finishRun(options, p, records, attentionRingView(ring), totals, out, report);
+    report.status = 0;
+  } catch (const UsageError& e) {
+    report.status = 2;
+    report.error = oneLine(e.what());
+  } catch (const std::exception& e) {
+    report.status = 1;
+    report.error = oneLine(e.what());
+  } catch (...) {
+    report.status = 1;
+    report.error = "unexpected error";
+  }
+  return report;
+}
+
+/// runController, then the error (if any) as one line "nao_rt: <message>" on `err`. Returns
+/// the exit status.
+template <class Dims>
+int runMain(const RunOptions& options, std::ostream& out, std::ostream& err, AllocationProbe* probe = nullptr) {
+  const RunReport r = runController<Dims>(options, out, err, probe);
+  if (r.status != 0) err << "nao_rt: " << r.error << "\n";
+  return r.status;
+}
+
+}  // namespace nao::rt

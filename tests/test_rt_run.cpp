@@ -1,0 +1,430 @@
+// nao_rt runs in process (rt_run, rt_cli): the run directory's contract, determinism, and the
+// one-line errors for bad inputs. The policy is a small random model written to a temporary
+// model.bin and loaded with --weights, so the run is compiled with SmallPolicyDims.
+#include "rt_cli.hpp"
+#include "rt_run.hpp"
+
+#include "nao/model_file.hpp"
+#include "support/random_policy.hpp"
+#include "support/test_util.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+using namespace nao;
+using Dims = SmallPolicyDims;
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Per process: suites of several build trees may run at the same time.
+fs::path suiteDir() {
+  return fs::temp_directory_path() / "nao_rt_tests" / ("rt_run_" + std::to_string(::getpid()));
+}
+
+// Removes the suite's files when the suite ends.
+const struct RemoveSuiteDir {
+  ~RemoveSuiteDir() {
+    std::error_code ec;
+    fs::remove_all(suiteDir(), ec);
+  }
+} remove_suite_dir;
+
+fs::path tempDir(const std::string& name) {
+  const fs::path dir = suiteDir() / name;
+  fs::remove_all(dir);
+  fs::create_directories(dir.parent_path());
+  return dir;
+}
+
+/// A random small-config model.bin (movements elbow, whole_arm, wrist like the trainer's).
+std::string writeModel(const std::string& name, Conditioning c, const std::string& metadata = "{}",
+                       const PolicyArch& arch = smallArch(), std::uint64_t seed = 7) {
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  ModelHeader h;
+  h.arch = arch;
+  h.conditioning = c;
+  h.joints = trainedJoints(arm);
+  h.movement_names = {"elbow", "whole_arm", "wrist"};
+  h.metadata_json = metadata;
+  const fs::path dir = suiteDir();
+  fs::create_directories(dir);
+  const std::string path = (dir / name).string();
+  writeModelFile(path, h, test::makeRandomPolicy(arch, arm, seed).tensors);
+  return path;
+}
+
+const std::string& referenceModel() {
+  static const std::string path = writeModel("reference.bin", Conditioning::kReference);
+  return path;
+}
+
+struct Outcome {
+  rt::RunReport report;
+  std::string out, err;
+};
+
+Outcome run(const rt::RunOptions& o) {
+  std::ostringstream out, err;
+  Outcome r;
+  r.report = rt::runController<Dims>(o, out, err);
+  r.out = out.str();
+  r.err = err.str();
+  return r;
+}
+
+/// What runMain prints on failure: exactly one line.
+std::string errorLine(const rt::RunOptions& o, int& status) {
+  std::ostringstream out, err;
+  status = rt::runMain<Dims>(o, out, err);
+  return err.str();
+}
+
+bool oneLine(const std::string& s) { return !s.empty() && s.find('\n') == s.size() - 1; }
+
+rt::RunOptions options(const std::string& weights, const std::string& reference, const fs::path& log = {}) {
+  rt::RunOptions o;
+  o.weights_path = weights;
+  o.reference = reference;
+  o.log_dir = log.string();
+  return o;
+}
+
+std::string bytes(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+}  // namespace
+
+TEST_CASE("ticks.csv's header is exactly the contract's columns, in order") {
+  const std::string expected =
+      "tick,t_s,q_ref_0,q_ref_1,q_ref_2,q_ref_3,q_ref_4,r_0,r_1,r_2,r_3,r_4,a_0,a_1,a_2,a_3,a_4,"
+      "q_cmd_0,q_cmd_1,q_cmd_2,q_cmd_3,q_cmd_4,q_0,q_1,q_2,q_3,q_4,ee_x,ee_y,ee_z,ee_ref_x,ee_ref_y,ee_ref_z,"
+      "att_0,att_1,att_2,att_3,att_4,fault,tick_us,retarget_us,policy_us,sim_us";
+  CHECK(rt::ticksCsvHeader() == expected);
+}
+
+TEST_CASE("the static weight storage holds exactly the 64-byte padded manifest") {
+  auto padded = [](const PolicyArch& a) {
+    std::size_t n = 0;
+    for (const TensorSpec& t : policyManifest(a)) n += (t.count() + 15) / 16 * 16;
+    return n;
+  };
+  CHECK(rt::policyStorageFloats<SmallPolicyDims>() == padded(smallArch()));
+  CHECK(rt::policyStorageFloats<PaperPolicyDims>() == padded(paperArch()));
+}
+
+TEST_CASE("a run writes ticks.csv, attention.bin and summary.json as the contract says") {
+  const fs::path dir = tempDir("contract");
+  const Outcome r = run(options(referenceModel(), "synthetic:elbow", dir));
+  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  CHECK(r.err.empty());
+
+  // ticks.csv: the header, one row per tick, as many fields as columns.
+  std::ifstream csv(dir / "ticks.csv");
+  std::string line;
+  REQUIRE(std::getline(csv, line));
+  CHECK(line == rt::ticksCsvHeader());
+  const auto columns = std::count(line.begin(), line.end(), ',') + 1;
+  std::int64_t rows = 0;
+  while (std::getline(csv, line)) {
+    CHECK(std::count(line.begin(), line.end(), ',') + 1 == columns);
+    ++rows;
+  }
+  CHECK(rows == r.report.ticks);
+  CHECK(r.report.ticks > 50);
+
+  // summary.json: the required keys.
+  const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
+  CHECK(s["ticks"] == r.report.ticks);
+  CHECK(s["overruns"] == 0);
+  for (const char* name : kControllerFaultNames) CHECK(s["faults"].contains(name));
+  CHECK(s["allocations_after_activate"].is_null());  // no probe in this suite
+  for (const char* k : {"tick_us", "policy_us", "retarget_us", "sim_us"}) {
+    CHECK(s[k]["p50"].is_number());
+    CHECK(s[k]["p99"] >= s[k]["p50"]);
+    CHECK(s[k]["max"] >= s[k]["p99"]);
+  }
+  CHECK(s["ee_rmse_m"].is_number());
+  CHECK(s["model"]["path"] == referenceModel());
+  CHECK(s["model"]["checksum"].get<std::string>().size() == 18);
+  CHECK(s["reference"].get<std::string>().find("synthetic:elbow (seed 1000001") == 0);
+  CHECK(s["movement"] == "elbow");
+  CHECK(s["seed"] == 1);
+  CHECK(s["realtime"] == false);
+  CHECK(s["attention"]["records_written"] == r.report.ticks);
+  MESSAGE("random small policy on synthetic:elbow: ee RMSE " << r.report.ee_rmse_m * 1e3 << " mm over "
+                                                             << r.report.ticks << " ticks");
+
+  // attention.bin: the header says what it holds.
+  const std::string att = bytes(dir / "attention.bin");
+  REQUIRE(att.size() >= 96);
+  CHECK(att.compare(0, 8, "NAOATTN1") == 0);
+  std::uint64_t count = 0, payload = 0;
+  std::memcpy(&count, att.data() + 16, 8);
+  std::memcpy(&payload, att.data() + 32, 8);
+  CHECK(count == static_cast<std::uint64_t>(std::min<std::int64_t>(r.report.ticks, kDefaultAttentionCapacity)));
+  CHECK(payload == sizeof(rt::RunPayload<Dims>));
+  CHECK(att.size() == 96 + count * payload);
+
+  // The printed summary says where the files went.
+  CHECK(r.out.find("ee RMSE") != std::string::npos);
+  CHECK(r.out.find((dir / "summary.json").string()) != std::string::npos);
+}
+
+TEST_CASE("two runs with the same arguments give byte-identical ticks.csv (--zero-timing) and attention.bin") {
+  const fs::path a = tempDir("det_a"), b = tempDir("det_b");
+  for (const fs::path& dir : {a, b}) {
+    rt::RunOptions o = options(referenceModel(), "synthetic:wrist", dir);
+    o.seed = 3;
+    o.zero_timing = true;
+    o.ticks = 150;  // past the reference's end too (no human: hold, then home)
+    const Outcome r = run(o);
+    REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  }
+  const std::string csv_a = bytes(a / "ticks.csv");
+  CHECK(csv_a.size() > 10000);
+  CHECK(csv_a == bytes(b / "ticks.csv"));
+  CHECK(bytes(a / "attention.bin") == bytes(b / "attention.bin"));
+  // --zero-timing zeroes exactly the four *_us columns.
+  std::istringstream rows(csv_a);
+  std::string line;
+  std::getline(rows, line);
+  std::getline(rows, line);
+  CHECK(line.size() > 8);
+  CHECK(line.substr(line.size() - 8) == ",0,0,0,0");
+}
+
+TEST_CASE("without --zero-timing the timing columns hold the measured stage times") {
+  const fs::path dir = tempDir("timing");
+  rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
+  o.ticks = 5;
+  REQUIRE(run(o).report.status == 0);
+  std::istringstream rows(bytes(dir / "ticks.csv"));
+  std::string line;
+  std::getline(rows, line);
+  std::getline(rows, line);
+  CHECK(line.substr(line.size() - 8) != ",0,0,0,0");
+}
+
+TEST_CASE("bad inputs end the run with a non-zero status and one clear line") {
+  const std::string good = referenceModel();
+  const std::string data = bytes(good);
+  const fs::path dir = suiteDir();
+  auto variant = [&](const std::string& name, std::string content) {
+    const std::string path = (dir / name).string();
+    std::ofstream(path, std::ios::binary) << content;
+    return path;
+  };
+  std::string flipped = data;
+  flipped[data.size() / 2] = static_cast<char>(flipped[data.size() / 2] ^ 0x10);
+  PolicyArch other = smallArch();
+  other.d_model = 16;
+
+  struct Case {
+    const char* what;
+    rt::RunOptions o;
+    int status;
+    const char* says;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"truncated weights", options(variant("truncated.bin", data.substr(0, data.size() / 2)), "synthetic:elbow"),
+                   1, "truncated"});
+  cases.push_back({"a flipped byte", options(variant("flipped.bin", flipped), "synthetic:elbow"), 1, "checksum"});
+  cases.push_back({"weights of another architecture",
+                   options(writeModel("other.bin", Conditioning::kReference, "{}", other), "synthetic:elbow"), 1,
+                   "differs from the compiled one"});
+  cases.push_back({"a missing weights file", options((dir / "missing.bin").string(), "synthetic:elbow"), 1, "missing.bin"});
+  {
+    rt::RunOptions o = options(good, "synthetic:elbow");
+    o.urdf_path = (dir / "missing.urdf").string();
+    cases.push_back({"a missing URDF", o, 1, "missing.urdf"});
+  }
+  cases.push_back({"an unknown reference", options(good, "camera:0"), 2, "unknown reference 'camera:0'"});
+  cases.push_back({"an unknown synthetic movement", options(good, "synthetic:wave"), 2, "wave"});
+  {
+    rt::RunOptions o = options(good, "file:/nonexistent/skeleton.csv");
+    o.movement = "elbow";
+    cases.push_back({"a missing reference file", o, 1, "skeleton.csv"});
+  }
+  cases.push_back({"file: without --movement", options(good, "file:/nonexistent/skeleton.csv"), 2, "--movement"});
+  {
+    rt::RunOptions o = options(good, "none");
+    o.movement = "elbow";
+    cases.push_back({"none with a reference-conditioned model", o, 1, "autonomous"});
+  }
+  {
+    rt::RunOptions o = options(good, "synthetic:elbow");
+    o.movement = "wrist";
+    cases.push_back({"a --movement that contradicts the reference", o, 2, "contradicts"});
+  }
+  cases.push_back({"no model at all", options("", "synthetic:elbow"), 1, "--weights"});
+  {
+    const std::string blocker = variant("not_a_dir", "x");
+    cases.push_back({"a run directory that cannot be made", options(good, "synthetic:elbow", fs::path(blocker) / "run"),
+                     1, "run directory"});
+  }
+  for (const Case& c : cases) {
+    const std::string what = c.what;
+    CAPTURE(what);
+    int status = 0;
+    const std::string err = errorLine(c.o, status);
+    CHECK(status == c.status);
+    CHECK(oneLine(err));
+    CHECK(err.rfind("nao_rt: ", 0) == 0);
+    CHECK_MESSAGE(err.find(c.says) != std::string::npos, "expected '" << std::string(c.says) << "' in: " << err);
+  }
+}
+
+TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with one line") {
+  auto parse = [](std::vector<const char*> args, rt::CommandLine& cl, std::string& out, std::string& err) {
+    args.insert(args.begin(), "nao_rt");
+    std::ostringstream o, e;
+    const int status = rt::parseCommandLine(static_cast<int>(args.size()), args.data(), cl, o, e);
+    out = o.str();
+    err = e.str();
+    return status;
+  };
+  rt::CommandLine cl;
+  std::string out, err;
+  CHECK(parse({"--help"}, cl, out, err) == 0);
+  for (const char* flag : {"--weights", "--urdf", "--reference", "--movement", "--seed", "--ticks", "--seconds",
+                           "--realtime", "--log", "--attention-shm", "--info", "--zero-timing"})
+    CHECK_MESSAGE(out.find(flag) != std::string::npos, flag);
+
+  for (std::vector<const char*> bad : {std::vector<const char*>{"--bogus"}, {"--ticks", "-3"}, {"--ticks", "ten"},
+                                       {"--ticks", "5", "--seconds", "2"}, {"--seed"}}) {
+    rt::CommandLine c;
+    CAPTURE(bad[0]);
+    CHECK(parse(bad, c, out, err) == 2);
+    CHECK(oneLine(err));
+    CHECK(err.rfind("nao_rt: ", 0) == 0);
+  }
+
+  rt::CommandLine c;
+  REQUIRE(parse({"--weights", "m.bin", "--reference", "file:x.csv", "--movement", "elbow", "--seed", "4", "--ticks",
+                 "20", "--realtime", "--log", "out", "--attention-shm", "nao_x", "--zero-timing"},
+                c, out, err) == -1);
+  CHECK(c.run.weights_path == "m.bin");
+  CHECK(c.run.reference == "file:x.csv");
+  CHECK(c.run.movement == "elbow");
+  CHECK(c.run.seed == 4);
+  CHECK(c.run.ticks == 20);
+  CHECK(c.run.realtime);
+  CHECK(c.run.log_dir == "out");
+  CHECK(c.run.attention_shm == "nao_x");
+  CHECK(c.run.zero_timing);
+  CHECK_FALSE(c.info);
+}
+
+TEST_CASE("--realtime paces the ticks on 100 ms deadlines and gives the same records as back to back") {
+  const fs::path a = tempDir("rt_a"), b = tempDir("rt_b");
+  rt::RunOptions o = options(referenceModel(), "synthetic:elbow", a);
+  o.ticks = 5;
+  o.zero_timing = true;
+  o.realtime = true;
+  std::ostringstream out, err;
+  const auto t0 = std::chrono::steady_clock::now();
+  const rt::RunReport r = rt::runController<Dims>(o, out, err);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  REQUIRE_MESSAGE(r.status == 0, r.error);
+  // At most one warning line (SCHED_FIFO / mlockall not permitted).
+  CHECK((err.str().empty() || oneLine(err.str())));
+  const nlohmann::json j = nlohmann::json::parse(r.summary_json);
+  CHECK(j["realtime"] == true);
+  CHECK(j["realtime_scheduling"].is_string());
+  CHECK(j["skipped_periods"].is_number());
+  // Five ticks on the grid: the last starts 400 ms after the first.
+  CHECK(s > 0.39);
+  if (r.overruns == 0) {
+    o.realtime = false;
+    o.log_dir = b.string();
+    REQUIRE(run(o).report.status == 0);
+    CHECK(bytes(a / "ticks.csv") == bytes(b / "ticks.csv"));
+  }
+}
+
+TEST_CASE("--attention-shm puts the ring into shared memory for the run") {
+  rt::RunOptions o = options(referenceModel(), "synthetic:elbow");
+  o.ticks = 3;
+  o.attention_shm = "nao_rt_test_run_" + std::to_string(::getpid());
+  const Outcome r = run(o);
+  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  const nlohmann::json j = nlohmann::json::parse(r.report.summary_json);
+  CHECK(j["attention"]["shm"] == o.attention_shm);
+  CHECK(j["attention"]["records_written"] == 3);
+  // Unlinked at the end of the run.
+  CHECK_FALSE(fs::exists("/dev/shm/" + o.attention_shm));
+  rt::RunOptions bad = o;
+  bad.attention_shm = "a/b";
+  int status = 0;
+  CHECK(oneLine(errorLine(bad, status)));
+  CHECK(status == 1);
+}
+
+TEST_CASE("--reference none rolls an autonomous model out from s_0 and reports the DTW to the validation demos") {
+  const std::string model = writeModel(
+      "autonomous.bin", Conditioning::kAutonomous,
+      R"({"split":{"train":["elbow_000"],"val":["elbow_003","whole_arm_001","elbow_010","wrist_003"]}})");
+  const fs::path dir = tempDir("none");
+  rt::RunOptions o = options(model, "none", dir);
+  o.movement = "elbow";
+  const Outcome r = run(o);
+  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
+  CHECK(s["validation_demos"] == nlohmann::json::array({"elbow_003", "elbow_010"}));
+  CHECK(s["validation_seed"] == 1);
+  CHECK(s["validation_seed_assumed"] == true);
+  CHECK(s["ee_dtw_m"].is_number());
+  CHECK(s["ee_dtw_m"].get<double>() > 0.0);
+  CHECK(s["ee_rmse_m"].is_null());
+  CHECK(s["faults"]["no_human"] == 0);  // an autonomous model needs no human
+  MESSAGE("random autonomous small policy, elbow: ee DTW " << r.report.ee_dtw_m * 1e3 << " mm over "
+                                                           << r.report.ticks << " ticks");
+
+  // The same demonstrations, regenerated, start where the run started and set its length.
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const ModelFile file = readModelFile(model);
+  std::vector<JointVector> centroids;
+  const float* c = file.data(file.find("centroids"));
+  for (int k = 0; k < Dims::kClusters; ++k) {
+    JointVector q;
+    for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];  // movement 0 = elbow
+    centroids.push_back(q);
+  }
+  const tools::ReferenceStream d3 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 3, centroids);
+  const tools::ReferenceStream d10 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 10, centroids);
+  CHECK(r.report.ticks == std::lround(static_cast<double>(d3.target.size() + d10.target.size()) / 2.0));
+  CHECK(d3.description.find("seed 1,") != std::string::npos);
+
+  // A model without validation demonstrations cannot be rolled out.
+  rt::RunOptions no_val = options(writeModel("autonomous_noval.bin", Conditioning::kAutonomous), "none");
+  no_val.movement = "elbow";
+  int status = 0;
+  const std::string err = errorLine(no_val, status);
+  CHECK(status == 1);
+  CHECK(err.find("split.val") != std::string::npos);
+}
+
+TEST_CASE("an autonomous model may run against a reference, which then only serves for evaluation") {
+  rt::RunOptions o = options(writeModel("autonomous_ref.bin", Conditioning::kAutonomous), "synthetic:whole_arm");
+  o.ticks = 40;
+  const Outcome r = run(o);
+  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  CHECK(std::isfinite(r.report.ee_rmse_m));
+  CHECK(r.report.faults[0] == 0);  // no_human: the reference is not an input
+}

@@ -1,0 +1,76 @@
+// Real-time property of a whole nao_rt run: from activate through 6,000 ticks (10 simulated
+// minutes: the reference ends after its demonstration, so the no-human hold and the return home
+// run too), with the ring push and the per-tick records, nothing is allocated; summary.json
+// reports the count.
+#include "rt_run.hpp"
+
+#include "nao/model_file.hpp"
+#include "support/alloc_counter.hpp"
+#include "support/random_policy.hpp"
+#include "support/test_util.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <optional>
+#include <sstream>
+
+using namespace nao;
+
+namespace {
+
+struct CountingProbe final : rt::AllocationProbe {
+  std::optional<CountAllocations> counter;
+  void start() override { counter.emplace(); }
+  std::int64_t stop() override {
+    const std::int64_t n = counter->count();
+    counter.reset();
+    return n;
+  }
+};
+
+}  // namespace
+
+TEST_CASE("a 6,000-tick nao_rt run allocates nothing after activate, and summary.json says so") {
+  namespace fs = std::filesystem;
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  ModelHeader h;
+  h.arch = smallArch();
+  h.joints = trainedJoints(arm);
+  h.movement_names = {"elbow", "whole_arm", "wrist"};
+  h.metadata_json = "{}";
+  const fs::path dir = fs::temp_directory_path() / "nao_rt_tests" / ("rt_run_alloc_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string model = (dir / "model.bin").string();
+  writeModelFile(model, h, test::makeRandomPolicy(h.arch, arm, 11).tensors);
+
+  rt::RunOptions o;
+  o.weights_path = model;
+  o.reference = "synthetic:whole_arm";
+  o.seed = 2;
+  o.ticks = 6000;
+  o.log_dir = (dir / "run").string();
+  o.controller.inject_policy_nan_first = 100;  // the non-finite policy path too
+  o.controller.inject_policy_nan_last = 102;
+  CountingProbe probe;
+  std::ostringstream out, err;
+  const rt::RunReport r = rt::runController<SmallPolicyDims>(o, out, err, &probe);
+  REQUIRE_MESSAGE(r.status == 0, r.error);
+  CHECK(r.ticks == 6000);
+  CHECK(r.allocations_after_activate == 0);
+  const nlohmann::json s = nlohmann::json::parse(r.summary_json);
+  CHECK(s["allocations_after_activate"] == 0);
+  // The fault paths ran inside the counted window.
+  CHECK(s["faults"]["no_human"] > 0);
+  CHECK(s["faults"]["human_timeout"] > 0);
+  CHECK(s["faults"]["policy_nonfinite"] == 3);
+  // The ring kept the last kDefaultAttentionCapacity records.
+  CHECK(s["attention"]["records_written"] == 6000);
+  CHECK(s["attention"]["record_count"] == kDefaultAttentionCapacity);
+  CHECK(s["attention"]["first_record"] == 6000 - kDefaultAttentionCapacity);
+  fs::remove_all(dir);
+}
