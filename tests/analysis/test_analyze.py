@@ -1,0 +1,135 @@
+"""End to end: `analyze.py` on two small run directories written in the documented formats
+gives every output file, a Table 2 with the contract's columns and the planted dependence,
+and a self-contained report; the same input gives the same bytes."""
+
+import csv
+import filecmp
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+import unittest
+
+import run_fixture
+from nao_analysis import figures, stats
+from nao_analysis.rundir import read_run
+from nao_analysis.table2 import table2_csv, table2_rows
+
+ANALYZE = os.path.join(run_fixture.ANALYSIS, "analyze.py")
+CONTRACT = ["movement", "joint", "pearson_r", "spearman_rho", "kendall_tau", "mi_bits"]
+MOVEMENTS = ("whole_arm", "wrist")
+PLANTED = 3  # RElbowRoll: its score follows its velocity in the fixtures
+
+
+class EndToEnd(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.mkdtemp(prefix="nao-analysis-e2e-")
+        cls.runs = [run_fixture.write_run(os.path.join(cls.tmp, m), m, n=60, seed=i, planted_joint=PLANTED)
+                    for i, m in enumerate(MOVEMENTS)]
+        cls.out = os.path.join(cls.tmp, "out")
+        cls.proc = subprocess.run(["/usr/bin/python3", ANALYZE, "--bootstrap", "100", "--out", cls.out] + cls.runs,
+                                  capture_output=True, text=True, timeout=600)
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.tmp)
+
+    def test_the_command_succeeds_and_reports_progress_on_stderr(self):
+        self.assertEqual(self.proc.returncode, 0, self.proc.stderr)
+        self.assertIn("UMAP", self.proc.stderr)
+        self.assertIn(self.out, self.proc.stdout)
+
+    def test_every_output_file_exists(self):
+        names = ["table2.csv", "table2.md", "report.html", "fig_umap.png", "fig_umap.svg"]
+        for m in MOVEMENTS:
+            for kind in ("ee", "attention", "motion"):
+                names += ["fig_%s_%s.png" % (kind, m), "fig_%s_%s.svg" % (kind, m)]
+        for name in names:
+            path = os.path.join(self.out, name)
+            self.assertTrue(os.path.isfile(path) and os.path.getsize(path) > 0, "missing or empty: %s" % name)
+
+    def test_table2_has_the_contract_columns_and_five_rows_per_movement(self):
+        with open(os.path.join(self.out, "table2.csv")) as f:
+            rows = list(csv.reader(f))
+        header = rows[0]
+        self.assertEqual(header[:6], CONTRACT)
+        for s in stats.STAT_NAMES:
+            for extra in (s + "_ci_lo", s + "_ci_hi", s + "_p"):
+                self.assertIn(extra, header)
+        body = [dict(zip(header, r)) for r in rows[1:]]
+        for m in MOVEMENTS:
+            joints = [r["joint"] for r in body if r["movement"] == m]
+            self.assertEqual(joints, list(run_fixture.JOINTS), "rows of %s" % m)
+        for r in body:
+            for s in CONTRACT[2:]:
+                float(r[s])  # every statistic is a number
+
+    def test_the_planted_dependence_is_found_and_significant(self):
+        with open(os.path.join(self.out, "table2.csv")) as f:
+            rows = list(csv.DictReader(f))
+        for r in rows:
+            planted = r["joint"] == run_fixture.JOINTS[PLANTED]
+            if planted:
+                self.assertGreater(float(r["pearson_r"]), 0.9, r)
+                self.assertGreater(float(r["mi_bits"]), 1.0, r)
+                for s in stats.STAT_NAMES:
+                    self.assertLess(float(r[s + "_p"]), 0.05, "%s %s" % (r["movement"], s))
+                    self.assertLess(float(r[s + "_ci_lo"]), float(r[s]))
+                    self.assertGreater(float(r[s + "_ci_hi"]), float(r[s]))
+            else:
+                self.assertLess(abs(float(r["pearson_r"])), 0.5, r)
+
+    def test_table2_md_states_the_method(self):
+        with open(os.path.join(self.out, "table2.md")) as f:
+            text = f.read()
+        self.assertIn("Trend removal: **linear**", text)
+        self.assertIn("k = 3", text)
+
+    def test_report_is_one_self_contained_page(self):
+        with open(os.path.join(self.out, "report.html")) as f:
+            page = f.read()
+        self.assertTrue("Table 2" in page, "no Table 2 in the report")
+        self.assertIsNone(re.search(r"<script|<link|src=\"(?!data:)", page), "the report must not load anything")
+        self.assertEqual(len(re.findall(r'<img [^>]*src="data:image/png;base64,', page)), 3 * len(MOVEMENTS) + 1)
+        # Each run's summary.json and the command line (checked without dumping the page).
+        self.assertTrue("synthetic:wrist (seed 1000001, index 0)" in page, "summary.json missing from the report")
+        self.assertTrue("analyze.py --bootstrap 100 --out " in page, "command line missing from the report")
+
+
+class Determinism(unittest.TestCase):
+    def test_same_runs_give_byte_identical_table2_and_figures(self):
+        tmp = tempfile.mkdtemp(prefix="nao-analysis-det-")
+        try:
+            path = run_fixture.write_run(os.path.join(tmp, "run"), "elbow", n=60, seed=5)
+            texts, dirs = [], []
+            for k in range(2):
+                run = read_run(path)
+                texts.append(table2_csv(table2_rows(run, "elbow", "linear", n_boot=100)))
+                d = os.path.join(tmp, "fig%d" % k)
+                os.makedirs(d)
+                figures.figure_motion(run, "elbow", d)
+                dirs.append(d)
+            self.assertEqual(texts[0], texts[1])
+            for ext in ("png", "svg"):
+                name = "fig_motion_elbow." + ext
+                self.assertTrue(filecmp.cmp(os.path.join(dirs[0], name), os.path.join(dirs[1], name), shallow=False),
+                                name + " differs between two identical runs")
+        finally:
+            shutil.rmtree(tmp)
+
+    def test_detrend_none_changes_the_numbers_and_is_named_in_the_table(self):
+        tmp = tempfile.mkdtemp(prefix="nao-analysis-none-")
+        try:
+            run = read_run(run_fixture.write_run(os.path.join(tmp, "run"), "elbow", n=60, seed=5))
+            lin = table2_rows(run, "elbow", "linear", n_boot=100)
+            raw = table2_rows(run, "elbow", "none", n_boot=100)
+            self.assertEqual({r["detrend"] for r in raw}, {"none"})
+            self.assertNotEqual([r["pearson_r"] for r in lin], [r["pearson_r"] for r in raw])
+        finally:
+            shutil.rmtree(tmp)
+
+
+if __name__ == "__main__":
+    unittest.main()
