@@ -5,6 +5,7 @@
 #include <doctest/doctest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 
 using namespace nao;
@@ -125,61 +126,83 @@ TEST_CASE("k-means refuses fewer points than clusters and k below 1") {
   CHECK_THROWS_AS(kmeansPlusPlus(points, options), UserError);
 }
 
-TEST_CASE("the feature-extracted trajectory passes through each segment's key pose at the segment's middle") {
-  // Three plateaus of 11 samples at 10 Hz, so each segment's middle falls on a sample
-  // (0.5 s, 1.6 s, 2.7 s); the centroids are the plateau values.
-  std::vector<JointVector> centroids = {JointVector::Constant(0.0), JointVector::Constant(1.0),
-                                        JointVector::Constant(-0.5)};
+TEST_CASE("after a key-pose change the feature-extracted trajectory follows the closed form of the blend") {
+  // Three plateaus of 11 samples at 10 Hz (the centroids are the plateau values). From rest at
+  // c0, a switch to c1 at tick s gives f(s + n) - c1 = (c0 - c1) (1 + (1 - p) n) p^n: the
+  // critically damped double pole, worked out independently of the recurrence.
+  const std::vector<JointVector> centroids = {JointVector::Constant(0.0), JointVector::Constant(1.0),
+                                              JointVector::Constant(-0.5)};
   std::vector<double> t;
   std::vector<JointVector> q;
   for (int i = 0; i < 33; ++i) {
     t.push_back(0.1 * i);
     q.push_back(centroids[static_cast<std::size_t>(i / 11)] + JointVector::Constant(0.01 * ((i % 3) - 1)));
   }
-  const std::vector<JointVector> f = featureTrajectory(centroids, t, q);
+  KeyPoseBlend blend;
+  blend.pole = 0.7;
+  const std::vector<JointVector> f = featureTrajectory(centroids, t, q, blend);
   REQUIRE(f.size() == q.size());
-  CHECK(f[5] == centroids[0]);
-  CHECK(f[16] == centroids[1]);
-  CHECK(f[27] == centroids[2]);
-  // Held before the first middle and after the last.
-  CHECK(f[0] == centroids[0]);
-  CHECK(f[32] == centroids[2]);
-  // Between key poses the blend stays between them and moves monotonically.
-  for (int i = 5; i < 16; ++i) {
-    CHECK(f[static_cast<std::size_t>(i)][0] >= 0.0);
-    CHECK(f[static_cast<std::size_t>(i)][0] <= 1.0);
-    CHECK(f[static_cast<std::size_t>(i + 1)][0] >= f[static_cast<std::size_t>(i)][0]);
+  for (int i = 0; i <= 11; ++i) CHECK(f[static_cast<std::size_t>(i)] == centroids[0]);  // at rest until the switch
+  const double p = blend.pole;
+  for (int n = 0; n < 11; ++n) {
+    const double expected = 1.0 + (0.0 - 1.0) * (1.0 + (1.0 - p) * n) * std::pow(p, n);
+    CHECK(f[static_cast<std::size_t>(11 + n)][0] == doctest::Approx(expected).epsilon(1e-12));
+    // Critically damped: it approaches the new key pose without overshoot.
+    if (n > 0) CHECK(f[static_cast<std::size_t>(11 + n)][0] >= f[static_cast<std::size_t>(10 + n)][0]);
+    CHECK(f[static_cast<std::size_t>(11 + n)][0] <= 1.0);
+  }
+  // The recurrence is the blend: f(t+1) - f(t) = velocity(f(t) - f(t-1), f(t), c(t)).
+  const std::vector<int> labels = keyPoseLabels(centroids, t, q, t);
+  for (std::size_t i = 1; i + 1 < f.size(); ++i) {
+    const JointVector v = blend.velocity(f[i] - f[i - 1], f[i], centroids[static_cast<std::size_t>(labels[i])]);
+    CHECK((f[i + 1] - f[i] - v).cwiseAbs().maxCoeff() < 1e-12);
   }
 }
 
-TEST_CASE("the feature-extracted trajectory on a grid with unmeasured samples equals the measured-only one where both exist") {
-  // Same plateaus as above on a 10 Hz grid; every 4th sample is "not measured" and left out of
-  // the segments. Evaluated on the whole grid, the measured times must give the poses of the
-  // measured-only trajectory, and unmeasured times lie on the same smooth blend.
-  std::vector<JointVector> centroids = {JointVector::Constant(0.0), JointVector::Constant(1.0),
-                                        JointVector::Constant(-0.5)};
+TEST_CASE("the feature-extracted trajectory is causal: later samples never change earlier poses") {
+  const std::vector<JointVector> centroids = {JointVector::Constant(0.0), JointVector::Constant(1.0),
+                                              JointVector::Constant(-0.5)};
+  std::vector<double> t;
+  std::vector<JointVector> q;
+  for (int i = 0; i < 40; ++i) {
+    t.push_back(0.1 * i);
+    q.push_back(centroids[static_cast<std::size_t>((i / 7) % 3)]);
+  }
+  const std::vector<JointVector> full = featureTrajectory(centroids, t, q);
+  for (std::size_t k : {1u, 8u, 15u, 29u}) {
+    const std::vector<double> t_k(t.begin(), t.begin() + static_cast<std::ptrdiff_t>(k));
+    const std::vector<JointVector> q_k(q.begin(), q.begin() + static_cast<std::ptrdiff_t>(k));
+    const std::vector<JointVector> part = featureTrajectory(centroids, t_k, q_k);
+    for (std::size_t i = 0; i < k; ++i) CHECK(part[i] == full[i]);
+  }
+}
+
+TEST_CASE("on a grid with unmeasured samples the last measured key pose stays in force") {
+  // Every 4th sample is not measured. Cross-check: the same as evaluating a fully measured
+  // grid in which each unmeasured sample repeats the last measured pose.
+  const std::vector<JointVector> centroids = {JointVector::Constant(0.0), JointVector::Constant(1.0),
+                                              JointVector::Constant(-0.5)};
   std::vector<double> t_grid, t_meas;
-  std::vector<JointVector> q_meas;
+  std::vector<JointVector> q_meas, q_filled;
   for (int i = 0; i < 33; ++i) {
     t_grid.push_back(0.1 * i);
-    if (i % 4 == 3) continue;
+    const JointVector qi = centroids[static_cast<std::size_t>((i / 3) % 3)];
+    if (i % 4 == 3) {
+      q_filled.push_back(q_filled.back());
+      continue;
+    }
     t_meas.push_back(0.1 * i);
-    q_meas.push_back(centroids[static_cast<std::size_t>(i / 11)]);
+    q_meas.push_back(qi);
+    q_filled.push_back(qi);
   }
-  const std::vector<JointVector> f_meas = featureTrajectory(centroids, t_meas, q_meas);
   const std::vector<JointVector> f_grid = featureTrajectory(centroids, t_meas, q_meas, t_grid);
+  const std::vector<JointVector> f_filled = featureTrajectory(centroids, t_grid, q_filled);
   REQUIRE(f_grid.size() == t_grid.size());
-  std::size_t k = 0;
-  for (std::size_t i = 0; i < t_grid.size(); ++i) {
-    if (i % 4 == 3) continue;
-    CHECK(f_grid[i] == f_meas[k++]);
-  }
-  // An unmeasured sample between two measured ones on a monotone blend lies between them.
-  for (std::size_t i = 3; i + 1 < t_grid.size(); i += 4) {
-    const double lo = std::min(f_grid[i - 1][0], f_grid[i + 1][0]);
-    const double hi = std::max(f_grid[i - 1][0], f_grid[i + 1][0]);
-    CHECK(f_grid[i][0] >= lo);
-    CHECK(f_grid[i][0] <= hi);
-  }
+  for (std::size_t i = 0; i < t_grid.size(); ++i) CHECK(f_grid[i] == f_filled[i]);
+  // Before the first measured sample the first key pose is in force.
+  const std::vector<int> labels = keyPoseLabels(centroids, {0.25}, {centroids[2]}, {0.0, 0.1, 0.2, 0.3});
+  CHECK(labels == std::vector<int>{2, 2, 2, 2});
   CHECK_THROWS_AS(featureTrajectory(centroids, {}, {}, t_grid), UserError);
+  CHECK_THROWS_WITH_AS(featureTrajectory(centroids, t_meas, q_meas, {0.0, 0.2, 0.1}),
+                       doctest::Contains("must increase"), UserError);
 }

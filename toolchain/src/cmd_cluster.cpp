@@ -113,11 +113,9 @@ void setup(CLI::App& app) {
         if (!csv) throw UserError("cannot write " + path.string());
         csv.precision(10);
         csv << "t_s,label,measured,f_0,f_1,f_2,f_3,f_4\n";
-        std::size_t next_measured = 0;
-        int label = nearestCentroid(r.centroids, d.q[0]);
+        const std::vector<int> labels = keyPoseLabels(r.centroids, d.t_s, d.q, d.t_grid);
         for (std::size_t i = 0; i < f.size(); ++i) {
-          if (d.measured[i]) label = nearestCentroid(r.centroids, d.q[next_measured++]);
-          csv << d.t_grid[i] << ',' << label << ',' << (d.measured[i] ? 1 : 0);
+          csv << d.t_grid[i] << ',' << labels[i] << ',' << (d.measured[i] ? 1 : 0);
           for (int j = 0; j < kNumJoints; ++j) csv << ',' << f[i][j];
           csv << '\n';
         }

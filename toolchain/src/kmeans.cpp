@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <limits>
 #include <random>
+#include <string>
 
 namespace nao::tools {
 namespace {
@@ -128,43 +129,42 @@ KMeansResult kmeansPlusPlus(const std::vector<JointVector>& points, const KMeans
 }
 
 std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
-                                           const std::vector<JointVector>& q) {
-  return featureTrajectory(centroids, t_s, q, t_s);
+                                           const std::vector<JointVector>& q, const KeyPoseBlend& blend) {
+  return featureTrajectory(centroids, t_s, q, t_s, blend);
+}
+
+std::vector<int> keyPoseLabels(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
+                               const std::vector<JointVector>& q, const std::vector<double>& t_eval) {
+  if (t_s.size() != q.size()) throw UserError("featureTrajectory: times and poses differ in length");
+  std::vector<int> labels(t_eval.size());
+  if (t_eval.empty()) return labels;
+  if (q.empty()) throw UserError("featureTrajectory: no measured samples to build segments from");
+  // A sample counts from its own tick on (0.1 ms of slack for times rounded in a CSV); before
+  // the first measured sample the first key pose is in force.
+  constexpr double kSlack = 1e-4;
+  std::size_t m = 0;
+  int label = nearestCentroid(centroids, q[0]);
+  for (std::size_t i = 0; i < t_eval.size(); ++i) {
+    if (i > 0 && !(t_eval[i] > t_eval[i - 1]))
+      throw UserError("featureTrajectory: evaluation times must increase (sample " + std::to_string(i) + ")");
+    while (m < q.size() && t_s[m] <= t_eval[i] + kSlack) label = nearestCentroid(centroids, q[m++]);
+    labels[i] = label;
+  }
+  return labels;
 }
 
 std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
-                                           const std::vector<JointVector>& q, const std::vector<double>& t_eval) {
-  if (t_s.size() != q.size()) throw UserError("featureTrajectory: times and poses differ in length");
+                                           const std::vector<JointVector>& q, const std::vector<double>& t_eval,
+                                           const KeyPoseBlend& blend) {
+  const std::vector<int> labels = keyPoseLabels(centroids, t_s, q, t_eval);
   std::vector<JointVector> out(t_eval.size());
-  if (t_eval.empty()) return out;
-  if (q.empty()) throw UserError("featureTrajectory: no measured samples to build segments from");
-  // Segments: runs of equal nearest-centroid labels; key pose at the segment's middle time.
-  std::vector<double> t_key;
-  std::vector<int> key;
-  std::size_t start = 0;
-  int label = nearestCentroid(centroids, q[0]);
-  for (std::size_t i = 1; i <= q.size(); ++i) {
-    const int next = i < q.size() ? nearestCentroid(centroids, q[i]) : -1;
-    if (next != label) {
-      t_key.push_back(0.5 * (t_s[start] + t_s[i - 1]));
-      key.push_back(label);
-      start = i;
-      label = next;
-    }
-  }
-  // t_eval is expected in increasing order; s only moves forward.
-  std::size_t s = 0;
-  for (std::size_t i = 0; i < t_eval.size(); ++i) {
-    while (s + 1 < t_key.size() && t_eval[i] >= t_key[s + 1]) ++s;
-    const JointVector& a = centroids[static_cast<std::size_t>(key[s])];
-    if (t_eval[i] <= t_key[s] || s + 1 == t_key.size()) {
-      out[i] = a;
-      continue;
-    }
-    const JointVector& b = centroids[static_cast<std::size_t>(key[s + 1])];
-    const double u = (t_eval[i] - t_key[s]) / (t_key[s + 1] - t_key[s]);
-    const double w = u * u * (3.0 - 2.0 * u);
-    out[i] = (1.0 - w) * a + w * b;
+  if (out.empty()) return out;
+  JointVector f = centroids[static_cast<std::size_t>(labels[0])];
+  JointVector v = JointVector::Zero();
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    out[i] = f;
+    v = blend.velocity(v, f, centroids[static_cast<std::size_t>(labels[i])]);
+    f += v;
   }
   return out;
 }
