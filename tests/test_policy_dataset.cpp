@@ -11,6 +11,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <random>
 #include <set>
 
 using namespace nao;
@@ -323,4 +325,109 @@ TEST_CASE("a broken data directory is rejected with the file and line") {
   writeText(one_sample / "centroids.json", centroidsJson());
   writeText(one_sample / "wrist_000" / "features.csv", "t_s,label,f_0,f_1,f_2,f_3,f_4\n0,0,0,0,0,0,0\n");
   CHECK(loadError(one_sample.string()).find("at least 2") != std::string::npos);
+}
+
+namespace {
+
+// A data set whose trajectories are real feature-extracted trajectories of random key poses.
+PolicyData blendedSet(const KeyPoseBlend& blend) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::map<std::string, std::vector<JointVector>> centroids;
+  std::vector<PolicyDemo> demos;
+  for (const char* m : {"elbow", "whole_arm", "wrist"}) {
+    std::vector<JointVector> c(4);
+    for (JointVector& x : c) x = JointVector::NullaryExpr([&] { return u(rng); });
+    centroids[m] = c;
+    for (int i = 0; i < 3; ++i) {
+      std::vector<double> t;
+      std::vector<JointVector> q;
+      for (int k = 0; k < 60; ++k) {
+        t.push_back(0.1 * k);
+        q.push_back(c[static_cast<std::size_t>((k / (5 + i)) % 4)]);
+      }
+      PolicyDemo d = demo(std::string(m) + "_00" + std::to_string(i), featureTrajectory(c, t, q, blend),
+                          keyPoseLabels(c, t, q, t));
+      demos.push_back(d);
+    }
+  }
+  return makePolicyData(centroids, demos);
+}
+
+}  // namespace
+
+TEST_CASE("demonstrated actions are the expert's: the blend applied to (q, a(t-1), r) of each sample") {
+  // Cross-check of two independent paths: differences of the feature-extracted trajectory
+  // (buildSamples) and the blend law evaluated on the sample's inputs (expertAction).
+  KeyPoseBlend blend;
+  blend.pole = 0.6;
+  const PolicyData data = blendedSet(blend);
+  const std::vector<PolicySample> samples = buildSamples(data, allDemos(data), 256);
+  REQUIRE(samples.size() > 500);
+  double worst = 0.0, largest = 0.0;
+  for (const PolicySample& s : samples) {
+    worst = std::max(worst, (s.a - expertAction(blend, s)).cwiseAbs().maxCoeff());
+    largest = std::max(largest, s.a.cwiseAbs().maxCoeff());
+  }
+  CHECK(worst < 1e-12);
+  CHECK(largest > 0.05);  // the trajectories do move
+  // Another pole is another expert: the same samples are then not its actions.
+  KeyPoseBlend other;
+  other.pole = 0.8;
+  double off = 0.0;
+  for (const PolicySample& s : samples) off = std::max(off, (s.a - expertAction(other, s)).cwiseAbs().maxCoeff());
+  CHECK(off > 1e-3);
+}
+
+TEST_CASE("perturbed samples: seeded, the stated share and spread, relabelled by the expert") {
+  Perturbation p;
+  p.blend.pole = 0.6;
+  const PolicyData data = blendedSet(p.blend);
+  const std::vector<PolicySample> one = buildSamples(data, allDemos(data), 256);
+  std::vector<PolicySample> base;
+  while (base.size() < 20000) base.insert(base.end(), one.begin(), one.end());  // many draws
+
+  const std::vector<PolicySample> a = perturbSamples(base, p, 11);
+  const std::vector<PolicySample> b = perturbSamples(base, p, 11);
+  const std::vector<PolicySample> c = perturbSamples(base, p, 12);
+  REQUIRE(a.size() == base.size());
+  std::size_t moved = 0, differs = 0;
+  double sum_dq2 = 0.0, sum_da2 = 0.0;
+  for (std::size_t i = 0; i < base.size(); ++i) {
+    CHECK(a[i].q == b[i].q);  // same seed, same samples
+    CHECK(a[i].a == b[i].a);
+    if (!(a[i].q == c[i].q)) ++differs;
+    CHECK(a[i].r == base[i].r);  // the reference, movement and step are never touched
+    CHECK(a[i].step == base[i].step);
+    if (a[i].q == base[i].q) {
+      CHECK(a[i].a == base[i].a);  // untouched samples keep the demonstrated action
+      continue;
+    }
+    ++moved;
+    sum_dq2 += (a[i].q - base[i].q).squaredNorm();
+    sum_da2 += (a[i].a_prev - base[i].a_prev).squaredNorm();
+    CHECK((a[i].a - expertAction(p.blend, a[i])).cwiseAbs().maxCoeff() < 1e-15);
+  }
+  const double n = static_cast<double>(base.size());
+  // Binomial(n, 0.5): 5 standard deviations is 0.0177 n at n = 20000.
+  CHECK(std::abs(static_cast<double>(moved) / n - p.fraction) < 0.018);
+  CHECK(differs > base.size() / 4);
+  // σ is drawn from the list: per joint E[dq²] = mean of σ², a(t−1) moves a_ratio as far.
+  double mean_var = 0.0;
+  for (double sd : p.q_std_rad) mean_var += sd * sd / static_cast<double>(p.q_std_rad.size());
+  const double dq_var = sum_dq2 / (static_cast<double>(moved) * kNumJoints);
+  const double da_var = sum_da2 / (static_cast<double>(moved) * kNumJoints);
+  CHECK(dq_var == doctest::Approx(mean_var).epsilon(0.06));
+  CHECK(da_var == doctest::Approx(mean_var * p.a_ratio * p.a_ratio).epsilon(0.06));
+
+  Perturbation off = p;
+  off.fraction = 0.0;
+  const std::vector<PolicySample> none = perturbSamples(base, off, 11);
+  for (std::size_t i = 0; i < base.size(); ++i) CHECK(none[i].q == base[i].q);
+  Perturbation bad = p;
+  bad.fraction = 1.5;
+  CHECK_THROWS_WITH_AS(perturbSamples(base, bad, 1), doctest::Contains("not in [0, 1]"), UserError);
+  bad = p;
+  bad.q_std_rad = {0.1, -0.2};
+  CHECK_THROWS_WITH_AS(perturbSamples(base, bad, 1), doctest::Contains("negative"), UserError);
 }

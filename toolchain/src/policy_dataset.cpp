@@ -265,6 +265,34 @@ std::vector<PolicySample> buildSamples(const PolicyData& data, const std::vector
   return out;
 }
 
+std::vector<PolicySample> perturbSamples(const std::vector<PolicySample>& samples, const Perturbation& p,
+                                         std::uint64_t seed) {
+  if (!(p.fraction >= 0.0 && p.fraction <= 1.0))
+    throw UserError("perturbation fraction " + std::to_string(p.fraction) + " is not in [0, 1]");
+  if (p.q_std_rad.empty() && p.fraction > 0.0) throw UserError("perturbation: no q standard deviation given");
+  for (double sd : p.q_std_rad)
+    if (!(sd >= 0.0)) throw UserError("perturbation: standard deviation " + std::to_string(sd) + " is negative");
+  if (!(p.a_ratio >= 0.0)) throw UserError("perturbation: a_ratio must not be negative");
+  std::vector<PolicySample> out = samples;
+  if (p.fraction == 0.0) return out;
+  SplitMix64 rng(seed ^ 0x6a09e667f3bcc909ull);
+  const auto uniform = [&rng] { return (static_cast<double>(rng.next() >> 11) + 0.5) * 0x1.0p-53; };  // (0, 1)
+  constexpr double kTwoPi = 6.283185307179586;
+  const auto normal = [&] {
+    const double u1 = uniform();  // two statements: the order of draws is fixed
+    const double u2 = uniform();
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(kTwoPi * u2);
+  };
+  for (PolicySample& s : out) {
+    if (!(uniform() < p.fraction)) continue;
+    const double sd = p.q_std_rad[rng.below(p.q_std_rad.size())];
+    for (int j = 0; j < kNumJoints; ++j) s.q[j] += sd * normal();
+    for (int j = 0; j < kNumJoints; ++j) s.a_prev[j] += p.a_ratio * sd * normal();
+    s.a = expertAction(p.blend, s);
+  }
+  return out;
+}
+
 PolicySplit splitByDemonstration(const PolicyData& data, double val_fraction, std::uint64_t seed) {
   if (!(val_fraction >= 0.0 && val_fraction < 1.0))
     throw UserError("validation fraction " + std::to_string(val_fraction) + " is not in [0, 1)");

@@ -18,7 +18,7 @@ struct TrainArgs {
   std::string config = "paper", out, data, conditioning = "reference", urdf = NAO_DEFAULT_URDF, card;
   std::uint64_t seed = 1;
   int epochs = 200, patience = 10, batch = 32;
-  double val_fraction = 0.2, lr = 6e-5;
+  double val_fraction = 0.2, lr = 6e-5, perturb_fraction = 0.5;
 };
 
 // The process's own argv (Linux), shell-quoted where needed; empty if unavailable.
@@ -67,6 +67,7 @@ void run(const TrainArgs& a) {
   o.val_fraction = a.val_fraction;
   o.batch = a.batch;
   o.lr = a.lr;
+  o.perturb.fraction = a.perturb_fraction;
 
   // The URDF first: a bad path should fail before minutes of training.
   std::vector<TrainedJoint> joints;
@@ -136,6 +137,11 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--batch", args->batch, "Batch size")->check(CLI::Range(1, 1 << 20))->capture_default_str();
   cmd->add_option("--lr", args->lr, "Adam learning rate")->check(CLI::PositiveNumber)->capture_default_str();
+  cmd->add_option("--perturb-fraction", args->perturb_fraction,
+                  "Share of training samples moved off their trajectory each epoch and relabelled with the "
+                  "feature extractor's action there (DAgger-style; 0 trains on demonstrated states only)")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
   cmd->add_option("--urdf", args->urdf, "Robot description (joint names and limits stored in the model)")
       ->check(CLI::ExistingFile)
       ->capture_default_str();

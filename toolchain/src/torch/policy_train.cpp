@@ -137,7 +137,7 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
   PolicyNet net(o.arch, o.conditioning);
   net->setNormalisation(res.stats);
   net->setCentroids(data.centroids);
-  const SampleTensors train = toTensors(net, train_samples);
+  SampleTensors train = toTensors(net, train_samples);
   const SampleTensors val = toTensors(net, val_samples);
 
   std::vector<torch::Tensor> params = net->trainableParameters();
@@ -149,6 +149,10 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
   for (int epoch = 1; epoch <= o.max_epochs; ++epoch) {
     const Clock::time_point t_epoch = Clock::now();
     net->train();
+    // Off-trajectory states for this epoch: one stream per (seed, epoch), fresh every epoch.
+    if (o.perturb.fraction > 0.0)
+      train = toTensors(net, perturbSamples(train_samples, o.perturb,
+                                            o.seed * 0xbf58476d1ce4e5b9ull + static_cast<std::uint64_t>(epoch)));
     // Batch order: one stream per (seed, epoch), independent of torch's generator.
     const std::vector<std::size_t> order =
         shuffledIndices(train_samples.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
@@ -229,6 +233,12 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["optimizer"] = "adam";
   t["lr"] = o.lr;
   t["loss"] = "mse of normalised actions";
+  auto& pt = t["perturbation"];
+  pt["fraction"] = o.perturb.fraction;
+  pt["q_std_rad"] = o.perturb.q_std_rad;
+  pt["a_ratio"] = o.perturb.a_ratio;
+  pt["expert"] = "key-pose blend";
+  pt["blend_pole"] = o.perturb.blend.pole;
   auto& d = j["data"];
   d["fingerprint"] = hex64(r.fingerprint);
   d["demos"] = data.demos.size();
@@ -285,6 +295,10 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     << o.arch.clusters << " / " << o.arch.max_steps << " |\n";
   s << "| parameters (manifest floats) | " << parameterCount(o.arch) << " |\n";
   s << "| optimiser | Adam, lr " << o.lr << ", batch " << o.batch << " |\n";
+  s << "| off-trajectory states | " << o.perturb.fraction * 100.0 << " % of samples per epoch, q moved by N(0, σ²), σ in {";
+  for (std::size_t i = 0; i < o.perturb.q_std_rad.size(); ++i) s << (i ? ", " : "") << o.perturb.q_std_rad[i];
+  s << "} rad, a(t−1) by " << o.perturb.a_ratio << " σ, relabelled by the key-pose blend (pole "
+    << o.perturb.blend.pole << ") |\n";
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs << ", patience " << o.patience
     << "), best " << r.best_epoch << " (exported) |\n";

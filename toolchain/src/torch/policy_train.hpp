@@ -25,6 +25,7 @@ struct TrainOptions {
   double val_fraction = 0.2;          ///< of each movement's demonstrations
   int batch = 32;
   double lr = 6e-5;                   ///< Adam
+  Perturbation perturb;               ///< expert-relabelled off-trajectory states (fraction 0: off)
 };
 
 struct EpochStats {
