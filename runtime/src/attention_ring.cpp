@@ -1,4 +1,5 @@
 #include "nao/attention_ring.hpp"
+#include "nao/file_io.hpp"
 
 #include <cerrno>
 #include <cstdio>
@@ -247,38 +248,8 @@ AttentionFileSummary writeAttentionFile(const std::string& path, const Attention
   for (int i = 0; i < kAttentionDescriptorFields; ++i) putU32(p + 56 + 4 * i, h.descriptor[i]);
   // p + 88 .. 96: reserved, zero.
 
-  // Temporary file next to the target, renamed over it: readers see a whole file or none.
-  const std::filesystem::path target(path);
-  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : std::filesystem::path(".");
-  std::string tmp = (dir / ("." + target.filename().string() + ".tmp-XXXXXX")).string();
-  const int fd = ::mkstemp(tmp.data());
-  if (fd < 0) fail(path, "cannot create a temporary file in " + dir.string() + errnoText(errno));
-  auto abandon = [&](const std::string& what) {
-    const int err = errno;
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    fail(path, what + errnoText(err));
-  };
-  std::size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t k = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (k < 0 && errno == EINTR) continue;
-    if (k <= 0) abandon("cannot write " + tmp);
-    done += static_cast<std::size_t>(k);
-  }
-  // mkstemp creates 0600; attention.bin is an ordinary run artefact.
-  if (::fchmod(fd, 0644) != 0) abandon("cannot set the permissions of " + tmp);
-  if (::fsync(fd) != 0) abandon("cannot flush " + tmp);
-  if (::close(fd) != 0) {
-    const int err = errno;
-    ::unlink(tmp.c_str());
-    fail(path, "cannot close " + tmp + errnoText(err));
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int err = errno;
-    ::unlink(tmp.c_str());
-    fail(path, "cannot rename the temporary file into place" + errnoText(err));
-  }
+  const std::string problem = writeFileAtomically(path, bytes.data(), bytes.size());
+  if (!problem.empty()) fail(path, problem);
   return summary;
 }
 

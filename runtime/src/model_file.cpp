@@ -1,4 +1,5 @@
 #include "nao/model_file.hpp"
+#include "nao/file_io.hpp"
 
 #include <algorithm>
 #include <cassert>
@@ -492,39 +493,8 @@ std::uint64_t writeModelFile(const std::string& path, const ModelHeader& header,
     fail(path, e.what());
   }
 
-  // Write a temporary file next to the target and rename it over the target: readers see
-  // the old file or the new one, never half of one.
-  const std::filesystem::path target(path);
-  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : std::filesystem::path(".");
-  std::string tmp = (dir / ("." + target.filename().string() + ".tmp-XXXXXX")).string();
-  const int fd = ::mkstemp(tmp.data());
-  if (fd < 0) fail(path, std::string("cannot create a temporary file in ") + dir.string() + " (" + std::strerror(errno) + ")");
-  auto abandon = [&](const std::string& what) {
-    const int err = errno;
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    fail(path, what + " (" + std::strerror(err) + ")");
-  };
-  std::size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) abandon("cannot write " + tmp);
-    done += static_cast<std::size_t>(n);
-  }
-  // mkstemp creates 0600; a model is an ordinary shared artefact.
-  if (::fchmod(fd, 0644) != 0) abandon("cannot set the permissions of " + tmp);
-  if (::fsync(fd) != 0) abandon("cannot flush " + tmp);
-  if (::close(fd) != 0) {
-    const int err = errno;
-    ::unlink(tmp.c_str());
-    fail(path, "cannot close " + tmp + " (" + std::strerror(err) + ")");
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int err = errno;
-    ::unlink(tmp.c_str());
-    fail(path, std::string("cannot rename the temporary file into place (") + std::strerror(err) + ")");
-  }
+  const std::string problem = writeFileAtomically(path, bytes.data(), bytes.size());
+  if (!problem.empty()) fail(path, problem);
   return loadU64(bytes.data() + bytes.size() - kChecksumBytes);
 }
 
