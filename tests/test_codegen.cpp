@@ -2,13 +2,13 @@
 // unchanged model rewrites nothing (cheap rebuilds).
 #include "nao/codegen.hpp"
 
+#include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
 
 #include <cstdlib>
 #include <filesystem>
-#include <random>
 
 namespace {
 
@@ -22,18 +22,6 @@ nao::ModelHeader makeHeader(const nao::PolicyArch& arch) {
   h.movement_names = {"elbow", "whole_arm", "wrist"};
   h.metadata_json = R"({"seed":11})";
   return h;
-}
-
-std::vector<std::vector<float>> randomTensors(const nao::PolicyArch& arch, std::uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  std::vector<std::vector<float>> out;
-  for (const nao::TensorSpec& t : nao::policyManifest(arch)) {
-    std::vector<float> v(t.count());
-    for (float& x : v) x = u(rng);
-    out.push_back(std::move(v));
-  }
-  return out;
 }
 
 fs::path freshDir(const std::string& name) {
@@ -69,7 +57,7 @@ TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S 
   const fs::path dir = freshDir("codegen");
   const std::string model_path = (dir / "in.bin").string();
   const nao::PolicyArch arch = nao::smallArch();
-  nao::writeModelFile(model_path, makeHeader(arch), randomTensors(arch, 5));
+  nao::writeModelFile(model_path, makeHeader(arch), nao::test::randomManifestTensors(arch, 5));
   const fs::path out = dir / "gen";
 
   const nao::codegen::Result r = nao::codegen::generate(model_path, out.string());
@@ -136,7 +124,7 @@ TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new mo
   const fs::path dir = freshDir("codegen_rerun");
   const std::string model_path = (dir / "in.bin").string();
   const nao::PolicyArch arch = nao::smallArch();
-  nao::writeModelFile(model_path, makeHeader(arch), randomTensors(arch, 5));
+  nao::writeModelFile(model_path, makeHeader(arch), nao::test::randomManifestTensors(arch, 5));
   const fs::path out = dir / "gen";
   nao::codegen::generate(model_path, out.string());
   const auto stamp = fs::last_write_time(out / "nao_model_config.hpp");
@@ -148,7 +136,7 @@ TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new mo
 
   // Other weights, same architecture: the model copy, the checksum in the config and the .S
   // comment change; the dims header does not.
-  nao::writeModelFile(model_path, makeHeader(arch), randomTensors(arch, 6));
+  nao::writeModelFile(model_path, makeHeader(arch), nao::test::randomManifestTensors(arch, 6));
   const nao::codegen::Result changed = nao::codegen::generate(model_path, out.string());
   CHECK(changed.written.size() == 3);
   REQUIRE(changed.unchanged.size() == 1);
@@ -166,7 +154,8 @@ TEST_CASE("nao_codegen refuses a bad model and writes nothing") {
 TEST_CASE("the dims header refuses an FFN depth nao::PolicyDims cannot express") {
   nao::PolicyArch arch = nao::smallArch();
   arch.ffn_hidden = {64, 64};
-  const nao::ModelFile m = nao::decodeModel(nao::encodeModel(makeHeader(arch), randomTensors(arch, 1)), "two.bin");
+  const nao::ModelFile m =
+      nao::decodeModel(nao::encodeModel(makeHeader(arch), nao::test::randomManifestTensors(arch, 1)), "two.bin");
   const std::string dims = nao::codegen::dimsHeader(m);
   CHECK(dims.find("#error \"nao::PolicyDims supports exactly 3 FFN hidden layers; this model has 2\"") != std::string::npos);
   CHECK(dims.find("using Dims") == std::string::npos);

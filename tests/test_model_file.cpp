@@ -2,6 +2,7 @@
 // file can be wrong is rejected with a message that names the file and the problem.
 #include "nao/model_file.hpp"
 
+#include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -10,7 +11,6 @@
 #include <cstring>
 #include <filesystem>
 #include <limits>
-#include <random>
 
 namespace {
 
@@ -28,21 +28,8 @@ nao::ModelHeader makeHeader(const nao::PolicyArch& arch) {
   return h;
 }
 
-/// One float vector per manifest entry, seeded pseudo-random values in [-1, 1).
-std::vector<std::vector<float>> randomTensors(const nao::PolicyArch& arch, std::uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  std::vector<std::vector<float>> out;
-  for (const nao::TensorSpec& t : nao::policyManifest(arch)) {
-    std::vector<float> v(t.count());
-    for (float& x : v) x = u(rng);
-    out.push_back(std::move(v));
-  }
-  return out;
-}
-
 std::vector<std::uint8_t> smallModelBytes() {
-  return nao::encodeModel(makeHeader(nao::smallArch()), randomTensors(nao::smallArch(), 1));
+  return nao::encodeModel(makeHeader(nao::smallArch()), nao::test::randomManifestTensors(nao::smallArch(), 1));
 }
 
 std::uint32_t getU32(const std::vector<std::uint8_t>& b, std::size_t at) {
@@ -96,7 +83,7 @@ std::size_t indexOf(const std::vector<nao::TensorSpec>& m, const std::string& na
 TEST_CASE("model.bin round trip: decode(encode(x)) gives the header, the tensors and the checksum back") {
   const nao::PolicyArch arch = nao::smallArch();
   const nao::ModelHeader header = makeHeader(arch);
-  const auto tensors = randomTensors(arch, 1);
+  const auto tensors = nao::test::randomManifestTensors(arch, 1);
   const std::vector<std::uint8_t> bytes = nao::encodeModel(header, tensors);
 
   const nao::ModelFile m = nao::decodeModel(bytes, kOrigin);
@@ -154,7 +141,7 @@ TEST_CASE("model.bin is little-endian with the documented fixed header") {
 TEST_CASE("two encodes of the same input are byte-identical") {
   CHECK(smallModelBytes() == smallModelBytes());
   // and a different seed gives different bytes (the test would pass vacuously otherwise)
-  CHECK(nao::encodeModel(makeHeader(nao::smallArch()), randomTensors(nao::smallArch(), 2)) != smallModelBytes());
+  CHECK(nao::encodeModel(makeHeader(nao::smallArch()), nao::test::randomManifestTensors(nao::smallArch(), 2)) != smallModelBytes());
 }
 
 TEST_CASE("writeModelFile writes the encoded bytes in one rename; readModelFile reads them back") {
@@ -163,7 +150,7 @@ TEST_CASE("writeModelFile writes the encoded bytes in one rename; readModelFile 
   std::filesystem::create_directories(dir);
   const std::string path = (dir / "model.bin").string();
   const nao::ModelHeader header = makeHeader(nao::smallArch());
-  const auto tensors = randomTensors(nao::smallArch(), 1);
+  const auto tensors = nao::test::randomManifestTensors(nao::smallArch(), 1);
 
   const std::uint64_t checksum = nao::writeModelFile(path, header, tensors);
   const nao::ModelFile m = nao::readModelFile(path);
@@ -365,14 +352,14 @@ TEST_CASE("decodeModel rejects an unusable architecture, and encodeModel refuses
 
   nao::PolicyArch bad = nao::smallArch();
   bad.d_model = 30;
-  CHECK_THROWS_WITH_AS(nao::encodeModel(makeHeader(bad), randomTensors(bad, 1)),
+  CHECK_THROWS_WITH_AS(nao::encodeModel(makeHeader(bad), nao::test::randomManifestTensors(bad, 1)),
                        "cannot encode model: architecture: d_model 30 is not a multiple of heads 4", ModelFileError);
 }
 
 TEST_CASE("encodeModel refuses tensors that do not fit the manifest, and non-finite weights") {
   const nao::PolicyArch arch = nao::smallArch();
   const nao::ModelHeader header = makeHeader(arch);
-  auto tensors = randomTensors(arch, 1);
+  auto tensors = nao::test::randomManifestTensors(arch, 1);
   auto fewer = tensors;
   fewer.pop_back();
   CHECK_THROWS_AS(nao::encodeModel(header, fewer), ModelFileError);
@@ -394,7 +381,7 @@ TEST_CASE("encodeModel refuses tensors that do not fit the manifest, and non-fin
 TEST_CASE("checkJointsMatch accepts the URDF's joints and names the joint that differs") {
   const nao::ArmModel arm = nao::loadArmModel(nao::test::kUrdfPath);
   const nao::PolicyArch arch = nao::smallArch();
-  const auto tensors = randomTensors(arch, 1);
+  const auto tensors = nao::test::randomManifestTensors(arch, 1);
   auto check = [&](const nao::ModelHeader& h) -> std::string {
     const nao::ModelFile m = nao::decodeModel(nao::encodeModel(h, tensors), kOrigin);
     try {
@@ -475,7 +462,7 @@ TEST_CASE("the paper manifest's parameter count equals a hand count from docs/po
 
 TEST_CASE("a paper-size model round-trips") {
   const nao::PolicyArch arch = nao::paperArch();
-  const auto tensors = randomTensors(arch, 3);
+  const auto tensors = nao::test::randomManifestTensors(arch, 3);
   const auto bytes = nao::encodeModel(makeHeader(arch), tensors);
   CHECK(bytes.size() > 24'000'000);
   const nao::ModelFile m = nao::decodeModel(bytes, kOrigin);

@@ -13,6 +13,20 @@
 
 namespace nao::test {
 
+/// One float vector per manifest entry of `arch`, seeded pseudo-random values in [-1, 1): a
+/// well-formed tensor set for file-format and codegen tests (not a usable policy).
+inline std::vector<std::vector<float>> randomManifestTensors(const PolicyArch& arch, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<std::vector<float>> out;
+  for (const TensorSpec& t : policyManifest(arch)) {
+    std::vector<float> v(t.count());
+    for (float& x : v) x = u(rng);
+    out.push_back(std::move(v));
+  }
+  return out;
+}
+
 struct RandomPolicy {
   std::vector<std::vector<float>> tensors;  ///< manifest order
   std::vector<const float*> pointers;
