@@ -1,5 +1,8 @@
 // Policy inference latency on the paper configuration (the committed models/default.bin):
-//   BM_Policy_StaticEigen  the runtime's fixed-size float stepPolicy (nao/policy.hpp)
+//   BM_Policy_StaticEigen  the runtime's fixed-size float stepPolicy (nao/policy.hpp) with the
+//                          kernel the runtime picks (NAO_POLICY_KERNEL, CPU; the label names it)
+//   BM_Policy_StaticEigen_SSE / _AVX2  the same with the kernel forced (nao/policy_kernels.hpp);
+//                          _AVX2 is skipped with a message on a CPU without AVX2
 //   BM_WeightStream        the physical limit: one read of the same weight bytes (a vectorised
 //                          sum over the model's tensor data), i.e. weight bytes / single-core
 //                          read bandwidth, measured in the same run
@@ -9,13 +12,21 @@
 
 #include <Eigen/Core>
 
+#include <string>
+
 namespace {
 
 using namespace nao;
 using namespace nao::bench;
 
-void BM_Policy_StaticEigen(benchmark::State& state) {
+/// stepPolicy with `kernel` (nullptr: the runtime's choice), one inference per iteration.
+void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel) {
   if (!haveModel(state)) return;
+  const PolicyKernel saved = activePolicyKernel();
+  if (kernel != nullptr && !selectPolicyKernel(*kernel)) {
+    state.SkipWithError((std::string("the ") + policyKernelName(*kernel) + " kernel is not supported here").c_str());
+    return;
+  }
   const ModelFile& model = paperModel();
   std::vector<const float*> p;
   for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
@@ -35,6 +46,20 @@ void BM_Policy_StaticEigen(benchmark::State& state) {
     rec.add(s);
   }
   rec.report(state);
+  state.SetLabel(policyKernelName(activePolicyKernel()));
+  selectPolicyKernel(saved);
+}
+
+void BM_Policy_StaticEigen(benchmark::State& state) { runStaticEigen(state, nullptr); }
+
+void BM_Policy_StaticEigen_SSE(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kSse;
+  runStaticEigen(state, &k);
+}
+
+void BM_Policy_StaticEigen_AVX2(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kAvx2;
+  runStaticEigen(state, &k);
 }
 
 void BM_WeightStream(benchmark::State& state) {
@@ -60,4 +85,6 @@ void BM_WeightStream(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(BM_Policy_StaticEigen)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
+BENCHMARK(BM_Policy_StaticEigen_SSE)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
+BENCHMARK(BM_Policy_StaticEigen_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_WeightStream)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);

@@ -3,11 +3,15 @@
 // synthetic whole-arm demonstration (seed 1,000,001) looped as the human reference, with
 // the committed models/default.bin. One benchmark iteration = the whole hour; per-stage
 // p50/p99/max come from the controller's own stage timings (CLOCK_MONOTONIC), plus peak RSS.
+// The label names the policy kernel in use (nao/policy_kernels.hpp; NAO_POLICY_KERNEL=sse forces
+// the SSE one).
 #include "bench_policy_common.hpp"
 #include "nao/controller.hpp"
 #include "nao/tools/reference_source.hpp"
 
 #include <sys/resource.h>
+
+#include <string>
 
 namespace {
 
@@ -59,6 +63,7 @@ void BM_Tick_Full(benchmark::State& state) {
   getrusage(RUSAGE_SELF, &ru);
   state.counters["rss_MB"] = static_cast<double>(ru.ru_maxrss) / 1024.0;
   state.counters["ticks"] = kTicks;
+  state.SetLabel(std::string("policy kernel ") + policyKernelName(activePolicyKernel()));
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 #pragma once
 
 #include "nao/policy_config.hpp"
+#include "nao/policy_kernels.hpp"
 
 #include <Eigen/Core>
 
@@ -321,85 +322,6 @@ void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<Ten
 
 /// Throws std::invalid_argument describing both architectures if they differ.
 void requireArch(const PolicyArch& compiled, const PolicyArch& given);
-
-using Packet = Eigen::internal::packet_traits<float>::type;
-inline constexpr int kPacketSize = Eigen::internal::packet_traits<float>::size;
-
-/// Y(:, t) += W(:, k0 .. k0+NK-1) X(k0 .. k0+NK-1, t) for all t, in k order.
-/// W column-major [Out, In], X [In, J] and Y [Out, J] column-major. Blocks of 2 packets of
-/// rows keep 2J accumulators in registers while NK consecutive columns of W stream by, so the
-/// panel (NK·Out contiguous floats) is read once for all J tokens.
-template <int Out, int In, int J, int NK>
-inline void accumulatePanel(const float* W, const float* X, float* Y, int k0) {
-  using Eigen::internal::padd;
-  using Eigen::internal::pmul;
-  using Eigen::internal::ploadu;
-  using Eigen::internal::pstoreu;
-  constexpr int P = kPacketSize;
-  constexpr int kRows = 2 * P;
-  Packet x_splat[NK][J];
-  for (int kk = 0; kk < NK; ++kk)
-    for (int t = 0; t < J; ++t) x_splat[kk][t] = Eigen::internal::pset1<Packet>(X[t * In + k0 + kk]);
-  const float* Wp = W + static_cast<std::ptrdiff_t>(k0) * Out;
-  int r = 0;
-  for (; r + kRows <= Out; r += kRows) {
-#if defined(__GNUC__)
-    // Pull the next panel (or, after the last one, the next tensor of model.bin) toward the
-    // cache in step with this one: the hardware prefetcher alone left the streamed weights
-    // ~2x slower than the arithmetic (measured, 24 MB sweep).
-    {
-      const char* next = reinterpret_cast<const char*>(Wp + NK * Out) +
-                         static_cast<std::ptrdiff_t>(r / kRows) * NK * kRows * static_cast<int>(sizeof(float));
-      for (int byte = 0; byte < NK * kRows * static_cast<int>(sizeof(float)); byte += 64) __builtin_prefetch(next + byte);
-    }
-#endif
-    Packet acc0[J], acc1[J];
-#pragma GCC unroll 8
-    for (int t = 0; t < J; ++t) {
-      acc0[t] = ploadu<Packet>(Y + t * Out + r);
-      acc1[t] = ploadu<Packet>(Y + t * Out + r + P);
-    }
-#pragma GCC unroll 16
-    for (int kk = 0; kk < NK; ++kk) {
-      const Packet w0 = ploadu<Packet>(Wp + kk * Out + r);
-      const Packet w1 = ploadu<Packet>(Wp + kk * Out + r + P);
-#pragma GCC unroll 8
-      for (int t = 0; t < J; ++t) {
-        // Multiply then add, never fused: the same rounding as the scalar rows below.
-        acc0[t] = padd(acc0[t], pmul(w0, x_splat[kk][t]));
-        acc1[t] = padd(acc1[t], pmul(w1, x_splat[kk][t]));
-      }
-    }
-#pragma GCC unroll 8
-    for (int t = 0; t < J; ++t) {
-      pstoreu(Y + t * Out + r, acc0[t]);
-      pstoreu(Y + t * Out + r + P, acc1[t]);
-    }
-  }
-  // Rows left over when Out is not a multiple of the block: same order of operations.
-  for (; r < Out; ++r)
-    for (int t = 0; t < J; ++t) {
-      float s = Y[t * Out + r];
-      for (int kk = 0; kk < NK; ++kk) s += Wp[kk * Out + r] * X[t * In + k0 + kk];
-      Y[t * Out + r] = s;
-    }
-}
-
-/// Y = W X + b (b may be null: zero), then ReLU if kRelu; every column an independent token.
-/// Each Y(r, t) is b(r) + W(r,0) X(0,t) + W(r,1) X(1,t) + ... summed in that order, whatever
-/// the packet width. W is read once. Real-time safe: no temporaries, no Eigen GEMM (whose
-/// fixed-size blocking buffers land on the stack and whose dynamic ones may allocate).
-template <int Out, int In, int J, bool kRelu>
-inline void affineTokens(const float* W, const float* b, const float* X, float* Y) {
-  // 4 columns x 2 packets x J tokens: measured fastest of 2-16 columns, 1-3 packets (SSE2).
-  constexpr int kPanel = 4;
-  for (int t = 0; t < J; ++t)
-    for (int r = 0; r < Out; ++r) Y[t * Out + r] = b != nullptr ? b[r] : 0.0f;
-  for (int k0 = 0; k0 + kPanel <= In; k0 += kPanel) accumulatePanel<Out, In, J, kPanel>(W, X, Y, k0);
-  if constexpr (In % kPanel != 0) accumulatePanel<Out, In, J, In % kPanel>(W, X, Y, In - In % kPanel);
-  if constexpr (kRelu)
-    for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
-}
 
 template <bool kRelu, int Out, int In, int J>
 inline void affine(const WeightView<Out, In>& W, const WeightView<Out, 1>& b, const Eigen::Matrix<float, In, J>& X,

@@ -1,0 +1,314 @@
+// The policy kernels (nao/policy_kernels.hpp): the kSse and kAvx2 implementations of
+// affineTokens give bit-identical results, equal bit for bit to a plain scalar loop that sums
+// in k order with one rounded multiply and one rounded add per term; and whole stepPolicy runs
+// (actions, α, scores, cross_out) are bit-identical under either kernel. On a CPU without AVX2
+// the kSse half of every check still runs and a message says AVX2 was not available.
+#include "nao/policy.hpp"
+
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <random>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+using namespace nao;
+
+namespace {
+
+float uniform(std::mt19937_64& rng, double lo, double hi) {
+  return static_cast<float>(lo + (hi - lo) * (static_cast<double>(rng() >> 11) * 0x1.0p-53));
+}
+
+bool haveAvx2() { return policyKernelSupported(PolicyKernel::kAvx2); }
+
+void noteAvx2Absent() {
+  if (!haveAvx2()) MESSAGE("AVX2 is not available on this CPU (or build): only the SSE kernel was checked");
+}
+
+/// Restores the kernel in use when it goes out of scope.
+struct KernelGuard {
+  PolicyKernel saved = activePolicyKernel();
+  ~KernelGuard() { selectPolicyKernel(saved); }
+};
+
+bool sameBits(const float* a, const float* b, std::size_t n) { return std::memcmp(a, b, n * sizeof(float)) == 0; }
+
+/// Index of the first float whose bits differ, or -1.
+long firstDifference(const float* a, const float* b, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i)
+    if (std::memcmp(a + i, b + i, sizeof(float)) != 0) return static_cast<long>(i);
+  return -1;
+}
+
+/// The definition: Y(r, t) = b(r) + W(r,0) X(0,t) + W(r,1) X(1,t) + ..., summed in k order,
+/// each product rounded before it is added (the project builds with -ffp-contract=off).
+template <int Out, int In, int J, bool kRelu>
+void scalarAffine(const float* W, const float* b, const float* X, float* Y) {
+  for (int t = 0; t < J; ++t)
+    for (int r = 0; r < Out; ++r) {
+      float s = b != nullptr ? b[r] : 0.0f;
+      for (int k = 0; k < In; ++k) {
+        const float p = W[static_cast<std::ptrdiff_t>(k) * Out + r] * X[t * In + k];
+        s = s + p;
+      }
+      Y[t * Out + r] = kRelu ? std::max(s, 0.0f) : s;
+    }
+}
+
+/// Values over several binades (a sum of them depends on its order) with some exact zeros.
+void fillWide(std::mt19937_64& rng, std::vector<float>& v) {
+  for (float& x : v) {
+    const int e = static_cast<int>(rng() % 13) - 6;
+    x = (rng() % 17 == 0) ? 0.0f : std::ldexp(uniform(rng, -1.0, 1.0), e);
+  }
+}
+
+/// affineTokens of one shape: kSse and kAvx2 (if available) against the scalar definition,
+/// bit for bit, with and without bias and ReLU, over several random draws.
+template <int Out, int In, int J>
+void checkShape(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<float> W(static_cast<std::size_t>(Out) * In), b(Out), X(static_cast<std::size_t>(In) * J);
+  std::vector<float> want(static_cast<std::size_t>(Out) * J), sse(want.size()), avx(want.size());
+  const auto run = [&](auto relu, const float* bias) {
+    constexpr bool kRelu = decltype(relu)::value;
+    std::fill(sse.begin(), sse.end(), NAN);  // every output is written
+    std::fill(avx.begin(), avx.end(), NAN);
+    scalarAffine<Out, In, J, kRelu>(W.data(), bias, X.data(), want.data());
+    detail::affineTokensSse<Out, In, J, kRelu>(W.data(), bias, X.data(), sse.data());
+    INFO("Out ", Out, ", In ", In, ", J ", J, ", relu ", kRelu, ", bias ", bias != nullptr, ", seed ", seed);
+    const long d_sse = firstDifference(sse.data(), want.data(), want.size());
+    CHECK_MESSAGE(d_sse < 0, "SSE differs from the scalar definition at ", d_sse);
+#if NAO_POLICY_HAVE_AVX2
+    if (haveAvx2()) {
+      detail::affineTokensAvx2<Out, In, J, kRelu>(W.data(), bias, X.data(), avx.data());
+      const long d_avx = firstDifference(avx.data(), want.data(), want.size());
+      CHECK_MESSAGE(d_avx < 0, "AVX2 differs from the scalar definition at ", d_avx);
+    }
+#endif
+    // Through the dispatcher, both kernels.
+    KernelGuard guard;
+    for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2}) {
+      if (!selectPolicyKernel(k)) continue;
+      std::fill(avx.begin(), avx.end(), NAN);
+      detail::affineTokens<Out, In, J, kRelu>(W.data(), bias, X.data(), avx.data());
+      CHECK_MESSAGE(sameBits(avx.data(), want.data(), want.size()), "affineTokens with ",
+                    std::string(policyKernelName(k)));
+    }
+  };
+  for (int draw = 0; draw < 3; ++draw) {
+    fillWide(rng, W);
+    fillWide(rng, b);
+    fillWide(rng, X);
+    run(std::false_type{}, b.data());
+    run(std::true_type{}, b.data());
+    run(std::false_type{}, nullptr);
+  }
+}
+
+// ---- Whole policies ----
+
+/// Random weights for `arch`: Xavier-uniform matrices, non-zero biases, embeddings, gains and
+/// normalisation statistics, so every term of the forward pass reaches the outputs.
+std::vector<std::vector<float>> randomTensors(const PolicyArch& arch, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<std::vector<float>> tensors;
+  for (const TensorSpec& s : policyManifest(arch)) {
+    std::vector<float> v(s.count());
+    const std::string& n = s.name;
+    const bool is_std = n.size() > 4 && n.compare(n.size() - 4, 4, "_std") == 0;
+    const bool is_gain = n.size() > 5 && n.compare(n.size() - 5, 5, ".gain") == 0;
+    for (float& x : v) {
+      if (is_std)
+        x = uniform(rng, 0.05, 0.5);
+      else if (is_gain)
+        x = uniform(rng, 0.7, 1.3);
+      else if (s.shape.size() == 2 && n.rfind("embed.", 0) != 0 && n != "centroids") {
+        const double a = std::sqrt(6.0 / (s.shape[0] + s.shape[1]));
+        x = uniform(rng, -a, a);
+      } else {
+        x = uniform(rng, -0.5, 0.5);
+      }
+    }
+    tensors.push_back(std::move(v));
+  }
+  return tensors;
+}
+
+PolicyInput randomInput(std::mt19937_64& rng, int movement, int step) {
+  PolicyInput in;
+  for (int j = 0; j < 5; ++j) {
+    in.q[j] = uniform(rng, -2.0, 2.0);
+    in.a_prev[j] = uniform(rng, -0.1, 0.1);
+    in.r[j] = uniform(rng, -2.0, 2.0);
+  }
+  in.movement = movement;
+  in.step = step;
+  return in;
+}
+
+/// What a step records, as raw floats: actions, α of every decoder layer, score, cross_out.
+template <class Dims>
+std::vector<float> recordOf(const PolicyWorkspace<Dims>& ws) {
+  std::vector<float> r(ws.action.data(), ws.action.data() + ws.action.size());
+  const float* cross = &ws.cross[0][0][0][0];
+  r.insert(r.end(), cross, cross + sizeof(ws.cross) / sizeof(float));
+  r.insert(r.end(), ws.score.data(), ws.score.data() + ws.score.size());
+  r.insert(r.end(), ws.cross_out.data(), ws.cross_out.data() + ws.cross_out.size());
+  return r;
+}
+
+/// For `n_models` random weight sets, both conditioning modes and `n_inputs` random inputs:
+/// the step under kSse and under kAvx2 records the same bits. Returns the number of steps
+/// compared under both kernels (0 without AVX2).
+template <class Dims>
+int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs) {
+  KernelGuard guard;
+  int compared = 0;
+  for (int m = 0; m < n_models; ++m) {
+    const std::vector<std::vector<float>> tensors = randomTensors(Dims::arch(), seed + 100 * static_cast<std::uint64_t>(m));
+    std::vector<const float*> ptrs;
+    for (const std::vector<float>& t : tensors) ptrs.push_back(t.data());
+    for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
+      const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c);
+      const auto ws_sse = makePolicyWorkspace<Dims>();
+      const auto ws_avx = makePolicyWorkspace<Dims>();
+      std::mt19937_64 rng(seed + 7 + static_cast<std::uint64_t>(m));
+      for (int n = 0; n < n_inputs; ++n) {
+        const PolicyInput in = randomInput(rng, n % Dims::kMovements, (n * 37) % (Dims::kMaxSteps + 10));
+        REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
+        stepPolicy(w, *ws_sse, in);
+        const std::vector<float> a = recordOf(*ws_sse);
+        REQUIRE(ws_sse->action.allFinite());
+        // SSE is deterministic on its own: the same input again gives the same bits.
+        stepPolicy(w, *ws_sse, in);
+        CHECK(sameBits(recordOf(*ws_sse).data(), a.data(), a.size()));
+        if (!selectPolicyKernel(PolicyKernel::kAvx2)) continue;
+        stepPolicy(w, *ws_avx, in);
+        const std::vector<float> b = recordOf(*ws_avx);
+        const long d = firstDifference(a.data(), b.data(), a.size());
+        INFO("model ", m, ", ", conditioningName(c), ", input ", n);
+        CHECK_MESSAGE(d < 0, "SSE and AVX2 records differ at float ", d, " (0-4 actions, then α, score, cross_out)");
+        ++compared;
+      }
+    }
+  }
+  return compared;
+}
+
+}  // namespace
+
+TEST_CASE("kernel selection: SSE always available, AVX2 when the CPU has it; the choice sticks") {
+  KernelGuard guard;
+  CHECK(policyKernelSupported(PolicyKernel::kSse));
+  CHECK(std::string(policyKernelName(PolicyKernel::kSse)) == "sse");
+  CHECK(std::string(policyKernelName(PolicyKernel::kAvx2)) == "avx2");
+  CHECK(selectPolicyKernel(PolicyKernel::kSse));
+  CHECK(activePolicyKernel() == PolicyKernel::kSse);
+  CHECK(selectPolicyKernel(PolicyKernel::kAvx2) == haveAvx2());
+  CHECK(activePolicyKernel() == (haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse));
+#if !NAO_POLICY_HAVE_AVX2
+  CHECK_FALSE(haveAvx2());  // no AVX2 code in a non-x86 build
+#endif
+  const std::string what = std::string("kernels: sse yes, avx2 ") + (haveAvx2() ? "yes" : "no") +
+                           "; default (NAO_POLICY_KERNEL, CPU): " + policyKernelName(defaultPolicyKernel());
+  MESSAGE(what);
+  noteAvx2Absent();
+}
+
+TEST_CASE("NAO_POLICY_KERNEL: 'sse' forces SSE, 'avx2' / 'auto' / unset pick AVX2 when available") {
+  const char* old = std::getenv("NAO_POLICY_KERNEL");
+  const std::string saved = old != nullptr ? old : "";
+  const PolicyKernel best = haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
+  setenv("NAO_POLICY_KERNEL", "sse", 1);
+  CHECK(defaultPolicyKernel() == PolicyKernel::kSse);
+  setenv("NAO_POLICY_KERNEL", "avx2", 1);
+  CHECK(defaultPolicyKernel() == best);
+  setenv("NAO_POLICY_KERNEL", "auto", 1);
+  CHECK(defaultPolicyKernel() == best);
+  unsetenv("NAO_POLICY_KERNEL");
+  CHECK(defaultPolicyKernel() == best);
+  if (old != nullptr) setenv("NAO_POLICY_KERNEL", saved.c_str(), 1);
+}
+
+TEST_CASE("affineTokens: SSE and AVX2 equal the scalar k-order definition bit for bit, odd shapes included") {
+  // Out not a multiple of 4, 8, 16 or 24; In not a multiple of any panel or strip width.
+  checkShape<1, 1, 5>(1);
+  checkShape<3, 5, 5>(2);
+  checkShape<7, 3, 5>(3);
+  checkShape<8, 4, 5>(4);
+  checkShape<9, 17, 5>(5);
+  checkShape<15, 9, 5>(6);
+  checkShape<16, 16, 5>(7);
+  checkShape<17, 13, 5>(8);
+  checkShape<23, 7, 5>(9);
+  checkShape<24, 25, 5>(10);
+  checkShape<31, 33, 5>(11);
+  checkShape<33, 2, 5>(12);
+  checkShape<40, 19, 5>(13);
+  checkShape<47, 65, 5>(14);
+  checkShape<63, 31, 5>(15);
+  checkShape<130, 131, 5>(16);
+  // Other token counts.
+  checkShape<37, 11, 1>(17);
+  checkShape<20, 6, 3>(18);
+  checkShape<64, 29, 7>(19);
+  // The paper shapes (d 128, FFN 512, head dim 32) and the small ones (d 32, FFN 64).
+  checkShape<128, 128, 5>(20);
+  checkShape<512, 128, 5>(21);
+  checkShape<512, 512, 5>(22);
+  checkShape<128, 512, 5>(23);
+  checkShape<128, 32, 5>(24);
+  checkShape<32, 32, 5>(25);
+  checkShape<64, 32, 5>(26);
+  checkShape<32, 64, 5>(27);
+  noteAvx2Absent();
+}
+
+TEST_CASE("the bit-for-bit comparison can fail: another summation order or a fused multiply-add differs") {
+  // The inputs of checkShape are wide enough that the order of the sum shows in the bits, so
+  // a kernel that reassociated or fused would not pass the test above.
+  constexpr int Out = 64, In = 128, J = 5;
+  std::mt19937_64 rng(99);
+  std::vector<float> W(Out * In), b(Out), X(In * J);
+  fillWide(rng, W);
+  fillWide(rng, b);
+  fillWide(rng, X);
+  std::vector<float> want(Out * J), reversed(Out * J), fused(Out * J);
+  scalarAffine<Out, In, J, false>(W.data(), b.data(), X.data(), want.data());
+  for (int t = 0; t < J; ++t)
+    for (int r = 0; r < Out; ++r) {
+      float s_rev = b[r], s_fma = b[r];
+      for (int k = In - 1; k >= 0; --k) s_rev = s_rev + W[k * Out + r] * X[t * In + k];
+      for (int k = 0; k < In; ++k) s_fma = std::fma(W[k * Out + r], X[t * In + k], s_fma);
+      reversed[t * Out + r] = s_rev;
+      fused[t * Out + r] = s_fma;
+    }
+  CHECK_FALSE(sameBits(reversed.data(), want.data(), want.size()));
+  CHECK_FALSE(sameBits(fused.data(), want.data(), want.size()));
+}
+
+TEST_CASE("stepPolicy records the same bits under SSE and AVX2: small dims, many weights and inputs") {
+  const int compared = checkStepBitIdentical<SmallPolicyDims>(1000, 8, 60);
+  CHECK(compared == (haveAvx2() ? 8 * 2 * 60 : 0));
+  noteAvx2Absent();
+}
+
+TEST_CASE("stepPolicy records the same bits under SSE and AVX2: paper dims") {
+  const int compared = checkStepBitIdentical<PaperPolicyDims>(2000, 3, 20);
+  CHECK(compared == (haveAvx2() ? 3 * 2 * 20 : 0));
+  noteAvx2Absent();
+}
+
+TEST_CASE("stepPolicy records the same bits under SSE and AVX2: odd dims (leftover rows and columns)") {
+  const int compared = checkStepBitIdentical<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>>(3000, 4, 40);
+  CHECK(compared == (haveAvx2() ? 4 * 2 * 40 : 0));
+  noteAvx2Absent();
+}
