@@ -10,6 +10,12 @@ from . import JOINT_NAMES
 from . import stats
 from .paper import CITATION, PAPER_TABLE2
 
+
+def _shown(path):
+    """A path as the user named it relative to the working directory: no machine paths in reports."""
+    rel = os.path.relpath(os.path.abspath(path))
+    return path if rel.startswith("..") else rel
+
 STAT_LABELS = {"pearson_r": "Pearson r", "spearman_rho": "Spearman ρ", "kendall_tau": "Kendall τ-b",
                "mi_bits": "MI [bits]"}
 
@@ -65,7 +71,7 @@ def table2_markdown(rows, options):
         cells += ["%d (%d)" % (r["n_ticks"], r["n_dropped"]), str(r["block_len"])]
         lines.append("| " + " | ".join(cells) + " |")
     runs = sorted({(r["run"], r["movement"]) for r in rows})
-    lines += ["", "Runs: " + ", ".join("%s (%s)" % (run, m) for run, m in runs) + ".", ""]
+    lines += ["", "Runs: " + ", ".join("%s (%s)" % (_shown(run), m) for run, m in runs) + ".", ""]
     return "\n".join(lines)
 
 
@@ -125,7 +131,7 @@ def nao_rt_command(summary, run_path):
         args += ["--weights", model]
     if summary.get("realtime"):
         args.append("--realtime")
-    return " ".join(args + ["--log", run_path])
+    return " ".join(args + ["--log", _shown(run_path)])
 
 
 CSS = """
@@ -151,8 +157,8 @@ def report_html(runs, labels, rows, figures, options, command):
              "paper lacks: block-bootstrap confidence intervals and shift-test p-values.</p>",
              "<h2>Command</h2><pre>%s</pre>" % html.escape(command),
              "<p>Runs: %s. Output: <code>%s</code>.</p>" % (
-                 ", ".join("<code>%s</code> (%s)" % (html.escape(r.path), html.escape(lab)) for r, lab in zip(runs, labels)),
-                 html.escape(out_dir)),
+                 ", ".join("<code>%s</code> (%s)" % (html.escape(_shown(r.path)), html.escape(lab)) for r, lab in zip(runs, labels)),
+                 html.escape(_shown(out_dir))),
              "<h2>Table 2: angular velocity vs attention score</h2>",
              "<p>Cells with p &lt; 0.05 (shift test) are shaded. Trend removal: <b>%s</b>.</p>"
              % html.escape(options["detrend"]),
@@ -176,7 +182,7 @@ def report_html(runs, labels, rows, figures, options, command):
         cmd = nao_rt_command(run.summary, run.path)
         parts.append("<h3>%s</h3>" % html.escape(lab))
         parts.append("<p><code>%s</code>: %d ticks, %d of them dropped from Table 2 (policy bypassed).</p>"
-                     % (html.escape(run.path), run.n_ticks, run.n_ticks - int(run.policy_mask().sum())))
+                     % (html.escape(_shown(run.path)), run.n_ticks, run.n_ticks - int(run.policy_mask().sum())))
         if cmd:
             parts.append("<p>nao_rt command (rebuilt from summary.json):</p><pre>%s</pre>" % html.escape(cmd))
         parts.append("<pre>%s</pre>" % html.escape(json.dumps(run.summary, indent=2)))
