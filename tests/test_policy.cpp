@@ -3,6 +3,7 @@
 // convention, no Eigen), plus the properties the architecture promises: attention rows sum to
 // 1, the decoder is causal, the conditioning inputs that must not matter do not.
 #include "nao/policy.hpp"
+#include "support/random_policy.hpp"
 
 #include <doctest/doctest.h>
 
@@ -21,11 +22,7 @@ using namespace nao;
 
 namespace {
 
-// Uniform in [lo, hi) from the generator's raw bits (std distributions differ between
-// standard libraries).
-float uniform(std::mt19937_64& rng, double lo, double hi) {
-  return static_cast<float>(lo + (hi - lo) * (static_cast<double>(rng() >> 11) * 0x1.0p-53));
-}
+float uniform(std::mt19937_64& rng, double lo, double hi) { return test::uniformFloat(rng, lo, hi); }
 
 bool startsWith(const std::string& s, const char* p) { return s.rfind(p, 0) == 0; }
 bool endsWith(const std::string& s, const std::string& e) {
@@ -84,15 +81,7 @@ TestModel randomModel(const PolicyArch& arch, std::uint64_t seed, bool zero_step
 }
 
 PolicyInput randomInput(std::mt19937_64& rng, int movement, int step) {
-  PolicyInput in;
-  for (int j = 0; j < 5; ++j) {
-    in.q[j] = uniform(rng, -1.5, 1.5);
-    in.a_prev[j] = uniform(rng, -0.1, 0.1);
-    in.r[j] = uniform(rng, -1.5, 1.5);
-  }
-  in.movement = movement;
-  in.step = step;
-  return in;
+  return test::randomPolicyInput(rng, movement, step, 1.5);
 }
 
 // ---- The reference: docs/policy.md, literally, in double. ----

@@ -4,6 +4,7 @@
 // (actions, α, scores, cross_out) are bit-identical under either kernel. On a CPU without AVX2
 // the kSse half of every check still runs and a message says AVX2 was not available.
 #include "nao/policy.hpp"
+#include "support/random_policy.hpp"
 
 #include <doctest/doctest.h>
 
@@ -22,9 +23,7 @@ using namespace nao;
 
 namespace {
 
-float uniform(std::mt19937_64& rng, double lo, double hi) {
-  return static_cast<float>(lo + (hi - lo) * (static_cast<double>(rng() >> 11) * 0x1.0p-53));
-}
+float uniform(std::mt19937_64& rng, double lo, double hi) { return test::uniformFloat(rng, lo, hi); }
 
 bool haveAvx2() { return policyKernelSupported(PolicyKernel::kAvx2); }
 
@@ -143,15 +142,7 @@ std::vector<std::vector<float>> randomTensors(const PolicyArch& arch, std::uint6
 }
 
 PolicyInput randomInput(std::mt19937_64& rng, int movement, int step) {
-  PolicyInput in;
-  for (int j = 0; j < 5; ++j) {
-    in.q[j] = uniform(rng, -2.0, 2.0);
-    in.a_prev[j] = uniform(rng, -0.1, 0.1);
-    in.r[j] = uniform(rng, -2.0, 2.0);
-  }
-  in.movement = movement;
-  in.step = step;
-  return in;
+  return test::randomPolicyInput(rng, movement, step, 2.0);
 }
 
 /// What a step records, as raw floats: actions, α of every decoder layer, score, cross_out.

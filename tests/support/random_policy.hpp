@@ -13,6 +13,25 @@
 
 namespace nao::test {
 
+/// Uniform in [lo, hi) from the generator's raw bits (std distributions differ between
+/// standard libraries).
+inline float uniformFloat(std::mt19937_64& rng, double lo, double hi) {
+  return static_cast<float>(lo + (hi - lo) * (static_cast<double>(rng() >> 11) * 0x1.0p-53));
+}
+
+/// A policy input with q and r uniform in ±q_range rad and a(t−1) in ±0.1 rad.
+inline PolicyInput randomPolicyInput(std::mt19937_64& rng, int movement, int step, double q_range) {
+  PolicyInput in;
+  for (int j = 0; j < kNumJoints; ++j) {
+    in.q[j] = uniformFloat(rng, -q_range, q_range);
+    in.a_prev[j] = uniformFloat(rng, -0.1, 0.1);
+    in.r[j] = uniformFloat(rng, -q_range, q_range);
+  }
+  in.movement = movement;
+  in.step = step;
+  return in;
+}
+
 /// One float vector per manifest entry of `arch`, seeded pseudo-random values in [-1, 1): a
 /// well-formed tensor set for file-format and codegen tests (not a usable policy).
 inline std::vector<std::vector<float>> randomManifestTensors(const PolicyArch& arch, std::uint64_t seed) {
@@ -34,9 +53,7 @@ struct RandomPolicy {
 
 inline RandomPolicy makeRandomPolicy(const PolicyArch& arch, const ArmModel& arm, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
-  auto uniform = [&rng](double lo, double hi) {
-    return static_cast<float>(lo + (hi - lo) * static_cast<double>(rng() >> 11) * 0x1.0p-53);
-  };
+  auto uniform = [&rng](double lo, double hi) { return uniformFloat(rng, lo, hi); };
   RandomPolicy p;
   for (const TensorSpec& t : policyManifest(arch)) {
     std::vector<float> v(t.count());
