@@ -55,20 +55,25 @@ Scores score(const std::string& path) {
     for (int k = 0; k < PaperPolicyDims::kClusters; ++k) centroids.push_back(centroid(w, m, k).cast<double>());
     const tools::ReferenceStream ref =
         tools::makeDemoReference(arm, tools::parseMovement(movement), kTrainingSeed, index, centroids);
-    // Labels as nao_toolchain cluster writes them: held samples keep the last measured label.
-    std::size_t first = 0;
-    while (first < ref.measured.size() && !ref.measured[first]) ++first;
-    REQUIRE(first < ref.measured.size());
-    int label = tools::nearestCentroid(centroids, ref.retargeted[first]);
+    // Labels as nao_toolchain cluster writes them (the key pose in force at each tick).
+    std::vector<double> t_grid, t_meas;
+    std::vector<JointVector> q_meas;
+    for (std::size_t t = 0; t < ref.retargeted.size(); ++t) {
+      t_grid.push_back(static_cast<double>(t) / ref.rate_hz);
+      if (!ref.measured[t]) continue;
+      t_meas.push_back(t_grid.back());
+      q_meas.push_back(ref.retargeted[t]);
+    }
+    REQUIRE(!q_meas.empty());
+    const std::vector<int> labels = tools::keyPoseLabels(centroids, t_meas, q_meas, t_grid);
     const std::vector<JointVector>& f = ref.target;
     for (std::size_t t = 0; t + 1 < f.size(); ++t) {
-      if (ref.measured[t]) label = tools::nearestCentroid(centroids, ref.retargeted[t]);
       const JointVector a_prev = t == 0 ? JointVector::Zero() : JointVector(f[t] - f[t - 1]);
       const JointVector target = f[t + 1] - f[t];
       PolicyInput in;
       in.q = f[t].cast<float>();
       in.a_prev = a_prev.cast<float>();
-      in.r = centroids[static_cast<std::size_t>(label)].cast<float>();
+      in.r = centroids[static_cast<std::size_t>(labels[t])].cast<float>();
       in.movement = m;
       in.step = static_cast<int>(std::min<std::size_t>(t, PaperPolicyDims::kMaxSteps - 1));
       const JointVector a = stepPolicy(w, *ws, in).cast<double>();
