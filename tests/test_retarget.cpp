@@ -197,57 +197,176 @@ TEST_CASE("retarget keeps every output joint inside its URDF limits, also for un
   CHECK_MESSAGE(n_unreachable_flagged > 2000, "expected most targets flagged unreachable, got " << n_unreachable_flagged);
 }
 
-TEST_CASE("q_q moves the joints to q_target clamped to the limits: mean distance below 1 % of q_x's on 20 trajectories") {
-  // With every IK anchored at the joint target, the outer loop's fixed point is q_target
-  // clamped (see retarget.hpp): q_q should sit on it, q_x only as close as the hand target allows.
+TEST_CASE("joint priority lands on its fixed point lambda_q (x(q_q) - x_target) = J (q_goal - q_q) on 20 trajectories") {
+  // The outer loop's fixed point (retarget.hpp): the hand pulled from x_target toward where the
+  // clamped human angles put it, priced by lambda_q. Checked on the solution itself, independent
+  // of how the loop got there; the IK's own miss (mu, ~1e-5 m) bounds the residual.
   const ArmModel& m = arm();
   const RetargetParams params;
   std::mt19937_64 rng(505);
-  double sum_x = 0.0, sum_q = 0.0;
-  int n_frames = 0, n_closer = 0;
+  ArmData d;
+  double worst_residual = 0.0, sum_ratio = 0.0, sum_dq = 0.0;
+  int n_frames = 0, n_conflict = 0, n_moved = 0, n_closer_hand = 0;
   for (int traj = 0; traj < 20; ++traj) {
     RetargetData data;
     for (const RetargetFrame& f : trajectoryFrames(m, rng, 100, false)) {
       const RetargetResult& r = solveRetarget(m, params, data, f.p_target_TH, f.q_target);
-      const JointVector q_goal = clampToLimits(m, f.q_target);
-      const double dx = (r.q_x - q_goal).norm(), dq = (r.q_q - q_goal).norm();
-      sum_x += dx;
-      sum_q += dq;
-      n_closer += dq <= dx + 1e-9;
       ++n_frames;
+      if (r.flags & (kRetargetQCapHit | kRetargetInnerCapHit | kRetargetFallback)) continue;
+      const JointVector q_goal = clampToLimits(m, f.q_target);
+      forwardKinematics(m, d, r.q_q);
+      handJacobian(m, d);
+      const Eigen::Vector3d residual = params.lambda_q * (d.p_TH - f.p_target_TH) - d.Jp_TH * (q_goal - r.q_q);
+      worst_residual = std::max(worst_residual, residual.norm());
+      // Where the targets conflict (the clamped angles miss the hand target by > 5 mm), q_q is
+      // neither the clamp nor q_x: its hand is between, about 1/(1 + lambda_q) of the way.
+      if (r.error_clamp_m > 5e-3) {
+        ++n_conflict;
+        const double miss_q = (r.p_TH_q - f.p_target_TH).norm();
+        sum_ratio += miss_q / r.error_clamp_m;
+        n_closer_hand += miss_q < r.error_clamp_m;
+        const double dq = (r.q_q - q_goal).norm();
+        sum_dq += dq;
+        n_moved += dq > 1e-3;
+      }
     }
   }
-  const double ratio = sum_q / sum_x;
-  MESSAGE("mean |q_x - q_target| = " << sum_x / n_frames << " rad, mean |q_q - q_target| = " << sum_q / n_frames
-                                     << " rad (ratio " << ratio << "), q_q closer on " << n_closer << "/" << n_frames
-                                     << " frames");
-  CHECK_MESSAGE(ratio <= 0.01, "expected mean |q_q - q_target| <= 1 % of mean |q_x - q_target|, got " << 100.0 * ratio
-                                                                                                         << " %");
-  CHECK_MESSAGE(sum_q / n_frames < 1e-6, "expected mean |q_q - q_target| < 1e-6 rad, got " << sum_q / n_frames);
+  const double mean_ratio = sum_ratio / n_conflict;
+  MESSAGE(n_frames << " frames, " << n_conflict << " with conflicting targets: worst fixed-point residual "
+                   << worst_residual << " m; mean hand miss of q_q / miss of the clamp " << mean_ratio
+                   << " (first order: " << 1.0 / (1.0 + params.lambda_q) << "); mean |q_q - clamp| "
+                   << sum_dq / n_conflict << " rad");
+  REQUIRE(n_conflict > 500);
+  CHECK_MESSAGE(worst_residual < 1e-4, "expected the fixed-point equation to hold within 1e-4 m, got " << worst_residual);
+  CHECK_MESSAGE(n_moved == n_conflict, "expected q_q to differ from the clamped angles (> 1e-3 rad) on every conflicting "
+                                       "frame, it did on " << n_moved << "/" << n_conflict);
+  CHECK_MESSAGE(n_closer_hand == n_conflict, "expected q_q's hand nearer x_target than the clamp's on every conflicting "
+                                             "frame, it was on " << n_closer_hand << "/" << n_conflict);
+  CHECK_MESSAGE(std::abs(mean_ratio - 1.0 / (1.0 + params.lambda_q)) < 0.05,
+                "expected the mean miss ratio near 1/(1+lambda_q) = " << 1.0 / (1.0 + params.lambda_q) << ", got "
+                                                                      << mean_ratio);
 }
 
-TEST_CASE("the fixed-size LM and the Ceres version agree within 1e-4 rad on every frame of 12 smooth trajectories") {
+TEST_CASE("joint priority on a known case: a hand target d off the joint target's hand pulls q_q's hand by d lambda/(1+lambda)") {
+  // q_goal inside the limits, x_target = x(q_goal) + d: to first order in |d| the fixed point
+  // puts the hand at x(q_goal) + d lambda_q / (1 + lambda_q). 1 cm offsets, 3 directions, 3 lambdas.
+  const ArmModel& m = arm();
+  JointVector q_goal;
+  q_goal << 0.4, -0.5, 1.0, 0.9, 0.3;
+  ArmData d;
+  const Eigen::Vector3d p_goal = forwardKinematics(m, d, q_goal);
+  for (double lambda : {0.25, 1.0, 4.0}) {
+    RetargetParams params;
+    params.lambda_q = lambda;
+    for (const Eigen::Vector3d& dir : {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(0, 0.6, 0.8)}) {
+      const Eigen::Vector3d offset = 0.01 * dir;
+      RetargetData data;
+      const RetargetResult& r = solveRetarget(m, params, data, p_goal + offset, q_goal);
+      const Eigen::Vector3d expected = p_goal + offset * (lambda / (1.0 + lambda));
+      const double miss = (r.p_TH_q - expected).norm();
+      CAPTURE(lambda);
+      CAPTURE(dir.transpose());
+      // Second-order terms of a 1 cm offset on a 0.2 m arm: well under a millimetre.
+      CHECK_MESSAGE(miss < 5e-4, "expected q_q's hand at " << expected.transpose() << ", got " << r.p_TH_q.transpose()
+                                                           << " (" << miss * 1e3 << " mm off)");
+      CHECK_MESSAGE((r.q_q - q_goal).norm() > 1e-3, "expected q_q to leave the joint target, |dq| = " << (r.q_q - q_goal).norm());
+      CHECK_MESSAGE(r.error_x_m < 1e-4, "expected q_x on the hand target, missed by " << r.error_x_m);
+    }
+  }
+}
+
+TEST_CASE("lambda_q spans the trade-off: 0 gives the clamped human angles, a large value the hand-priority pose") {
+  const ArmModel& m = arm();
+  std::mt19937_64 rng(515);
+  const std::vector<RetargetFrame> frames = trajectoryFrames(m, rng, 100, false);
+  RetargetParams joints_only, hand_like;
+  joints_only.lambda_q = 0.0;
+  hand_like.lambda_q = 1e6;
+  RetargetData a, b;
+  double worst_clamp = 0.0, worst_hand = 0.0;
+  for (const RetargetFrame& f : frames) {
+    const RetargetResult& ra = solveRetarget(m, joints_only, a, f.p_target_TH, f.q_target);
+    worst_clamp = std::max(worst_clamp, (ra.q_q - clampToLimits(m, f.q_target)).cwiseAbs().maxCoeff());
+    const RetargetResult& rb = solveRetarget(m, hand_like, b, f.p_target_TH, f.q_target);
+    worst_hand = std::max(worst_hand, (rb.p_TH_q - f.p_target_TH).norm());
+  }
+  MESSAGE("lambda_q = 0: max |q_q - clamp| = " << worst_clamp << " rad; lambda_q = 1e6: max hand miss of q_q = "
+                                               << worst_hand * 1e3 << " mm");
+  CHECK_MESSAGE(worst_clamp < 1e-5, "lambda_q = 0 should give the clamped angles, off by " << worst_clamp);
+  CHECK_MESSAGE(worst_hand < 1e-3, "lambda_q = 1e6 should put the hand on x_target, missed by " << worst_hand);
+}
+
+TEST_CASE("q_r is q_x with hand priority and q_q with joint priority, and never misses the hand more than the clamp") {
+  const ArmModel& m = arm();
+  std::mt19937_64 rng(525);
+  const std::vector<RetargetFrame> frames = trajectoryFrames(m, rng, 200, false);
+  RetargetParams hand, joints;
+  joints.priority = RetargetPriority::kJoints;
+  RetargetData dh, dj;
+  int n_worse = 0;
+  for (const RetargetFrame& f : frames) {
+    const RetargetResult& rh = solveRetarget(m, hand, dh, f.p_target_TH, f.q_target);
+    CHECK(rh.q_r == rh.q_x);
+    n_worse += (rh.error_x_m > rh.error_clamp_m + 1e-9);
+    const RetargetResult& rj = solveRetarget(m, joints, dj, f.p_target_TH, f.q_target);
+    CHECK(rj.q_r == rj.q_q);
+    n_worse += ((rj.p_TH_q - f.p_target_TH).norm() > rj.error_clamp_m + 1e-9);
+  }
+  CHECK_MESSAGE(n_worse == 0, n_worse << " poses missed the hand target by more than the clamped angles");
+}
+
+TEST_CASE("a failed solve falls back to the clamped human angles and says so") {
+  // One LM iteration from a far warm start cannot reach the target: q_x would be worse than
+  // clamping, so q_r is the clamped joint target and kRetargetFallback is set.
+  const ArmModel& m = arm();
+  RetargetParams params;
+  params.max_inner_iterations = 1;
+  params.lambda_x = 1e3;  // heavy damping: the one step is tiny
+  JointVector q_target;
+  q_target << 0.2, -0.3, 0.8, 1.0, 0.0;
+  ArmData d;
+  const Eigen::Vector3d target = forwardKinematics(m, d, q_target) + Eigen::Vector3d(0.0, 0.0, 0.004);
+  RetargetData data;
+  JointVector far;
+  far << 1.8, 0.2, -1.5, 0.1, 1.5;
+  resetRetarget(m, data, far);
+  const RetargetResult& r = solveRetarget(m, params, data, target, q_target);
+  CHECK_MESSAGE((r.flags & kRetargetFallback) != 0, "expected the fallback flag, got flags " << r.flags);
+  CHECK((r.flags & kRetargetXCapHit) != 0);
+  CHECK(r.q_r == clampToLimits(m, q_target));
+  CHECK(r.error_x_m <= r.error_clamp_m + 1e-12);
+}
+
+TEST_CASE("the fixed-size LM and Ceres agree within 1e-4 rad: q_x (the default q_r) on every frame, q_q on >= 99 % of 12 smooth trajectories") {
+  // q_x is one bounded IK with a unique minimiser. q_q is the outer loop's fixed point: where the
+  // clamped angles miss the hand target by centimetres with a joint pinned at its limit, the loop
+  // can stop on its iteration cap, and the two solvers' 1e-8 differences then pick different
+  // points of a flat valley. Such frames are counted, not hidden.
   const ArmModel& m = arm();
   const RetargetParams params;
   std::mt19937_64 rng(606);
   double worst_x = 0.0, worst_q = 0.0;
-  int n_frames = 0;
+  int n_frames = 0, n_q_agree = 0, n_q_capped = 0;
   for (int traj = 0; traj < 12; ++traj) {
     const std::vector<RetargetFrame> frames = trajectoryFrames(m, rng, 100, traj % 3 == 2);
     const auto lm = nao::tools::retargetSequenceLM(m, params, frames);
     const auto cs = nao::tools::retargetSequenceCeres(m, params, frames);
     const nao::tools::RetargetAgreement a = nao::tools::compareRetarget(lm, cs);
-    CHECK_MESSAGE(std::max(a.max_abs_q_x, a.max_abs_q_q) < 1e-4,
-                  "trajectory " << traj << ": expected agreement < 1e-4 rad, got q_x " << a.max_abs_q_x << ", q_q "
-                                << a.max_abs_q_q << " (worst frame " << a.worst_frame << ", flags "
-                                << lm[a.worst_frame].flags << "/" << cs[a.worst_frame].flags << ", outer iterations "
-                                << lm[a.worst_frame].iterations_outer << "/" << cs[a.worst_frame].iterations_outer << ")");
+    CHECK_MESSAGE(a.max_abs_q_x < 1e-4, "trajectory " << traj << ": expected q_x agreement < 1e-4 rad, got "
+                                                      << a.max_abs_q_x << " (worst frame " << a.worst_frame << ")");
+    for (std::size_t i = 0; i < frames.size(); ++i) {
+      n_q_agree += (lm[i].q_q - cs[i].q_q).cwiseAbs().maxCoeff() < 1e-4;
+      n_q_capped += ((lm[i].flags | cs[i].flags) & kRetargetQCapHit) != 0;
+    }
     worst_x = std::max(worst_x, a.max_abs_q_x);
     worst_q = std::max(worst_q, a.max_abs_q_q);
     n_frames += static_cast<int>(frames.size());
   }
-  MESSAGE("LM vs Ceres over " << n_frames << " frames: max |dq_x| = " << worst_x << " rad, max |dq_q| = " << worst_q
-                              << " rad");
+  const double share_q = static_cast<double>(n_q_agree) / n_frames;
+  MESSAGE("LM vs Ceres over " << n_frames << " frames: max |dq_x| = " << worst_x << " rad; q_q within 1e-4 rad on "
+                              << n_q_agree << " frames (" << 100.0 * share_q << " %), max |dq_q| = " << worst_q
+                              << " rad; outer-loop cap hit by either solver on " << n_q_capped << " frames");
+  CHECK_MESSAGE(share_q >= 0.99, "expected q_q to agree within 1e-4 rad on >= 99 % of frames, got " << 100.0 * share_q << " %");
 }
 
 TEST_CASE("the same frames twice give bitwise-equal results") {
@@ -320,6 +439,7 @@ TEST_CASE("a non-finite target right after a reset to a measured pose holds that
   const JointVector expected = clampToLimits(m, q_measured);
   CHECK(r.q_x == expected);
   CHECK(r.q_q == expected);
+  CHECK(r.q_r == expected);
   ArmData d;
   CHECK((r.p_TH_x - forwardKinematics(m, d, expected)).norm() < 1e-12);
 }

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace nao {
 
@@ -21,11 +22,11 @@ struct IkProblem {
   const Eigen::Vector3d& p_target_TH;
   const Eigen::Vector3d* u_target_TH;
   const JointVector& q_anchor;
-  double mu;
+  const JointVector& mu_w;  // mu times the per-joint posture weights
   double w;
 
   double cost(const ArmData& arm) const {
-    double c = (arm.p_TH - p_target_TH).squaredNorm() + mu * (arm.q - q_anchor).squaredNorm();
+    double c = (arm.p_TH - p_target_TH).squaredNorm() + (mu_w.array() * (arm.q - q_anchor).array().square()).sum();
     if (u_target_TH != nullptr) c += w * w * (arm.u_TH - *u_target_TH).squaredNorm();
     return 0.5 * c;
   }
@@ -38,12 +39,29 @@ struct IkProblem {
       g.noalias() += (w * w) * (arm.Ju_TH.transpose() * (arm.u_TH - *u_target_TH));
       H.noalias() += (w * w) * (arm.Ju_TH.transpose() * arm.Ju_TH);
     }
-    g.noalias() += mu * (arm.q - q_anchor);
-    H.diagonal().array() += mu;
+    g.array() += mu_w.array() * (arm.q - q_anchor).array();
+    H.diagonal() += mu_w;
   }
 };
 
 }  // namespace
+
+const char* retargetPriorityName(RetargetPriority priority) {
+  return priority == RetargetPriority::kJoints ? "joints" : "hand";
+}
+
+bool parseRetargetPriority(const char* name, RetargetPriority& priority) {
+  if (name == nullptr) return false;
+  if (std::strcmp(name, "hand") == 0) {
+    priority = RetargetPriority::kHand;
+    return true;
+  }
+  if (std::strcmp(name, "joints") == 0) {
+    priority = RetargetPriority::kJoints;
+    return true;
+  }
+  return false;
+}
 
 void resetRetarget(RetargetData& data) { data.has_warm_start = false; }
 
@@ -53,7 +71,7 @@ void resetRetarget(const ArmModel& model, RetargetData& data, const JointVector&
   // A frame with bad input holds data.result: make that the start pose, not a stale or zero one.
   RetargetResult& r = data.result;
   r = RetargetResult{};
-  r.q_x = r.q_q = data.q_warm;
+  r.q_x = r.q_q = r.q_r = data.q_warm;
   r.p_TH_x = r.p_TH_q = forwardKinematics(model, data.arm, data.q_warm);
 }
 
@@ -63,7 +81,8 @@ const JointVector& solveHandIk(const ArmModel& model, const RetargetParams& para
   IkResult& ik = data.ik;
   ArmData& arm = data.arm;
   const JointVector anchor = clampToLimits(model, q_anchor);
-  const IkProblem problem{p_target_TH, u_target_TH, anchor, params.mu, params.pointing_weight};
+  const JointVector mu_w = params.mu * params.posture_weights;
+  const IkProblem problem{p_target_TH, u_target_TH, anchor, mu_w, params.pointing_weight};
 
   JointVector q = clampToLimits(model, q_start);
   forwardKinematics(model, arm, q);

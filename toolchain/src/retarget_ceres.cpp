@@ -20,20 +20,20 @@ constexpr int kPositionResiduals = 3 + kNumJoints;
 class HandPositionCost final : public ceres::SizedCostFunction<kPositionResiduals, kNumJoints> {
  public:
   HandPositionCost(const ArmModel& model, ArmData& arm, const Eigen::Vector3d& p_target_TH,
-                   const JointVector& q_anchor, double mu)
-      : model_(model), arm_(arm), p_target_TH_(p_target_TH), q_anchor_(q_anchor), sqrt_mu_(std::sqrt(mu)) {}
+                   const JointVector& q_anchor, const JointVector& mu_w)
+      : model_(model), arm_(arm), p_target_TH_(p_target_TH), q_anchor_(q_anchor), sqrt_mu_(mu_w.cwiseSqrt()) {}
 
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
     const Eigen::Map<const JointVector> q(parameters[0]);
     forwardKinematics(model_, arm_, JointVector(q));
     Eigen::Map<Eigen::Matrix<double, kPositionResiduals, 1>> r(residuals);
     r.head<3>() = arm_.p_TH - p_target_TH_;
-    r.tail<kNumJoints>() = sqrt_mu_ * (q - q_anchor_);
+    r.tail<kNumJoints>() = sqrt_mu_.cwiseProduct(q - q_anchor_);
     if (jacobians != nullptr && jacobians[0] != nullptr) {
       handJacobian(model_, arm_);
       Eigen::Map<Eigen::Matrix<double, kPositionResiduals, kNumJoints, Eigen::RowMajor>> J(jacobians[0]);
       J.topRows<3>() = arm_.Jp_TH;
-      J.bottomRows<kNumJoints>() = sqrt_mu_ * Eigen::Matrix<double, kNumJoints, kNumJoints>::Identity();
+      J.bottomRows<kNumJoints>() = sqrt_mu_.asDiagonal();
     }
     return true;
   }
@@ -43,7 +43,7 @@ class HandPositionCost final : public ceres::SizedCostFunction<kPositionResidual
   ArmData& arm_;
   const Eigen::Vector3d p_target_TH_;
   const JointVector q_anchor_;
-  const double sqrt_mu_;
+  const JointVector sqrt_mu_;  // sqrt(mu w_j) per joint
 };
 
 // Pointing-direction error w (u_TH(q) - u_target).
@@ -89,7 +89,7 @@ JointVector objectiveGradient(const ArmModel& model, const RetargetParams& param
     const double w2 = params.pointing_weight * params.pointing_weight;
     g.noalias() += w2 * (arm.Ju_TH.transpose() * (arm.u_TH - *u_target_TH));
   }
-  g.noalias() += params.mu * (q - q_anchor);
+  g.array() += params.mu * params.posture_weights.array() * (q - q_anchor).array();
   return g;
 }
 
@@ -97,7 +97,7 @@ JointVector objectiveGradient(const ArmModel& model, const RetargetParams& param
 ceres::Solver::Summary runCeres(const ArmModel& model, const RetargetParams& params, ArmData& arm,
                                 const Eigen::Vector3d& p_target_TH, const Eigen::Vector3d* u_target_TH,
                                 const JointVector& q_anchor, const std::vector<int>& held, double* q) {
-  HandPositionCost position_cost(model, arm, p_target_TH, q_anchor, params.mu);
+  HandPositionCost position_cost(model, arm, p_target_TH, q_anchor, params.mu * params.posture_weights);
   HandPointingCost pointing_cost(model, arm, u_target_TH != nullptr ? *u_target_TH : Eigen::Vector3d::UnitX(),
                                  params.pointing_weight);
   ceres::Problem::Options problem_options;

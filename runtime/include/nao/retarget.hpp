@@ -1,36 +1,52 @@
-// Retargeting, paper Algorithm 1 (eqs. 3-6): per frame, the end-effector-priority pose q_x and
-// the joint-priority pose q_q of the NAO arm for a scaled human hand target x_target and human
-// joint angles q_target. Online version: fixed-size, allocation-free, deterministic.
+// Retargeting, paper Algorithm 1 (eqs. 3-6): per frame, the end-effector-priority pose q_x, the
+// joint-priority pose q_q, and the imitation reference q_r (one of the two, chosen by
+// RetargetParams::priority; hand priority by default, DESIGN section 5) of the NAO arm for a scaled
+// human hand target x_target and human joint angles q_target. Online version: fixed-size,
+// allocation-free, deterministic.
 //
 // The algorithm (the offline Ceres version, toolchain/retarget_ceres.hpp, runs the same steps):
 //   q_goal = q_target clamped to the limits
 //   q <- IK(x_target, start: warm start, anchor: q_goal)        q_x = this first IK solution
-//   repeat up to max_outer_iterations:
-//     dq = q_goal - q;  dx = (1 + lambda_q)^-1 J dq                  (paper eq. 6)
-//       (dq scaled down so that eta_q/(1+lambda_q) |dq|_inf <= max_outer_step: J dq is a
-//        linearisation; unlimited, large joint gaps threw x_k out of reach and the loop wandered)
-//     x_k <- x(q) + eta_q dx;  q <- IK(x_k, start: q, anchor: q_goal)  (paper eq. 5)
+//   repeat up to max_outer_iterations:                          (paper eqs. 4 and 6)
+//     dq = q_goal - q
+//     x_bar = x_target + (1 + lambda_q)^-1 (x(q) + J dq - x_target)
+//     x_k <- x(q) + eta_q (x_bar - x(q)), the move capped at max_outer_step_m
+//     q <- IK(x_k, start: q, anchor: q_goal)                    (paper eq. 5)
 //     stop when the change of q is below outer_tolerance
 //   q_q = q after the last outer iteration
+//   q_r = q_x (priority hand) or q_q (priority joints), after the fallback check below
 // The warm start is the previous frame's q_x (the first frame starts from q_goal).
 //
+// What the outer loop converges to. x(q) + J dq is the hand point the joint target would give
+// (linearised at q), and lambda_q is the price of moving the hand away from x_target (the
+// paper's lambda_q/2 xdot^T xdot with xdot measured from the hand target). At the fixed point q*
+// (its hand on x_k):  lambda_q (x(q*) - x_target) = J(q*) (q_goal - q*),  and, to first order,
+// x(q*) - x_target = (x(q_goal) - x_target) / (1 + lambda_q): the joint-priority hand lies on the
+// segment from the hand target to where the clamped human angles put the hand, 1/(1+lambda_q)
+// of the way toward the latter, and the posture is the one nearest the human's that reaches it.
+// lambda_q -> 0 gives the clamped human angles (pure joint priority), lambda_q -> infinity q_x.
+// So q_q depends on the kinematics and differs from the clamped angles exactly where the hand
+// target and the joint targets conflict (tests/test_retarget.cpp checks the fixed-point equation).
+// Its convergence is fast: to first order one outer step lands on the fixed point.
+//
 // Each IK solve is a bounded least-squares problem with a unique local minimiser, the paper's
-// displacement term (lambda_x/2 |dq|^2 of eq. 3) made explicit as mu:
-//   min_q 1/2 |p_TH(q) - x|^2 + 1/2 w^2 |u_TH(q) - u_target|^2 + 1/2 mu |q - q_anchor|^2
+// displacement term (lambda_x/2 |dq|^2 of eq. 3) made explicit as mu with per-joint posture
+// weights w (RetargetParams::posture_weights):
+//   min_q 1/2 |p_TH(q) - x|^2 + 1/2 w_p^2 |u_TH(q) - u_target|^2 + 1/2 mu sum_j w_j (q_j - q_anchor,j)^2
 //   subject to q_min <= q <= q_max (the URDF limits);
 // the pointing term is present only when a hand direction target is given. A 5-DoF arm with a
 // 3-D target is redundant; mu picks, among the poses that reach the target, the one nearest the
-// anchor, so both solvers converge to the same point. The anchor is the human's joint angles
+// anchor in the w-weighted metric (the human's posture as the secondary objective in the null
+// space), so both solvers converge to the same point. The anchor is the human's joint angles
 // (clamped), not the solve's start (the paper's q-dot^T q-dot): with the start as anchor the
-// null space is neutral, so q_x wandered by radians over a trajectory and the outer loop
-// crept along the self-motion manifold for dozens of iterations, amplifying 1e-8 solver
-// differences to 1e-3..1 rad. With q_goal as anchor the redundancy is resolved toward the
-// human's posture, and the outer loop's fixed point is q_goal itself: q_q converges to the
-// joint target clamped to the limits (tests: mean distance ~2e-8 rad), the joint-priority
-// end of the trade-off, while q_x is the pose nearest q_goal that puts the hand on x_target.
-// Price of mu on reach: the hand misses a reachable target by about
+// null space is neutral, so q_x wandered by radians over a trajectory, amplifying 1e-8 solver
+// differences to 1e-3..1 rad. Price of mu on reach: the hand misses a reachable target by about
 // mu |q - q_anchor| / sigma_min(J); with mu = 1e-6 m^2/rad^2 that is ~1e-5 m for a 1 rad
 // posture difference at sigma_min ~ 0.05 m/rad (tests: < 1 mm on every warm-started frame).
+//
+// Fallback: the clamped human angles are always a feasible pose. A solve whose pose puts the hand
+// farther from x_target than they do (a capped or failed solve) would be worse than clamping on
+// both targets, so that pose is replaced by q_goal and kRetargetFallback is set.
 //
 // The solver is a projected Levenberg-Marquardt method (paper eq. 5 with adaptive damping
 // lambda, started at lambda_x): joints at a limit whose gradient pushes outward are held, the
@@ -58,16 +74,35 @@ enum RetargetFlags : std::uint32_t {
   kRetargetBadInput = 1u << 4,      ///< non-finite target: nothing solved, previous pose held
   kRetargetQTargetOutside = 1u << 5,  ///< q_target lies outside the limits (informational)
   kRetargetBadPointing = 1u << 6,   ///< direction target non-finite or ~0: solved position-only
+  /// q_x or q_q put the hand farther from x_target than the clamped human angles: replaced by them
+  kRetargetFallback = 1u << 7,
 };
+
+/// Where the imitation reference q_r lies on the hand <-> joints trade-off (DESIGN section 5).
+enum class RetargetPriority : std::uint8_t {
+  kHand = 0,    ///< q_r = q_x: the hand on x_target, the human's posture in the null space
+  kJoints = 1,  ///< q_r = q_q: the human's joint angles first, the hand pulled toward x_target
+};
+
+/// "hand" / "joints" (files, CLI, model.bin metadata).
+const char* retargetPriorityName(RetargetPriority priority);
+/// Parses "hand" / "joints"; false for anything else (priority unchanged).
+bool parseRetargetPriority(const char* name, RetargetPriority& priority);
 
 /// Tuning of Algorithm 1; shared by the online LM and the offline Ceres version.
 struct RetargetParams {
   double lambda_x = 1e-4;   ///< initial LM damping of each IK solve (paper lambda_x), m^2
   double eta_x = 1.0;       ///< IK step rate (paper eta_x); below 1 slows convergence
-  double lambda_q = 0.25;   ///< outer-loop damping (paper lambda_q)
-  double eta_q = 1.0;       ///< outer-loop rate (paper eta_q): x moves by eta_q/(1+lambda_q) J dq
-  double max_outer_step = 0.1;  ///< cap on |eta_q/(1+lambda_q) dq|_inf per outer iteration, rad
+  /// Price of moving the hand off x_target in the joint-priority solve (paper lambda_q): the
+  /// joint-priority hand misses x_target by 1/(1+lambda_q) of the clamped angles' miss.
+  double lambda_q = 0.25;
+  double eta_q = 1.0;       ///< outer-loop rate (paper eta_q), 0 < eta_q <= 1
+  double max_outer_step_m = 0.02;  ///< cap on the hand target's move per outer iteration, m
   double mu = 1e-6;         ///< displacement weight of each IK solve, m^2/rad^2
+  /// Per-joint weights w_j of the posture term (which of the human's joints the null space keeps
+  /// nearest), dimensionless, > 0; all 1 = the plain Euclidean distance in joint space.
+  JointVector posture_weights = JointVector::Ones();
+  RetargetPriority priority = RetargetPriority::kHand;  ///< which pose is q_r
   double pointing_weight = 0.05;  ///< w: metres of hand error worth a unit direction error
   /// LM iteration cap per IK solve. Near a straight elbow the displacement term alone fixes
   /// ElbowYaw, a flat valley where 100 iterations left 1e-2 rad unconverged on ~3 % of the
@@ -84,9 +119,11 @@ struct RetargetParams {
 struct RetargetResult {
   JointVector q_x = JointVector::Zero();  ///< end-effector priority pose (first IK), rad, inside limits
   JointVector q_q = JointVector::Zero();  ///< joint priority pose (last outer iteration), rad, inside limits
+  JointVector q_r = JointVector::Zero();  ///< imitation reference: q_x or q_q by params.priority, rad
   Eigen::Vector3d p_TH_x = Eigen::Vector3d::Zero();  ///< hand point reached by q_x, torso frame, m
   Eigen::Vector3d p_TH_q = Eigen::Vector3d::Zero();  ///< hand point reached by q_q, torso frame, m
   double error_x_m = 0.0;  ///< |p_TH_x - x_target|, m
+  double error_clamp_m = 0.0;  ///< |p_TH(q_target clamped) - x_target|: the gap without retargeting, m
   int iterations_x = 0;    ///< LM iterations of the q_x solve
   int iterations_outer = 0;  ///< outer iterations run
   int iterations_total = 0;  ///< LM iterations of all IK solves of the frame
@@ -164,6 +201,7 @@ const RetargetResult& runAlgorithm1(const ArmModel& model, const RetargetParams&
     if (!has_warm_start) {
       result.q_x = clampToLimits(model, JointVector::Zero());
       result.q_q = result.q_x;
+      result.q_r = result.q_x;
       result.p_TH_x = forwardKinematics(model, arm, result.q_x);
       result.p_TH_q = result.p_TH_x;
     }
@@ -185,9 +223,21 @@ const RetargetResult& runAlgorithm1(const ArmModel& model, const RetargetParams&
   }
 
   // The joint target the outer loop pulls toward: clamped, so its fixed point is a pose the
-  // arm can take.
+  // arm can take. Its hand miss is the embodiment gap without retargeting and the bar the
+  // fallback check holds every solve to.
   const JointVector q_goal = clampToLimits(model, q_target);
   if (!(q_goal.array() == q_target.array()).all()) result.flags |= kRetargetQTargetOutside;
+  // Squared task error of the pose of the last forwardKinematics call (position, and the
+  // pointing direction when it is a target).
+  const double w2 = params.pointing_weight * params.pointing_weight;
+  auto taskError2 = [&]() {
+    double e = (arm.p_TH - p_target_TH).squaredNorm();
+    if (u_use != nullptr) e += w2 * (arm.u_TH - *u_use).squaredNorm();
+    return e;
+  };
+  const Eigen::Vector3d p_TH_goal = forwardKinematics(model, arm, q_goal);
+  result.error_clamp_m = (p_TH_goal - p_target_TH).norm();
+  const double task_goal = taskError2();
 
   JointVector q = has_warm_start ? q_warm : q_goal;
   int n_it = 0;
@@ -200,20 +250,27 @@ const RetargetResult& runAlgorithm1(const ArmModel& model, const RetargetParams&
   result.error_x_m = (result.p_TH_x - p_target_TH).norm();
   if (result.error_x_m > params.reach_tolerance_m) result.flags |= kRetargetXUnreachable;
 
-  // Joint priority: pull x_target toward the joint target (paper eq. 6), re-solve the IK.
-  const double rate = params.eta_q / (1.0 + params.lambda_q);
+  // Joint priority (paper eqs. 4, 6): move the hand target from x_target toward the hand point of
+  // the joint target, priced by lambda_q, and re-solve the IK (see the top of this file).
+  const double keep = 1.0 / (1.0 + params.lambda_q);
   bool outer_converged = false;
   for (int k = 0; k < params.max_outer_iterations; ++k) {
     forwardKinematics(model, arm, q);
     handJacobian(model, arm);
-    JointVector dq = q_goal - q;
-    const double step_inf = rate * dq.cwiseAbs().maxCoeff();
-    if (step_inf > params.max_outer_step) dq *= params.max_outer_step / step_inf;
-    Eigen::Vector3d x_k = arm.p_TH;
-    x_k.noalias() += rate * (arm.Jp_TH * dq);
+    const JointVector dq = q_goal - q;
+    Eigen::Vector3d x_bar = arm.p_TH - p_target_TH;
+    x_bar.noalias() += arm.Jp_TH * dq;
+    x_bar = p_target_TH + keep * x_bar;
+    Eigen::Vector3d move = params.eta_q * (x_bar - arm.p_TH);
+    const double move_norm = move.norm();
+    if (move_norm > params.max_outer_step_m) move *= params.max_outer_step_m / move_norm;
+    const Eigen::Vector3d x_k = arm.p_TH + move;
     Eigen::Vector3d u_k = arm.u_TH;
     if (u_use != nullptr) {
-      u_k.noalias() += rate * (arm.Ju_TH * dq);
+      // The direction follows the same trade-off, linearised the same way.
+      Eigen::Vector3d u_bar = arm.u_TH - *u_use;
+      u_bar.noalias() += arm.Ju_TH * dq;
+      u_k += params.eta_q * (*u_use + keep * u_bar - arm.u_TH);
       u_k.normalize();
     }
     const JointVector q_before = q;
@@ -228,6 +285,24 @@ const RetargetResult& runAlgorithm1(const ArmModel& model, const RetargetParams&
   if (!outer_converged && params.max_outer_iterations > 0) result.flags |= kRetargetQCapHit;
   result.q_q = q;
   result.p_TH_q = forwardKinematics(model, arm, q);
+
+  // Never worse than clamping on both targets: a pose whose hand is farther from x_target than
+  // the clamped angles' hand is dominated by them (the clamp is nearest the joint target).
+  const double slack = 1e-12;
+  forwardKinematics(model, arm, result.q_x);
+  if (taskError2() > task_goal + slack) {
+    result.q_x = q_goal;
+    result.p_TH_x = p_TH_goal;
+    result.error_x_m = result.error_clamp_m;
+    if (params.priority == RetargetPriority::kHand) result.flags |= kRetargetFallback;
+  }
+  forwardKinematics(model, arm, result.q_q);
+  if (taskError2() > task_goal + slack) {
+    result.q_q = q_goal;
+    result.p_TH_q = p_TH_goal;
+    if (params.priority == RetargetPriority::kJoints) result.flags |= kRetargetFallback;
+  }
+  result.q_r = params.priority == RetargetPriority::kHand ? result.q_x : result.q_q;
 
   q_warm = result.q_x;
   has_warm_start = true;
