@@ -115,12 +115,19 @@ TEST_CASE("a retarget CSV reads back what was written") {
   CHECK((rows[2].flags & kRowHumanMissing) != 0);
   CHECK(rows[2].result.q_q == rows[1].result.q_q);
   const std::string path = (freshDir("pipeline_csv") / "retarget.csv").string();
-  writeRetargetCsv(path, rows);
-  const std::vector<RetargetRow> back = readRetargetCsv(path);
+  RetargetParams written = options.params;
+  written.priority = RetargetPriority::kJoints;  // what is read back must be what was written
+  written.lambda_q = 0.75;
+  written.posture_weights << 1.0, 2.0, 0.5, 1.0, 0.25;
+  writeRetargetCsv(path, rows, written);
+  RetargetParams setting;
+  const std::vector<RetargetRow> back = readRetargetCsv(path, &setting);
+  CHECK(sameRetargetSetting(setting, written));
   REQUIRE(back.size() == rows.size());
   for (std::size_t i = 0; i < rows.size(); ++i) {
     CHECK(back[i].flags == rows[i].flags);
     CHECK((back[i].result.q_q - rows[i].result.q_q).cwiseAbs().maxCoeff() < 1e-8);
+    CHECK((back[i].result.q_r - rows[i].result.q_r).cwiseAbs().maxCoeff() < 1e-8);
     CHECK((back[i].target.p_target_TH - rows[i].target.p_target_TH).cwiseAbs().maxCoeff() < 1e-8);
   }
 }

@@ -32,7 +32,7 @@ void setup(CLI::App& app) {
       "DATA/<demo>/features.csv (t_s, label, measured, f_0..4: the feature-extracted trajectory on\n"
       "the whole 10 Hz grid) and the centroids of every movement as JSON.");
   struct Args {
-    std::string data, out, update = "mean", trajectory = "qq";
+    std::string data, out, update = "mean", trajectory = "qr";
     int k = 10, max_iterations = 300;
     std::uint64_t seed = 1;
   };
@@ -43,8 +43,10 @@ void setup(CLI::App& app) {
   cmd->add_option("--update", args->update, "Centroid update: mean (paper eq. 10) or median (paper Algorithm 2)")
       ->check(CLI::IsMember({"mean", "median"}))
       ->capture_default_str();
-  cmd->add_option("--trajectory", args->trajectory, "Robot trajectory to cluster: qq (joint priority) or qx")
-      ->check(CLI::IsMember({"qq", "qx"}))
+  cmd->add_option("--trajectory", args->trajectory,
+                  "Robot trajectory to cluster: qr (the imitation reference, as retarget --priority chose it),\n"
+                  "qx (hand priority) or qq (joint priority)")
+      ->check(CLI::IsMember({"qr", "qx", "qq"}))
       ->capture_default_str();
   cmd->add_option("--seed", args->seed, "Seed of the k-means++ draws")->capture_default_str();
   cmd->add_option("--max-iterations", args->max_iterations, "Cap on assignment/update rounds")
@@ -58,6 +60,8 @@ void setup(CLI::App& app) {
       if (entry.is_directory() && fs::exists(entry.path() / "retarget.csv")) dirs.push_back(entry.path());
     std::sort(dirs.begin(), dirs.end());
     if (dirs.empty()) throw UserError(args->data + ": no <movement>_<index>/retarget.csv found (run retarget first)");
+    RetargetParams setting;
+    bool have_setting = false;
     for (const fs::path& dir : dirs) {
       const std::string name = dir.filename().string();
       const auto cut = name.rfind('_');
@@ -65,13 +69,26 @@ void setup(CLI::App& app) {
         throw UserError(dir.string() + ": directory name is not <movement>_<index>");
       Demo demo;
       demo.name = name;
-      for (const RetargetRow& r : readRetargetCsv((dir / "retarget.csv").string())) {
+      RetargetParams demo_setting;
+      const std::vector<RetargetRow> rows = readRetargetCsv((dir / "retarget.csv").string(), &demo_setting);
+      // One data set, one reference: demonstrations retargeted differently cannot share key poses.
+      if (!have_setting) {
+        setting = demo_setting;
+        have_setting = !rows.empty();
+      } else if (!rows.empty() && !sameRetargetSetting(setting, demo_setting)) {
+        throw UserError((dir / "retarget.csv").string() + ": retargeted with " +
+                        retargetSettingJson(demo_setting).dump() + ", the demonstrations before it with " +
+                        retargetSettingJson(setting).dump());
+      }
+      for (const RetargetRow& r : rows) {
         const bool measured = (r.flags & kRowHumanMissing) == 0;
         demo.t_grid.push_back(r.t_s);
         demo.measured.push_back(measured);
         if (!measured) continue;  // a held pose is not a measured one
         demo.t_s.push_back(r.t_s);
-        demo.q.push_back(args->trajectory == "qq" ? r.result.q_q : r.result.q_x);
+        demo.q.push_back(args->trajectory == "qr"   ? r.result.q_r
+                         : args->trajectory == "qq" ? r.result.q_q
+                                                    : r.result.q_x);
       }
       if (demo.q.empty()) throw UserError(dir.string() + "/retarget.csv: no sample with a measured human arm");
       movements[name.substr(0, cut)].push_back(std::move(demo));
@@ -81,6 +98,7 @@ void setup(CLI::App& app) {
     out["k"] = args->k;
     out["update"] = args->update;
     out["trajectory"] = args->trajectory;
+    out["retarget"] = retargetSettingJson(setting);
     out["seed"] = args->seed;
     std::uint64_t movement_index = 0;
     for (const auto& [movement, demos] : movements) {

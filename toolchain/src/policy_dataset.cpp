@@ -84,7 +84,7 @@ std::uint64_t fnv1a(const std::vector<std::uint8_t>& bytes) {
   return h;
 }
 
-std::map<std::string, std::vector<JointVector>> readCentroids(const fs::path& path) {
+std::map<std::string, std::vector<JointVector>> readCentroids(const fs::path& path, std::string& retarget_json) {
   std::ifstream in(path);
   if (!in) throw UserError("cannot open " + path.string() + " (run nao_toolchain cluster first)");
   nlohmann::json j;
@@ -116,6 +116,14 @@ std::map<std::string, std::vector<JointVector>> readCentroids(const fs::path& pa
       }
       cs.push_back(v);
     }
+  }
+  // How the clustered reference was retargeted (cluster writes it); kept verbatim for model.bin.
+  retarget_json.clear();
+  if (j.contains("retarget")) {
+    const auto& r = j["retarget"];
+    if (!r.is_object() || !r.contains("priority") || !r["priority"].is_string())
+      throw UserError(where + "\"retarget\" is not an object with a \"priority\" string");
+    retarget_json = r.dump();
   }
   return out;
 }
@@ -168,7 +176,9 @@ PolicyDemo readFeatures(const fs::path& path, int clusters) {
 PolicyData loadPolicyData(const std::string& dir) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw UserError(dir + ": not a directory");
-  const std::map<std::string, std::vector<JointVector>> centroids = readCentroids(fs::path(dir) / "centroids.json");
+  std::string retarget_json;
+  const std::map<std::string, std::vector<JointVector>> centroids =
+      readCentroids(fs::path(dir) / "centroids.json", retarget_json);
   const int clusters = static_cast<int>(centroids.begin()->second.size());
 
   std::vector<fs::path> files;
@@ -189,7 +199,9 @@ PolicyData loadPolicyData(const std::string& dir) {
     demos.push_back(readFeatures(file, clusters));
   }
   try {
-    return makePolicyData(centroids, std::move(demos));
+    PolicyData data = makePolicyData(centroids, std::move(demos));
+    data.retarget_json = retarget_json;
+    return data;
   } catch (const UserError& e) {
     throw UserError(dir + ": " + e.what());
   }

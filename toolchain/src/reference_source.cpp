@@ -34,7 +34,8 @@ Person2d toPerson(const OpenPoseFrame& f) {
 
 }  // namespace
 
-void prepareReference(const ArmModel& arm, ReferenceStream& s, const std::vector<JointVector>& centroids) {
+void prepareReference(const ArmModel& arm, ReferenceStream& s, const std::vector<JointVector>& centroids,
+                      const RetargetParams& retarget) {
   if (s.frames.empty()) throw UserError(s.description + ": no frames");
   if (centroids.empty()) throw UserError(s.description + ": the model has no key poses for " + s.movement);
   // Only frames the controller will see count (a missing tick is a missing human).
@@ -43,6 +44,7 @@ void prepareReference(const ArmModel& arm, ReferenceStream& s, const std::vector
     if (!s.present[i]) seen[i].ok.fill(false);
   RetargetOptions options;
   options.use_ceres = false;  // the runtime's own LM: the online and offline references agree
+  options.params = retarget;
   const HumanArmLengths lengths = estimateHumanArmLengths(seen, options.human);
   if (lengths.n_arm_frames == 0) throw UserError(s.description + ": no frame has a measurable right arm");
   s.human = withDemoScale(options.human, lengths);
@@ -54,23 +56,21 @@ void prepareReference(const ArmModel& arm, ReferenceStream& s, const std::vector
   for (const RetargetRow& r : rows) {
     const bool measured = (r.flags & kRowHumanMissing) == 0;
     t_grid.push_back(r.t_s);
-    s.retargeted.push_back(r.result.q_q);
+    s.retargeted.push_back(r.result.q_r);
     s.measured.push_back(measured);
     if (!measured) continue;
     t_meas.push_back(r.t_s);
-    q_meas.push_back(r.result.q_q);
+    q_meas.push_back(r.result.q_r);
   }
   s.target = featureTrajectory(centroids, t_meas, q_meas, t_grid);
 }
 
 ReferenceStream makeSyntheticReference(const ArmModel& arm, Movement movement, std::uint64_t seed, int index,
-                                       const std::vector<JointVector>& centroids) {
-  return makeDemoReference(arm, movement, kReferenceSeedBase + seed, index, centroids);
+                                       const std::vector<JointVector>& centroids, const RetargetParams& retarget) {
+  return makeDemoReference(arm, movement, kReferenceSeedBase + seed, index, centroids, retarget);
 }
 
-ReferenceStream makeDemoReference(const ArmModel& arm, Movement movement, std::uint64_t run_seed, int index,
-                                  const std::vector<JointVector>& centroids) {
-  const SynthDemo demo = generateDemo(movement, index, run_seed, false);
+Skeleton observeDemo(const SynthDemo& demo, double rate_hz) {
   std::vector<CameraKeypoints> cams(demo.cameras.size());
   for (std::size_t c = 0; c < demo.cameras.size(); ++c) {
     const std::vector<OpenPoseFrame> rendered = renderCamera(demo, static_cast<int>(c));
@@ -83,18 +83,25 @@ ReferenceStream makeDemoReference(const ArmModel& arm, Movement movement, std::u
   }
   TriangulateOptions opt;
   opt.fps = demo.fps;
+  opt.rate_hz = rate_hz;
+  return resampleSkeleton(triangulateCapture(demo.cameras, cams, opt), opt.rate_hz, demo.fps);
+}
+
+ReferenceStream makeDemoReference(const ArmModel& arm, Movement movement, std::uint64_t run_seed, int index,
+                                  const std::vector<JointVector>& centroids, const RetargetParams& retarget) {
+  const SynthDemo demo = generateDemo(movement, index, run_seed, false);
   ReferenceStream s;
   s.movement = kMovementNames[static_cast<std::size_t>(movement)];
   s.description = "synthetic:" + s.movement + " (seed " + std::to_string(run_seed) + ", index " +
                   std::to_string(index) + ")";
-  s.frames = resampleSkeleton(triangulateCapture(demo.cameras, cams, opt), opt.rate_hz, demo.fps);
+  s.frames = observeDemo(demo, s.rate_hz);
   s.present.assign(s.frames.size(), true);
-  prepareReference(arm, s, centroids);
+  prepareReference(arm, s, centroids, retarget);
   return s;
 }
 
 ReferenceStream makeFileReference(const ArmModel& arm, const std::string& path, const std::string& movement,
-                                  const std::vector<JointVector>& centroids) {
+                                  const std::vector<JointVector>& centroids, const RetargetParams& retarget) {
   ReferenceStream s;
   s.movement = movement;
   s.description = "file:" + path;
@@ -107,7 +114,7 @@ ReferenceStream makeFileReference(const ArmModel& arm, const std::string& path, 
                       std::to_string(dt) + " s apart; nao_rt needs a 10 Hz skeleton (triangulate --rate 10)");
   }
   s.present.assign(s.frames.size(), true);
-  prepareReference(arm, s, centroids);
+  prepareReference(arm, s, centroids, retarget);
   return s;
 }
 

@@ -5,6 +5,7 @@
 #include "nao/tools/human_scale.hpp"
 
 #include <fstream>
+#include <string>
 
 namespace nao::tools {
 
@@ -40,6 +41,17 @@ std::vector<RetargetFrame> retargetTargets(const ArmModel& arm, const Skeleton& 
   return targets;
 }
 
+bool sameRetargetSetting(const RetargetParams& a, const RetargetParams& b) {
+  return a.priority == b.priority && a.lambda_q == b.lambda_q && a.posture_weights == b.posture_weights;
+}
+
+nlohmann::json retargetSettingJson(const RetargetParams& params) {
+  return {{"priority", retargetPriorityName(params.priority)},
+          {"lambda_q", params.lambda_q},
+          {"posture_weights", std::vector<double>(params.posture_weights.data(),
+                                                  params.posture_weights.data() + kNumJoints)}};
+}
+
 std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options) {
   std::vector<bool> ok, hand_seen;
   const std::vector<RetargetFrame> targets = retargetTargets(arm, frames, options, ok, hand_seen);
@@ -60,7 +72,7 @@ std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& f
         row.result = previous->result;
       } else {
         // Before the first measurement: the zero pose clamped, so every row stays inside the limits.
-        row.result.q_x = row.result.q_q = clampToLimits(arm, JointVector::Zero());
+        row.result.q_x = row.result.q_q = row.result.q_r = clampToLimits(arm, JointVector::Zero());
         row.result.p_TH_x = row.result.p_TH_q = forwardKinematics(arm, lm.arm, row.result.q_x);
       }
       row.result.flags = 0;
@@ -79,7 +91,7 @@ std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& f
   return rows;
 }
 
-void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& rows) {
+void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& rows, const RetargetParams& params) {
   std::ofstream out(path);
   if (!out) throw UserError("cannot write " + path);
   out.precision(10);
@@ -88,6 +100,9 @@ void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& r
     for (int j = 0; j < kNumJoints; ++j) out << ',' << name << '_' << j;
   out << ",xt_x,xt_y,xt_z,ex_x,ex_y,ex_z,eq_x,eq_y,eq_z,flags";
   for (int j = 0; j < kNumJoints; ++j) out << ",qt_" << j;
+  for (int j = 0; j < kNumJoints; ++j) out << ",qr_" << j;
+  out << ",priority,lambda_q";
+  for (int j = 0; j < kNumJoints; ++j) out << ",pw_" << j;
   out << '\n';
   for (const RetargetRow& r : rows) {
     out << r.t_s;
@@ -97,19 +112,25 @@ void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& r
       out << ',' << v->x() << ',' << v->y() << ',' << v->z();
     out << ',' << r.flags;
     for (int j = 0; j < kNumJoints; ++j) out << ',' << r.target.q_target[j];
+    for (int j = 0; j < kNumJoints; ++j) out << ',' << r.result.q_r[j];
+    out << ',' << static_cast<int>(params.priority) << ',' << params.lambda_q;
+    for (int j = 0; j < kNumJoints; ++j) out << ',' << params.posture_weights[j];
     out << '\n';
   }
   if (!out) throw UserError("error while writing " + path);
 }
 
-std::vector<RetargetRow> readRetargetCsv(const std::string& path) {
+std::vector<RetargetRow> readRetargetCsv(const std::string& path, RetargetParams* setting) {
   CsvReader csv(path, "retarget CSV");
-  const std::size_t c_t = csv.column("t_s"), c_flags = csv.column("flags");
-  std::array<std::size_t, kNumJoints> c_qx, c_qq, c_qt;
+  const std::size_t c_t = csv.column("t_s"), c_flags = csv.column("flags"), c_priority = csv.column("priority"),
+                    c_lambda_q = csv.column("lambda_q");
+  std::array<std::size_t, kNumJoints> c_qx, c_qq, c_qt, c_qr, c_pw;
   for (int j = 0; j < kNumJoints; ++j) {
+    c_pw[j] = csv.column("pw_" + std::to_string(j));
     c_qx[j] = csv.column("qx_" + std::to_string(j));
     c_qq[j] = csv.column("qq_" + std::to_string(j));
     c_qt[j] = csv.column("qt_" + std::to_string(j));
+    c_qr[j] = csv.column("qr_" + std::to_string(j));
   }
   std::array<std::size_t, 9> c_xyz;
   int k = 0;
@@ -124,6 +145,24 @@ std::vector<RetargetRow> readRetargetCsv(const std::string& path) {
       r.result.q_x[j] = csv.number(c_qx[j]);
       r.result.q_q[j] = csv.number(c_qq[j]);
       r.target.q_target[j] = csv.number(c_qt[j]);
+      r.result.q_r[j] = csv.number(c_qr[j]);
+    }
+    // The retargeting setting q_r was made with: the same on every row.
+    RetargetParams row_setting;
+    const double p = csv.number(c_priority);
+    if (p != 0.0 && p != 1.0)
+      throw UserError(path + ": priority must be 0 (hand) or 1 (joints), got " + std::to_string(p));
+    row_setting.priority = p == 0.0 ? RetargetPriority::kHand : RetargetPriority::kJoints;
+    row_setting.lambda_q = csv.number(c_lambda_q);
+    for (int j = 0; j < kNumJoints; ++j) row_setting.posture_weights[j] = csv.number(c_pw[j]);
+    if (rows.empty()) {
+      if (setting != nullptr) {
+        setting->priority = row_setting.priority;
+        setting->lambda_q = row_setting.lambda_q;
+        setting->posture_weights = row_setting.posture_weights;
+      }
+    } else if (setting != nullptr && !sameRetargetSetting(*setting, row_setting)) {
+      throw UserError(path + ": rows retargeted with different settings (priority, lambda_q, pw_*)");
     }
     for (int a = 0; a < 3; ++a) {
       r.target.p_target_TH[a] = csv.number(c_xyz[a]);

@@ -241,6 +241,8 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   pt["blend_pole"] = o.perturb.blend.pole;
   auto& d = j["data"];
   d["fingerprint"] = hex64(r.fingerprint);
+  // nao_rt retargets the live human the same way (runtime/app reads it back).
+  d["retarget"] = data.retarget_json.empty() ? nlohmann::ordered_json() : nlohmann::ordered_json::parse(data.retarget_json);
   d["demos"] = data.demos.size();
   d["train_samples"] = r.train_samples;
   d["val_samples"] = r.val_samples;
@@ -307,6 +309,8 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "| wall time | " << buf << ", single thread |\n\n";
 
   s << "## Data\n\n";
+  s << "- retargeting (the clustered reference q_r, DESIGN section 5): "
+    << (data.retarget_json.empty() ? std::string("not recorded by the data set") : data.retarget_json) << "\n";
   s << "- fingerprint " << hex64(r.fingerprint) << ", movements";
   for (std::size_t m = 0; m < data.movement_names.size(); ++m) s << (m ? ", " : " ") << m << " = " << data.movement_names[m];
   s << "\n- " << data.demos.size() << " demonstrations: " << r.split.train.size() << " training (" << r.train_samples

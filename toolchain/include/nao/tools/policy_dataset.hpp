@@ -32,6 +32,9 @@ struct PolicyData {
   std::vector<std::string> movement_names;          ///< sorted; index = movement index m
   std::vector<std::vector<JointVector>> centroids;  ///< [movement][cluster], rad; K per movement
   std::vector<PolicyDemo> demos;                    ///< sorted by name
+  /// The retargeting setting of the clustered reference (centroids.json "retarget": priority,
+  /// lambda_q, posture_weights) as JSON; empty when the data set does not say.
+  std::string retarget_json;
 
   int movements() const { return static_cast<int>(movement_names.size()); }
   int clusters() const { return centroids.empty() ? 0 : static_cast<int>(centroids.front().size()); }

@@ -7,6 +7,8 @@
 #include "nao/tools/retarget_ceres.hpp"
 #include "nao/tools/skeleton_csv.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -33,7 +35,7 @@ struct RetargetOptions {
 struct RetargetRow {
   double t_s = 0.0;
   RetargetFrame target;   ///< x_target (torso frame, m), q_target (rad), pointing direction
-  RetargetResult result;  ///< q_x, q_q, hands reached, solver flags
+  RetargetResult result;  ///< q_x, q_q, q_r, hands reached, solver flags
   std::uint32_t flags = 0;  ///< RetargetFlags | RetargetRowFlags
 };
 
@@ -49,11 +51,22 @@ std::vector<RetargetFrame> retargetTargets(const ArmModel& arm, const Skeleton& 
 /// was not measured holds the previous solution and is flagged.
 std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options);
 
-/// Header and rows of the retarget CSV. Throws UserError if the file cannot be written.
-void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& rows);
+/// Header and rows of the retarget CSV; `params` holds the setting the rows' q_r was made with
+/// (priority, lambda_q, posture weights: written on every row). Throws UserError if the file
+/// cannot be written.
+void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& rows, const RetargetParams& params);
 
-/// Reads a retarget CSV back (t_s, q_x, q_q, x_target, hands reached, flags, q_target).
-/// Throws UserError naming the file, line and column for a missing column or a bad value.
-std::vector<RetargetRow> readRetargetCsv(const std::string& path);
+/// Reads a retarget CSV back (t_s, q_x, q_q, x_target, hands reached, flags, q_target, q_r) and,
+/// when `setting` is given, writes the retargeting setting of its q_r into it (priority,
+/// lambda_q, posture_weights; other fields untouched). Throws UserError naming the file, line and
+/// column for a missing column or a bad value, or for rows of mixed settings.
+std::vector<RetargetRow> readRetargetCsv(const std::string& path, RetargetParams* setting = nullptr);
+
+/// True when a and b choose q_r the same way (priority, lambda_q, posture weights).
+bool sameRetargetSetting(const RetargetParams& a, const RetargetParams& b);
+
+/// {"priority": "hand"|"joints", "lambda_q": x, "posture_weights": [5]}: the retargeting setting
+/// as centroids.json and model.bin metadata record it (nao_rt applies it: runtime/app).
+nlohmann::json retargetSettingJson(const RetargetParams& params);
 
 }  // namespace nao::tools
