@@ -204,6 +204,37 @@ ValidationSet validationDemos(const std::string& metadata_json, const std::strin
   return v;
 }
 
+RetargetParams modelRetargetSetting(const std::string& metadata_json, const RetargetParams& defaults,
+                                    const std::string& origin) {
+  RetargetParams r = defaults;
+  const nlohmann::json j = nlohmann::json::parse(metadata_json, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object() || !j.contains("data") || !j["data"].is_object() || !j["data"].contains("retarget") ||
+      j["data"]["retarget"].is_null())
+    return r;  // a model that does not say: the default (hand priority)
+  const nlohmann::json& s = j["data"]["retarget"];
+  const std::string bad = origin + ": the model's metadata has an unusable data.retarget ";
+  if (!s.is_object() || !s.contains("priority") || !s["priority"].is_string() ||
+      !parseRetargetPriority(s["priority"].get<std::string>().c_str(), r.priority))
+    throw std::runtime_error(bad + "(priority must be \"hand\" or \"joints\")");
+  if (s.contains("lambda_q")) {
+    if (!s["lambda_q"].is_number() || !(s["lambda_q"].get<double>() >= 0.0) || !std::isfinite(s["lambda_q"].get<double>()))
+      throw std::runtime_error(bad + "(lambda_q must be a finite number >= 0)");
+    r.lambda_q = s["lambda_q"].get<double>();
+  }
+  if (s.contains("posture_weights")) {
+    const nlohmann::json& w = s["posture_weights"];
+    if (!w.is_array() || w.size() != static_cast<std::size_t>(kNumJoints))
+      throw std::runtime_error(bad + "(posture_weights must hold " + std::to_string(kNumJoints) + " numbers)");
+    for (int k = 0; k < kNumJoints; ++k) {
+      const nlohmann::json& x = w[static_cast<std::size_t>(k)];
+      if (!x.is_number() || !(x.get<double>() > 0.0) || !std::isfinite(x.get<double>()))
+        throw std::runtime_error(bad + "(posture_weights must be finite and > 0)");
+      r.posture_weights[k] = x.get<double>();
+    }
+  }
+  return r;
+}
+
 PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   PreparedRun p;
   p.spec = parseReferenceSpec(o.reference, o.movement);
@@ -224,14 +255,17 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
     throw std::runtime_error("--reference none needs an autonomous-mode model; " + p.model_source +
                              " is reference-conditioned (it imitates a reference: use synthetic:M or file:PATH)");
   p.centroids = modelCentroids(p.model, p.movement_index);
+  // The reference is retargeted the way the model's training data was.
+  p.retarget = modelRetargetSetting(h.metadata_json, o.controller.retarget, p.model_source);
 
   std::int64_t default_ticks = 0;
   switch (p.spec.kind) {
     case ReferenceKind::kSynthetic:
-      p.reference = tools::makeSyntheticReference(p.arm, tools::parseMovement(p.spec.movement), o.seed, 0, p.centroids);
+      p.reference = tools::makeSyntheticReference(p.arm, tools::parseMovement(p.spec.movement), o.seed, 0, p.centroids,
+                                                   p.retarget);
       break;
     case ReferenceKind::kFile:
-      p.reference = tools::makeFileReference(p.arm, p.spec.path, p.spec.movement, p.centroids);
+      p.reference = tools::makeFileReference(p.arm, p.spec.path, p.spec.movement, p.centroids, p.retarget);
       break;
     case ReferenceKind::kNone: {
       if (!isSynthMovement(p.spec.movement))
@@ -242,7 +276,7 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
       JointVector s0 = JointVector::Zero();
       double length = 0.0;
       for (int index : p.validation.indices) {
-        p.validation_demos.push_back(tools::makeDemoReference(p.arm, m, p.validation.seed, index, p.centroids));
+        p.validation_demos.push_back(tools::makeDemoReference(p.arm, m, p.validation.seed, index, p.centroids, p.retarget));
         s0 += p.validation_demos.back().target.front();
         length += static_cast<double>(p.validation_demos.back().target.size());
       }
@@ -449,6 +483,10 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
                 {"checksum", hex64(p.model.checksum)},
                 {"conditioning", conditioningName(p.model.header.conditioning)}};
   j["reference"] = p.reference.description;
+  j["retarget"] = {{"priority", retargetPriorityName(p.retarget.priority)},
+                   {"lambda_q", p.retarget.lambda_q},
+                   {"posture_weights", std::vector<double>(p.retarget.posture_weights.data(),
+                                                           p.retarget.posture_weights.data() + kNumJoints)}};
   j["movement"] = p.spec.movement;
   j["seed"] = o.seed;
   j["realtime"] = o.realtime;

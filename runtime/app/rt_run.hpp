@@ -123,6 +123,7 @@ struct PreparedRun {
   ReferenceSpec spec;
   int movement_index = 0;              ///< into model.header.movement_names
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
+  RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
   tools::ReferenceStream reference;    ///< synthetic/file (empty for none)
   ValidationSet validation;            ///< none only
   std::vector<tools::ReferenceStream> validation_demos;  ///< none only
@@ -130,6 +131,12 @@ struct PreparedRun {
   std::int64_t ticks = 0;
   bool has_targets = false;            ///< the reference has a feature-extracted target per tick
 };
+
+/// `defaults` with the retargeting setting a model's metadata records (data.retarget: priority,
+/// lambda_q, posture_weights) applied; unchanged when the metadata has none. Throws
+/// std::runtime_error naming `origin` for a setting that is present but unusable.
+RetargetParams modelRetargetSetting(const std::string& metadata_json, const RetargetParams& defaults,
+                                    const std::string& origin);
 
 /// Configure-time checks and preparation, in the order that fails fastest: reference syntax,
 /// URDF, model (file checks, joints against the URDF, architecture against `compiled_arch`),
@@ -283,7 +290,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     const std::vector<const float*> tensors = policyTensorPointers<Dims>(p);
     const PolicyWeights<Dims> weights =
         bindPolicyWeights<Dims>(tensors.data(), tensors.size(), p.model.header.conditioning);
-    const ControllerModel<Dims> model = configureController(p.arm, weights, options.controller, options.sim);
+    ControllerParams controller_params = options.controller;
+    controller_params.retarget = p.retarget;
+    const ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, options.sim);
     auto data = std::make_unique<ControllerData<Dims>>(model.sim, p.q_start);
     detail::RingHolder<RunRing<Dims>> rings;
     const AttentionDescriptor descriptor = attentionPayloadDescriptor<RunPayload<Dims>>();

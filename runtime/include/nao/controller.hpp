@@ -36,7 +36,8 @@ enum ControllerFault : std::uint32_t {
   kFaultHumanTimeout = 1u << 1,
   /// NaN/Inf among the keypoints the arm needs (also sets kFaultNoHuman).
   kFaultNonFiniteKeypoints = 1u << 2,
-  /// Algorithm 1 hit an iteration cap: the last reference is kept.
+  /// Algorithm 1 hit an iteration cap: the reference is its best feasible pose (see
+  /// kFaultRetargetFallback), never worse than the clamped human angles.
   kFaultIkNotConverged = 1u << 3,
   /// The policy produced a NaN/Inf action: the arm holds its position (a = 0).
   kFaultPolicyNonFinite = 1u << 4,
@@ -44,11 +45,14 @@ enum ControllerFault : std::uint32_t {
   kFaultOverrun = 1u << 5,
   /// Informational: the command was cut to the position or velocity limits.
   kFaultCommandLimited = 1u << 6,
+  /// The retargeting solve put the hand farther from its target than the clamped human angles
+  /// do: the reference is the clamped human angles this tick (retarget.hpp, kRetargetFallback).
+  kFaultRetargetFallback = 1u << 7,
 };
-inline constexpr int kNumControllerFaults = 7;
+inline constexpr int kNumControllerFaults = 8;
 inline constexpr std::array<const char*, kNumControllerFaults> kControllerFaultNames = {
     "no_human", "human_timeout", "nonfinite_keypoints", "ik_not_converged", "policy_nonfinite", "overrun",
-    "command_limited"};
+    "command_limited", "retarget_fallback"};
 
 /// Injected monotonic clock (STYLE 6): the real one reads CLOCK_MONOTONIC, tests drive time.
 struct ControllerClock {
@@ -79,7 +83,7 @@ struct ControllerParams {
 struct TickRecord {
   std::int64_t tick = 0;
   double t_s = 0.0;                    ///< tick start time on the grid
-  JointVector q_ref = JointVector::Zero();   ///< retargeted reference (q_q of Algorithm 1)
+  JointVector q_ref = JointVector::Zero();   ///< retargeted reference (q_r of Algorithm 1)
   JointVector r = JointVector::Zero();       ///< snapped key pose fed to the policy
   JointVector a = JointVector::Zero();       ///< policy action a_t (0 when bypassed)
   JointVector q_cmd = JointVector::Zero();   ///< command sent to the servos
@@ -194,13 +198,18 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
                                                                                data.human.p_SH_T);
       const JointVector q_target = data.human.q.template head<kNumJoints>();
       const RetargetResult& r = solveRetarget(model.arm, p.retarget, data.retarget, p_target, q_target);
-      constexpr std::uint32_t kCaps = kRetargetXCapHit | kRetargetQCapHit | kRetargetInnerCapHit;
-      if (r.flags & kCaps)
-        rec.fault |= kFaultIkNotConverged;
-      else if (r.flags & kRetargetBadInput)
+      // The caps of the solve that made q_r.
+      const std::uint32_t kCaps = p.retarget.priority == RetargetPriority::kHand
+                                      ? std::uint32_t{kRetargetXCapHit}
+                                      : std::uint32_t{kRetargetQCapHit | kRetargetInnerCapHit};
+      if (r.flags & kRetargetBadInput) {
         have_human = false;
-      else
-        data.q_ref = r.q_q;
+      } else {
+        // A capped solve still gives the best feasible pose (q_r never does worse than clamping).
+        if (r.flags & kCaps) rec.fault |= kFaultIkNotConverged;
+        if (r.flags & kRetargetFallback) rec.fault |= kFaultRetargetFallback;
+        data.q_ref = r.q_r;
+      }
     }
     if (have_human) {
       data.last_human_tick = data.tick;
