@@ -79,38 +79,57 @@ std::vector<RetargetFrame> trajectoryFrames(const ArmModel& m, std::mt19937_64& 
   return frames;
 }
 
+// The solver's own precision is tested with the posture nearly free (mu 1e-6 m^2/rad^2: 1 rad for
+// 1 mm). The default price (3e-5) trades a fraction of a millimetre of reach for a calm posture
+// at the rim of the workspace (retarget.hpp); those tests say so where they use it.
+RetargetParams reachParams() {
+  RetargetParams p;
+  p.mu = 1e-6;
+  return p;
+}
+
 bool insideLimits(const ArmModel& m, const JointVector& q) {
   return (q.array() >= m.q_min.array()).all() && (q.array() <= m.q_max.array()).all();
 }
 
 }  // namespace
 
-TEST_CASE("q_x reaches every target of 20 warm-started smooth trajectories within 1 mm") {
+TEST_CASE("q_x reaches every target of 20 warm-started smooth trajectories within 1 mm (posture nearly free); the default price costs a median < 1 mm") {
   const ArmModel& m = arm();
-  const RetargetParams params;
+  const RetargetParams params = reachParams(), defaults;
   std::mt19937_64 rng(101);
   double worst = 0.0;
   int n_frames = 0, n_flagged_x = 0;
+  std::vector<double> miss_default;
   for (int traj = 0; traj < 20; ++traj) {
-    RetargetData data;
+    RetargetData data, data_default;
     for (const RetargetFrame& f : trajectoryFrames(m, rng, 100, false)) {
       const RetargetResult& r = solveRetarget(m, params, data, f.p_target_TH, f.q_target);
       worst = std::max(worst, r.error_x_m);
       n_flagged_x += (r.flags & (kRetargetXCapHit | kRetargetXUnreachable)) != 0;
+      miss_default.push_back(solveRetarget(m, defaults, data_default, f.p_target_TH, f.q_target).error_x_m);
       ++n_frames;
     }
   }
-  MESSAGE("largest q_x hand error over " << n_frames << " frames: " << worst * 1e3 << " mm");
+  std::sort(miss_default.begin(), miss_default.end());
+  const double median_default = miss_default[miss_default.size() / 2];
+  MESSAGE("largest q_x hand error over " << n_frames << " frames: " << worst * 1e3 << " mm (mu " << params.mu
+                                         << "); with the default mu " << defaults.mu << ": median "
+                                         << median_default * 1e3 << " mm, largest " << miss_default.back() * 1e3 << " mm");
   CHECK_MESSAGE(worst < 1e-3, "expected every hand error < 1 mm, got a largest error of " << worst * 1e3 << " mm");
   CHECK_MESSAGE(n_flagged_x == 0, "expected no q_x cap/unreachable flags, got " << n_flagged_x);
+  // These trajectories pull the posture hard (joint targets up to ~1 rad off the hand's pose).
+  CHECK_MESSAGE(median_default < 1e-3, "expected the default posture price to cost a median < 1 mm of reach, got "
+                                           << median_default * 1e3 << " mm");
 }
 
 TEST_CASE("q_x reaches a reachable target from an unrelated random start in at least 85 % of 2000 cases") {
   // Far starts (a random pose to another random pose) can end in a local minimum against a
   // joint limit: measured 88.5 % success with this seed; the bound guards against regressions.
   // The warm-started case above is the one the runtime depends on and is asserted fully.
+  // The anchor is the random start, radians from the answer: posture nearly free here.
   const ArmModel& m = arm();
-  const RetargetParams params;
+  const RetargetParams params = reachParams();
   RetargetData data;
   ArmData d;
   std::mt19937_64 rng(202);
@@ -200,9 +219,10 @@ TEST_CASE("retarget keeps every output joint inside its URDF limits, also for un
 TEST_CASE("joint priority lands on its fixed point lambda_q (x(q_q) - x_target) = J (q_goal - q_q) on 20 trajectories") {
   // The outer loop's fixed point (retarget.hpp): the hand pulled from x_target toward where the
   // clamped human angles put it, priced by lambda_q. Checked on the solution itself, independent
-  // of how the loop got there; the IK's own miss (mu, ~1e-5 m) bounds the residual.
+  // of how the loop got there. The equation is the mu -> 0 limit: with the posture nearly free
+  // (mu 1e-6) the IK's own miss (~1e-5 m) bounds the residual.
   const ArmModel& m = arm();
-  const RetargetParams params;
+  const RetargetParams params = reachParams();
   std::mt19937_64 rng(505);
   ArmData d;
   double worst_residual = 0.0, sum_ratio = 0.0, sum_dq = 0.0;
@@ -256,7 +276,7 @@ TEST_CASE("joint priority on a known case: a hand target d off the joint target'
   ArmData d;
   const Eigen::Vector3d p_goal = forwardKinematics(m, d, q_goal);
   for (double lambda : {0.25, 1.0, 4.0}) {
-    RetargetParams params;
+    RetargetParams params = reachParams();  // the first-order answer is the mu -> 0 limit
     params.lambda_q = lambda;
     for (const Eigen::Vector3d& dir : {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(0, 0.6, 0.8)}) {
       const Eigen::Vector3d offset = 0.01 * dir;

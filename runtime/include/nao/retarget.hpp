@@ -40,9 +40,15 @@
 // space), so both solvers converge to the same point. The anchor is the human's joint angles
 // (clamped), not the solve's start (the paper's q-dot^T q-dot): with the start as anchor the
 // null space is neutral, so q_x wandered by radians over a trajectory, amplifying 1e-8 solver
-// differences to 1e-3..1 rad. Price of mu on reach: the hand misses a reachable target by about
-// mu |q - q_anchor| / sigma_min(J); with mu = 1e-6 m^2/rad^2 that is ~1e-5 m for a 1 rad
-// posture difference at sigma_min ~ 0.05 m/rad (tests: < 1 mm on every warm-started frame).
+// differences to 1e-3..1 rad. mu is a price, not an infinitesimal: 1 rad of posture is worth
+// sqrt(mu) of hand error. With mu = 1e-6 m^2/rad^2 (1 rad for 1 mm), targets at the rim of the
+// workspace (the human's arm straight, NAO's elbow on its 2 deg limit) were reached by twisting
+// ElbowYaw/WristYaw 0.5-1.2 rad for one frame to gain 1-2 mm of reach: on held-out whole-arm
+// demos 65 % of 10 Hz steps of q_r moved a joint > 0.3 rad (the clamped human angles 32 %).
+// mu = 3e-5 (1 rad for 5.5 mm) measured (nao_toolchain gap, 8 held-out demos per movement):
+// median hand miss 0.06-0.49 mm, >= 98 % of reachable frames within 1 cm, p99 step 0.88-1.08 rad
+// (clamp 0.83-0.87). Near a singular direction the hand gives way by about
+// mu / (sigma^2 + mu) of the posture pull along it (sigma ~ 0.05 m/rad away from the rim: ~1 %).
 //
 // Fallback: the clamped human angles are always a feasible pose. A solve whose pose puts the hand
 // farther from x_target than they do (a capped or failed solve) would be worse than clamping on
@@ -98,7 +104,7 @@ struct RetargetParams {
   double lambda_q = 0.25;
   double eta_q = 1.0;       ///< outer-loop rate (paper eta_q), 0 < eta_q <= 1
   double max_outer_step_m = 0.02;  ///< cap on the hand target's move per outer iteration, m
-  double mu = 1e-6;         ///< displacement weight of each IK solve, m^2/rad^2
+  double mu = 3e-5;         ///< displacement weight of each IK solve (price of posture), m^2/rad^2
   /// Per-joint weights w_j of the posture term (which of the human's joints the null space keeps
   /// nearest), dimensionless, > 0; all 1 = the plain Euclidean distance in joint space.
   JointVector posture_weights = JointVector::Ones();
