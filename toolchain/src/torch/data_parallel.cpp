@@ -7,6 +7,7 @@
 #include <torch/csrc/distributed/c10d/TCPStore.hpp>
 
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 
 namespace nao::tools {
@@ -87,8 +88,10 @@ ProcessGroup::ProcessGroup(const DistOptions& o) : impl_(std::make_unique<Impl>(
   } catch (const UserError&) {
     throw;
   } catch (const std::exception& e) {
-    throw UserError("rendezvous failed (" + where_ + ", timeout " + std::to_string(o.timeout_s) +
-                    " s; are all ranks started with the same --world-size and --rendezvous?): " + message(e));
+    char timeout_text[32];
+    std::snprintf(timeout_text, sizeof timeout_text, "%g s", o.timeout_s);
+    throw UserError("rendezvous failed (" + where_ + ", timeout " + timeout_text +
+                    "; are all ranks started with the same --world-size and --rendezvous?): " + message(e));
   }
 }
 
