@@ -356,6 +356,24 @@ TEST_CASE("a stopped rank ends the other rank with an error after the timeout") 
   MESSAGE("rank 0 after the stop (" << after << " s): " << rank0.error);
 }
 
+TEST_CASE("ranks started with different options refuse to train, every one with the reason") {
+  torch::set_num_threads(1);
+  const TempDir tmp;
+  const std::string& dir = tmp.path;
+  const std::vector<RankExit> exits = runRanks(2, dir, [&](int r) {
+    TrainOptions o = smallOptions(5, 1);
+    if (r == 1) o.lr = 2e-3;
+    o.dist = dist(2, r, dir);
+    trainPolicy(smallData(), o, nullptr);
+  });
+  for (int r = 0; r < 2; ++r) {
+    const RankExit& x = exits[static_cast<std::size_t>(r)];
+    CHECK(x.exited);
+    CHECK(x.code == 1);
+    CHECK_MESSAGE(x.error.find("the ranks' options and data differ") != std::string::npos, "rank " << r << ": " << x.error);
+  }
+}
+
 TEST_CASE("a rank whose peers never come fails the rendezvous with an error after the timeout") {
   torch::set_num_threads(1);
   const TempDir tmp;

@@ -1,5 +1,6 @@
 #include "data_parallel.hpp"
 
+#include "nao/model_file.hpp"
 #include "nao/tools/command.hpp"
 
 #include <torch/csrc/distributed/c10d/FileStore.hpp>
@@ -134,16 +135,17 @@ void ProcessGroup::sumGradients(const std::vector<torch::Tensor>& params) {
 }
 
 void ProcessGroup::checkInSync(const std::vector<torch::Tensor>& params) {
-  // FNV-1a over the parameters' bytes.
-  std::uint64_t h = 0xcbf29ce484222325ull;
+  std::uint64_t h = fnv1a64(nullptr, 0);
   for (const torch::Tensor& p : params) {
     const torch::Tensor c = p.detach().contiguous();
-    const auto* bytes = static_cast<const unsigned char*>(c.data_ptr());
-    const std::size_t n = static_cast<std::size_t>(c.numel()) * c.element_size();
-    for (std::size_t i = 0; i < n; ++i) h = (h ^ bytes[i]) * 0x100000001b3ull;
+    h = fnv1a64(static_cast<const std::uint8_t*>(c.data_ptr()), static_cast<std::size_t>(c.numel()) * c.element_size(), h);
   }
+  checkSame(h, "weights");
+}
+
+void ProcessGroup::checkSame(std::uint64_t value, const char* what) {
   std::int64_t mine = 0;
-  std::memcpy(&mine, &h, sizeof mine);
+  std::memcpy(&mine, &value, sizeof mine);
   torch::Tensor lo = torch::full({1}, mine, torch::kInt64), hi = lo.clone();
   try {
     std::vector<torch::Tensor> a{lo}, b{hi};
@@ -153,12 +155,12 @@ void ProcessGroup::checkInSync(const std::vector<torch::Tensor>& params) {
     impl_->group->allreduce(a, min_op)->wait();
     impl_->group->allreduce(b, max_op)->wait();
   } catch (const std::exception& e) {
-    throw UserError("all-reduce of the weight hashes failed (" + where_ +
+    throw UserError(std::string("all-reduce of the ") + what + " hashes failed (" + where_ +
                     "): another rank died, stopped or timed out: " + message(e));
   }
   if (lo.item<std::int64_t>() != hi.item<std::int64_t>())
-    throw UserError("the ranks' weights differ (" + where_ +
-                    "): ranks must run the same build, data and options");
+    throw UserError(std::string("the ranks' ") + what + " differ (" + where_ +
+                    "): every rank must run the same build with the same data and options");
 }
 
 }  // namespace nao::tools

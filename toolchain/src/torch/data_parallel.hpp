@@ -52,8 +52,11 @@ class ProcessGroup {
   /// Undefined gradients count as zeros.
   void sumGradients(const std::vector<torch::Tensor>& params);
 
-  /// Throws UserError unless every rank holds bit-identical `params` (a hash compared with
-  /// MIN/MAX all-reduces): the ranks must stay in lock step.
+  /// Throws UserError naming `what` unless every rank passes the same `value` (MIN and MAX
+  /// all-reduces): ranks that disagree on options, data or weights must not go on.
+  void checkSame(std::uint64_t value, const char* what);
+
+  /// checkSame of a hash of the bytes of `params`: the ranks must stay in lock step.
   void checkInSync(const std::vector<torch::Tensor>& params);
 
  private:

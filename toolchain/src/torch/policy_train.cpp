@@ -7,8 +7,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <memory>
 #include <limits>
+#include <memory>
 #include <ostream>
 #include <sstream>
 
@@ -289,7 +289,15 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
 
   // The group joins after the cheap checks and the data: a bad option fails alone, at once.
   std::unique_ptr<ProcessGroup> group;
-  if (o.dist.world_size > 1) group = std::make_unique<ProcessGroup>(o.dist);
+  if (o.dist.world_size > 1) {
+    group = std::make_unique<ProcessGroup>(o.dist);
+    // Ranks that disagree would call different collectives: refuse before the first batch.
+    group->checkSame(fnv1a64(reinterpret_cast<const std::uint8_t*>(key.data()), key.size(),
+                             fnv1a64(reinterpret_cast<const std::uint8_t*>(&res.train_samples),
+                                     sizeof res.train_samples)),
+                     "options and data");
+    group->checkInSync(params);
+  }
   const int rank = o.dist.rank;
   const bool live = progress && o.live_progress;
 
