@@ -153,7 +153,8 @@ void writeCheckpoint(const std::string& path, const std::string& key, const std:
   torch::serialize::OutputArchive p, b, adam;
   for (std::size_t i = 0; i < params.size(); ++i) {
     p.write(std::to_string(i), params[i].detach());
-    b.write(std::to_string(i), best[i]);
+    // No best yet only if every validation loss was NaN: the current weights stand in.
+    b.write(std::to_string(i), i < best.size() ? best[i] : params[i].detach());
   }
   archive.write("params", p);
   archive.write("best", b);
@@ -513,12 +514,16 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs << ", patience " << o.patience
     << "), best " << r.best_epoch << " (exported) |\n";
-  std::snprintf(buf, sizeof buf, "%.1f s (%.2f s per epoch)", r.seconds,
-                r.history.empty() ? 0.0 : r.seconds / static_cast<double>(r.history.size()));
-  s << "| wall time | " << buf << (r.resumed_after > 0 ? ", this run (resumed after epoch " +
-                                                              std::to_string(r.resumed_after) + ")"
-                                                        : std::string())
-    << " |\n";
+  if (r.resumed_after == 0) {
+    std::snprintf(buf, sizeof buf, "%.1f s (%.2f s per epoch)", r.seconds,
+                  r.history.empty() ? 0.0 : r.seconds / static_cast<double>(r.history.size()));
+  } else {
+    double epoch_s = 0.0;
+    for (const EpochStats& e : r.history) epoch_s += e.seconds;
+    std::snprintf(buf, sizeof buf, "%.1f s this run, resumed after epoch %d (%.2f s per epoch, all runs)", r.seconds,
+                  r.resumed_after, epoch_s / static_cast<double>(r.history.size()));
+  }
+  s << "| wall time | " << buf << " |\n";
   s << "| parallelism | world size " << r.world_size << " (data-parallel, Gloo all-reduce), " << r.threads_per_rank
     << " thread" << (r.threads_per_rank == 1 ? "" : "s") << " per rank |\n";
   std::snprintf(buf, sizeof buf, "%.0f training samples/s, %.0f per rank (epoch wall time, validation included)",
