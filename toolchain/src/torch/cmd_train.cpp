@@ -5,6 +5,8 @@
 #include "nao/tools/policy_dataset.hpp"
 #include "policy_train.hpp"
 
+#include <unistd.h>
+
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -16,9 +18,10 @@ namespace {
 
 struct TrainArgs {
   std::string config = "paper", out, data, conditioning = "reference", urdf = NAO_DEFAULT_URDF, card;
+  std::string rendezvous, interface, checkpoint, resume;
   std::uint64_t seed = 1;
-  int epochs = 200, patience = 10, batch = 32;
-  double val_fraction = 0.2, lr = 6e-5, perturb_fraction = 0.5;
+  int epochs = 200, patience = 10, batch = 32, world_size = 1, rank = 0, max_batches = 0;
+  double val_fraction = 0.2, lr = 6e-5, perturb_fraction = 0.5, timeout = 300;
 };
 
 // The process's own argv (Linux), shell-quoted where needed; empty if unavailable.
@@ -68,6 +71,20 @@ void run(const TrainArgs& a) {
   o.batch = a.batch;
   o.lr = a.lr;
   o.perturb.fraction = a.perturb_fraction;
+  o.dist.world_size = a.world_size;
+  o.dist.rank = a.rank;
+  o.dist.rendezvous = a.rendezvous;
+  o.dist.interface = a.interface;
+  o.dist.timeout_s = a.timeout;
+  o.checkpoint = a.checkpoint;
+  o.resume = a.resume;
+  o.max_batches = a.max_batches;
+  o.live_progress = isatty(fileno(stdout)) != 0;
+  if (a.rank >= a.world_size)
+    throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
+  if (a.world_size > 1 && a.rendezvous.empty())
+    throw UserError("--world-size " + std::to_string(a.world_size) + " needs --rendezvous tcp://HOST:PORT or file://PATH");
+  const bool writer = a.rank == 0;  // rank 0 writes the model, the card and the checkpoints
 
   // The URDF first: a bad path should fail before minutes of training.
   std::vector<TrainedJoint> joints;
@@ -77,6 +94,15 @@ void run(const TrainArgs& a) {
     throw UserError(e.what());
   }
 
+  if (a.world_size > 1)
+    std::printf("train: rank %d of %d, rendezvous %s\n", a.rank, a.world_size, a.rendezvous.c_str());
+  if (!writer) {
+    // The other ranks train and check, quietly; rank 0 reports and writes.
+    std::fflush(stdout);
+    const TrainResult r = trainPolicy(data, o, nullptr);
+    std::printf("train: rank %d done after %zu epochs (rank 0 writes %s)\n", a.rank, r.history.size(), a.out.c_str());
+    return;
+  }
   std::printf("train: %s, %s conditioning, seed %llu; data %s: %zu demos, movements", a.config.c_str(),
               a.conditioning.c_str(), static_cast<unsigned long long>(a.seed), hex64(dataFingerprint(data)).c_str(),
               data.demos.size());
@@ -115,7 +141,12 @@ void setup(CLI::App& app) {
       "Trains the body-part Transformer policy (docs/policy.md) on a clustered data set: DATA/centroids.json\n"
       "and DATA/<movement>_<index>/features.csv (nao_toolchain cluster). Split by demonstration, normalisation\n"
       "from the training split, Adam, early stopping on the validation loss (the best weights are exported).\n"
-      "Single-threaded and seeded: two equal runs write byte-identical model.bin files.");
+      "One thread per process and seeded: two equal runs write byte-identical model.bin files.\n"
+      "Data-parallel over libtorch's c10d Gloo process group (docs/training.md): start the same command\n"
+      "once per rank with --world-size N --rank R --rendezvous URL (toolchain/nao train --procs N does it\n"
+      "on one machine); each rank takes a slice of every global batch of --batch samples, the gradients\n"
+      "are summed by all-reduce, rank 0 writes the model, the card and the checkpoints. Bit-identical for\n"
+      "a fixed world size and seed; world size 1 (the default) is the single-process trainer.");
   cmd->add_option("--config", args->config, "Architecture: paper (4+4 layers, d_model 128) or small (tests)")
       ->check(CLI::IsMember({"paper", "small"}))
       ->capture_default_str();
@@ -146,6 +177,33 @@ void setup(CLI::App& app) {
       ->check(CLI::ExistingFile)
       ->capture_default_str();
   cmd->add_option("--card", args->card, "Also write a Markdown model card here");
+  cmd->add_option("--world-size", args->world_size, "Ranks training together (data-parallel); 1: this process alone")
+      ->check(CLI::Range(1, 4096))
+      ->capture_default_str();
+  cmd->add_option("--rank", args->rank, "This process's rank, 0..world-size-1 (rank 0 writes the outputs)")
+      ->check(CLI::Range(0, 4095))
+      ->capture_default_str();
+  cmd->add_option("--rendezvous", args->rendezvous,
+                  "Where the ranks meet: tcp://HOST:PORT (rank 0 listens there; the others connect) or "
+                  "file://PATH (a fresh file every rank can reach, e.g. on a shared disk)");
+  cmd->add_option("--interface", args->interface,
+                  "Network interface for Gloo's connections (e.g. eth0); default: loopback for file:// and "
+                  "tcp://127.0.0.1, else the address the host name resolves to");
+  cmd->add_option("--timeout", args->timeout,
+                  "Seconds a rank waits for the rendezvous or any exchange before it gives up with an error "
+                  "(a dead or stuck rank ends every rank)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--checkpoint", args->checkpoint,
+                  "Write the training state here after every epoch (rank 0; replaced atomically)");
+  cmd->add_option("--resume", args->resume,
+                  "Continue from this checkpoint (same data and options; any world size; --epochs and "
+                  "--patience may change)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--max-batches", args->max_batches,
+                  "Stop every epoch after this many global batches (timing runs; recorded in the model)")
+      ->check(CLI::Range(0, 1 << 30))
+      ->capture_default_str();
   cmd->callback([args] { run(*args); });
 }
 

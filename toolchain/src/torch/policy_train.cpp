@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <memory>
 #include <ostream>
 #include <sstream>
 
@@ -60,23 +61,39 @@ PolicyBatch rows(const PolicyBatch& b, const torch::Tensor& index) {
           b.movement.index_select(0, index), b.step.index_select(0, index)};
 }
 
-SplitLoss evaluate(const PolicyNet& net, const SampleTensors& t) {
+// Sums of the squared normalised and rad errors over samples [begin, end) (chunks of 4096).
+std::pair<double, double> errorSums(const PolicyNet& net, const SampleTensors& t, std::int64_t begin, std::int64_t end) {
   torch::NoGradGuard no_grad;
-  SplitLoss loss;
-  if (t.size == 0) return loss;
   const std::int64_t chunk = 4096;
   double sum_n = 0.0, sum_rad2 = 0.0;
-  for (std::int64_t b = 0; b < t.size; b += chunk) {
-    const std::int64_t e = std::min(b + chunk, t.size);
+  for (std::int64_t b = begin; b < end; b += chunk) {
+    const std::int64_t e = std::min(b + chunk, end);
     const PolicyBatch in{t.in.qn.slice(0, b, e), t.in.an.slice(0, b, e), t.in.rn.slice(0, b, e),
                          t.in.movement.slice(0, b, e), t.in.step.slice(0, b, e)};
     const torch::Tensor err = net->forward(in) - t.target.slice(0, b, e);
     sum_n += err.square().sum().item<double>();
     sum_rad2 += (err * net->a_std).square().sum().item<double>();
   }
+  return {sum_n, sum_rad2};
+}
+
+// Loss over all of `t`; with a group each rank evaluates its shard and the sums are all-reduced.
+SplitLoss evaluate(const PolicyNet& net, const SampleTensors& t, ProcessGroup* group = nullptr) {
+  SplitLoss loss;
+  if (t.size == 0) return loss;
+  std::pair<double, double> sums;
+  if (group) {
+    const auto [begin, end] = shardRange(t.size, group->worldSize(), group->rank());
+    const std::pair<double, double> mine = errorSums(net, t, begin, end);
+    torch::Tensor both = torch::tensor({mine.first, mine.second}, torch::kFloat64);
+    group->sum(both, "validation sums");
+    sums = {both[0].item<double>(), both[1].item<double>()};
+  } else {
+    sums = errorSums(net, t, 0, t.size);
+  }
   const double count = static_cast<double>(t.size) * kNumJoints;
-  loss.normalised = sum_n / count;
-  loss.mse_rad2 = sum_rad2 / count;
+  loss.normalised = sums.first / count;
+  loss.mse_rad2 = sums.second / count;
   return loss;
 }
 
@@ -106,6 +123,115 @@ void check(const PolicyData& data, const TrainOptions& o) {
   if (!(o.lr > 0.0)) throw UserError("learning rate must be positive");
 }
 
+// Checkpoints (torch archives): the trainable parameters in manifest order, Adam's state, the
+// best weights so far, the history, and a key of everything that makes the run what it is
+// except the world size, the epoch cap and the patience (those may change on resume).
+std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
+  std::ostringstream k;
+  k.precision(17);
+  k << "nao-rt checkpoint 1; data " << hex64(fingerprint) << "; config " << o.config_name << " "
+    << parameterCount(o.arch) << "; " << conditioningName(o.conditioning) << "; seed " << o.seed << "; val "
+    << o.val_fraction << "; batch " << o.batch << "; lr " << o.lr << "; perturb " << o.perturb.fraction << " "
+    << o.perturb.a_ratio << " " << o.perturb.blend.pole;
+  for (double q : o.perturb.q_std_rad) k << " " << q;
+  k << "; batches " << o.max_batches;
+  return k.str();
+}
+
+struct Checkpoint {
+  std::vector<torch::Tensor> best;
+  double best_val = 0.0;
+  int best_epoch = 0;
+  std::vector<EpochStats> history;
+};
+
+void writeCheckpoint(const std::string& path, const std::string& key, const std::vector<torch::Tensor>& params,
+                     torch::optim::Adam& optimiser, const std::vector<torch::Tensor>& best, double best_val,
+                     int best_epoch, const std::vector<EpochStats>& history) {
+  torch::serialize::OutputArchive archive;
+  archive.write("key", c10::IValue(key));
+  torch::serialize::OutputArchive p, b, adam;
+  for (std::size_t i = 0; i < params.size(); ++i) {
+    p.write(std::to_string(i), params[i].detach());
+    // No best yet only if every validation loss was NaN: the current weights stand in.
+    b.write(std::to_string(i), i < best.size() ? best[i] : params[i].detach());
+  }
+  archive.write("params", p);
+  archive.write("best", b);
+  optimiser.save(adam);
+  archive.write("adam", adam);
+  archive.write("best_val", c10::IValue(best_val));
+  archive.write("best_epoch", c10::IValue(static_cast<std::int64_t>(best_epoch)));
+  torch::Tensor h = torch::empty({static_cast<std::int64_t>(history.size()), 6}, torch::kFloat64);
+  for (std::size_t i = 0; i < history.size(); ++i) {
+    const EpochStats& e = history[i];
+    const double row[6] = {static_cast<double>(e.epoch), e.train_loss, e.val_loss, e.val_mse_rad2, e.seconds,
+                           static_cast<double>(e.samples)};
+    for (std::int64_t c = 0; c < 6; ++c) h[static_cast<std::int64_t>(i)][c] = row[c];
+  }
+  archive.write("history", h);
+  // Written aside and renamed: a run killed while saving leaves the previous checkpoint whole.
+  const std::string tmp = path + ".tmp";
+  try {
+    archive.save_to(tmp);
+  } catch (const std::exception& e) {
+    throw UserError("cannot write the checkpoint " + tmp + ": " + e.what());
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) throw UserError("cannot rename " + tmp + " to " + path);
+}
+
+Checkpoint readCheckpoint(const std::string& path, const std::string& key, std::vector<torch::Tensor>& params,
+                          torch::optim::Adam& optimiser) {
+  Checkpoint ck;
+  try {
+    torch::serialize::InputArchive archive;
+    archive.load_from(path);
+    c10::IValue v;
+    archive.read("key", v);
+    if (v.toStringRef() != key)
+      throw UserError("checkpoint " + path + " belongs to another run: it has '" + v.toStringRef() + "', this run '" +
+                      key + "'");
+    torch::serialize::InputArchive p, b, adam;
+    archive.read("params", p);
+    archive.read("best", b);
+    torch::NoGradGuard no_grad;
+    for (std::size_t i = 0; i < params.size(); ++i) {
+      torch::Tensor t, u;
+      p.read(std::to_string(i), t);
+      b.read(std::to_string(i), u);
+      params[i].copy_(t);
+      ck.best.push_back(u);
+    }
+    archive.read("adam", adam);
+    optimiser.load(adam);
+    archive.read("best_val", v);
+    ck.best_val = v.toDouble();
+    archive.read("best_epoch", v);
+    ck.best_epoch = static_cast<int>(v.toInt());
+    torch::Tensor h;
+    archive.read("history", h);
+    for (std::int64_t i = 0; i < h.size(0); ++i) {
+      EpochStats e;
+      e.epoch = static_cast<int>(h[i][0].item<double>());
+      e.train_loss = h[i][1].item<double>();
+      e.val_loss = h[i][2].item<double>();
+      e.val_mse_rad2 = h[i][3].item<double>();
+      e.seconds = h[i][4].item<double>();
+      e.samples = static_cast<std::size_t>(h[i][5].item<double>());
+      ck.history.push_back(e);
+    }
+  } catch (const UserError&) {
+    throw;
+  } catch (const c10::Error& e) {
+    throw UserError("cannot read the checkpoint " + path + ": " + e.what_without_backtrace());
+  } catch (const std::exception& e) {
+    throw UserError("cannot read the checkpoint " + path + ": " + e.what());
+  }
+  if (ck.history.empty() || ck.best.size() != params.size())
+    throw UserError("checkpoint " + path + " holds no finished epoch");
+  return ck;
+}
+
 }  // namespace
 
 SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySample>& samples) {
@@ -119,8 +245,12 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
   torch::set_num_threads(1);
   at::globalContext().setDeterministicAlgorithms(true, false);
   torch::manual_seed(o.seed);
+  // Ranks > 0 say nothing: rank 0 speaks for the group.
+  if (o.dist.rank != 0) progress = nullptr;
 
   TrainResult res;
+  res.world_size = o.dist.world_size;
+  res.threads_per_rank = torch::get_num_threads();
   res.fingerprint = dataFingerprint(data);
   res.split = splitByDemonstration(data, o.val_fraction, o.seed);
   if (res.split.val.empty())
@@ -145,33 +275,99 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
   std::vector<torch::Tensor> best;
   double best_val = std::numeric_limits<double>::infinity();
   double epoch_seconds_sum = 0.0;
+  int first_epoch = 1;
+  const std::string key = checkpointKey(o, res.fingerprint);
+  if (!o.resume.empty()) {
+    Checkpoint ck = readCheckpoint(o.resume, key, params, optimiser);
+    best = std::move(ck.best);
+    best_val = ck.best_val;
+    res.best_epoch = ck.best_epoch;
+    res.history = std::move(ck.history);
+    for (const EpochStats& e : res.history) epoch_seconds_sum += e.seconds;
+    first_epoch = static_cast<int>(res.history.size()) + 1;
+    res.resumed_after = first_epoch - 1;
+  }
 
-  for (int epoch = 1; epoch <= o.max_epochs; ++epoch) {
+  // The group joins after the cheap checks and the data: a bad option fails alone, at once.
+  std::unique_ptr<ProcessGroup> group;
+  if (o.dist.world_size > 1) {
+    group = std::make_unique<ProcessGroup>(o.dist);
+    // Ranks that disagree would call different collectives: refuse before the first batch.
+    group->checkSame(fnv1a64(reinterpret_cast<const std::uint8_t*>(key.data()), key.size(),
+                             fnv1a64(reinterpret_cast<const std::uint8_t*>(&res.train_samples),
+                                     sizeof res.train_samples)),
+                     "options and data");
+    group->checkInSync(params);
+  }
+  const int rank = o.dist.rank;
+  const bool live = progress && o.live_progress;
+
+  const bool done_before = !res.history.empty() && (res.history.back().epoch - res.best_epoch >= o.patience ||
+                                                     res.history.back().epoch >= o.max_epochs);
+  for (int epoch = first_epoch; epoch <= o.max_epochs && !done_before; ++epoch) {
     const Clock::time_point t_epoch = Clock::now();
     net->train();
     // Off-trajectory states for this epoch: one stream per (seed, epoch), fresh every epoch.
     if (o.perturb.fraction > 0.0)
       train = toTensors(net, perturbSamples(train_samples, o.perturb,
                                             o.seed * 0xbf58476d1ce4e5b9ull + static_cast<std::uint64_t>(epoch)));
-    // Batch order: one stream per (seed, epoch), independent of torch's generator.
+    // Batch order: one stream per (seed, epoch), independent of torch's generator and of the
+    // world size (a global batch is the same samples for every world size).
     const std::vector<std::size_t> order =
         shuffledIndices(train_samples.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
     const torch::Tensor perm =
         torch::tensor(std::vector<std::int64_t>(order.begin(), order.end()), torch::kInt64);
+    const std::int64_t n_batches = (train.size + o.batch - 1) / o.batch;
+    const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
     double loss_sum = 0.0;
-    for (std::int64_t b = 0; b < train.size; b += o.batch) {
-      const torch::Tensor index = perm.slice(0, b, std::min<std::int64_t>(b + o.batch, train.size));
-      const torch::Tensor loss = torch::mse_loss(net->forward(rows(train.in, index)), train.target.index_select(0, index));
-      optimiser.zero_grad();
-      loss.backward();
-      optimiser.step();
-      loss_sum += loss.item<double>() * static_cast<double>(index.size(0));
+    std::int64_t seen = 0;
+    Clock::time_point t_live = Clock::now();
+    for (std::int64_t k = 0; k < n_run; ++k) {
+      const std::int64_t b = k * o.batch, e = std::min<std::int64_t>(b + o.batch, train.size);
+      if (!group) {
+        const torch::Tensor index = perm.slice(0, b, e);
+        const torch::Tensor loss = torch::mse_loss(net->forward(rows(train.in, index)), train.target.index_select(0, index));
+        optimiser.zero_grad();
+        loss.backward();
+        optimiser.step();
+        loss_sum += loss.item<double>() * static_cast<double>(index.size(0));
+      } else {
+        // This rank's shard of the global batch; the loss is its share of the global batch's
+        // mean, so the all-reduced sum of the gradients is the gradient of that mean.
+        const auto [lo, hi] = shardRange(e - b, o.dist.world_size, o.dist.rank);
+        optimiser.zero_grad();
+        if (hi > lo) {
+          const torch::Tensor index = perm.slice(0, b + lo, b + hi);
+          const torch::Tensor sse =
+              (net->forward(rows(train.in, index)) - train.target.index_select(0, index)).square().sum();
+          (sse / static_cast<double>((e - b) * kNumJoints)).backward();
+          loss_sum += sse.item<double>() / kNumJoints;
+        }
+        group->sumGradients(params);
+        optimiser.step();
+      }
+      seen += e - b;
+      if (live && secondsSince(t_live) >= 0.5) {
+        t_live = Clock::now();
+        const double s = secondsSince(t_epoch);
+        char line[160];
+        std::snprintf(line, sizeof line, "\r\033[Kepoch %d/%d  batch %lld/%lld  %.0f samples/s  epoch ~%s left", epoch,
+                      o.max_epochs, static_cast<long long>(k + 1), static_cast<long long>(n_run), static_cast<double>(seen) / s,
+                      duration(s / static_cast<double>(k + 1) * static_cast<double>(n_run - k - 1)).c_str());
+        *progress << line << std::flush;
+      }
+    }
+    if (group) {
+      torch::Tensor total = torch::tensor({loss_sum}, torch::kFloat64);
+      group->sum(total, "training loss");
+      loss_sum = total.item<double>();
     }
     net->eval();
     EpochStats st;
     st.epoch = epoch;
-    st.train_loss = loss_sum / static_cast<double>(train.size);
-    const SplitLoss v = evaluate(net, val);
+    st.samples = static_cast<std::size_t>(seen);
+    st.train_loss = loss_sum / static_cast<double>(o.max_batches > 0 ? seen : train.size);
+    const SplitLoss v = evaluate(net, val, group.get());
     st.val_loss = v.normalised;
     st.val_mse_rad2 = v.mse_rad2;
     if (st.val_loss < best_val) {
@@ -180,14 +376,19 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
       best.clear();
       for (const torch::Tensor& p : params) best.push_back(p.detach().clone());
     }
+    // Every rank applied the same summed gradients: a difference is a bug or a mixed group.
+    if (group) group->checkInSync(params);
     st.seconds = secondsSince(t_epoch);
     epoch_seconds_sum += st.seconds;
     res.history.push_back(st);
     const bool stop = epoch - res.best_epoch >= o.patience || epoch == o.max_epochs;
+    if (!o.checkpoint.empty() && rank == 0)
+      writeCheckpoint(o.checkpoint, key, params, optimiser, best, best_val, res.best_epoch, res.history);
     if (progress) {
-      char line[200];
-      std::snprintf(line, sizeof line, "epoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  ", epoch,
-                    o.max_epochs, st.train_loss, st.val_loss, best_val, res.best_epoch, st.seconds);
+      char line[240];
+      std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  %.0f samples/s  ",
+                    live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, best_val, res.best_epoch,
+                    st.seconds, static_cast<double>(st.samples) / st.seconds);
       *progress << line
                 << (stop ? std::string(epoch == o.max_epochs ? "epoch cap reached" : "early stop")
                          : "~" + duration(epoch_seconds_sum / epoch * (o.max_epochs - epoch)) + " left")
@@ -202,9 +403,15 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
   }
   net->eval();
   res.net = net;
-  res.train = evaluate(net, train);
-  res.val = evaluate(net, val);
+  res.train = evaluate(net, train, group.get());
+  res.val = evaluate(net, val, group.get());
   res.seconds = secondsSince(t_start);
+  double samples = 0.0, seconds = 0.0;
+  for (const EpochStats& e : res.history) {
+    samples += static_cast<double>(e.samples);
+    seconds += e.seconds;
+  }
+  res.samples_per_s = seconds > 0.0 ? samples / seconds : 0.0;
   return res;
 }
 
@@ -233,6 +440,9 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["optimizer"] = "adam";
   t["lr"] = o.lr;
   t["loss"] = "mse of normalised actions";
+  // Only when they change the result: single-process files keep their bytes.
+  if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;
+  if (o.max_batches > 0) t["max_batches_per_epoch"] = o.max_batches;
   auto& pt = t["perturbation"];
   pt["fraction"] = o.perturb.fraction;
   pt["q_std_rad"] = o.perturb.q_std_rad;
@@ -304,9 +514,23 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs << ", patience " << o.patience
     << "), best " << r.best_epoch << " (exported) |\n";
-  std::snprintf(buf, sizeof buf, "%.1f s (%.2f s per epoch)", r.seconds,
-                r.history.empty() ? 0.0 : r.seconds / static_cast<double>(r.history.size()));
-  s << "| wall time | " << buf << ", single thread |\n\n";
+  if (r.resumed_after == 0) {
+    std::snprintf(buf, sizeof buf, "%.1f s (%.2f s per epoch)", r.seconds,
+                  r.history.empty() ? 0.0 : r.seconds / static_cast<double>(r.history.size()));
+  } else {
+    double epoch_s = 0.0;
+    for (const EpochStats& e : r.history) epoch_s += e.seconds;
+    std::snprintf(buf, sizeof buf, "%.1f s this run, resumed after epoch %d (%.2f s per epoch, all runs)", r.seconds,
+                  r.resumed_after, epoch_s / static_cast<double>(r.history.size()));
+  }
+  s << "| wall time | " << buf << " |\n";
+  s << "| parallelism | world size " << r.world_size << " (data-parallel, Gloo all-reduce), " << r.threads_per_rank
+    << " thread" << (r.threads_per_rank == 1 ? "" : "s") << " per rank |\n";
+  std::snprintf(buf, sizeof buf, "%.0f training samples/s, %.0f per rank (epoch wall time, validation included)",
+                r.samples_per_s, r.samples_per_s / r.world_size);
+  s << "| throughput | " << buf << " |\n";
+  if (o.max_batches > 0) s << "| batches per epoch | capped at " << o.max_batches << " (timing run) |\n";
+  s << "\n";
 
   s << "## Data\n\n";
   s << "- retargeting (the clustered reference q_r, DESIGN section 5): "
@@ -331,10 +555,11 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << buf << "\n";
 
   s << "## Per-epoch loss (normalised MSE)\n\n";
-  s << "| epoch | train | val | val (rad^2) | s |\n|---|---|---|---|---|\n";
+  s << "| epoch | train | val | val (rad^2) | s | samples/s |\n|---|---|---|---|---|---|\n";
   for (const EpochStats& e : r.history) {
-    std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e | %.1f |\n", e.epoch, e.epoch == r.best_epoch ? " *" : "",
-                  e.train_loss, e.val_loss, e.val_mse_rad2, e.seconds);
+    std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e | %.1f | %.0f |\n", e.epoch,
+                  e.epoch == r.best_epoch ? " *" : "", e.train_loss, e.val_loss, e.val_mse_rad2, e.seconds,
+                  e.seconds > 0.0 ? static_cast<double>(e.samples) / e.seconds : 0.0);
     s << buf;
   }
   s << "\n## Command\n\n```\n" << command_line << "\n```\n";

@@ -1,11 +1,13 @@
-// Training the policy (docs/policy.md): seeded, single-threaded, deterministic; early stopping
-// on the validation loss keeps the best weights; export to model.bin and a model card.
-// Offline only (libtorch).
+// Training the policy (docs/policy.md): seeded, one thread per rank, deterministic for a fixed
+// world size; data-parallel over a Gloo process group (docs/training.md); early stopping on the
+// validation loss keeps the best weights; checkpoints and resume; export to model.bin and a
+// model card. Offline only (libtorch).
 #pragma once
 
 #include "nao/model_file.hpp"
 #include "nao/policy_config.hpp"
 #include "nao/tools/policy_dataset.hpp"
+#include "data_parallel.hpp"
 #include "policy_torch.hpp"
 
 #include <cstdint>
@@ -26,6 +28,11 @@ struct TrainOptions {
   int batch = 32;
   double lr = 6e-5;                   ///< Adam
   Perturbation perturb;               ///< expert-relabelled off-trajectory states (fraction 0: off)
+  DistOptions dist;                   ///< world size 1: this process alone, the single-process loop
+  std::string checkpoint;             ///< if set, rank 0 writes the state here after every epoch
+  std::string resume;                 ///< if set, continue from this checkpoint (any world size)
+  int max_batches = 0;                ///< > 0: each epoch stops after this many global batches (timing)
+  bool live_progress = false;         ///< rank 0 also redraws a '\r' line during the epoch (terminals)
 };
 
 struct EpochStats {
@@ -34,6 +41,7 @@ struct EpochStats {
   double val_loss = 0.0;     ///< normalised MSE on the validation split after the epoch
   double val_mse_rad2 = 0.0; ///< the same in rad^2
   double seconds = 0.0;      ///< wall time of the epoch (never written to model.bin)
+  std::size_t samples = 0;   ///< training samples of the epoch, all ranks together
 };
 
 /// Loss of a model on a split, normalised (what is optimised) and in rad^2.
@@ -53,20 +61,30 @@ struct TrainResult {
   SplitLoss train, val;         ///< of the kept weights
   Baselines train_baselines, val_baselines;  ///< rad^2
   double seconds = 0.0;         ///< total wall time
+  int world_size = 1;           ///< ranks that trained it
+  int threads_per_rank = 1;     ///< torch intra-op threads of each rank
+  double samples_per_s = 0.0;   ///< training samples per second of epoch wall time, all ranks
+  int resumed_after = 0;        ///< epoch of the checkpoint this run continued from (0: none)
 };
 
 /// Trains a policy on `data`. Sets torch to one thread and deterministic algorithms, seeds
 /// torch's generator with options.seed before initialisation, shuffles batches with a local
-/// generator. Prints one line per epoch to `progress` (if not null, flushed). Throws UserError
-/// for options that do not fit the data (architecture movements/clusters differ from the
-/// data's, no validation demonstration, bad batch/epochs/patience/lr).
+/// generator. Prints one line per epoch to `progress` (if not null, flushed).
+/// With options.dist.world_size > 1 this is one rank of a data-parallel group: it joins the
+/// group, takes shardRange() of every global batch and of the validation samples, and sums
+/// gradients and losses with Gloo all-reduce; every rank returns the same result. World size 1
+/// never touches c10d and gives the bytes of the single-process trainer.
+/// Throws UserError for options that do not fit the data (architecture movements/clusters
+/// differ from the data's, no validation demonstration, bad batch/epochs/patience/lr), a
+/// checkpoint of other data or options, and a failed rendezvous or collective (a rank died).
 TrainResult trainPolicy(const PolicyData& data, const TrainOptions& options, std::ostream* progress);
 
 /// Normalised and rad^2 MSE of `net` on `samples` (evaluation mode, no gradients).
 SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySample>& samples);
 
 /// The metadata JSON stored in model.bin: config, seed, data fingerprint, split, epochs run,
-/// best epoch, final losses, baselines. No wall time or date: equal runs give equal text.
+/// best epoch, final losses, baselines; the world size and batch cap only when not 1 / not
+/// off (so single-process files keep their bytes). No wall time or date: equal runs give equal text.
 std::string modelMetadata(const PolicyData& data, const TrainOptions& options, const TrainResult& result);
 
 /// Header of the model.bin for `result` (joints: nao::trainedJoints of the URDF in use).
@@ -74,7 +92,8 @@ ModelHeader modelHeader(const PolicyData& data, const TrainOptions& options, con
                         const std::vector<TrainedJoint>& joints);
 
 /// Markdown model card: configuration, layer-norm placement, seed, data fingerprint, epochs,
-/// wall time, per-epoch losses, validation MSE vs the baselines, the command line.
+/// world size, threads per rank, wall time and throughput, per-epoch losses, validation MSE vs
+/// the baselines, the command line.
 std::string modelCard(const PolicyData& data, const TrainOptions& options, const TrainResult& result,
                       const std::string& command_line, const std::string& model_path);
 

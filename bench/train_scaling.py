@@ -1,0 +1,81 @@
+#!/usr/bin/env python3
+"""Data-parallel training speed: world size 1 vs N on this machine (docs/training.md).
+
+Runs `nao_toolchain train --config paper` for one epoch capped at A and at B global batches
+(--max-batches), for each world size, ranks over a file store. The difference B - A cancels
+start-up, data loading and the final evaluations, so per global batch:
+  wall  = (wall(B) - wall(A)) / (B - A)               (rank 0, the slowest to finish)
+  cpu_r = (cpu_r(B) - cpu_r(A)) / (B - A) per rank    (user + system, Gloo's threads included)
+Wall time is the speed-up when the cores are free. On a loaded machine, cpu of the busiest
+rank is what a batch would take with one free core per rank (a waiting rank sleeps in the
+kernel, it burns no CPU), so it is printed too, with the load average before and after.
+
+usage: bench/train_scaling.py DATA [--worlds 1 2] [--batches 10 40] [--tc build/bin/nao_toolchain]
+"""
+import argparse
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+OPENBLAS = "/usr/lib/x86_64-linux-gnu/openblas-serial/libopenblas.so.0"
+
+
+def run(tc, data, world, batches, out_dir):
+    """One timing run; returns (wall of rank 0, [cpu seconds per rank])."""
+    store = os.path.join(out_dir, f"store_{world}_{batches}")
+    base = [tc, "train", "--config", "paper", "--data", data, "--epochs", "1", "--seed", "1",
+            "--max-batches", str(batches), "--out", os.path.join(out_dir, f"m_{world}_{batches}.bin")]
+    env = dict(os.environ)
+    if os.path.exists(OPENBLAS):
+        env["LD_PRELOAD"] = OPENBLAS
+    procs = []
+    t0 = time.monotonic()
+    for r in range(world):
+        cmd = base + (["--world-size", str(world), "--rank", str(r), "--rendezvous", "file://" + store]
+                      if world > 1 else [])
+        procs.append(subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT))
+    cpu = [0.0] * world
+    wall = 0.0
+    for r, p in enumerate(procs):
+        # wait4 gives each child's own rusage.
+        _, status, usage = os.wait4(p.pid, 0)
+        if r == 0:
+            wall = time.monotonic() - t0
+        cpu[r] = usage.ru_utime + usage.ru_stime
+        if status != 0:
+            sys.exit(f"rank {r} of world size {world} failed:\n" + p.stdout.read().decode())
+    return wall, cpu
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("data")
+    ap.add_argument("--worlds", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--batches", type=int, nargs=2, default=[10, 40])
+    ap.add_argument("--tc", default="build/bin/nao_toolchain")
+    a = ap.parse_args()
+    lo, hi = a.batches
+    print(f"# {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, {os.cpu_count()} cores")
+    print(f"# command: bench/train_scaling.py {a.data} --worlds {' '.join(map(str, a.worlds))} "
+          f"--batches {lo} {hi}")
+    print(f"# load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print("world  wall/batch (s)  cpu/batch per rank (s)  speed-up wall  speed-up cpu (busiest rank)")
+    ref_wall = ref_cpu = None
+    with tempfile.TemporaryDirectory(prefix="nao_scaling_") as d:
+        for w in a.worlds:
+            wall_lo, cpu_lo = run(a.tc, a.data, w, lo, d)
+            wall_hi, cpu_hi = run(a.tc, a.data, w, hi, d)
+            wall = (wall_hi - wall_lo) / (hi - lo)
+            cpu = [(h - l) / (hi - lo) for h, l in zip(cpu_hi, cpu_lo)]
+            if ref_wall is None:
+                ref_wall, ref_cpu = wall, max(cpu)
+            print(f"{w:5d}  {wall:14.3f}  {' '.join(f'{c:.3f}' for c in cpu):>22}  "
+                  f"{ref_wall / wall:13.2f}  {ref_cpu / max(cpu):27.2f}", flush=True)
+    print(f"# load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
+if __name__ == "__main__":
+    main()

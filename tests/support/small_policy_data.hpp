@@ -1,0 +1,61 @@
+// The small clustered policy data set the libtorch training tests share (test_torch_*.cpp).
+#pragma once
+
+#include "nao/tools/kmeans.hpp"
+#include "nao/tools/policy_dataset.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace nao::test {
+
+// Smooth circle-like joint trajectories (3 movements x 4 demos, 10 Hz), clustered with the
+// project's own k-means++ into K = 10 key poses per movement and feature-extracted, as
+// `nao_toolchain cluster` does.
+inline const nao::tools::PolicyData& smallData() {
+  static const nao::tools::PolicyData data = [] {
+    const char* names[] = {"elbow", "whole_arm", "wrist"};
+    std::map<std::string, std::vector<JointVector>> centroids;
+    std::vector<nao::tools::PolicyDemo> demos;
+    for (int m = 0; m < 3; ++m) {
+      std::vector<std::vector<JointVector>> qs;
+      std::vector<std::vector<double>> ts;
+      std::vector<JointVector> all;
+      for (int i = 0; i < 4; ++i) {
+        const int n = 50 + 7 * i;
+        std::vector<JointVector> q;
+        std::vector<double> t_s;
+        for (int t = 0; t < n; ++t) {
+          const double phase = 2.0 * 3.14159265358979 * t / (25.0 + 3 * i) + 0.4 * i;
+          JointVector v;
+          for (int j = 0; j < kNumJoints; ++j)
+            v[j] = 0.2 * (j + 1) - 0.3 * m + (0.15 + 0.1 * m) * std::sin(phase + 0.9 * j) * std::min(1.0, t / 10.0);
+          q.push_back(v);
+          t_s.push_back(0.1 * t);
+        }
+        all.insert(all.end(), q.begin(), q.end());
+        qs.push_back(q);
+        ts.push_back(t_s);
+      }
+      nao::tools::KMeansOptions options;
+      options.seed = 5 + static_cast<std::uint64_t>(m);
+      const nao::tools::KMeansResult km = nao::tools::kmeansPlusPlus(all, options);
+      centroids[names[m]] = km.centroids;
+      for (int i = 0; i < 4; ++i) {
+        nao::tools::PolicyDemo d;
+        d.name = std::string(names[m]) + "_00" + std::to_string(i);
+        d.t_s = ts[static_cast<std::size_t>(i)];
+        d.f = nao::tools::featureTrajectory(km.centroids, d.t_s, qs[static_cast<std::size_t>(i)]);
+        for (const JointVector& q : qs[static_cast<std::size_t>(i)]) d.label.push_back(nao::tools::nearestCentroid(km.centroids, q));
+        demos.push_back(d);
+      }
+    }
+    return nao::tools::makePolicyData(centroids, demos);
+  }();
+  return data;
+}
+
+}  // namespace nao::test
