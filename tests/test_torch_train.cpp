@@ -6,6 +6,7 @@
 #include "nao/tools/policy_dataset.hpp"
 #include "policy_torch.hpp"
 #include "policy_train.hpp"
+#include "support/small_policy_data.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -21,51 +22,7 @@ using namespace nao::tools;
 
 namespace {
 
-// Smooth circle-like joint trajectories (3 movements x 4 demos, 10 Hz), clustered with the
-// project's own k-means++ into K = 10 key poses per movement and feature-extracted, as
-// `nao_toolchain cluster` does.
-const PolicyData& smallData() {
-  static const PolicyData data = [] {
-    const char* names[] = {"elbow", "whole_arm", "wrist"};
-    std::map<std::string, std::vector<JointVector>> centroids;
-    std::vector<PolicyDemo> demos;
-    for (int m = 0; m < 3; ++m) {
-      std::vector<std::vector<JointVector>> qs;
-      std::vector<std::vector<double>> ts;
-      std::vector<JointVector> all;
-      for (int i = 0; i < 4; ++i) {
-        const int n = 50 + 7 * i;
-        std::vector<JointVector> q;
-        std::vector<double> t_s;
-        for (int t = 0; t < n; ++t) {
-          const double phase = 2.0 * 3.14159265358979 * t / (25.0 + 3 * i) + 0.4 * i;
-          JointVector v;
-          for (int j = 0; j < kNumJoints; ++j)
-            v[j] = 0.2 * (j + 1) - 0.3 * m + (0.15 + 0.1 * m) * std::sin(phase + 0.9 * j) * std::min(1.0, t / 10.0);
-          q.push_back(v);
-          t_s.push_back(0.1 * t);
-        }
-        all.insert(all.end(), q.begin(), q.end());
-        qs.push_back(q);
-        ts.push_back(t_s);
-      }
-      KMeansOptions options;
-      options.seed = 5 + static_cast<std::uint64_t>(m);
-      const KMeansResult km = kmeansPlusPlus(all, options);
-      centroids[names[m]] = km.centroids;
-      for (int i = 0; i < 4; ++i) {
-        PolicyDemo d;
-        d.name = std::string(names[m]) + "_00" + std::to_string(i);
-        d.t_s = ts[static_cast<std::size_t>(i)];
-        d.f = featureTrajectory(km.centroids, d.t_s, qs[static_cast<std::size_t>(i)]);
-        for (const JointVector& q : qs[static_cast<std::size_t>(i)]) d.label.push_back(nearestCentroid(km.centroids, q));
-        demos.push_back(d);
-      }
-    }
-    return makePolicyData(centroids, demos);
-  }();
-  return data;
-}
+using nao::test::smallData;
 
 TrainOptions smallOptions(std::uint64_t seed, int epochs) {
   TrainOptions o;
