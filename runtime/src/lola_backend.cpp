@@ -307,7 +307,7 @@ const JointVector& LolaBackend::activate(const JointVector& q0) {
 }
 
 const JointVector& LolaBackend::command(const JointVector& q_cmd) {
-  faults_ = 0;
+  if (ticks_ > 0) faults_ = 0;  // what happened during activate goes onto the first tick
   wait_ns_ = 0;
   if (stop_ != RobotStop::kNone) {
     faults_ |= kFaultSafeStop;
