@@ -79,7 +79,7 @@ std::array<float, kN> startPose(const JointVector& arm) {
 }
 
 struct Injection {
-  std::vector<std::string> drop, delay, garbage, bad_length, heat;
+  std::vector<std::string> drop, delay, garbage, bad_length, heat, misread;
   std::int64_t close_at = -1;
 };
 
@@ -148,11 +148,15 @@ int main(int argc, char** argv) {
                  "CYCLE:N  for N cycles from CYCLE send a sensor packet whose Position has 24 entries")
       ->type_name("C:N");
   app.add_option("--close-at", inj.close_at, "Close the client's socket at this cycle and exit")->type_name("C");
+  app.add_option("--misread", inj.misread,
+                 "CYCLE:N  for N cycles from CYCLE, RElbowRoll (LoLA 21) reads 0.5 rad off (a bad\n"
+                 "encoder, or an arm held by someone): the client's tracking check must see it")
+      ->type_name("C:N");
   app.add_option("--heat", inj.heat, "JOINT:CYCLE  from CYCLE on, LoLA joint JOINT reads 80 degC")->type_name("J:C");
   CLI11_PARSE(app, argc, argv);
 
   // Configure: the arm, the injection plan, the server socket.
-  std::vector<Event> drops, delays, garbages, bads, heats;
+  std::vector<Event> drops, delays, garbages, bads, heats, misreads;
   auto parseList = [](const std::vector<std::string>& in, std::vector<Event>& out, const char* flag) {
     for (const std::string& s : in) {
       double a = 0, b = 0;
@@ -166,7 +170,7 @@ int main(int argc, char** argv) {
   };
   if (!parseList(inj.drop, drops, "--drop") || !parseList(inj.delay, delays, "--delay") ||
       !parseList(inj.garbage, garbages, "--garbage") || !parseList(inj.bad_length, bads, "--bad-length") ||
-      !parseList(inj.heat, heats, "--heat"))
+      !parseList(inj.heat, heats, "--heat") || !parseList(inj.misread, misreads, "--misread"))
     return 2;
   for (Event& h : heats) {  // J:C
     if (h.joint < 0 || h.joint >= kN) {
@@ -315,6 +319,7 @@ int main(int argc, char** argv) {
       break;
     }
     sensor.position = position;
+    if (inWindow(misreads, cycle, v)) sensor.position[21] += 0.5f;
     sensor.stiffness = applied_stiff;
     for (const Event& h : heats)
       if (cycle >= h.cycle) sensor.temperature[static_cast<std::size_t>(h.joint)] = 80.0f;

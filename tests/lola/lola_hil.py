@@ -7,7 +7,7 @@ CASE:
   movement:M   nao_lola_sim + `nao_rt --robot lola:PATH --reference synthetic:M` against the
                in-process run of the same reference: hand RMSE, allocations, answers within the
                cycle, the stiffness ramps, no joint but the right arm's commanded away from start.
-  fault:F      one injected fault (drop, delay, garbage, bad_length, heat, close, silence,
+  fault:F      one injected fault (drop, delay, garbage, bad_length, heat, misread, close, silence,
                sigterm, no_robot): it ends as docs/lola.md specifies, never a crash or a hang.
   peer:sim     python3-msgpack (an independent MessagePack implementation) as LoLA client
                of nao_lola_sim: keys, lengths, joint order.
@@ -164,7 +164,8 @@ def case_movement(a, movement, tmp):
     check(hil["allocations_after_activate"] == 0,
           f"0 allocations after activate (got {hil['allocations_after_activate']})")
     lola = hil["lola"]
-    check(lola["malformed"] == 0 and lola["cycles"] > ticks * 8, f"LoLA counters plausible: {lola}")
+    check(lola["malformed"] == 0 and lola["gaps"] == 0 and lola["tracking_cycles"] == 0 and lola["hot_cycles"] == 0
+          and lola["cycles"] > ticks * 8, f"no robot fault counted without an injected one: {lola}")
     check(lola["late"] <= 0.01 * lola["cycles"], f"nao_rt counts <= 1 % late answers ({lola['late']} of {lola['cycles']})")
     check_answers(rows, movement)
     check_start_and_stop(rows, movement)
@@ -188,6 +189,10 @@ FAULTS = {
                   for r in rows), "the hot joint (RElbowRoll) is commanded at half stiffness, its neighbour at full"),
         check(all(stiff(r, 21) <= ARM_STIFFNESS * HOT_SCALE + 1e-6 for r in rows if int(r["cycle"]) > 502),
               "once hot, RElbowRoll never gets more than half stiffness"))),
+    "misread": (["--misread", "500:10"], 0, lambda s, ss, rows: (
+        check(s["faults"]["tracking_error"] >= 1 and s["lola"]["tracking_cycles"] >= 3,
+              f"RElbowRoll read 0.5 rad off for 10 cycles is a counted tracking error "
+              f"({s['lola']['tracking_cycles']} cycles, {s['faults']['tracking_error']} ticks)"))),
     "close": (["--close-at", "500"], 3, lambda s, ss, rows: (
         check(s["faults"]["robot_link_lost"] >= 1 and s["lola"]["stop"] == "link_lost",
               "a closed socket is a link-lost safe stop in summary.json"),
@@ -224,6 +229,8 @@ def case_fault(a, name, tmp):
     check(rc == want, f"{name}: nao_rt exits {want} (got {rc})")
     s = summary_of(log)
     print(f"info  lola {s['lola']}; faults {s['faults']}; sim {ss}")
+    if name != "misread":
+        check(s["lola"]["tracking_cycles"] == 0, f"{name}: no tracking error where the arm tracks")
     if want == 0:
         check(s["ticks"] == 70, f"{name}: the run recovers and completes its 70 ticks (got {s['ticks']})")
         check(s["allocations_after_activate"] == 0, f"{name}: 0 allocations after activate")
