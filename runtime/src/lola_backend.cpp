@@ -284,12 +284,6 @@ const JointVector& LolaBackend::activate(const JointVector& q0) {
   phase_ = Phase::kRamp;
   phase_cycles_ = 0;
   stiffness_scale_ = 0.0;
-  // Packets that queued up while we configured are stale: start from the next fresh one.
-  for (;;) {
-    const ssize_t n = ::recv(fd_, rx_.data(), rx_.size(), MSG_DONTWAIT);
-    if (n <= 0) break;
-  }
-  rx_len_ = 0;
   const int ramp_cycles = cyclesFor(params_.ramp_s);
   const int settle_cycles = cyclesFor(params_.settle_s);
   while (phase_cycles_ < ramp_cycles)
