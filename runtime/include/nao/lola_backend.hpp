@@ -2,11 +2,15 @@
 // (or nao_lola_sim) through LoLA's Unix stream socket.
 //
 // Threads and time: everything runs on the control thread. LoLA is the clock: the robot sends a
-// sensor packet every 12 ms and each is answered at once from the interpolation state; the
-// 10 Hz tick runs after the answer of the cycle that completes 100 ms of LoLA time (cycle
-// counting: 9, 8, 8, ... cycles), so its 2-5 ms of work sit inside the next cycle's 12 ms and
-// never between a packet and its answer. One thread means no hand-off, no lock, nothing to
-// race; a tick longer than a cycle shows up as late answers (counted).
+// sensor packet every 12 ms and each is answered from the interpolation state; the 10 Hz tick
+// runs on the packet that completes 100 ms of LoLA time (cycle counting: 9, 8, 8, ... cycles,
+// never the wall clock). By default that one packet is answered after the tick, already toward
+// the new command (LoLA applies an answer from the next cycle, so this is the least lag from
+// measurement to effect: 12 ms); the other packets are answered at once. With
+// answer_after_tick = false every packet is answered at once and the new command goes out one
+// cycle later. A separate I/O thread would not get a command to the joints any sooner, and the
+// tick fits in a cycle, so one thread: no hand-off, no lock, nothing to race; a tick longer
+// than a cycle shows up as late answers (counted).
 //
 // Per cycle: parse the sensor packet (LolaReader, fixed buffers), move the right arm's setpoint
 // (LoLA 18-22) toward the tick's command by at most the URDF velocity limit x 12 ms, hold every
