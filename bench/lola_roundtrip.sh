@@ -6,6 +6,8 @@
 #   - nao_rt's side: sensor packet complete -> actuator packet sent (summary.json lola.round_trip_us),
 #   - the robot's side: sensor packet sent -> actuator packet complete (nao_lola_sim --summary),
 # with the load average before and after. Usage: bench/lola_roundtrip.sh [BUILD_DIR] > result.txt
+# The autonomous-mode model runs its policy on every tick (a synthetic reference ends after
+# ~13 s, after which the controller bypasses the policy and the ticks get cheap).
 set -euo pipefail
 build="${1:-build}"
 tmp="$(mktemp -d)"
@@ -20,7 +22,7 @@ for mode in default answer-first; do
   "$build/bin/nao_lola_sim" --socket "$tmp/lola.sock" --seconds 200 --summary "$tmp/sim.json" 2>/dev/null &
   sim=$!
   sleep 0.5
-  cmd=("$build/bin/nao_rt" --robot "lola:$tmp/lola.sock" --reference synthetic:whole_arm --ticks 1200 --log "$tmp/run" "${flags[@]}")
+  cmd=("$build/bin/nao_rt" --robot "lola:$tmp/lola.sock" --weights models/autonomous.bin --reference none --movement whole_arm --ticks 1200 --log "$tmp/run" "${flags[@]}")
   echo "command: ${cmd[*]/$tmp/TMP}"
   "${cmd[@]}" > "$tmp/out.txt"
   kill -TERM "$sim"
