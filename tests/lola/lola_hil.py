@@ -323,17 +323,19 @@ def case_peer_client(a, tmp):
     cycle = 0
     t_next = time.monotonic()
     while p.poll() is None and cycle < 5000:
-        if cycle == 20:  # one packet without "Temperature": counted, skipped, not answered
-            c.sendall(sensor_packet(position, drop_key="Temperature"))
-            bad_sent += 1
-        else:
-            c.sendall(sensor_packet(position))
-            try:
+        try:  # nao_rt closes the socket when its run ends: a send may then fail
+            if cycle == 20:  # one packet without "Temperature": counted, skipped, not answered
+                c.sendall(sensor_packet(position, drop_key="Temperature"))
+                bad_sent += 1
+                ans = {}
+            else:
+                c.sendall(sensor_packet(position))
                 ans = read_one(up, c, timeout=1.0)
-            except (socket.timeout, ConnectionResetError):
-                ans = None
-            if ans is None:
-                break
+        except (socket.timeout, ConnectionResetError, BrokenPipeError):
+            ans = None
+        if ans is None:
+            break
+        if ans:
             answers.append(ans)
             for i in ARM:  # an ideal servo: the arm is where it was commanded
                 position[i] = ans["Position"][i]
