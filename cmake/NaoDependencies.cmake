@@ -30,6 +30,11 @@ nao_require(nlohmann_json_FOUND "nlohmann-json" nlohmann-json3-dev)
 find_package(tomlplusplus 3 QUIET CONFIG)
 nao_require(tomlplusplus_FOUND "toml++" libtomlplusplus-dev)
 
+# msgpack-c is header-only; used without Boost (MSGPACK_NO_BOOST), so its CMake package (which
+# pulls Boost) is not needed: the header is enough.
+find_path(NAO_MSGPACK_INCLUDE_DIR msgpack.hpp)
+nao_require(NAO_MSGPACK_INCLUDE_DIR "msgpack-c" libmsgpack-cxx-dev)
+
 find_package(benchmark QUIET CONFIG)
 nao_require(benchmark_FOUND "Google Benchmark" libbenchmark-dev)
 

@@ -9,7 +9,8 @@ namespace nao::rt {
 int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::ostream& out, std::ostream& err) {
   RunOptions& o = cl.run;
   CLI::App app{
-      "nao_rt: the NAO V6 right-arm imitation controller (DESIGN section 9) on the ODE-simulated arm.\n"
+      "nao_rt: the NAO V6 right-arm imitation controller (DESIGN section 9) on the ODE-simulated arm\n"
+      "(default) or on a NAO V6 through LoLA (--robot lola, docs/lola.md).\n"
       "Configures everything (URDF, policy, reference, attention ring, run buffers), then runs the\n"
       "deterministic 10 Hz loop - human frame -> retarget -> snap to key pose -> policy -> command ->\n"
       "100 x 1 ms of physics - with no heap allocation, and writes the run directory (docs/nao_rt.md).",
@@ -48,6 +49,17 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                "SCHED_FIFO + mlockall when permitted (one warning line when not); a missed deadline\n"
                "is an overrun and the loop skips to the next grid point. Without it ticks run back\n"
                "to back with identical results");
+  app.add_option("--robot", o.robot,
+                 "ode          the in-process ODE arm (deterministic)\n"
+                 "lola[:PATH]  a NAO V6 (or nao_lola_sim) through LoLA's Unix socket (default\n"
+                 "             /tmp/robocup): safe start (stiffness ramp, move to the start pose),\n"
+                 "             the 10 Hz loop on LoLA's 12 ms packet clock, safe stop at the end, on\n"
+                 "             SIGINT/SIGTERM (exit 4) or when the link is lost (exit 3)")
+      ->type_name("ROBOT")
+      ->capture_default_str();
+  app.add_flag("--lola-answer-first{false}", o.lola.answer_after_tick,
+               "LoLA: answer the packet that ends a tick at once (the new command then goes out one\n"
+               "cycle later) instead of after the tick's work (docs/lola.md, timing)");
   app.add_option("--log", o.log_dir, "Run directory (created if missing): ticks.csv, attention.bin, summary.json")
       ->type_name("DIR");
   app.add_option("--attention-shm", o.attention_shm,

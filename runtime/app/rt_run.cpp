@@ -398,6 +398,22 @@ void leaveRealtime(const RealtimeScheduling& s) {
   }
 }
 
+RobotSpec parseRobotSpec(const std::string& robot, const std::string& default_socket) {
+  RobotSpec r;
+  if (robot == "ode") return r;
+  if (robot == "lola") {
+    r.lola = true;
+    r.socket_path = default_socket;
+    return r;
+  }
+  if (robot.rfind("lola:", 0) == 0 && robot.size() > 5) {
+    r.lola = true;
+    r.socket_path = robot.substr(5);
+    return r;
+  }
+  throw UsageError("--robot '" + robot + "': expected ode, lola or lola:SOCKET");
+}
+
 void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<TickRecord>& records,
                const AttentionRingView& ring, const LoopTotals& totals, std::ostream& out, RunReport& report) {
   using nlohmann::ordered_json;
@@ -495,6 +511,26 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
     j["skipped_periods"] = totals.skipped_periods;
   }
   j["zero_timing"] = o.zero_timing;
+  j["robot"] = totals.lola ? "lola" : "ode";
+  if (totals.lola) {
+    const LolaCounters& c = totals.lola_counters;
+    std::vector<double> rtt_us;
+    rtt_us.reserve(totals.lola_latency_ns.size());
+    for (std::int64_t ns : totals.lola_latency_ns) rtt_us.push_back(static_cast<double>(ns) * 1e-3);
+    j["lola"] = {{"socket", totals.lola_socket},
+                 {"cycles", c.cycles},
+                 {"late", c.late},
+                 {"malformed", c.malformed},
+                 {"gaps", c.gaps},
+                 {"hot_cycles", c.hot_cycles},
+                 {"tracking_cycles", c.tracking_cycles},
+                 {"round_trip_us", statsJson(latencyStats(rtt_us))},
+                 {"stop", totals.stop == RobotStop::kLinkLost ? "link_lost"
+                          : totals.stop == RobotStop::kSignal ? "signal"
+                                                              : "end_of_run"}};
+  } else {
+    j["lola"] = nullptr;
+  }
   j["wall_s"] = totals.wall_s;
   j["attention"] = {{"file", logging ? ordered_json("attention.bin") : ordered_json(nullptr)},
                     {"shm", o.attention_shm.empty() ? ordered_json(nullptr) : ordered_json(o.attention_shm)},

@@ -10,13 +10,15 @@
 // Threads and time: configure and the file output run before and after the loop; between
 // activate and deactivate the control thread only calls updateController, forward kinematics,
 // and pushFromRT into preallocated memory — no allocation (counted through AllocationProbe),
-// no I/O, no lock.
+// no file I/O, no lock. With --robot lola the robot backend's socket I/O is on this thread:
+// the robot's packets are the clock (lola_backend.hpp says why).
 #pragma once
 
 #include "nao/arm_model.hpp"
 #include "nao/attention_ring.hpp"
 #include "nao/controller.hpp"
 #include "nao/kinematics.hpp"
+#include "nao/lola_backend.hpp"
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/reference_source.hpp"
@@ -55,6 +57,9 @@ struct RunOptions {
   bool zero_timing = false;    ///< write the *_us columns of ticks.csv as 0 (byte-comparable files)
   ControllerParams controller; ///< fault timeouts, home pose, retargeting (defaults: DESIGN §9)
   SimParams sim;
+  /// ode (the in-process arm, default) or lola[:SOCKET] (LoLA, default socket /tmp/robocup).
+  std::string robot = "ode";
+  LolaParams lola;             ///< LoLA safety parameters (socket_path from `robot`)
   ControllerClock* clock = nullptr;  ///< stage timings; nullptr: CLOCK_MONOTONIC (tests inject)
 };
 
@@ -73,8 +78,14 @@ struct AllocationProbe {
 };
 
 /// What a run produced (also in summary.json).
+/// Exit statuses of a run that the robot backend ended early (after its safe stop; the run
+/// directory is still written).
+inline constexpr int kExitRobotLinkLost = 3;  ///< LoLA socket closed or silent
+inline constexpr int kExitStopSignal = 4;     ///< SIGINT/SIGTERM
+
 struct RunReport {
-  int status = 1;              ///< exit status: 0 done, 1 configure/load/output error, 2 usage error
+  int status = 1;              ///< exit status: 0 done, 1 configure/load/output error, 2 usage error,
+                               ///< kExitRobotLinkLost, kExitStopSignal
   std::string error;           ///< one line (without "nao_rt: ") when status != 0
   std::int64_t ticks = 0;
   std::int64_t overruns = 0;   ///< ticks that missed their deadline (--realtime only)
@@ -96,6 +107,15 @@ struct ReferenceSpec {
   std::string movement;  ///< movement name as in model.bin
   std::string path;      ///< file: only
 };
+
+/// The robot backend a run drives (--robot).
+struct RobotSpec {
+  bool lola = false;
+  std::string socket_path;  ///< lola only
+};
+
+/// Parses --robot: ode, lola, lola:PATH. Throws UsageError otherwise.
+RobotSpec parseRobotSpec(const std::string& robot, const std::string& default_socket);
 
 /// Parses --reference / --movement. Throws UsageError: unknown source, unknown movement,
 /// --movement missing for file: and none, or contradicting synthetic:<movement>.
@@ -174,6 +194,11 @@ struct LoopTotals {
   std::int64_t skipped_periods = 0;  ///< --realtime: whole periods skipped after overruns
   double wall_s = 0.0;
   std::string realtime_scheduling;   ///< "SCHED_FIFO + mlockall", or what was not permitted
+  bool lola = false;                 ///< the robot was LoLA (summary.json "robot", "lola")
+  std::string lola_socket;
+  LolaCounters lola_counters;
+  std::vector<std::int64_t> lola_latency_ns;  ///< per answered cycle
+  RobotStop stop = RobotStop::kNone;          ///< the backend ended the run early
 };
 
 /// After the loop: metrics, summary.json, ticks.csv, attention.bin (from `ring`), the printed
@@ -286,6 +311,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
   RunReport report;
   try {
     // Configure: everything that can fail or allocate.
+    const RobotSpec robot = parseRobotSpec(options.robot, options.lola.socket_path);
+    if (robot.lola && options.realtime)
+      throw UsageError("--realtime paces the in-process arm; with --robot lola the robot's packets are the clock");
     PreparedRun p = prepareRun(options, Dims::arch());
     const std::vector<const float*> tensors = policyTensorPointers<Dims>(p);
     const PolicyWeights<Dims> weights =
@@ -294,6 +322,15 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     controller_params.retarget = p.retarget;
     const ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, options.sim);
     auto data = std::make_unique<ControllerData<Dims>>(model.sim, p.q_start);
+    std::unique_ptr<LolaBackend> lola;
+    if (robot.lola) {
+      // The socket is opened here, before activate.
+      LolaParams lola_params = options.lola;
+      lola_params.socket_path = robot.socket_path;
+      installLolaStopSignals();
+      lola = std::make_unique<LolaBackend>(p.arm, lola_params);
+      data->robot = lola.get();
+    }
     detail::RingHolder<RunRing<Dims>> rings;
     const AttentionDescriptor descriptor = attentionPayloadDescriptor<RunPayload<Dims>>();
     if (options.attention_shm.empty())
@@ -318,7 +355,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     }
     out << "nao_rt: " << p.reference.description << " -> movement " << p.spec.movement << ", model " << p.model_source << ", " << p.ticks << " ticks ("
         << static_cast<double>(p.ticks) * options.controller.period_s << " s), "
-        << (options.realtime ? "real time" : "back to back") << "\n";
+        << (robot.lola ? "on LoLA " + robot.socket_path : options.realtime ? "real time" : "back to back") << "\n";
     out.flush();
 
     // The loop: no allocation, no I/O, no exception from here to deactivate.
@@ -326,7 +363,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     const std::int64_t wall0 = monotonicNs();
     activateController(model, *data, p.q_start, p.movement_index, clock);
     std::int64_t next_ns = monotonicNs();
-    for (std::int64_t t = 0; t < p.ticks; ++t) {
+    std::int64_t ticks_done = 0;
+    for (std::int64_t t = 0; t < p.ticks && data->robot->stopReason() == RobotStop::kNone; ++t) {
       if (options.realtime) sleepUntilNs(next_ns);
       const std::size_t i = static_cast<std::size_t>(t);
       const SkeletonFrame* frame = i < n_frames && p.reference.present[i] ? &p.reference.frames[i] : nullptr;
@@ -357,15 +395,34 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       }
       detail::fillPayload<Dims>(rec, *data->policy, *payload);
       pushFromRT(ring, *payload);
+      ticks_done = t + 1;
     }
+    const RobotStop stop = data->robot->stopReason();
     deactivateController(model, *data);
     closeFromRT(ring);
     totals.wall_s = static_cast<double>(monotonicNs() - wall0) * 1e-9;
     if (probe != nullptr) totals.allocations = probe->stop();
     if (options.realtime) leaveRealtime(rt);
+    records.resize(static_cast<std::size_t>(ticks_done));
+    totals.stop = stop;
+    if (lola) {
+      totals.lola = true;
+      totals.lola_socket = robot.socket_path;
+      totals.lola_counters = lola->counters();
+      totals.lola_latency_ns = lola->latenciesNs();
+    }
 
     finishRun(options, p, records, attentionRingView(ring), totals, out, report);
     report.status = 0;
+    if (stop == RobotStop::kLinkLost) {
+      report.status = kExitRobotLinkLost;
+      report.error = "the robot's LoLA link was lost after " + std::to_string(ticks_done) + " of " +
+                     std::to_string(p.ticks) + " ticks (run directory written)";
+    } else if (stop == RobotStop::kSignal) {
+      report.status = kExitStopSignal;
+      report.error = "stopped by a signal after " + std::to_string(ticks_done) + " of " + std::to_string(p.ticks) +
+                     " ticks: held, stiffness ramped to 0 (run directory written)";
+    }
   } catch (const UsageError& e) {
     report.status = 2;
     report.error = oneLine(e.what());

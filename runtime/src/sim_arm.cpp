@@ -180,6 +180,11 @@ const JointVector& stepSim(const SimModel& model, SimData& data, const JointVect
   return data.q;
 }
 
+void setSimTorqueScale(const SimModel& model, SimData& data, const JointVector& scale) {
+  for (int j = 0; j < kNumJoints; ++j)
+    dJointSetHingeParam(data.hinge[j], dParamFMax, model.arm.tau_max[j] * std::clamp(scale[j], 0.0, 1.0));
+}
+
 Eigen::Vector3d simHandPosition(const SimModel& model, const SimData& data) {
   constexpr int w = kNumJoints - 1;
   const dReal* p = dBodyGetPosition(data.body[w]);

@@ -1,6 +1,7 @@
 // The 10 Hz imitation controller (DESIGN §9): human frame -> human kinematics + scaling ->
 // fixed-size LM retargeting (Algorithm 1) -> snap to the model's key pose -> policy ->
-// command q_t + a_t within the position and velocity limits -> ODE arm, 100 x 1 ms -> record.
+// command q_t + a_t within the position and velocity limits -> robot backend (the ODE arm,
+// 100 x 1 ms, by default; robot_backend.hpp) -> record.
 //
 // Lifecycle (STYLE 6): configureController builds everything that allocates (ControllerModel,
 // ControllerData); activateController puts the arm at its start pose; updateController runs one
@@ -15,6 +16,7 @@
 #include "nao/kinematics.hpp"
 #include "nao/policy.hpp"
 #include "nao/retarget.hpp"
+#include "nao/robot_backend.hpp"
 #include "nao/sim_arm.hpp"
 
 #include <Eigen/Core>
@@ -26,7 +28,8 @@
 
 namespace nao {
 
-/// Fault bits of a tick (ticks.csv column `fault`). None of them stops the loop.
+/// Fault bits of a tick (ticks.csv column `fault`). Bits 0-7 come from the tick itself and
+/// never stop the loop; bits 8-13 come from the robot backend (LoLA; the ODE arm raises none).
 enum ControllerFault : std::uint32_t {
   /// No usable human arm this tick (no frame, torso/arm keypoints missing): the last
   /// reference is held.
@@ -48,11 +51,29 @@ enum ControllerFault : std::uint32_t {
   /// The retargeting solve put the hand farther from its target than the clamped human angles
   /// do: the reference is the clamped human angles this tick (retarget.hpp, kRetargetFallback).
   kFaultRetargetFallback = 1u << 7,
+  /// The robot's socket closed, or no packet came for LolaParams::link_lost_cycles: the backend
+  /// stops (safe stop as far as the link allows) and the run ends with a non-zero exit status.
+  kFaultRobotLinkLost = 1u << 8,
+  /// No sensor packet for more than 2 cycles (24 ms): counted; the run goes on when packets
+  /// resume (the controller's clock is the packet count, so the tick stretches).
+  kFaultRobotPacketGap = 1u << 9,
+  /// A packet that is not MessagePack, or lacks a key, or has an array of the wrong length:
+  /// counted and skipped (not answered, no cycle counted); the last good measurement is kept.
+  kFaultRobotMalformedPacket = 1u << 10,
+  /// A joint's temperature is above LolaParams::hot_c: that joint's stiffness is scaled by
+  /// LolaParams::hot_stiffness_scale until it cools below the threshold.
+  kFaultJointHot = 1u << 11,
+  /// A right-arm joint measured farther than LolaParams::tracking_error_rad from its previous
+  /// cycle's command: counted (the arm is not pushed harder).
+  kFaultTrackingError = 1u << 12,
+  /// The backend ended the run early (link lost, SIGINT/SIGTERM): hold, stiffness ramped to 0.
+  kFaultSafeStop = 1u << 13,
 };
-inline constexpr int kNumControllerFaults = 8;
+inline constexpr int kNumControllerFaults = 14;
 inline constexpr std::array<const char*, kNumControllerFaults> kControllerFaultNames = {
     "no_human", "human_timeout", "nonfinite_keypoints", "ik_not_converged", "policy_nonfinite", "overrun",
-    "command_limited", "retarget_fallback"};
+    "command_limited", "retarget_fallback", "robot_link_lost", "robot_packet_gap", "robot_malformed_packet",
+    "joint_hot", "tracking_error", "safe_stop"};
 
 /// Injected monotonic clock (STYLE 6): the real one reads CLOCK_MONOTONIC, tests drive time.
 struct ControllerClock {
@@ -87,12 +108,14 @@ struct TickRecord {
   JointVector r = JointVector::Zero();       ///< snapped key pose fed to the policy
   JointVector a = JointVector::Zero();       ///< policy action a_t (0 when bypassed)
   JointVector q_cmd = JointVector::Zero();   ///< command sent to the servos
-  JointVector q = JointVector::Zero();       ///< measured joint angles at the end of the tick
+  JointVector q = JointVector::Zero();       ///< measured joint angles at the end of the tick (LoLA: as measured)
   Eigen::Vector3d ee = Eigen::Vector3d::Zero();  ///< hand point of q
   Eigen::Vector3d ee_ref = Eigen::Vector3d::Constant(std::nan(""));  ///< evaluation target (driver fills)
   std::array<float, kNumJoints> att{};  ///< per-body-part attention score
   std::uint32_t fault = 0;             ///< ControllerFault bits
   int key_pose = 0;                    ///< index of r among the movement's key poses
+  /// Stage timings; sim_us is the robot backend's work, tick_us the whole tick, both without
+  /// the time spent waiting for the robot (RobotBackend::waitNs, LoLA's packet clock).
   double tick_us = 0.0, retarget_us = 0.0, policy_us = 0.0, sim_us = 0.0;
 };
 
@@ -110,9 +133,11 @@ struct ControllerModel {
 /// Everything a tick writes. Built once by configureController.
 template <class Dims>
 struct ControllerData {
-  ControllerData(const SimModel& sim_model, const JointVector& q0) : sim(sim_model, q0) {}
+  ControllerData(const SimModel& sim_model, const JointVector& q0) : sim(sim_model, q0), ode(sim_model, sim) {}
 
   SimData sim;
+  OdeArmBackend ode;              ///< the in-process arm over `sim`
+  RobotBackend* robot = &ode;     ///< the robot the ticks drive (replace before activate)
   ArmData kin;
   HumanArmData human;
   RetargetData retarget;
@@ -155,8 +180,7 @@ inline double microseconds(std::int64_t from_ns, std::int64_t to_ns) {
 template <class Dims>
 void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q0,
                         int movement, ControllerClock& clock) {
-  const JointVector q = clampToLimits(model.arm, q0);
-  resetSim(model.sim, data.sim, q);
+  const JointVector q = data.robot->activate(clampToLimits(model.arm, q0));
   resetHumanArm(data.human);
   resetRetarget(model.arm, data.retarget, q);
   data.clock = &clock;
@@ -222,7 +246,7 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   const std::int64_t t1 = data.clock->nowNs();
 
   // 2. Snap to the model's key pose, 3. policy (bypassed while returning home).
-  const JointVector& q = data.sim.q;
+  const JointVector& q = data.robot->measured();
   rec.key_pose = snapToCentroid(model.policy, data.movement, data.q_ref);
   rec.r = centroid(model.policy, data.movement, rec.key_pose).template cast<double>();
   JointVector a = JointVector::Zero();
@@ -266,15 +290,16 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   data.a_prev = q_cmd - q;  // the action as applied is the next tick's a(t-1)
 
   // 5. The arm advances one period.
-  stepSim(model.sim, data.sim, q_cmd);
-  rec.q = data.sim.q;
+  rec.q = data.robot->command(q_cmd);
+  rec.fault |= data.robot->faults();
   rec.ee = forwardKinematics(model.arm, data.kin, rec.q);
   const std::int64_t t3 = data.clock->nowNs();
+  const std::int64_t wait_ns = data.robot->waitNs();
 
   rec.retarget_us = detail::microseconds(t0, t1);
   rec.policy_us = detail::microseconds(t1, t2);
-  rec.sim_us = detail::microseconds(t2, t3);
-  rec.tick_us = detail::microseconds(t0, t3);
+  rec.sim_us = detail::microseconds(t2, t3 - wait_ns);
+  rec.tick_us = detail::microseconds(t0, t3 - wait_ns);
   if (rec.tick_us > p.period_s * 1e6) rec.fault |= kFaultOverrun;
   for (int b = 0; b < kNumControllerFaults; ++b)
     if (rec.fault & (1u << b)) ++data.fault_counts[static_cast<std::size_t>(b)];
@@ -282,11 +307,12 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   return rec;
 }
 
-/// Ends the run: the arm is commanded to hold where it is. Real-time safe.
+/// Ends the run: the arm is commanded to hold where it is (the LoLA backend then ramps the
+/// stiffness to 0). Real-time safe.
 template <class Dims>
 void deactivateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data) {
   (void)model;
-  data.sim.q_cmd = data.sim.q;
+  data.robot->deactivate();
   data.active = false;
 }
 

@@ -86,6 +86,12 @@ void resetSim(const SimModel& model, SimData& data, const JointVector& q0);
 /// the SimData constructor's warm-up: no allocation, no I/O.
 const JointVector& stepSim(const SimModel& model, SimData& data, const JointVector& q_cmd);
 
+/// Caps each joint motor's torque at scale[j] x its URDF effort (NAO's stiffness is such a
+/// fraction of the motor's maximum current; nao_lola_sim uses it). The default, set by the
+/// SimData constructor, is 1 for every joint; nao_rt's in-process arm never calls this.
+/// scale is clamped to [0, 1]. Real-time safe.
+void setSimTorqueScale(const SimModel& model, SimData& data, const JointVector& scale);
+
 /// Hand point of the simulated arm in the torso frame, from the ODE body pose of the wrist
 /// link (not from the joint angles: an independent check of the kinematics). Real-time safe.
 Eigen::Vector3d simHandPosition(const SimModel& model, const SimData& data);

@@ -1,0 +1,130 @@
+// The LoLA robot backend (DESIGN §9, docs/lola.md): nao_rt --robot lola[:SOCKET] drives a NAO V6
+// (or nao_lola_sim) through LoLA's Unix stream socket.
+//
+// Threads and time: everything runs on the control thread. LoLA is the clock: the robot sends a
+// sensor packet every 12 ms and each is answered from the interpolation state; the 10 Hz tick
+// runs on the packet that completes 100 ms of LoLA time (cycle counting: 9, 8, 8, ... cycles,
+// never the wall clock). By default that one packet is answered after the tick, already toward
+// the new command (LoLA applies an answer from the next cycle, so this is the least lag from
+// measurement to effect: 12 ms); the other packets are answered at once. With
+// answer_after_tick = false every packet is answered at once and the new command goes out one
+// cycle later. A separate I/O thread would not get a command to the joints any sooner, and the
+// tick fits in a cycle, so one thread: no hand-off, no lock, nothing to race; a tick longer
+// than a cycle shows up as late answers (counted).
+//
+// Per cycle: parse the sensor packet (LolaReader, fixed buffers), move the right arm's setpoint
+// (LoLA 18-22) toward the tick's command by at most the URDF velocity limit x 12 ms, hold every
+// other joint at the position it had at start, write the actuator packet into a preallocated
+// buffer and send it. Safe start (activate): command the measured positions back while the
+// stiffness ramps from 0 over LolaParams::ramp_s, then move the arm to the start pose at
+// to_start_speed, then settle. Safe stop (deactivate, or a signal): hold, ramp the stiffness to 0.
+#pragma once
+
+#include "nao/lola.hpp"
+#include "nao/robot_backend.hpp"
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace nao {
+
+struct LolaParams {
+  std::string socket_path = "/tmp/robocup";
+  double arm_stiffness = 1.0;        ///< right arm while running (the servo the policy was trained against)
+  double hold_stiffness = 0.6;       ///< every other joint: holds its start position
+  double ramp_s = 0.6;               ///< safe start: stiffness 0 -> nominal over this long (>= 0.5 s)
+  double to_start_speed_rad_s = 0.5; ///< then the arm moves to the controller's start pose this fast
+  double settle_s = 0.3;             ///< and rests there this long before the first tick
+  double stop_ramp_s = 0.6;          ///< safe stop: stiffness -> 0 over this long
+  double hot_c = 75.0;               ///< joint temperature above which its stiffness is scaled
+  double hot_stiffness_scale = 0.5;
+  double tracking_error_rad = 0.35;  ///< right-arm |measured - previous cycle's command| above this: fault
+  /// The packet that ends a tick is answered after the tick, already toward the new command
+  /// (one cycle less lag; that answer waits for the tick's work). false: every packet is
+  /// answered at once and the new command goes out with the next packet's answer.
+  bool answer_after_tick = true;
+  int gap_cycles = 2;                ///< no packet for more than this many cycles: packet-gap fault
+  int link_lost_cycles = 84;         ///< no packet for this many cycles (~1 s): link lost, stop
+  std::size_t latency_capacity = 1 << 16;  ///< per-cycle round-trip samples kept (summary, bench)
+};
+
+/// Counters of a LoLA run (summary.json "lola").
+struct LolaCounters {
+  std::int64_t cycles = 0;     ///< sensor packets answered
+  std::int64_t late = 0;       ///< answered after their cycle (the packet waited for us)
+  std::int64_t malformed = 0;  ///< packets skipped: not MessagePack, wrong keys or lengths
+  std::int64_t gaps = 0;       ///< times no packet came for more than gap_cycles
+  std::int64_t hot_cycles = 0; ///< cycles with a joint above hot_c
+  std::int64_t tracking_cycles = 0;  ///< cycles with a tracking error
+};
+
+/// Installs SIGINT/SIGTERM handlers that ask a running LolaBackend for a safe stop (and make
+/// blocking waits return). Configure time.
+void installLolaStopSignals();
+
+class LolaBackend final : public RobotBackend {
+ public:
+  /// Connects to the LoLA socket (configure time). Throws std::runtime_error naming the path
+  /// when it cannot connect.
+  LolaBackend(const ArmModel& arm, const LolaParams& params);
+  ~LolaBackend() override;
+  LolaBackend(const LolaBackend&) = delete;
+  LolaBackend& operator=(const LolaBackend&) = delete;
+
+  const JointVector& activate(const JointVector& q0) override;
+  const JointVector& measured() const override { return q_meas_; }
+  const JointVector& command(const JointVector& q_cmd) override;
+  std::uint32_t faults() const override { return faults_; }
+  std::int64_t waitNs() const override { return wait_ns_; }
+  RobotStop stopReason() const override { return stop_; }
+  void deactivate() override;
+
+  const LolaCounters& counters() const { return counters_; }
+  /// Round-trip time of each answered cycle (sensor packet complete -> actuator packet sent), ns.
+  const std::vector<std::int64_t>& latenciesNs() const { return latency_ns_; }
+
+ private:
+  enum class Phase { kRamp, kToStart, kSettle, kRun, kStop };
+  bool cycle(bool defer);       // waits for, parses and (unless defer) answers one packet; false: stopped
+  bool receive();               // one complete packet into reader_; false: stopped
+  void measure();               // the packet's measurement: q_meas_, tracking
+  void respond(std::int64_t t_in_ns, bool waited);  // this cycle's setpoint and stiffness, sent
+  void failLink();
+
+  const ArmModel& arm_;
+  LolaParams params_;
+  int fd_ = -1;
+  lola::LolaReader reader_{lola::PacketKind::kSensor};
+  lola::ActuatorPacket out_{};
+  std::array<char, 16384> rx_{};
+  std::size_t rx_len_ = 0;
+  std::int64_t rx_pending_since_ns_ = 0;  // when the incomplete bytes in rx_ arrived
+  std::array<char, lola::kMaxPacketBytes> tx_{};
+
+  Phase phase_ = Phase::kRamp;
+  bool have_start_ = false;
+  std::array<float, lola::kNumLolaJoints> start_position_{};
+  JointVector q_meas_ = JointVector::Zero();
+  JointVector setpoint_ = JointVector::Zero();   // right arm, what the last packet commanded
+  JointVector target_ = JointVector::Zero();     // the tick's command / the start pose
+  JointVector q_start_ = JointVector::Zero();
+  double stiffness_scale_ = 0.0;                 // ramp factor 0..1
+  int phase_cycles_ = 0;
+  std::int64_t run_cycles_ = 0;
+  std::int64_t ticks_ = 0;
+  std::int64_t last_packet_ns_ = 0;
+  std::int64_t last_send_ns_ = 0;
+  bool in_gap_ = false;
+  bool pending_ = false;                 // the last packet is not answered yet (tick boundary)
+  std::int64_t pending_t_in_ns_ = 0;
+  bool pending_waited_ = false;
+  std::uint32_t faults_ = 0;
+  std::int64_t wait_ns_ = 0;
+  RobotStop stop_ = RobotStop::kNone;
+  LolaCounters counters_;
+  std::vector<std::int64_t> latency_ns_;
+};
+
+}  // namespace nao

@@ -1,0 +1,349 @@
+#include "nao/lola_backend.hpp"
+
+#include "nao/controller.hpp"
+
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <csignal>
+#include <cstring>
+#include <stdexcept>
+
+namespace nao {
+namespace {
+
+volatile std::sig_atomic_t g_stop_signal = 0;
+
+extern "C" void onStopSignal(int) { g_stop_signal = 1; }
+
+std::int64_t nowNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+int cyclesFor(double seconds) {
+  return std::max(1, static_cast<int>(std::ceil(seconds * 1e9 / static_cast<double>(lola::kCycleNs) - 1e-9)));
+}
+
+// Bytes that stay incomplete this long are not the start of a packet (the robot writes each
+// packet at once): dropped as malformed so the stream resynchronises on the next packet.
+constexpr std::int64_t kStaleBytesNs = lola::kCycleNs / 2;
+
+}  // namespace
+
+void installLolaStopSignals() {
+  struct sigaction sa {};
+  sa.sa_handler = onStopSignal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = 0;  // no SA_RESTART: a blocking poll returns EINTR and the loop sees the flag
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  // A robot that closes the socket while we write must not kill us: write() returns EPIPE.
+  std::signal(SIGPIPE, SIG_IGN);
+}
+
+LolaBackend::LolaBackend(const ArmModel& arm, const LolaParams& params) : arm_(arm), params_(params) {
+  if (params_.ramp_s < 0.5) throw std::invalid_argument("lola: the stiffness ramp must last at least 0.5 s");
+  sockaddr_un addr{};
+  if (params_.socket_path.empty() || params_.socket_path.size() >= sizeof(addr.sun_path))
+    throw std::invalid_argument("lola: socket path '" + params_.socket_path + "' is empty or too long");
+  fd_ = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd_ < 0) throw std::runtime_error(std::string("lola: socket(): ") + std::strerror(errno));
+  addr.sun_family = AF_UNIX;
+  std::memcpy(addr.sun_path, params_.socket_path.c_str(), params_.socket_path.size());
+  if (::connect(fd_, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0) {
+    const int e = errno;
+    ::close(fd_);
+    fd_ = -1;
+    throw std::runtime_error("lola: cannot connect to '" + params_.socket_path + "': " + std::strerror(e) +
+                             " (is LoLA, or nao_lola_sim, running?)");
+  }
+  latency_ns_.reserve(params_.latency_capacity);
+  out_.sonar = {1.0f, 1.0f};
+}
+
+LolaBackend::~LolaBackend() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void LolaBackend::failLink() {
+  stop_ = RobotStop::kLinkLost;
+  faults_ |= kFaultRobotLinkLost | kFaultSafeStop;
+}
+
+bool LolaBackend::receive() {
+  for (;;) {
+    if (rx_len_ > 0) {
+      const lola::ParseResult r = reader_.parse(rx_.data(), rx_len_);
+      if (r.status == lola::ParseStatus::kComplete || r.status == lola::ParseStatus::kBadContent) {
+        std::memmove(rx_.data(), rx_.data() + r.consumed, rx_len_ - r.consumed);
+        rx_len_ -= r.consumed;
+        rx_pending_since_ns_ = nowNs();
+        if (r.status == lola::ParseStatus::kComplete) return true;
+        ++counters_.malformed;
+        faults_ |= kFaultRobotMalformedPacket;
+        continue;
+      }
+      if (r.status == lola::ParseStatus::kBadSyntax || rx_len_ == rx_.size()) {
+        rx_len_ = 0;
+        ++counters_.malformed;
+        faults_ |= kFaultRobotMalformedPacket;
+        continue;
+      }
+      // Incomplete: wait for the rest, unless it has been waiting too long already.
+      if (nowNs() - rx_pending_since_ns_ > kStaleBytesNs) {
+        rx_len_ = 0;
+        ++counters_.malformed;
+        faults_ |= kFaultRobotMalformedPacket;
+      }
+    }
+    if (g_stop_signal != 0) {
+      stop_ = RobotStop::kSignal;
+      faults_ |= kFaultSafeStop;
+      return false;
+    }
+    // Wait at most until the next thing to check: the gap threshold, link loss, or stale bytes.
+    const std::int64_t t0 = nowNs();
+    const std::int64_t since = t0 - last_packet_ns_;
+    const std::int64_t gap_ns = (params_.gap_cycles + 1) * lola::kCycleNs;
+    if (have_start_ && since > gap_ns && !in_gap_) {
+      in_gap_ = true;
+      ++counters_.gaps;
+    }
+    if (in_gap_) faults_ |= kFaultRobotPacketGap;
+    if (have_start_ && since > params_.link_lost_cycles * lola::kCycleNs) {
+      failLink();
+      return false;
+    }
+    std::int64_t timeout_ns = lola::kCycleNs;
+    if (have_start_ && !in_gap_) timeout_ns = std::max<std::int64_t>(1'000'000, gap_ns - since + 500'000);
+    if (rx_len_ > 0) timeout_ns = std::min(timeout_ns, std::max<std::int64_t>(1'000'000, kStaleBytesNs));
+    pollfd pfd{fd_, POLLIN, 0};
+    const int pr = ::poll(&pfd, 1, static_cast<int>((timeout_ns + 999'999) / 1'000'000));
+    wait_ns_ += nowNs() - t0;
+    if (pr < 0) {
+      if (errno == EINTR) continue;
+      failLink();
+      return false;
+    }
+    if (pr == 0) continue;
+    if (rx_len_ == 0) rx_pending_since_ns_ = nowNs();
+    const ssize_t n = ::recv(fd_, rx_.data() + rx_len_, rx_.size() - rx_len_, MSG_DONTWAIT);
+    if (n == 0) {  // the robot closed the socket
+      failLink();
+      return false;
+    }
+    if (n < 0) {
+      if (errno == EINTR || errno == EAGAIN || errno == EWOULDBLOCK) continue;
+      failLink();
+      return false;
+    }
+    rx_len_ += static_cast<std::size_t>(n);
+  }
+}
+
+bool LolaBackend::cycle(bool defer) {
+  if (stop_ != RobotStop::kNone) return false;
+  const std::int64_t wait_before = wait_ns_;
+  for (;;) {
+    if (!receive()) return false;
+    // Non-finite positions are a broken packet, not a measurement (never fed to the arm).
+    bool finite = true;
+    for (float x : reader_.sensor().position) finite = finite && std::isfinite(x);
+    if (finite) break;
+    ++counters_.malformed;
+    faults_ |= kFaultRobotMalformedPacket;
+  }
+  const std::int64_t t_in = nowNs();
+  // The packet waited for us (no blocking wait was needed) and the previous answer is more than
+  // a cycle and a half ago: this answer comes after the packet's cycle ended.
+  const bool waited = wait_ns_ - wait_before > 200'000;
+  last_packet_ns_ = t_in;
+  in_gap_ = false;
+  measure();
+  if (defer) {
+    pending_ = true;
+    pending_t_in_ns_ = t_in;
+    pending_waited_ = waited;
+  } else {
+    respond(t_in, waited);
+  }
+  return stop_ == RobotStop::kNone;
+}
+
+void LolaBackend::measure() {
+  ++phase_cycles_;
+  const lola::SensorPacket& s = reader_.sensor();
+  if (!have_start_) {
+    start_position_ = s.position;
+    have_start_ = true;
+  }
+  for (int j = 0; j < kNumJoints; ++j)
+    q_meas_[j] = static_cast<double>(s.position[static_cast<std::size_t>(lola::kRightArmLolaIndex[j])]);
+
+  // Tracking: the measurement against what the previous cycle commanded (applied from then on).
+  if (phase_ == Phase::kRun) {
+    bool far = false;
+    for (int j = 0; j < kNumJoints; ++j) far = far || std::abs(q_meas_[j] - setpoint_[j]) > params_.tracking_error_rad;
+    if (far) {
+      faults_ |= kFaultTrackingError;
+      ++counters_.tracking_cycles;
+    }
+  }
+}
+
+void LolaBackend::respond(std::int64_t t_in_ns, bool waited) {
+  pending_ = false;
+  const lola::SensorPacket& s = reader_.sensor();
+  // Phase and setpoint of this cycle.
+  const int ramp_cycles = cyclesFor(params_.ramp_s);
+  const double dt = static_cast<double>(lola::kCycleNs) * 1e-9;
+  auto stepToward = [&](const JointVector& goal, const JointVector& v) {
+    bool there = true;
+    for (int j = 0; j < kNumJoints; ++j) {
+      const double step = v[j] * dt;
+      if (!std::isfinite(goal[j])) continue;  // never send a non-finite target: hold
+      if (std::abs(goal[j] - setpoint_[j]) <= step)
+        setpoint_[j] = goal[j];
+      else
+        setpoint_[j] += goal[j] > setpoint_[j] ? step : -step;
+      there = there && setpoint_[j] == goal[j];
+    }
+    return there;
+  };
+  switch (phase_) {
+    case Phase::kRamp:
+      if (phase_cycles_ == 1) setpoint_ = q_meas_;  // read the positions, command them back
+      stiffness_scale_ = std::min(1.0, static_cast<double>(phase_cycles_) / ramp_cycles);
+      break;
+    case Phase::kToStart:
+      stepToward(q_start_, JointVector::Constant(params_.to_start_speed_rad_s));
+      break;
+    case Phase::kSettle:
+    case Phase::kRun:
+      stepToward(target_, arm_.v_max);
+      break;
+    case Phase::kStop: {
+      const int stop_cycles = cyclesFor(params_.stop_ramp_s);
+      stiffness_scale_ = std::min(stiffness_scale_, std::max(0.0, 1.0 - static_cast<double>(phase_cycles_) / stop_cycles));
+      break;
+    }
+  }
+
+  // Positions: every joint at its start except the right arm; stiffness with hot joints scaled.
+  out_.position = start_position_;
+  for (int j = 0; j < kNumJoints; ++j)
+    out_.position[static_cast<std::size_t>(lola::kRightArmLolaIndex[j])] = static_cast<float>(setpoint_[j]);
+  bool hot = false;
+  for (int i = 0; i < lola::kNumLolaJoints; ++i) {
+    double k = params_.hold_stiffness;
+    for (int j = 0; j < kNumJoints; ++j)
+      if (lola::kRightArmLolaIndex[j] == i) k = params_.arm_stiffness;
+    if (s.temperature[static_cast<std::size_t>(i)] > params_.hot_c) {
+      hot = true;
+      k *= params_.hot_stiffness_scale;
+    }
+    out_.stiffness[static_cast<std::size_t>(i)] = static_cast<float>(k * stiffness_scale_);
+  }
+  if (hot) {
+    faults_ |= kFaultJointHot;
+    ++counters_.hot_cycles;
+  }
+
+  const std::size_t n = lola::writeActuatorPacket(out_, tx_.data(), tx_.size());
+  std::size_t sent = 0;
+  while (sent < n) {
+    const ssize_t w = ::send(fd_, tx_.data() + sent, n - sent, MSG_NOSIGNAL);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) {
+      failLink();
+      return;
+    }
+    sent += static_cast<std::size_t>(w);
+  }
+  const std::int64_t t_out = nowNs();
+  ++counters_.cycles;
+  if (latency_ns_.size() < latency_ns_.capacity()) latency_ns_.push_back(t_out - t_in_ns);
+  if (t_out - t_in_ns > lola::kCycleNs ||
+      (!waited && last_send_ns_ != 0 && t_out - last_send_ns_ > lola::kCycleNs * 3 / 2))
+    ++counters_.late;
+  last_send_ns_ = t_out;
+}
+
+const JointVector& LolaBackend::activate(const JointVector& q0) {
+  faults_ = 0;
+  wait_ns_ = 0;
+  q_start_ = q0;
+  phase_ = Phase::kRamp;
+  phase_cycles_ = 0;
+  stiffness_scale_ = 0.0;
+  const int ramp_cycles = cyclesFor(params_.ramp_s);
+  const int settle_cycles = cyclesFor(params_.settle_s);
+  while (phase_cycles_ < ramp_cycles)
+    if (!cycle(false)) return q_meas_;
+  phase_ = Phase::kToStart;
+  phase_cycles_ = 0;
+  // Move until the setpoint is at the start pose (stepToward in answer), then settle.
+  while (setpoint_ != q_start_)
+    if (!cycle(false)) return q_meas_;
+  phase_ = Phase::kSettle;
+  phase_cycles_ = 0;
+  target_ = q_start_;
+  // The last settle packet is answered by the first command, with the first tick's target.
+  while (phase_cycles_ < settle_cycles)
+    if (!cycle(phase_cycles_ + 1 == settle_cycles && params_.answer_after_tick)) return q_meas_;
+  phase_ = Phase::kRun;
+  phase_cycles_ = 0;
+  run_cycles_ = 0;
+  ticks_ = 0;
+  return q_meas_;
+}
+
+const JointVector& LolaBackend::command(const JointVector& q_cmd) {
+  if (ticks_ > 0) faults_ = 0;  // what happened during activate goes onto the first tick
+  wait_ns_ = 0;
+  if (stop_ != RobotStop::kNone) {
+    faults_ |= kFaultSafeStop;
+    return q_meas_;
+  }
+  target_ = q_cmd;
+  // The packet the tick's measurement came from is answered now, already toward q_cmd.
+  if (pending_) respond(pending_t_in_ns_, pending_waited_);
+  // Tick k ends with the packet that completes (k + 1) x 100 ms of LoLA time; it is answered
+  // by the next command (or by deactivate).
+  ++ticks_;
+  const std::int64_t end_ns = ticks_ * 100'000'000;
+  while (stop_ == RobotStop::kNone && run_cycles_ * lola::kCycleNs < end_ns) {
+    const bool last = (run_cycles_ + 1) * lola::kCycleNs >= end_ns;
+    if (!cycle(last && params_.answer_after_tick)) break;
+    ++run_cycles_;
+  }
+  return q_meas_;
+}
+
+void LolaBackend::deactivate() {
+  if (stop_ == RobotStop::kLinkLost || fd_ < 0) return;
+  // Hold where the arm is commanded now, ramp the stiffness to 0, then one more packet at 0.
+  // A signal during the ramp does not interrupt it.
+  // A second SIGINT/SIGTERM during the ramp ends it early (the stiffness stays where it got).
+  const RobotStop reason = stop_;
+  stop_ = RobotStop::kNone;
+  g_stop_signal = 0;
+  phase_ = Phase::kStop;
+  phase_cycles_ = 0;
+  target_ = setpoint_;
+  if (pending_) respond(pending_t_in_ns_, pending_waited_);
+  const int stop_cycles = cyclesFor(params_.stop_ramp_s);
+  while (phase_cycles_ <= stop_cycles)
+    if (!cycle(false)) break;
+  if (stop_ == RobotStop::kNone) stop_ = reason;
+}
+
+}  // namespace nao
