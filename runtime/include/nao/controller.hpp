@@ -98,6 +98,10 @@ struct ControllerParams {
   /// action with NaN before the non-finite check. -1: never.
   int inject_policy_nan_first = -1;
   int inject_policy_nan_last = -1;
+  /// Baseline: > 0 replaces the policy by the key-pose blend law its training labels follow,
+  /// a = pole^2 a(t-1) + (1 - pole)^2 (r - q) (toolchain KeyPoseBlend), driving the same arm,
+  /// so a test can measure what the servos alone cost. 0: the policy. Reference mode only.
+  double blend_law_pole = 0.0;
 };
 
 /// One tick as recorded (ticks.csv; angles rad, positions m in the torso frame).
@@ -256,6 +260,9 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
       const double step = 0.5 * model.arm.v_max[j] * p.period_s;
       a[j] = std::clamp(model.home[j] - q[j], -step, step);
     }
+  } else if (p.blend_law_pole > 0.0 && !autonomous) {
+    const double pole = p.blend_law_pole;
+    a = pole * pole * data.a_prev + (1.0 - pole) * (1.0 - pole) * (rec.r - q);
   } else {
     PolicyInput in;
     in.q = q.cast<float>();
