@@ -34,17 +34,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-TrainOptions smallOptions(std::uint64_t seed, int epochs) {
-  TrainOptions o;
-  o.config_name = "small";
-  o.arch = smallArch();
-  o.seed = seed;
-  o.max_epochs = epochs;
-  o.patience = epochs;
-  o.val_fraction = 0.25;
-  o.lr = 1e-3;
-  return o;
-}
+using nao::test::smallOptions;
 
 // A fresh directory per use, removed afterwards: a FileStore must never see a previous run's file.
 struct TempDir {

@@ -23,18 +23,7 @@ using namespace nao::tools;
 namespace {
 
 using nao::test::smallData;
-
-TrainOptions smallOptions(std::uint64_t seed, int epochs) {
-  TrainOptions o;
-  o.config_name = "small";
-  o.arch = smallArch();
-  o.seed = seed;
-  o.max_epochs = epochs;
-  o.patience = epochs;
-  o.val_fraction = 0.25;
-  o.lr = 1e-3;  // a few epochs must show progress
-  return o;
-}
+using nao::test::smallOptions;
 
 std::vector<TrainedJoint> urdfJoints() { return trainedJoints(loadArmModel(nao::test::kUrdfPath)); }
 

@@ -3,6 +3,7 @@
 
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/policy_dataset.hpp"
+#include "policy_train.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -56,6 +57,20 @@ inline const nao::tools::PolicyData& smallData() {
     return nao::tools::makePolicyData(centroids, demos);
   }();
   return data;
+}
+
+// Training options of the small configuration on smallData(): `epochs` epochs (and as patience),
+// a quarter held out, lr 1e-3 so that a few epochs show progress.
+inline nao::tools::TrainOptions smallOptions(std::uint64_t seed, int epochs) {
+  nao::tools::TrainOptions o;
+  o.config_name = "small";
+  o.arch = nao::smallArch();
+  o.seed = seed;
+  o.max_epochs = epochs;
+  o.patience = epochs;
+  o.val_fraction = 0.25;
+  o.lr = 1e-3;
+  return o;
 }
 
 }  // namespace nao::test

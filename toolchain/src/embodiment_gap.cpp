@@ -1,4 +1,5 @@
 #include "nao/tools/embodiment_gap.hpp"
+#include "nao/tools/stats.hpp"
 
 #include "nao/kinematics.hpp"
 #include "nao/tools/command.hpp"
@@ -18,15 +19,6 @@ Eigen::Vector3d humanEndpoint(const Anthropometrics& body, const HumanJointVecto
   Eigen::Vector3d h = Eigen::Vector3d::Zero();
   for (const Eigen::Vector3d& k : p.p_WHand) h += k;
   return h / static_cast<double>(p.p_WHand.size());
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const std::size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
-  const double upper = v[mid];
-  if (v.size() % 2 == 1) return upper;
-  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid)));
 }
 
 }  // namespace

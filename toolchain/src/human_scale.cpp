@@ -1,22 +1,10 @@
 #include "nao/tools/human_scale.hpp"
+#include "nao/tools/stats.hpp"
 
 #include <algorithm>
 #include <vector>
 
 namespace nao::tools {
-namespace {
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const std::size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
-  const double upper = v[mid];
-  if (v.size() % 2 == 1) return upper;
-  const double lower = *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid));
-  return 0.5 * (lower + upper);
-}
-
-}  // namespace
 
 HumanArmLengths estimateHumanArmLengths(const Skeleton& frames, const HumanKinematicsConfig& config) {
   HumanKinematicsConfig per_frame = config;
