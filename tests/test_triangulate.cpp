@@ -927,6 +927,9 @@ TEST_CASE("4-camera stress recordings: the right arm is kept through a crossing 
       }
     }
     n_hidden += scene.n_hidden_points;
+    MESSAGE(std::string(kMovementNames[static_cast<std::size_t>(m)]) << ": frames without subject " << report.n_frames_without_subject
+                                                        << ", inconsistent points " << report.n_points_inconsistent
+                                                        << ", bone-length rejections " << report.n_bone_rejections);
     n_swapped += scene.n_swapped_frames;
     n_wrong += scene.n_wrong_keypoints;
   }
@@ -946,5 +949,7 @@ TEST_CASE("4-camera stress recordings: the right arm is kept through a crossing 
   CHECK(arm_rate >= 0.98);
   CHECK(quantile(errors, 0.5) <= 0.01);
   CHECK(quantile(errors, 0.95) <= 0.03);
+  // Left: a left/right swap whose wrong arm lies on the epipolar plane of the one other camera
+  // that sees it, a tie of two camera pairs that continuity does not always break right.
   CHECK(n_wrong_view_points <= n_points / 200);
 }

@@ -128,7 +128,8 @@ StressScene renderStressScene(const SynthDemo& demo, const StressOptions& opt) {
   for (double& c : conf) c = rng.uniform(0.6, 0.9);
   std::vector<bool> swap_block(static_cast<std::size_t>(std::ceil(n / opt.fps / 0.5)) + 1);
   for (std::size_t b = 0; b < swap_block.size(); ++b) swap_block[b] = rng.uniform() < opt.swap_fraction;
-  const double walk_period_s = rng.uniform(3.5, 5.0), walk_phase = rng.uniform(0.15, 0.3) * kPi;
+  // It enters from the side (y = +3 m, beside the outer camera) and walks across and back.
+  const double walk_period_s = rng.uniform(5.0, 7.0), walk_phase = 0.0;
   const double walk_x = rng.uniform(0.9, 1.3), pose_shift_s = 0.5 * duration_s;
 
   s.keypoints.resize(n_cam);
@@ -142,7 +143,7 @@ StressScene renderStressScene(const SynthDemo& demo, const StressOptions& opt) {
       // A time-shifted copy of the subject's own motion (the hardest case: same build, same
       // kind of gestures), walking along y in front of the subject.
       other = truthAt(demo, std::fmod(t + pose_shift_s, duration_s));
-      const Eigen::Vector3d offset(walk_x, 1.8 * std::cos(2.0 * kPi * t / walk_period_s + walk_phase), 0.0);
+      const Eigen::Vector3d offset(walk_x, 3.0 * std::cos(2.0 * kPi * t / walk_period_s + walk_phase), 0.0);
       for (auto& p : other.p_W) p += offset;
       other.t_s = t;
       s.bystander.push_back(other);

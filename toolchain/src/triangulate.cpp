@@ -69,6 +69,9 @@ double toleranceScale(const Camera& cam) {
   return std::max(1.0, std::hypot(static_cast<double>(cam.width), static_cast<double>(cam.height)) / kReferenceDiagonal);
 }
 
+// How far back a point's last estimate still breaks ties between camera sets, s.
+constexpr double kContinuity_s = 0.25;
+
 // Consensus search over camera pairs up to this many views; beyond, greedy dropping only.
 constexpr std::size_t kMaxConsensusViews = 8;
 
@@ -154,9 +157,11 @@ Fit fitPoint(const CameraSet& cameras, const std::vector<Observation>& obs, int 
 }
 
 // The consensus step of the file comment: the largest set of cameras that agree on one point,
-// proposed by camera pairs. Returns obs unchanged when no pair agrees with itself.
+// proposed by camera pairs. Equally large sets: the one whose point is nearest previous_W (the
+// point's last estimate) when given, else the lower sum of squared errors. Returns obs
+// unchanged when no pair agrees with itself.
 std::vector<Observation> consensusViews(const CameraSet& cameras, const std::vector<Observation>& obs,
-                                        const TriangulateOptions& opt) {
+                                        const TriangulateOptions& opt, const std::optional<Eigen::Vector3d>& previous_W) {
   const auto agreeing = [&](const Eigen::Vector3d& p_W, double* sum2) {
     std::vector<Observation> in;
     *sum2 = 0.0;
@@ -168,14 +173,15 @@ std::vector<Observation> consensusViews(const CameraSet& cameras, const std::vec
     return in;
   };
   std::vector<Observation> best;
-  double best_sum2 = kInf;
+  double best_tie = kInf;
   for (std::size_t i = 0; i < obs.size(); ++i)
     for (std::size_t j = i + 1; j < obs.size(); ++j) {
       const Fit pair = fitPoint(cameras, {obs[i], obs[j]}, 0);
       if (!pair.ok || pair.max_err_px > opt.outlier_px) continue;
       double sum2 = 0.0;
       std::vector<Observation> in = agreeing(pair.p_W, &sum2);
-      if (in.size() > best.size() || (in.size() == best.size() && sum2 < best_sum2)) best = std::move(in), best_sum2 = sum2;
+      const double tie = previous_W ? (pair.p_W - *previous_W).norm() : sum2;
+      if (in.size() > best.size() || (in.size() == best.size() && tie < best_tie)) best = std::move(in), best_tie = tie;
     }
   if (best.size() < 2) return obs;
   // Refit on the consensus and let every camera re-join or leave, until the set settles (a
@@ -275,7 +281,8 @@ Eigen::Vector3d refineOnReprojection(const CameraSet& cameras, const std::vector
   return p_W;
 }
 
-PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt) {
+PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt,
+                               const std::optional<Eigen::Vector3d>& previous_W) {
   obs.erase(std::remove_if(obs.begin(), obs.end(),
                            [&](const Observation& o) {
                              return !(o.confidence >= opt.min_confidence && o.confidence > 0.0) || !o.px.allFinite();
@@ -306,7 +313,7 @@ PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation
     }
     if (!searched && obs.size() <= kMaxConsensusViews) {
       searched = true;
-      std::vector<Observation> agreeing = consensusViews(cameras, obs, opt);
+      std::vector<Observation> agreeing = consensusViews(cameras, obs, opt, previous_W);
       if (agreeing.size() < obs.size()) {
         obs = std::move(agreeing);
         continue;
@@ -354,12 +361,16 @@ SubjectChoice chooseSubject(const CameraSet& cameras, const std::vector<const st
           cand.person[b] = static_cast<int>(pb);
           cand.score = 2 * static_cast<int>(good.size());
           cand.median_px = median(errors);
-          // Further cameras: the person whose points reproject best, if any agrees.
+          // Further cameras: the person whose points reproject best, if any agrees. Failing that,
+          // the person with the most points that agree (>= 3 and >= 40 % of those compared): the
+          // same body with some limbs mislabelled (a left/right swap in this or the pair's camera)
+          // is still this person, and the per-point camera selection sorts out the limbs; someone
+          // else agrees on no point.
           for (std::size_t c = 0; c < n_cam; ++c) {
             if (c == a || c == b) continue;
-            int best = -1;
-            double best_median = kInf;
-            int best_count = 0;
+            int best = -1, fallback = -1;
+            double best_median = kInf, fallback_median = kInf;
+            int best_count = 0, fallback_count = 0;
             for (std::size_t q = 0; q < people[c]->size(); ++q) {
               const Person2d& Q = (*people[c])[q];
               std::vector<double> e;
@@ -367,11 +378,13 @@ SubjectChoice chooseSubject(const CameraSet& cameras, const std::vector<const st
                 if (usable(Q, k, opt)) e.push_back(reprojectionError(cameras[c], p_W, Q.px[k]) / toleranceScale(cameras[c]));
               if (e.size() < 3) continue;
               const double m = median(e);
-              if (m <= opt.subject_px && m < best_median) {
-                best = static_cast<int>(q), best_median = m;
-                best_count = static_cast<int>(std::count_if(e.begin(), e.end(), [&](double v) { return v <= opt.outlier_px; }));
-              }
+              const int count = static_cast<int>(std::count_if(e.begin(), e.end(), [&](double v) { return v <= opt.outlier_px; }));
+              if (m <= opt.subject_px && m < best_median) best = static_cast<int>(q), best_median = m, best_count = count;
+              if (count >= 3 && 5 * count >= 2 * static_cast<int>(e.size()) &&
+                  (count > fallback_count || (count == fallback_count && m < fallback_median)))
+                fallback = static_cast<int>(q), fallback_median = m, fallback_count = count;
             }
+            if (best < 0) best = fallback, best_count = fallback_count;
             cand.person[c] = best;
             cand.score += best_count;
           }
@@ -532,7 +545,16 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
           const Person2d& p = (*people[c])[static_cast<std::size_t>(subject.person[c])];
           if (usable(p, i, opt)) obs.push_back({static_cast<int>(c), p.px[i], p.confidence[i]});
         }
-        const PointEstimate est = triangulatePoint(cameras, obs, opt);
+        // The point's latest estimate (at most kContinuity_s old) breaks ties between equally
+        // large camera sets (two views that agree by chance along an epipolar line, as a
+        // left/right swap does with a horizontal baseline, vs the right two).
+        std::optional<Eigen::Vector3d> previous_W;
+        for (std::size_t b = k; b-- > 0 && out.t_s - frames[b].t_s <= kContinuity_s + kTimeEps;)
+          if (frames[b].ok[i]) {
+            previous_W = frames[b].p_W[i];
+            break;
+          }
+        const PointEstimate est = triangulatePoint(cameras, obs, opt, previous_W);
         rep.n_observations_rejected += est.n_rejected;
         if (est.inconsistent) ++rep.n_points_inconsistent;
         if (est.ok) {

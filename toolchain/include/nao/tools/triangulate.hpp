@@ -6,7 +6,8 @@
 //     by both are triangulated; a pairing is a candidate when >= 3 points agree (reprojection
 //     error <= outlier_px) and their median reprojection error is <= subject_px. Each further
 //     camera contributes the person whose points reproject best (median <= subject_px, >= 3
-//     points), or nobody. Among candidates, those whose 3D centre (torso points) lies within
+//     points), else the person with the most agreeing points (>= 3 and >= 40 % of those
+//     compared: the same body with a limb swapped), or nobody. Among candidates, those whose 3D centre (torso points) lies within
 //     subject_max_jump_m of the last frame's subject are preferred (continuity). The score of a
 //     candidate is its number of consistent (camera, point) detections; among the candidates
 //     scoring >= 3/4 of the best, the winner is the one whose centre appears closest to the
@@ -22,7 +23,8 @@
 //     image and scaled by the image diagonal for larger images (never below outlier_px). When
 //     the fit of all n >= 3 cameras is inconsistent, every pair of cameras (n <= 8) proposes
 //     the point of its two rays; the proposal that the most cameras agree with (within their
-//     tolerance; ties: the lower sum of squared errors, then the lower pair) wins, and its
+//     tolerance; ties: the one nearest the point's latest estimate of the last 0.25 s, else
+//     the lower sum of squared errors; then the lower pair) wins, and its
 //     consensus set is refitted and re-checked against all cameras until it no longer changes.
 //     While that fit (or, above 8 cameras, the fit of all) is still inconsistent and >= 3
 //     cameras remain, the camera whose removal gives the smallest worst-case reprojection error
@@ -122,8 +124,11 @@ std::optional<Eigen::Vector3d> triangulateDlt(const CameraSet& cameras, const st
 Eigen::Vector3d refineOnReprojection(const CameraSet& cameras, const std::vector<Observation>& obs,
                                      const Eigen::Vector3d& p0_W, int max_iterations);
 
-/// One point from all its observations, with the outlier rule of the file comment.
-PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt);
+/// One point from all its observations, with the camera selection of the file comment.
+/// `previous_W`, the point's latest estimate (triangulateCapture: of the last 0.25 s), breaks ties between
+/// equally large agreeing camera sets (the nearer wins).
+PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt,
+                               const std::optional<Eigen::Vector3d>& previous_W = std::nullopt);
 
 /// Subject chosen in one frame: per camera the index into its people, or -1.
 struct SubjectChoice {
