@@ -85,7 +85,7 @@ TEST_CASE("the default model imitates held-out demonstrations of every movement 
       const double excess = worstLimitExcess(dir / "ticks.csv", arm, rows);
       MESSAGE(std::string(movement) << " seed " << seed << ": " << r.ticks << " ticks, end-effector RMSE "
                        << r.ee_rmse_m * 1000.0 << " mm, worst limit excess " << excess << " rad, faults no_human "
-                       << r.faults[0] << ", command_limited " << r.faults[static_cast<std::size_t>(kNumControllerFaults - 1)]);
+                       << r.faults[0] << ", human_bridged " << r.faults[8] << ", command_limited " << r.faults[6]);
       CHECK(rows == static_cast<std::size_t>(r.ticks));
       CHECK(r.ticks > 50);
       CHECK(r.ee_rmse_m < 0.01);
