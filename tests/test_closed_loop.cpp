@@ -65,6 +65,10 @@ double worstLimitExcess(const fs::path& ticks_csv, const ArmModel& arm, std::siz
   return worst;
 }
 
+// Fault counters by bit (controller.hpp).
+constexpr std::size_t kNoHuman = 0, kLimited = 6, kBridged = 14;
+static_assert(kNumControllerFaults == 15, "fault bits renumbered: update the indices above");
+
 }  // namespace
 
 TEST_CASE("the default model imitates held-out demonstrations inside the limits, within 2 mm of the blend law under the same servos, and within 1 cm RMS on elbow and wrist") {
@@ -93,8 +97,8 @@ TEST_CASE("the default model imitates held-out demonstrations inside the limits,
         rmse[baseline] = r.ee_rmse_m;
         MESSAGE(std::string(movement) << " seed " << seed << (baseline ? " blend law" : " policy   ") << ": " << r.ticks
                                       << " ticks, end-effector RMSE " << r.ee_rmse_m * 1000.0 << " mm, worst limit excess "
-                                      << excess << " rad, faults no_human " << r.faults[0] << ", command_limited "
-                                      << r.faults[6]);
+                                      << excess << " rad, faults no_human " << r.faults[kNoHuman] << ", human_bridged "
+                                      << r.faults[kBridged] << ", command_limited " << r.faults[kLimited]);
         CHECK(rows == static_cast<std::size_t>(r.ticks));
         CHECK(r.ticks > 50);
         CHECK(excess <= 0.0);

@@ -17,6 +17,10 @@ using Dims = SmallPolicyDims;
 
 namespace {
 
+// Counter index of kFaultHumanBridged (fault counters are indexed by bit).
+constexpr std::size_t kBridgedBit = 14;
+static_assert(kFaultHumanBridged == (1u << kBridgedBit), "human_bridged moved: update kBridgedBit");
+
 // Deterministic clock: 1 µs per reading, plus a jump at a chosen reading.
 struct FakeClock final : ControllerClock {
   std::int64_t now = 0;
@@ -121,19 +125,24 @@ TEST_CASE("a 2 s reference dropout mid-movement holds the last reference, is cou
     return run(ControllerParams{}, c, never, never);
   }();
   REQUIRE(r.records.size() > static_cast<std::size_t>(last + 10));
-  // Every dropped tick is flagged; none reaches the home-return timeout (3 s).
+  // Every dropped tick is flagged: the first two after the last human as bridged, the rest as
+  // no_human; none reaches the home-return timeout (3 s).
+  constexpr std::uint32_t kMissing = kFaultNoHuman | kFaultHumanBridged;
+  int last_human = first - 1;
+  while (r.records[static_cast<std::size_t>(last_human)].fault & kMissing) --last_human;
   for (int t = first; t <= last; ++t) {
     const TickRecord& rec = r.records[static_cast<std::size_t>(t)];
-    CHECK((rec.fault & kFaultNoHuman) != 0);
+    const bool bridged = t - last_human <= 2;
+    CHECK(((rec.fault & kFaultHumanBridged) != 0) == bridged);
+    CHECK(((rec.fault & kFaultNoHuman) != 0) == !bridged);
     CHECK((rec.fault & kFaultHumanTimeout) == 0);
     CHECK(rec.q_ref == r.records[static_cast<std::size_t>(first - 1)].q_ref);
   }
   // Counted once per dropped tick (ticks the synthesiser had already dropped count once).
   int newly_dropped = 0;
-  for (int t = first; t <= last; ++t)
-    newly_dropped += (clean.records[static_cast<std::size_t>(t)].fault & kFaultNoHuman) ? 0 : 1;
+  for (int t = first; t <= last; ++t) newly_dropped += (clean.records[static_cast<std::size_t>(t)].fault & kMissing) ? 0 : 1;
   CHECK(newly_dropped > 10);
-  CHECK(r.faults[0] - clean.faults[0] == newly_dropped);
+  CHECK(r.faults[0] + r.faults[kBridgedBit] - clean.faults[0] - clean.faults[kBridgedBit] == newly_dropped);
   CHECK(r.faults[1] == 0);
   // After the dropout the reference follows the human again.
   bool moved = false;
@@ -168,7 +177,9 @@ TEST_CASE("a dropout longer than the timeout sends the arm home at half speed, b
 
 TEST_CASE("NaN keypoints are counted as a fault, treated as no human, and the run continues") {
   FakeClock clock;
-  const Run r = run(ControllerParams{}, clock, never, [](int t) { return t == 20 || t == 21; });
+  ControllerParams params;
+  params.human_bridge_ticks = 0;  // no_human at once (the bridge has its own test)
+  const Run r = run(params, clock, never, [](int t) { return t == 20 || t == 21; });
   for (int t : {20, 21}) {
     const TickRecord& rec = r.records[static_cast<std::size_t>(t)];
     CHECK((rec.fault & kFaultNonFiniteKeypoints) != 0);
@@ -217,4 +228,41 @@ TEST_CASE("the synthetic reference is not a training demonstration and has a tar
   int measured = 0;
   for (bool m : ref.measured) measured += m ? 1 : 0;
   CHECK(measured > static_cast<int>(ref.frames.size()) / 2);
+}
+
+TEST_CASE("detector gaps of up to 2 ticks are bridged on the held reference; from the 3rd tick on they are no_human") {
+  FakeClock clock;
+  // Gaps of 1, 2 and 3 ticks after stretches with the human, and none before the first human.
+  auto gap = [](int t) { return t == 20 || t == 30 || t == 31 || (t >= 40 && t <= 42); };
+  const Run r = run(ControllerParams{}, clock, gap, never);
+  FakeClock c0;
+  ControllerParams off;
+  off.human_bridge_ticks = 0;
+  const Run unbridged = run(off, c0, gap, never);
+  REQUIRE(r.records.size() == unbridged.records.size());
+  for (int t : {20, 30, 31, 40, 41, 42}) {
+    const TickRecord& rec = r.records[static_cast<std::size_t>(t)];
+    // The synthesiser's reference has gaps of its own: count from the last tick with a human.
+    int last_human = t - 1;
+    while (r.records[static_cast<std::size_t>(last_human)].fault & (kFaultNoHuman | kFaultHumanBridged)) --last_human;
+    const bool bridged = t - last_human <= 2;
+    INFO("tick " << t << ", last human " << last_human);
+    CHECK(((rec.fault & kFaultHumanBridged) != 0) == bridged);
+    CHECK(((rec.fault & kFaultNoHuman) != 0) == !bridged);
+    // Held: the reference of the last tick with a human.
+    CHECK(rec.q_ref == r.records[static_cast<std::size_t>(t) - 1].q_ref);
+    // Only the label differs from the unbridged run: the arm does the same.
+    CHECK(rec.q_cmd == unbridged.records[static_cast<std::size_t>(t)].q_cmd);
+    CHECK(((unbridged.records[static_cast<std::size_t>(t)].fault & kFaultNoHuman) != 0));
+  }
+  CHECK((r.records[42].fault & kFaultNoHuman) != 0);  // a 3-tick gap is no_human from its 3rd tick
+  // Bridged ticks are not no_human ticks: the counts move from one bit to the other.
+  CHECK(r.faults[kBridgedBit] > 0);
+  CHECK(r.faults[0] + r.faults[kBridgedBit] == unbridged.faults[0]);
+  CHECK(unbridged.faults[kBridgedBit] == 0);
+  // Before the first human there is nothing to bridge.
+  FakeClock c1;
+  const Run late = run(ControllerParams{}, c1, [](int t) { return t < 2; }, never, 5);
+  CHECK((late.records[0].fault & kFaultNoHuman) != 0);
+  CHECK((late.records[1].fault & kFaultNoHuman) != 0);
 }

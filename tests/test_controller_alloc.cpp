@@ -58,6 +58,7 @@ void checkNoAllocation(std::uint64_t seed) {
   CHECK(data.tick == kTicks);
   // The fault paths ran inside the counted window.
   CHECK((faults_seen & kFaultNoHuman) != 0);
+  CHECK((faults_seen & kFaultHumanBridged) != 0);
   CHECK((faults_seen & kFaultHumanTimeout) != 0);
   CHECK((faults_seen & kFaultNonFiniteKeypoints) != 0);
   CHECK((faults_seen & kFaultPolicyNonFinite) != 0);

@@ -1,6 +1,7 @@
 // `nao_toolchain synth`: synthetic human demonstrations of the paper's three circle movements.
 #include "nao/tools/command.hpp"
 #include "nao/tools/synth.hpp"
+#include "nao/tools/synth_stress.hpp"
 
 #include <iostream>
 #include <memory>
@@ -13,6 +14,8 @@ struct SynthArgs {
   std::uint64_t seed = 1;
   std::string out;
   bool noise_free = false;
+  int stress_cameras = 0;
+  int stress_frames = 0;
 };
 
 void setup(CLI::App& app) {
@@ -34,7 +37,33 @@ void setup(CLI::App& app) {
   cmd->add_option("--out", args->out, "output directory")->required();
   cmd->add_flag("--noise-free", args->noise_free,
                 "exact projections: no pixel noise, no dropouts, confidence 1, no tremor (for tests)");
+  cmd->add_option("--stress-cameras", args->stress_cameras,
+                  "instead of the demonstrations, write stress recordings <movement>_<index>_stress/ seen by N\n"
+                  "cameras at 60 fps: a second person crossing, left/right arm swaps in cam1, wrong confident\n"
+                  "arm keypoints in cam2, per-camera dropouts (docs/synth.md); 0: off")
+      ->check(CLI::Range(0, 16));
+  cmd->add_option("--stress-frames", args->stress_frames, "frames per stress recording (0: the whole demonstration)")
+      ->check(CLI::NonNegativeNumber);
   cmd->callback([args] {
+    if (args->stress_cameras > 0) {
+      nao::tools::StressOptions stress;
+      stress.n_cameras = args->stress_cameras;
+      stress.n_frames = args->stress_frames;
+      stress.seed = args->seed;
+      if (stress.n_cameras < 3) stress.wrong_camera = -1;
+      if (stress.n_cameras < 2) throw nao::tools::UserError("--stress-cameras needs at least 2 cameras");
+      std::vector<nao::tools::Movement> movements = {nao::tools::Movement::kWholeArm, nao::tools::Movement::kElbow,
+                                                     nao::tools::Movement::kWrist};
+      if (args->movement != "all") movements = {nao::tools::parseMovement(args->movement)};
+      for (nao::tools::Movement m : movements)
+        for (int i = 0; i < args->per_movement; ++i) {
+          const auto scene = nao::tools::renderStressScene(nao::tools::generateDemo(m, i, args->seed, args->noise_free), stress);
+          nao::tools::writeStressScene(scene, args->out);
+          std::cout << scene.name << ": " << scene.truth.size() << " frames at " << scene.fps << " Hz, "
+                    << scene.cameras.size() << " cameras\n";
+        }
+      return;
+    }
     nao::tools::SynthOptions options;
     if (args->movement != "all") options.movements = {nao::tools::parseMovement(args->movement)};
     options.per_movement = args->per_movement;

@@ -23,6 +23,7 @@ struct TriangulateArgs {
   double rate = 10.0;
   double min_confidence = 0.05;
   double outlier_px = 10.0;
+  double max_gap = 0.2;
   bool no_bone_check = false;
   std::string out;
 };
@@ -42,6 +43,7 @@ void run(const TriangulateArgs& args) {
   opt.rate_hz = args.rate;
   opt.min_confidence = args.min_confidence;
   opt.outlier_px = args.outlier_px;
+  opt.max_gap_s = args.max_gap;
   opt.check_bone_lengths = !args.no_bone_check;
   // On a terminal one line updated in place every 10 %; in a log one line every 25 %.
   const bool tty = isatty(fileno(stderr)) != 0;
@@ -61,9 +63,9 @@ void run(const TriangulateArgs& args) {
             << "\n";
   TriangulationReport report;
   const Skeleton skeleton = triangulateFolders(dirs, calibration, opt, &report);
-  writeSkeletonCsv(args.out, skeleton);
+  writeSkeletonCsv(args.out, skeleton, true);
 
-  const int n_points = report.n_points_valid + report.n_points_missing;
+  const int n_points = report.n_points_valid + report.n_points_missing + report.n_points_interpolated;
   std::printf("%d capture frames at %g Hz -> %zu samples at %g Hz in %s\n", report.n_frames, args.fps,
               skeleton.size(), args.rate, args.out.c_str());
   if (report.n_frames_absent > 0 || report.n_frames_incomplete > 0)
@@ -74,6 +76,8 @@ void run(const TriangulateArgs& args) {
               report.n_points_valid, n_points, n_points > 0 ? 100.0 * report.n_points_valid / n_points : 0.0,
               report.n_frames_without_subject, report.n_points_inconsistent, report.n_observations_rejected,
               report.n_bone_rejections, report.median_reprojection_px);
+  std::printf("points interpolated across gaps of at most %g s: %d (written with _ok = 2)\n", args.max_gap,
+              report.n_points_interpolated);
 }
 
 void setup(CLI::App& app) {
@@ -81,8 +85,9 @@ void setup(CLI::App& app) {
   CLI::App* cmd = app.add_subcommand(
       "triangulate",
       "Triangulate OpenPose keypoints from two or more calibrated cameras into a 3D skeleton CSV\n"
-      "(confidence-weighted DLT, outlier cameras rejected by reprojection error, Ceres refinement;\n"
-      "points seen by fewer than two consistent cameras are written as missing, never invented).");
+      "(confidence-weighted DLT, per point the cameras that agree by reprojection error, Ceres refinement;\n"
+      "points seen by fewer than two consistent cameras are missing; gaps up to --max-gap are interpolated\n"
+      "and flagged _ok = 2, longer ones stay missing).");
   auto* demo = cmd->add_option("--demo", args->demo,
                                "synthesiser demonstration folder: reads its cam*/ folders (sorted) and calibration.json");
   auto* kp = cmd->add_option("--keypoints", args->keypoints,
@@ -99,8 +104,12 @@ void setup(CLI::App& app) {
   cmd->add_option("--min-confidence", args->min_confidence, "ignore detections with a lower confidence")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
-  cmd->add_option("--outlier-px", args->outlier_px, "max reprojection error of an accepted camera observation, px")
+  cmd->add_option("--outlier-px", args->outlier_px, "max reprojection error of an accepted camera observation, px (for 1920x1080; scaled up with larger images)")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--max-gap", args->max_gap,
+                  "interpolate a point missing for at most this long (s) and flag it _ok = 2; 0: never")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_flag("--no-bone-check", args->no_bone_check, "do not mark points whose bone lengths jump as missing");
   cmd->add_option("--out", args->out, "skeleton CSV to write (docs/formats.md)")->required();

@@ -84,6 +84,9 @@ Skeleton observeDemo(const SynthDemo& demo, double rate_hz) {
   TriangulateOptions opt;
   opt.fps = demo.fps;
   opt.rate_hz = rate_hz;
+  // The reference stands for a live detector: nothing after a frame may fill it, so no offline
+  // gap interpolation (nao_rt bridges short gaps itself, causally).
+  opt.max_gap_s = 0.0;
   return resampleSkeleton(triangulateCapture(demo.cameras, cams, opt), opt.rate_hz, demo.fps);
 }
 

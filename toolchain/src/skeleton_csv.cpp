@@ -3,6 +3,7 @@
 #include "nao/tools/command.hpp"
 #include "nao/tools/csv.hpp"
 
+#include <cmath>
 #include <fstream>
 
 namespace nao::tools {
@@ -18,19 +19,29 @@ void writeSkeletonColumns(std::ostream& out, const SkeletonFrame& frame) {
   out << frame.t_s;
   for (int i = 0; i < kNumSkeletonPoints; ++i) {
     if (frame.ok[i])
-      out << ',' << frame.p_W[i].x() << ',' << frame.p_W[i].y() << ',' << frame.p_W[i].z() << ",1";
+      out << ',' << frame.p_W[i].x() << ',' << frame.p_W[i].y() << ',' << frame.p_W[i].z()
+          << (frame.interpolated[i] ? ",2" : ",1");
     else
       out << ",0,0,0,0";
   }
 }
 
-void writeSkeletonCsv(const std::string& path, const Skeleton& frames) {
+void writeSkeletonCsv(const std::string& path, const Skeleton& frames, bool with_views) {
   std::ofstream out(path);
   if (!out) throw UserError("cannot write " + path);
   out.precision(10);
-  out << skeletonCsvHeader() << '\n';
+  out << skeletonCsvHeader();
+  if (with_views) {
+    for (const char* name : kSkeletonPointNames) out << ',' << name << "_cams";
+    for (const char* name : kSkeletonPointNames) out << ',' << name << "_px";
+  }
+  out << '\n';
   for (const SkeletonFrame& f : frames) {
     writeSkeletonColumns(out, f);
+    if (with_views) {
+      for (int i = 0; i < kNumSkeletonPoints; ++i) out << ',' << (f.ok[i] ? f.views[i] : 0u);
+      for (int i = 0; i < kNumSkeletonPoints; ++i) out << ',' << (f.ok[i] ? std::round(1000.0 * f.reprojection_px[i]) / 1000.0 : 0.0);
+    }
     out << '\n';
   }
   if (!out) throw UserError("error while writing " + path);
@@ -54,7 +65,9 @@ Skeleton readSkeletonCsv(const std::string& path) {
     if (!frames.empty() && f.t_s <= frames.back().t_s)
       throw UserError(csv.where() + ": time t_s=" + std::to_string(f.t_s) + " does not increase");
     for (int i = 0; i < kNumSkeletonPoints; ++i) {
-      f.ok[i] = csv.number(c_pt[i][3]) != 0.0;
+      const double ok = csv.number(c_pt[i][3]);
+      f.ok[i] = ok != 0.0;
+      f.interpolated[i] = ok == 2.0;
       f.p_W[i] = f.ok[i] ? Eigen::Vector3d(csv.number(c_pt[i][0]), csv.number(c_pt[i][1]), csv.number(c_pt[i][2]))
                          : Eigen::Vector3d::Zero();
     }

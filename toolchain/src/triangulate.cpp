@@ -61,6 +61,20 @@ bool projectT(const Camera& cam, const T* p_W, T* px) {
   return true;
 }
 
+// Tolerances are given for a 1920 x 1080 image: a larger image scales them by its diagonal (the
+// same detector error is more pixels there); a smaller one keeps them (detector noise does not
+// shrink below a few pixels). Exactly 1 for 1080p, so those results do not change.
+double toleranceScale(const Camera& cam) {
+  static const double kReferenceDiagonal = std::hypot(1920.0, 1080.0);
+  return std::max(1.0, std::hypot(static_cast<double>(cam.width), static_cast<double>(cam.height)) / kReferenceDiagonal);
+}
+
+// How far back a point's last estimate still breaks ties between camera sets, s.
+constexpr double kContinuity_s = 0.25;
+
+// Consensus search over camera pairs up to this many views; beyond, greedy dropping only.
+constexpr std::size_t kMaxConsensusViews = 8;
+
 // Pixel reprojection error of p_W in one observation; infinite behind the camera.
 double reprojectionError(const Camera& cam, const Eigen::Vector3d& p_W, const Eigen::Vector2d& px) {
   if (toCamera(cam, p_W).z() <= 1e-9) return kInf;
@@ -100,7 +114,7 @@ struct Fit {
   bool ok = false;
   Eigen::Vector3d p_W = Eigen::Vector3d::Zero();
   std::vector<double> err_px;
-  double max_err_px = kInf;
+  double max_err_px = kInf;  // largest error in 1080p pixels (err_px / toleranceScale)
 };
 
 // Per-camera reprojection errors of p_W (infinite behind a camera).
@@ -109,8 +123,9 @@ Fit evaluateFit(const CameraSet& cameras, const std::vector<Observation>& obs, c
   fit.p_W = p_W;
   fit.max_err_px = 0.0;
   for (const Observation& o : obs) {
-    fit.err_px.push_back(reprojectionError(cameras[static_cast<std::size_t>(o.camera)], p_W, o.px));
-    fit.max_err_px = std::max(fit.max_err_px, fit.err_px.back());
+    const Camera& cam = cameras[static_cast<std::size_t>(o.camera)];
+    fit.err_px.push_back(reprojectionError(cam, p_W, o.px));
+    fit.max_err_px = std::max(fit.max_err_px, fit.err_px.back() / toleranceScale(cam));
   }
   fit.ok = p_W.allFinite() && std::isfinite(fit.max_err_px);
   return fit;
@@ -139,6 +154,47 @@ Fit fitPoint(const CameraSet& cameras, const std::vector<Observation>& obs, int 
     if (refined.ok && weightedCost(obs, refined) <= weightedCost(obs, fit)) fit = std::move(refined);
   }
   return fit;
+}
+
+// The consensus step of the file comment: the largest set of cameras that agree on one point,
+// proposed by camera pairs. Equally large sets: the one whose point is nearest previous_W (the
+// point's last estimate) when given, else the lower sum of squared errors. Returns obs
+// unchanged when no pair agrees with itself.
+std::vector<Observation> consensusViews(const CameraSet& cameras, const std::vector<Observation>& obs,
+                                        const TriangulateOptions& opt, const std::optional<Eigen::Vector3d>& previous_W) {
+  const auto agreeing = [&](const Eigen::Vector3d& p_W, double* sum2) {
+    std::vector<Observation> in;
+    *sum2 = 0.0;
+    for (const Observation& o : obs) {
+      const Camera& cam = cameras[static_cast<std::size_t>(o.camera)];
+      const double e = reprojectionError(cam, p_W, o.px) / toleranceScale(cam);
+      if (e <= opt.outlier_px) in.push_back(o), *sum2 += e * e;
+    }
+    return in;
+  };
+  std::vector<Observation> best;
+  double best_tie = kInf;
+  for (std::size_t i = 0; i < obs.size(); ++i)
+    for (std::size_t j = i + 1; j < obs.size(); ++j) {
+      const Fit pair = fitPoint(cameras, {obs[i], obs[j]}, 0);
+      if (!pair.ok || pair.max_err_px > opt.outlier_px) continue;
+      double sum2 = 0.0;
+      std::vector<Observation> in = agreeing(pair.p_W, &sum2);
+      const double tie = previous_W ? (pair.p_W - *previous_W).norm() : sum2;
+      if (in.size() > best.size() || (in.size() == best.size() && tie < best_tie)) best = std::move(in), best_tie = tie;
+    }
+  if (best.size() < 2) return obs;
+  // Refit on the consensus and let every camera re-join or leave, until the set settles (a
+  // set can only be replaced by a larger one, so this ends).
+  for (std::size_t it = 0; it < obs.size(); ++it) {
+    const Fit fit = fitPoint(cameras, best, opt.max_refine_iterations);
+    if (!fit.ok) break;
+    double sum2 = 0.0;
+    std::vector<Observation> in = agreeing(fit.p_W, &sum2);
+    if (in.size() <= best.size()) break;
+    best = std::move(in);
+  }
+  return best;
 }
 
 double median(std::vector<double> v) {
@@ -225,7 +281,8 @@ Eigen::Vector3d refineOnReprojection(const CameraSet& cameras, const std::vector
   return p_W;
 }
 
-PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt) {
+PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt,
+                               const std::optional<Eigen::Vector3d>& previous_W) {
   obs.erase(std::remove_if(obs.begin(), obs.end(),
                            [&](const Observation& o) {
                              return !(o.confidence >= opt.min_confidence && o.confidence > 0.0) || !o.px.allFinite();
@@ -233,12 +290,17 @@ PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation
             obs.end());
   PointEstimate est;
   if (obs.size() < 2) return est;
+  const std::size_t n_views = obs.size();
+  bool searched = false;
   for (;;) {
     const Fit fit = fitPoint(cameras, obs, opt.max_refine_iterations);
     if (fit.ok && fit.max_err_px <= opt.outlier_px) {
       est.ok = true;
       est.p_W = fit.p_W;
       est.n_used = static_cast<int>(obs.size());
+      est.n_rejected = static_cast<int>(n_views - obs.size());
+      for (const Observation& o : obs)
+        if (o.camera >= 0 && o.camera < 32) est.views |= std::uint32_t{1} << o.camera;
       double sum2 = 0.0;
       for (double e : fit.err_px) sum2 += e * e;
       est.rms_px = std::sqrt(sum2 / static_cast<double>(fit.err_px.size()));
@@ -246,7 +308,16 @@ PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation
     }
     if (obs.size() <= 2) {
       est.inconsistent = true;
+      est.n_rejected = static_cast<int>(n_views - obs.size());
       return est;
+    }
+    if (!searched && obs.size() <= kMaxConsensusViews) {
+      searched = true;
+      std::vector<Observation> agreeing = consensusViews(cameras, obs, opt, previous_W);
+      if (agreeing.size() < obs.size()) {
+        obs = std::move(agreeing);
+        continue;
+      }
     }
     // Drop the camera whose removal leaves the most consistent fit.
     std::size_t worst = 0;
@@ -259,7 +330,6 @@ PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation
       if (score < best_rest) best_rest = score, worst = j;
     }
     obs.erase(obs.begin() + static_cast<std::ptrdiff_t>(worst));
-    ++est.n_rejected;
   }
 }
 
@@ -291,24 +361,30 @@ SubjectChoice chooseSubject(const CameraSet& cameras, const std::vector<const st
           cand.person[b] = static_cast<int>(pb);
           cand.score = 2 * static_cast<int>(good.size());
           cand.median_px = median(errors);
-          // Further cameras: the person whose points reproject best, if any agrees.
+          // Further cameras: the person whose points reproject best, if any agrees. Failing that,
+          // the person with the most points that agree (>= 3 and >= 40 % of those compared): the
+          // same body with some limbs mislabelled (a left/right swap in this or the pair's camera)
+          // is still this person, and the per-point camera selection sorts out the limbs; someone
+          // else agrees on no point.
           for (std::size_t c = 0; c < n_cam; ++c) {
             if (c == a || c == b) continue;
-            int best = -1;
-            double best_median = kInf;
-            int best_count = 0;
+            int best = -1, fallback = -1;
+            double best_median = kInf, fallback_median = kInf;
+            int best_count = 0, fallback_count = 0;
             for (std::size_t q = 0; q < people[c]->size(); ++q) {
               const Person2d& Q = (*people[c])[q];
               std::vector<double> e;
               for (const auto& [k, p_W] : good)
-                if (usable(Q, k, opt)) e.push_back(reprojectionError(cameras[c], p_W, Q.px[k]));
+                if (usable(Q, k, opt)) e.push_back(reprojectionError(cameras[c], p_W, Q.px[k]) / toleranceScale(cameras[c]));
               if (e.size() < 3) continue;
               const double m = median(e);
-              if (m <= opt.subject_px && m < best_median) {
-                best = static_cast<int>(q), best_median = m;
-                best_count = static_cast<int>(std::count_if(e.begin(), e.end(), [&](double v) { return v <= opt.outlier_px; }));
-              }
+              const int count = static_cast<int>(std::count_if(e.begin(), e.end(), [&](double v) { return v <= opt.outlier_px; }));
+              if (m <= opt.subject_px && m < best_median) best = static_cast<int>(q), best_median = m, best_count = count;
+              if (count >= 3 && 5 * count >= 2 * static_cast<int>(e.size()) &&
+                  (count > fallback_count || (count == fallback_count && m < fallback_median)))
+                fallback = static_cast<int>(q), fallback_median = m, fallback_count = count;
             }
+            if (best < 0) best = fallback, best_count = fallback_count;
             cand.person[c] = best;
             cand.score += best_count;
           }
@@ -457,6 +533,7 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
     for (const KeypointFrame* f : files) people.push_back(f != nullptr ? &f->people : &nobody);
     if (std::find(files.begin(), files.end(), nullptr) != files.end()) ++rep.n_frames_incomplete;
     const SubjectChoice subject = chooseSubject(cameras, people, previous_centre, opt);
+    rep.subject_person.push_back(subject.found ? subject.person : std::vector<int>(cameras.size(), -1));
     if (!subject.found) {
       ++rep.n_frames_without_subject;
     } else {
@@ -468,12 +545,23 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
           const Person2d& p = (*people[c])[static_cast<std::size_t>(subject.person[c])];
           if (usable(p, i, opt)) obs.push_back({static_cast<int>(c), p.px[i], p.confidence[i]});
         }
-        const PointEstimate est = triangulatePoint(cameras, obs, opt);
+        // The point's latest estimate (at most kContinuity_s old) breaks ties between equally
+        // large camera sets (two views that agree by chance along an epipolar line, as a
+        // left/right swap does with a horizontal baseline, vs the right two).
+        std::optional<Eigen::Vector3d> previous_W;
+        for (std::size_t b = k; b-- > 0 && out.t_s - frames[b].t_s <= kContinuity_s + kTimeEps;)
+          if (frames[b].ok[i]) {
+            previous_W = frames[b].p_W[i];
+            break;
+          }
+        const PointEstimate est = triangulatePoint(cameras, obs, opt, previous_W);
         rep.n_observations_rejected += est.n_rejected;
         if (est.inconsistent) ++rep.n_points_inconsistent;
         if (est.ok) {
           out.p_W[i] = est.p_W;
           out.ok[i] = true;
+          out.views[i] = est.views;
+          out.reprojection_px[i] = static_cast<float>(est.rms_px);
           rms.push_back(est.rms_px);
         }
       }
@@ -482,17 +570,58 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
     if (opt.progress) opt.progress(static_cast<int>(k), static_cast<int>(n_frames));
   }
   if (opt.check_bone_lengths) rep.n_bone_rejections = rejectBoneLengthOutliers(frames, opt.bone_tolerance);
+  for (SkeletonFrame& f : frames)
+    for (int i = 0; i < kNumSkeletonPoints; ++i)
+      if (!f.ok[i]) f.views[i] = 0, f.reprojection_px[i] = 0.0f;
+  fillShortGaps(frames, opt.max_gap_s, opt.fps);
   for (SkeletonFrame& f : frames) {
     // BODY_25B has no MidHip: the mean of the 3D hips (exact, unlike averaging projections).
     if (opt.format == PoseFormat::kBody25B && f.ok[kRHip] && f.ok[kLHip]) {
       f.p_W[kMidHip] = 0.5 * (f.p_W[kRHip] + f.p_W[kLHip]);
       f.ok[kMidHip] = true;
+      f.interpolated[kMidHip] = f.interpolated[kRHip] || f.interpolated[kLHip];
+      f.views[kMidHip] = f.views[kRHip] | f.views[kLHip];
+      f.reprojection_px[kMidHip] = std::max(f.reprojection_px[kRHip], f.reprojection_px[kLHip]);
     }
-    for (int i = 0; i < kNumSkeletonPoints; ++i) (f.ok[i] ? rep.n_points_valid : rep.n_points_missing) += 1;
+    for (int i = 0; i < kNumSkeletonPoints; ++i)
+      (f.interpolated[i] ? rep.n_points_interpolated : f.ok[i] ? rep.n_points_valid : rep.n_points_missing) += 1;
   }
   rep.median_reprojection_px = median(rms);
   if (report != nullptr) *report = rep;
   return frames;
+}
+
+int fillShortGaps(Skeleton& frames, double max_gap_s, double capture_fps) {
+  if (!(max_gap_s > 0.0) || !(capture_fps > 0.0)) return 0;
+  const double period_s = 1.0 / capture_fps;
+  int n_filled = 0;
+  for (int i = 0; i < kNumSkeletonPoints; ++i) {
+    std::size_t last = frames.size();  // last valid sample of point i so far
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+      if (!frames[k].ok[i]) continue;
+      if (last < frames.size() && k > last + 1) {
+        const SkeletonFrame& a = frames[last];
+        const SkeletonFrame& b = frames[k];
+        const double span_s = b.t_s - a.t_s;
+        // Missing frames only (an absent index would make the span longer than the count says).
+        const bool contiguous = std::abs(span_s - static_cast<double>(k - last) * period_s) <= kTimeEps * static_cast<double>(k - last + 1);
+        if (contiguous && span_s - period_s <= max_gap_s + kTimeEps) {
+          for (std::size_t m = last + 1; m < k; ++m) {
+            const double w = (frames[m].t_s - a.t_s) / span_s;
+            SkeletonFrame& f = frames[m];
+            f.p_W[i] = (1.0 - w) * a.p_W[i] + w * b.p_W[i];
+            f.ok[i] = true;
+            f.interpolated[i] = true;
+            f.views[i] = 0;
+            f.reprojection_px[i] = 0.0f;
+            ++n_filled;
+          }
+        }
+      }
+      last = k;
+    }
+  }
+  return n_filled;
 }
 
 Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz, double capture_fps) {
@@ -522,6 +651,10 @@ Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz, double capture
       for (int i = 0; i < kNumSkeletonPoints; ++i) {
         f.ok[i] = a.ok[i] && b.ok[i];
         f.p_W[i] = f.ok[i] ? Eigen::Vector3d((1.0 - w) * a.p_W[i] + w * b.p_W[i]) : Eigen::Vector3d::Zero();
+        if (!f.ok[i]) continue;
+        f.interpolated[i] = a.interpolated[i] || b.interpolated[i];
+        f.views[i] = a.views[i] | b.views[i];
+        f.reprojection_px[i] = std::max(a.reprojection_px[i], b.reprojection_px[i]);
       }
     }
     f.t_s = t;

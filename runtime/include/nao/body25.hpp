@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <cstdint>
 
 namespace nao {
 
@@ -37,6 +38,13 @@ struct SkeletonFrame {
   double t_s = 0.0;
   std::array<Eigen::Vector3d, kNumSkeletonPoints> p_W;
   std::array<bool, kNumSkeletonPoints> ok{};
+  /// Triangulation bookkeeping (the toolchain writes it, the runtime ignores it): per point,
+  /// the cameras whose detections made it (bit c = camera c of the calibration; 0 when not
+  /// triangulated), their RMS reprojection error (px), and whether the point was bridged
+  /// across a short gap by interpolation instead of measured (skeleton CSV `_ok` = 2).
+  std::array<std::uint32_t, kNumSkeletonPoints> views{};
+  std::array<float, kNumSkeletonPoints> reprojection_px{};
+  std::array<bool, kNumSkeletonPoints> interpolated{};
 };
 
 }  // namespace nao

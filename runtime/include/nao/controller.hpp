@@ -28,16 +28,17 @@
 
 namespace nao {
 
-/// Fault bits of a tick (ticks.csv column `fault`). Bits 0-7 come from the tick itself and
+/// Fault bits of a tick (ticks.csv column `fault`). Bits 0-7 and 14 come from the tick itself and
 /// never stop the loop; bits 8-13 come from the robot backend (LoLA; the ODE arm raises none).
 enum ControllerFault : std::uint32_t {
-  /// No usable human arm this tick (no frame, torso/arm keypoints missing): the last
-  /// reference is held.
+  /// No usable human arm this tick (no frame, torso/arm keypoints missing) for longer than the
+  /// bridge (kFaultHumanBridged): the last reference is held.
   kFaultNoHuman = 1u << 0,
   /// No usable human for longer than ControllerParams::no_human_timeout_s: the policy is
   /// bypassed and the arm returns to the home pose at half its velocity limits.
   kFaultHumanTimeout = 1u << 1,
-  /// NaN/Inf among the keypoints the arm needs (also sets kFaultNoHuman).
+  /// NaN/Inf among the keypoints the arm needs (also sets kFaultNoHuman, or kFaultHumanBridged
+  /// within the bridge).
   kFaultNonFiniteKeypoints = 1u << 2,
   /// Algorithm 1 hit an iteration cap: the reference is its best feasible pose (see
   /// kFaultRetargetFallback), never worse than the clamped human angles.
@@ -68,12 +69,16 @@ enum ControllerFault : std::uint32_t {
   kFaultTrackingError = 1u << 12,
   /// The backend ended the run early (link lost, SIGINT/SIGTERM): hold, stiffness ramped to 0.
   kFaultSafeStop = 1u << 13,
+  /// A short detector gap: no usable human this tick, but one within the last
+  /// ControllerParams::human_bridge_ticks ticks. The last reference is held (as for
+  /// kFaultNoHuman, which this tick does not set).
+  kFaultHumanBridged = 1u << 14,
 };
-inline constexpr int kNumControllerFaults = 14;
+inline constexpr int kNumControllerFaults = 15;
 inline constexpr std::array<const char*, kNumControllerFaults> kControllerFaultNames = {
     "no_human", "human_timeout", "nonfinite_keypoints", "ik_not_converged", "policy_nonfinite", "overrun",
     "command_limited", "retarget_fallback", "robot_link_lost", "robot_packet_gap", "robot_malformed_packet",
-    "joint_hot", "tracking_error", "safe_stop"};
+    "joint_hot", "tracking_error", "safe_stop", "human_bridged"};
 
 /// Injected monotonic clock (STYLE 6): the real one reads CLOCK_MONOTONIC, tests drive time.
 struct ControllerClock {
@@ -90,6 +95,9 @@ struct SteadyClock final : ControllerClock {
 struct ControllerParams {
   double period_s = 0.1;             ///< control period (10 Hz)
   double no_human_timeout_s = 3.0;   ///< hold the last reference this long, then go home
+  /// Detector gaps of at most this many ticks after a usable human are bridged
+  /// (kFaultHumanBridged) instead of counted as kFaultNoHuman; 0: never.
+  int human_bridge_ticks = 2;
   /// NAO's rest pose (arm down, elbow slightly bent), rad; clamped to the limits.
   JointVector home = (JointVector() << 1.40, -0.20, 1.20, 0.50, 0.00).finished();
   RetargetParams retarget;
@@ -165,6 +173,7 @@ ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeigh
                                           const ControllerParams& params, const SimParams& sim_params = {}) {
   if (!(params.period_s > 0.0)) throw std::invalid_argument("controller: period must be positive");
   if (!(params.no_human_timeout_s >= 0.0)) throw std::invalid_argument("controller: negative no-human timeout");
+  if (params.human_bridge_ticks < 0) throw std::invalid_argument("controller: negative human bridge");
   if (std::abs(sim_params.dt_s * sim_params.substeps_per_tick - params.period_s) > 1e-9)
     throw std::invalid_argument("controller: physics substeps do not add up to the control period");
   ControllerModel<Dims> m{arm, makeSimModel(arm, sim_params), policy, params, robotScale(arm),
@@ -241,6 +250,9 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
     }
     if (have_human) {
       data.last_human_tick = data.tick;
+    } else if (data.last_human_tick >= 0 && data.tick - data.last_human_tick <= p.human_bridge_ticks) {
+      // A short detector gap: the held reference bridges it.
+      rec.fault |= kFaultHumanBridged;
     } else {
       rec.fault |= kFaultNoHuman;
       const double since_s = static_cast<double>(data.tick - data.last_human_tick) * p.period_s;

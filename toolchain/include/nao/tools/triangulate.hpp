@@ -6,7 +6,8 @@
 //     by both are triangulated; a pairing is a candidate when >= 3 points agree (reprojection
 //     error <= outlier_px) and their median reprojection error is <= subject_px. Each further
 //     camera contributes the person whose points reproject best (median <= subject_px, >= 3
-//     points), or nobody. Among candidates, those whose 3D centre (torso points) lies within
+//     points), else the person with the most agreeing points (>= 3 and >= 40 % of those
+//     compared: the same body with a limb swapped), or nobody. Among candidates, those whose 3D centre (torso points) lies within
 //     subject_max_jump_m of the last frame's subject are preferred (continuity). The score of a
 //     candidate is its number of consistent (camera, point) detections; among the candidates
 //     scoring >= 3/4 of the best, the winner is the one whose centre appears closest to the
@@ -17,19 +18,30 @@
 //     autodiff, iteration cap) on the confidence-weighted pixel reprojection error; the refined
 //     point replaces the DLT point only if it is in front of every camera and that error is
 //     not higher.
-//  3. Outlier rule. A fit is consistent when every used camera sees the point in front of it
-//     and reprojects it within outlier_px. While a fit of n >= 3 cameras is inconsistent, the
-//     camera whose removal gives the smallest worst-case reprojection error of the others is
-//     dropped (counted as rejected). A fit of 2 cameras that is inconsistent (the two rays do
-//     not meet: a wrong keypoint off the epipolar line) makes the point missing: with two
-//     views one cannot tell which camera is wrong, so no point is invented.
-//     Fewer than 2 usable views -> missing.
+//  3. Camera selection by consensus. A fit is consistent when every used camera sees the point
+//     in front of it and reprojects it within its tolerance: outlier_px, given for a 1920 x 1080
+//     image and scaled by the image diagonal for larger images (never below outlier_px). When
+//     the fit of all n >= 3 cameras is inconsistent, every pair of cameras (n <= 8) proposes
+//     the point of its two rays; the proposal that the most cameras agree with (within their
+//     tolerance; ties: the one nearest the point's latest estimate of the last 0.25 s, else
+//     the lower sum of squared errors; then the lower pair) wins, and its
+//     consensus set is refitted and re-checked against all cameras until it no longer changes.
+//     While that fit (or, above 8 cameras, the fit of all) is still inconsistent and >= 3
+//     cameras remain, the camera whose removal gives the smallest worst-case reprojection error
+//     of the others is dropped. Cameras not in the final fit count as rejected. A fit of 2
+//     cameras that is inconsistent (the two rays do not meet: a wrong keypoint off the
+//     epipolar line) makes the point missing: with two views one cannot tell which camera is
+//     wrong, so no point is invented. Fewer than 2 usable views -> missing. The cameras used
+//     (SkeletonFrame::views) and their RMS reprojection error are kept per point.
 //  4. BODY_25B: MidHip = mean of the two 3D hips when both are valid.
 // Over the sequence (capture rate), the bone-length rule catches what geometry cannot with two
 // cameras (a wrong keypoint moved along its epipolar line): a bone whose length differs from
 // its sequence median by more than max(bone_tolerance * median, 5 cm) is bad; greedily, the
 // point with the most bad bones (all of its checked bones bad) is marked missing, until no
 // point has all its bones bad. Bones need >= 5 valid samples and a median >= 5 cm.
+// Gap policy (max_gap_s): a point missing for at most max_gap_s between two valid samples of
+// it is interpolated linearly and flagged (SkeletonFrame::interpolated, CSV `_ok` = 2); longer
+// gaps, and gaps that contain frame indices absent from every folder, stay missing.
 // Frames pair across cameras by their file index (triangulateCapture); finally the sequence is
 // resampled from fps to rate_hz (resampleSkeleton), never interpolating across absent frames.
 #pragma once
@@ -41,6 +53,7 @@
 
 #include <Eigen/Core>
 
+#include <cstdint>
 #include <functional>
 #include <optional>
 #include <string>
@@ -53,8 +66,9 @@ struct TriangulateOptions {
   double fps = 30.0;                ///< capture rate of the keypoint files, Hz
   double rate_hz = 10.0;            ///< output rate, Hz
   double min_confidence = 0.05;     ///< detections below are not used
-  double outlier_px = 10.0;         ///< max reprojection error of an accepted observation, px
-  double subject_px = 15.0;         ///< max median reprojection error of a person match, px
+  double outlier_px = 10.0;         ///< max reprojection error of an accepted observation, px (1080p; scaled up with the image)
+  double subject_px = 15.0;         ///< max median reprojection error of a person match, px (1080p; scaled likewise)
+  double max_gap_s = 0.2;           ///< longest gap of a point that is interpolated (flagged), s; 0: none
   double subject_max_jump_m = 0.5;  ///< continuity gate for the subject's torso centre, m
   bool check_bone_lengths = true;   ///< apply the bone-length rule over the sequence
   double bone_tolerance = 0.25;     ///< relative bone-length deviation marked bad
@@ -73,7 +87,11 @@ struct TriangulationReport {
   int n_points_inconsistent = 0;    ///< >= 2 views that never agreed -> missing
   int n_observations_rejected = 0;  ///< camera observations dropped as outliers
   int n_bone_rejections = 0;        ///< points marked missing by the bone-length rule
+  int n_points_interpolated = 0;    ///< missing points bridged by the gap policy (not in n_points_valid/missing)
   double median_reprojection_px = 0.0;  ///< over valid points, RMS over their cameras
+  /// Per output frame of triangulateCapture (sorted present indices): per camera the index of
+  /// the subject's detection in that camera's people, or -1.
+  std::vector<std::vector<int>> subject_person;
 };
 
 /// One camera's detection of one point.
@@ -89,6 +107,7 @@ struct PointEstimate {
   bool ok = false;
   int n_used = 0;              ///< cameras in the final fit
   int n_rejected = 0;          ///< cameras dropped by the outlier rule
+  std::uint32_t views = 0;     ///< cameras in the final fit: bit c = Observation::camera c (c < 32)
   bool inconsistent = false;   ///< had >= 2 views but none agreed
   double rms_px = 0.0;         ///< RMS reprojection error over the used cameras
 };
@@ -105,8 +124,11 @@ std::optional<Eigen::Vector3d> triangulateDlt(const CameraSet& cameras, const st
 Eigen::Vector3d refineOnReprojection(const CameraSet& cameras, const std::vector<Observation>& obs,
                                      const Eigen::Vector3d& p0_W, int max_iterations);
 
-/// One point from all its observations, with the outlier rule of the file comment.
-PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt);
+/// One point from all its observations, with the camera selection of the file comment.
+/// `previous_W`, the point's latest estimate (triangulateCapture: of the last 0.25 s), breaks ties between
+/// equally large agreeing camera sets (the nearer wins).
+PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt,
+                               const std::optional<Eigen::Vector3d>& previous_W = std::nullopt);
 
 /// Subject chosen in one frame: per camera the index into its people, or -1.
 struct SubjectChoice {
@@ -135,6 +157,12 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
 
 /// Bone-length rule of the file comment; returns how many points it marked missing.
 int rejectBoneLengthOutliers(Skeleton& frames, double tolerance);
+
+/// Gap policy of the file comment on capture frames at capture_fps: interpolates every gap of
+/// a point that lasts at most max_gap_s (missing capture frames / capture_fps) between two
+/// valid samples, with no absent frame index inside, and flags the filled points
+/// (interpolated, views 0). Returns how many points it filled.
+int fillShortGaps(Skeleton& frames, double max_gap_s, double capture_fps);
 
 /// Resamples to rate_hz: times t0 + j / rate_hz up to the last input time. `frames` are capture
 /// frames at capture_fps, possibly with gaps (absent frames). A time that falls on an input
