@@ -1,9 +1,10 @@
 #include "nao/tools/skeleton_csv.hpp"
 
+#include "nao/file_io.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/csv.hpp"
 
-#include <fstream>
+#include <sstream>
 
 namespace nao::tools {
 
@@ -25,15 +26,17 @@ void writeSkeletonColumns(std::ostream& out, const SkeletonFrame& frame) {
 }
 
 void writeSkeletonCsv(const std::string& path, const Skeleton& frames) {
-  std::ofstream out(path);
-  if (!out) throw UserError("cannot write " + path);
+  std::ostringstream out;
   out.precision(10);
   out << skeletonCsvHeader() << '\n';
   for (const SkeletonFrame& f : frames) {
     writeSkeletonColumns(out, f);
     out << '\n';
   }
-  if (!out) throw UserError("error while writing " + path);
+  // Whole or not at all: a reader never sees half a skeleton.
+  const std::string text = out.str();
+  if (const std::string problem = writeFileAtomically(path, text.data(), text.size()); !problem.empty())
+    throw UserError("cannot write " + path + ": " + problem);
 }
 
 Skeleton readSkeletonCsv(const std::string& path) {
