@@ -7,6 +7,7 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -493,6 +494,22 @@ TEST_CASE("an empty file, unordered joint limits and non-positive velocity limit
   CHECK(decodeError(withJoint(4, 2, 0.0)) == "x.bin: header: joint 'RWristYaw' has velocity limit 0 rad/s, expected > 0");
   CHECK(decodeError(withJoint(0, 2, -1.0)) ==
         "x.bin: header: joint 'RShoulderPitch' has velocity limit -1 rad/s, expected > 0");
+
+  // Metadata nested deeper than any JSON the trainer writes: nao_rt --info dumps it recursively.
+  nao::ModelHeader deep = makeHeader(nao::smallArch());
+  deep.metadata_json = std::string(100000, '[') + std::string(100000, ']');
+  CHECK_THROWS_WITH_AS(nao::encodeModel(deep, nao::test::randomManifestTensors(nao::smallArch(), 1)),
+                       doctest::Contains("metadata nests deeper than 64 levels"), ModelFileError);
+
+  deep.metadata_json = std::string(200, 'x');
+  std::vector<std::uint8_t> b = nao::encodeModel(deep, nao::test::randomManifestTensors(nao::smallArch(), 1));
+  const std::string marker(200, 'x');
+  const auto at = std::search(b.begin(), b.end(), marker.begin(), marker.end());
+  REQUIRE(at != b.end());
+  std::fill(at, at + 100, static_cast<std::uint8_t>('['));
+  std::fill(at + 100, at + 200, static_cast<std::uint8_t>(']'));
+  reseal(b);
+  CHECK(decodeError(b) == "x.bin: header: metadata nests deeper than 64 levels (at byte 64)");
 
   // The writer refuses what the reader would.
   nao::ModelHeader h = makeHeader(nao::smallArch());

@@ -1,5 +1,6 @@
 #include "nao/model_file.hpp"
 #include "nao/file_io.hpp"
+#include "nao/text_guard.hpp"
 
 #include <algorithm>
 #include <cassert>
@@ -389,6 +390,7 @@ std::string encodeProblem(const ModelHeader& h) {
   for (const std::string& m : h.movement_names)
     if (std::string p = nameProblem("movement", m); !p.empty()) return p;
   if (h.metadata_json.size() > std::numeric_limits<std::uint32_t>::max()) return "metadata is larger than 4 GiB";
+  if (const std::string p = jsonShapeProblem(h.metadata_json); !p.empty()) return "metadata " + p;
   if (h.conditioning != Conditioning::kReference && h.conditioning != Conditioning::kAutonomous)
     return "conditioning " + std::to_string(static_cast<std::uint32_t>(h.conditioning)) + " is unknown";
   return {};
@@ -561,6 +563,8 @@ ModelFile decodeModel(std::vector<std::uint8_t> bytes, const std::string& origin
     if (const std::string p = jointProblem(j); !p.empty()) fail(origin, "header: " + p);
   h.joints = std::move(raw.joints);
   h.movement_names = std::move(raw.movements);
+  // The metadata is JSON that nao_rt --info parses and dumps, recursively: bound its nesting.
+  if (const std::string p = jsonShapeProblem(raw.metadata); !p.empty()) fail(origin, "header: metadata " + p);
   h.metadata_json = std::move(raw.metadata);
 
   if (const std::string p = archProblem(h.arch); !p.empty()) fail(origin, "architecture: " + p);
