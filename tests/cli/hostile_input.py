@@ -185,6 +185,11 @@ class Hostile(unittest.TestCase):
             p = os.path.join(CORPUS, "model_file", name)
             self.expect_refused(self.nao_rt("--weights", p), [p, joint, "velocity limit"])
 
+    def test_model_metadata_nested_deeply(self):
+        # nao_rt --info parses the metadata and dumps it: deep nesting overflowed the stack.
+        p = os.path.join(CORPUS, "model_file", "crash_deep_metadata.bin")
+        self.expect_refused([NAO_RT, "--info", "--weights", p], [p, "metadata nests deeper"])
+
     def test_nao_rt_seconds_1e19(self):
         self.expect_refused([NAO_RT, "--seconds", "1e19"], ["--seconds 1e+19", "longest run"], codes=(2,))
 

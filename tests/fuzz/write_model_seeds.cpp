@@ -4,6 +4,7 @@
 #include "nao/file_io.hpp"
 #include "nao/model_file.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <random>
@@ -25,13 +26,14 @@ nao::PolicyArch tinyArch() {
   return a;
 }
 
-std::vector<std::uint8_t> tinyModel(nao::Conditioning conditioning) {
+std::vector<std::uint8_t> tinyModel(nao::Conditioning conditioning, const std::string& metadata =
+    R"({"seed":1,"split":{"val":["elbow_000"]},"data":{"retarget":{"priority":"hand"}}})") {
   nao::ModelHeader h;
   h.arch = tinyArch();
   h.conditioning = conditioning;
   h.joints = nao::trainedJoints(nao::loadArmModel(NAO_DEFAULT_URDF));
   h.movement_names = {"elbow"};
-  h.metadata_json = R"({"seed":1,"split":{"val":["elbow_000"]},"data":{"retarget":{"priority":"hand"}}})";
+  h.metadata_json = metadata;
   std::mt19937_64 rng(1);
   std::vector<std::vector<float>> tensors;
   for (const nao::TensorSpec& t : nao::policyManifest(h.arch)) {
@@ -42,13 +44,28 @@ std::vector<std::uint8_t> tinyModel(nao::Conditioning conditioning) {
   return nao::encodeModel(h, tensors);
 }
 
+void reseal(std::vector<std::uint8_t>& b) {
+  const std::uint64_t sum = nao::fnv1a64(b.data(), b.size() - 8);
+  for (int i = 0; i < 8; ++i) b[b.size() - 8 + i] = static_cast<std::uint8_t>(sum >> (8 * i));
+}
+
+// Metadata nested 500 deep (the writer refuses it, so it is written flat and bracketed after).
+std::vector<std::uint8_t> deepMetadata() {
+  const std::string flat(1000, 'x');
+  std::vector<std::uint8_t> b = tinyModel(nao::Conditioning::kReference, flat);
+  const auto at = std::search(b.begin(), b.end(), flat.begin(), flat.end());
+  std::fill(at, at + 500, static_cast<std::uint8_t>('['));
+  std::fill(at + 500, at + 1000, static_cast<std::uint8_t>(']'));
+  reseal(b);
+  return b;
+}
+
 // Joint j's lower/upper/velocity doubles sit after the fixed fields, the FFN widths and j
 // earlier joints (docs/policy.md); the checksum is redone so the reader gets past it.
 std::vector<std::uint8_t> withJointValue(std::vector<std::uint8_t> b, int joint, int field, double v) {
   const std::size_t at = 60 + 4 * tinyArch().ffn_hidden.size() + 56 * static_cast<std::size_t>(joint) + 32 + 8 * field;
   std::memcpy(b.data() + at, &v, sizeof v);
-  const std::uint64_t sum = nao::fnv1a64(b.data(), b.size() - 8);
-  for (int i = 0; i < 8; ++i) b[b.size() - 8 + i] = static_cast<std::uint8_t>(sum >> (8 * i));
+  reseal(b);
   return b;
 }
 
@@ -74,5 +91,6 @@ int main(int argc, char** argv) {
   ok = ok && write(dir, "lower_above_upper.bin", withJointValue(reference, 2, 0, 3.0));
   ok = ok && write(dir, "velocity_zero.bin", withJointValue(reference, 4, 2, 0.0));
   ok = ok && write(dir, "velocity_negative.bin", withJointValue(reference, 0, 2, -1.0));
+  ok = ok && write(dir, "crash_deep_metadata.bin", deepMetadata());
   return ok ? 0 : 1;
 }
