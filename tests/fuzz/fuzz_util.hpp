@@ -27,16 +27,18 @@ namespace nao::fuzz {
 
 /// A per-process scratch directory (removed at exit) for readers that open a path.
 inline const std::filesystem::path& scratchDir() {
-  static const std::filesystem::path dir = [] {
-    const auto d = std::filesystem::temp_directory_path() / ("nao_fuzz_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(d);
+  // Never destroyed: the atexit handler runs after static destructors registered later.
+  static const std::filesystem::path* const dir = [] {
+    const auto* d = new std::filesystem::path(std::filesystem::temp_directory_path() /
+                                              ("nao_fuzz_" + std::to_string(::getpid())));
+    std::filesystem::create_directories(*d);
     std::atexit([] {
       std::error_code ec;
       std::filesystem::remove_all(scratchDir(), ec);
     });
     return d;
   }();
-  return dir;
+  return *dir;
 }
 
 /// Writes the input to `relative` inside scratchDir() and returns its path.
