@@ -144,3 +144,36 @@ TEST_CASE("a URDF whose chain is wired differently or lacks the hand link is ref
       loadError("no_hand.urdf", urdfWith("<link name=\"r_hand\"/>", "<link name=\"r_hand_renamed\"/>"));
   CHECK_MESSAGE(no_hand.find("r_hand") != std::string::npos, no_hand);
 }
+
+TEST_CASE("URDF text that could crash or mislead the parser is refused before it (issue 16)") {
+  // 60000 nested elements overflowed the stack inside TinyXML.
+  const std::string deep = loadError("deep.urdf", "<?xml version=\"1.0\"?>\n<robot name=\"x\">" +
+                                                       [] {
+                                                         std::string s;
+                                                         for (int i = 0; i < 60000; ++i) s += "<a>";
+                                                         for (int i = 0; i < 60000; ++i) s += "</a>";
+                                                         return s;
+                                                       }() +
+                                                       "</robot>");
+  CHECK_MESSAGE(deep.find("deep.urdf: not a usable URDF: the text nests deeper than 64 levels") != std::string::npos, deep);
+  // These 36 bytes end in a UTF-8 lead byte: TinyXML read past the buffer.
+  const std::string cut = loadError("utf8.urdf", std::string("<?xml version=\"1.0\"?>\n<robot name=\"\xF2"));
+  CHECK_MESSAGE(cut.find("utf8.urdf: not a usable URDF: the text is not valid UTF-8") != std::string::npos, cut);
+  const std::string nul = loadError("nul.urdf", std::string("<robot name=\"x\">\0</robot>", 25));
+  CHECK_MESSAGE(nul.find("NUL byte") != std::string::npos, nul);
+  // Comments, CDATA and self-closing tags do not count as nesting: the project's URDF loads.
+  CHECK_NOTHROW(nao::parseArmModel("<!-- <a><a><a> -->" + nao::test::readFile(kUrdfPath), "commented.urdf"));
+}
+
+TEST_CASE("a URDF whose numbers are finite but absurd is refused naming the joint (issue 16)") {
+  const std::string far = loadError("far.urdf", urdfWith("<origin xyz=\"0.105 -0.015 0\"", "<origin xyz=\"1e308 -0.015 0\""));
+  CHECK_MESSAGE(far.find("joint 'RElbowYaw' origin xyz=\"1e+308 -0.015 0\" is not finite or not within 10 m") !=
+                    std::string::npos,
+                far);
+  const std::string hand = loadError("far_hand.urdf", urdfWith("<origin xyz=\"0.05775 0 -0.01231\"", "<origin xyz=\"0.05775 0 -12\""));
+  CHECK_MESSAGE(hand.find("RHandPoint") != std::string::npos, hand);
+  const std::string limit = loadError("turns.urdf", urdfWith("lower=\"-1.82387\"", "lower=\"-100\""));
+  CHECK_MESSAGE(limit.find("joint 'RWristYaw' has limit lower=-100") != std::string::npos, limit);
+  const std::string speed = loadError("fast.urdf", urdfWith("velocity=\"24.6229\"", "velocity=\"1e300\""));
+  CHECK_MESSAGE(speed.find("joint 'RWristYaw' has velocity limit 1e+300") != std::string::npos, speed);
+}

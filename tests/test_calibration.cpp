@@ -191,3 +191,37 @@ TEST_CASE("malformed calibrations give one clear line each") {
                          UserError);
   }
 }
+
+TEST_CASE("calibrations that parse but mean nothing are refused, naming the file (issue 16)") {
+  SUBCASE("a number that overflows a double (json out_of_range, not parse_error)") {
+    expectJsonError(replaceField("translation", "[1e400, 0, 2]"), "calibration JSON does not parse");
+  }
+  SUBCASE("JSON nested deeper than any calibration") {
+    expectJsonError("{\"cameras\": " + std::string(100000, '[') + std::string(100000, ']') + "}", "nests deeper than");
+  }
+  SUBCASE("a Rodrigues vector whose norm overflows") {
+    expectJsonError(replaceField("rotation", "[1e200, 0, 0]"), "'rotation' [1e+200, 0, 0] is not a rotation");
+  }
+  SUBCASE("focal lengths of 1e-300 px") {
+    expectJsonError(replaceField("matrix", "[[1e-300, 0, 320], [0, 1e-300, 240], [0, 0, 1]]"),
+                    "focal lengths fx=1e-300, fy=1e-300 px are not plausible");
+  }
+  SUBCASE("a camera kilometres away") {
+    expectJsonError(replaceField("translation", "[0, 0, 2e3]"), "more than 1000 m away");
+  }
+  SUBCASE("two identical cameras") {
+    std::string second = kGoodCamera;
+    second.replace(second.find("\"c\""), 3, "\"d\"");
+    expectJsonError("{\"cameras\": [" + kGoodCamera + ", " + second + "]}", "cameras 'c' and 'd' sit at the same place");
+  }
+  SUBCASE("two identical cameras in TOML") {
+    const std::string cam = "size = [640, 480]\nmatrix = [[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]\n"
+                            "distortions = [0.0, 0.0, 0.0, 0.0]\nrotation = [0.0, 0.0, 0.0]\ntranslation = [0.0, 0.0, 1.0]\n";
+    CHECK_THROWS_WITH_AS(parseCalibrationToml("[cam_0]\n" + cam + "[cam_1]\n" + cam, "calib.toml"),
+                         doctest::Contains("calib.toml: cameras 'cam_0' and 'cam_1' sit at the same place"), UserError);
+  }
+  SUBCASE("the project's own calibrations pass every check") {
+    CHECK(readCalibration(kDataDir + "/calibration.json").size() == 2);
+    CHECK(readCalibration(kDataDir + "/calibration.toml").size() == 2);
+  }
+}

@@ -7,6 +7,7 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -469,4 +470,50 @@ TEST_CASE("a paper-size model round-trips") {
   CHECK(m.header.arch == arch);
   const std::size_t last = m.tensors.size() - 1;
   CHECK(std::memcmp(m.data(last), tensors[last].data(), tensors[last].size() * 4) == 0);
+}
+
+TEST_CASE("an empty file, unordered joint limits and non-positive velocity limits are refused (issue 16)") {
+  // memcmp on the null data() of an empty vector was undefined behaviour.
+  CHECK(decodeError({}) == "x.bin: truncated (0 bytes, header needs at least 60)");
+
+  // Joint j's lower/upper/velocity doubles follow the 60 fixed bytes, the FFN widths and the
+  // 56-byte records of the joints before it (docs/policy.md).
+  const std::vector<std::uint8_t> good = smallModelBytes();
+  const std::size_t joints = 60 + 4 * nao::smallArch().ffn_hidden.size();
+  auto withJoint = [&](int j, int field, double v) {
+    std::vector<std::uint8_t> b = good;
+    std::uint64_t bits;
+    std::memcpy(&bits, &v, sizeof bits);
+    putU64(b, joints + 56 * static_cast<std::size_t>(j) + 32 + 8 * static_cast<std::size_t>(field), bits);
+    reseal(b);
+    return b;
+  };
+  CHECK(decodeError(withJoint(2, 0, 0.0)) == "(accepted)");  // the offsets point at the limits
+  CHECK(decodeError(withJoint(2, 0, 3.0)) ==
+        "x.bin: header: joint 'RElbowYaw' has lower limit 3 rad not below its upper limit 2.08567 rad");
+  CHECK(decodeError(withJoint(4, 2, 0.0)) == "x.bin: header: joint 'RWristYaw' has velocity limit 0 rad/s, expected > 0");
+  CHECK(decodeError(withJoint(0, 2, -1.0)) ==
+        "x.bin: header: joint 'RShoulderPitch' has velocity limit -1 rad/s, expected > 0");
+
+  // Metadata nested deeper than any JSON the trainer writes: nao_rt --info dumps it recursively.
+  nao::ModelHeader deep = makeHeader(nao::smallArch());
+  deep.metadata_json = std::string(100000, '[') + std::string(100000, ']');
+  CHECK_THROWS_WITH_AS(nao::encodeModel(deep, nao::test::randomManifestTensors(nao::smallArch(), 1)),
+                       doctest::Contains("metadata nests deeper than 64 levels"), ModelFileError);
+
+  deep.metadata_json = std::string(200, 'x');
+  std::vector<std::uint8_t> b = nao::encodeModel(deep, nao::test::randomManifestTensors(nao::smallArch(), 1));
+  const std::string marker(200, 'x');
+  const auto at = std::search(b.begin(), b.end(), marker.begin(), marker.end());
+  REQUIRE(at != b.end());
+  std::fill(at, at + 100, static_cast<std::uint8_t>('['));
+  std::fill(at + 100, at + 200, static_cast<std::uint8_t>(']'));
+  reseal(b);
+  CHECK(decodeError(b) == "x.bin: header: metadata nests deeper than 64 levels (at byte 64)");
+
+  // The writer refuses what the reader would.
+  nao::ModelHeader h = makeHeader(nao::smallArch());
+  h.joints[1].upper = h.joints[1].lower;
+  CHECK_THROWS_WITH_AS(nao::encodeModel(h, nao::test::randomManifestTensors(nao::smallArch(), 1)),
+                       doctest::Contains("joint 'RShoulderRoll' has lower limit"), ModelFileError);
 }

@@ -251,6 +251,15 @@ TEST_CASE("malformed OpenPose files give one clear line each") {
     pose[0] = "12";
     expectError(document({personWith("pose_keypoints_2d", pose)}), "expected a number");
   }
+  SUBCASE("a value nested a million deep: refused before the parser, and never dumped (issue 16)") {
+    const std::string deep = std::string(1000000, '[') + std::string(1000000, ']');
+    expectError("{\"people\": [{\"pose_keypoints_2d\": " + deep + "}]}", "the JSON text nests deeper than 64 levels");
+  }
+  SUBCASE("an array where a number belongs is named by its kind, not its text") {
+    nlohmann::json pose = poseArray();
+    pose[0] = nlohmann::json::array({1, 2, 3});
+    expectError(document({personWith("pose_keypoints_2d", pose)}), "value 0 (point 0) is an array, expected a number");
+  }
   SUBCASE("negative confidence") {
     nlohmann::json pose = poseArray();
     pose[3 * kRElbow + 2] = -0.2;

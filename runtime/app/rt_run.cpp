@@ -27,6 +27,10 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr const char* kReferenceHelp = "synthetic:whole_arm|elbow|wrist, file:PATH or none";
+// Longest run: one hour of ticks (NAO's battery lasts about that). The run buffers are sized
+// by it before the loop, so a larger count would only allocate until the machine gives up.
+constexpr std::int64_t kMaxRunTicks = 36000;
+constexpr const char* kMaxRunText = "36000 ticks (1 h at 10 Hz)";
 
 bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefix, 0) == 0; }
 
@@ -242,6 +246,14 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   if (o.seconds < 0.0 || !std::isfinite(o.seconds)) throw UsageError("--seconds must be positive");
   if (o.ticks > 0 && o.seconds > 0.0) throw UsageError("--ticks and --seconds exclude each other");
   if (!(o.controller.period_s > 0.0)) throw UsageError("the control period must be positive");
+  // Counts in double before any cast: llround of 1e20 is undefined (it gave one tick).
+  if (o.ticks > kMaxRunTicks)
+    throw UsageError("--ticks " + std::to_string(o.ticks) + " is more than the longest run, " + kMaxRunText);
+  if (o.seconds > 0.0 && !(o.seconds / o.controller.period_s <= static_cast<double>(kMaxRunTicks))) {
+    char seconds[32];
+    std::snprintf(seconds, sizeof seconds, "%g", o.seconds);
+    throw UsageError(std::string("--seconds ") + seconds + " is more than the longest run, " + kMaxRunText);
+  }
 
   p.arm = loadArmModel(o.urdf_path);
   loadModel(o, compiled_arch, p);
@@ -302,6 +314,9 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   else
     p.ticks = default_ticks;
   if (p.ticks <= 0) throw std::runtime_error("nothing to run: the reference has no ticks");
+  if (p.ticks > kMaxRunTicks)
+    throw std::runtime_error("the reference (" + p.reference.description + ") has " + std::to_string(p.ticks) +
+                             " ticks, more than the longest run, " + kMaxRunText + ": give --ticks or --seconds");
 
   if (!o.log_dir.empty()) {
     std::error_code ec;

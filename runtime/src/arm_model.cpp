@@ -1,4 +1,5 @@
 #include "nao/arm_model.hpp"
+#include "nao/text_guard.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
@@ -6,6 +7,7 @@
 #include <urdf_parser/urdf_parser.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 
@@ -34,6 +36,33 @@ class CollectErrors : public console_bridge::OutputHandler {
 
 Eigen::Vector3d toEigen(const urdf::Vector3& v) { return {v.x, v.y, v.z}; }
 
+// A robot this size has every offset within a metre; 10 m leaves room for any arm while still
+// refusing numbers (1e308) that only break the kinematics later, on every tick.
+constexpr double kMaxOffset_m = 10.0;
+// A revolute joint's limits lie within one turn each way; speeds and torques within these.
+constexpr double kMaxLimit_rad = 2.0 * 3.14159265358979323846;
+constexpr double kMaxVelocity_rads = 1e3;
+constexpr double kMaxEffort_Nm = 1e4;
+
+std::string num(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
+
+// A pose from the URDF (joint or inertial origin): finite and of plausible size.
+void checkPose(const urdf::Pose& pose, const std::string& origin, const std::string& what) {
+  const Eigen::Vector3d p = toEigen(pose.position);
+  if (!p.allFinite() || p.cwiseAbs().maxCoeff() >= kMaxOffset_m)
+    fail(origin, what + " origin xyz=\"" + num(p.x()) + " " + num(p.y()) + " " + num(p.z()) +
+                     "\" is not finite or not within " + num(kMaxOffset_m) + " m");
+  double x, y, z, w;
+  pose.rotation.getQuaternion(x, y, z, w);
+  if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z) || !std::isfinite(w) ||
+      !(std::abs(x) + std::abs(y) + std::abs(z) + std::abs(w) > 0.0))
+    fail(origin, what + " origin rpy is not a finite rotation");
+}
+
 Eigen::Matrix3d toEigen(const urdf::Rotation& r) {
   double x, y, z, w;
   r.getQuaternion(x, y, z, w);
@@ -55,6 +84,7 @@ const char* typeName(int type) {
 LinkInertial readInertial(const urdf::Link& link, const std::string& origin) {
   if (!link.inertial) fail(origin, "link '" + link.name + "' has no <inertial>; the simulator needs its mass");
   const urdf::Inertial& in = *link.inertial;
+  checkPose(in.origin, origin, "link '" + link.name + "' <inertial>");
   if (!(in.mass > 0.0) || !std::isfinite(in.mass))
     fail(origin, "link '" + link.name + "' has mass " + std::to_string(in.mass) + "; expected > 0");
   LinkInertial out;
@@ -78,10 +108,14 @@ ArmModel loadArmModel(const std::string& urdf_path) {
   if (!file) fail(urdf_path, "cannot open the URDF file (does it exist and is it readable?)");
   std::ostringstream text;
   text << file.rdbuf();
+  if (!file && !file.eof()) fail(urdf_path, "cannot read the URDF file");
   return parseArmModel(text.str(), urdf_path);
 }
 
 ArmModel parseArmModel(const std::string& urdf_xml, const std::string& origin) {
+  // TinyXML recurses per element and trusts UTF-8 lead bytes: bound the text first.
+  if (const std::string problem = xmlShapeProblem(urdf_xml); !problem.empty())
+    fail(origin, "not a usable URDF: the text " + problem);
   urdf::ModelInterfaceSharedPtr urdf;
   {
     CollectErrors errors;
@@ -110,12 +144,21 @@ ArmModel parseArmModel(const std::string& urdf_xml, const std::string& origin) {
     if (!joint->limits) fail(origin, "joint '" + name + "' has no <limit>");
     const urdf::JointLimits& lim = *joint->limits;
     if (!(lim.lower < lim.upper))
-      fail(origin, "joint '" + name + "' has limit lower=" + std::to_string(lim.lower) +
-                       " upper=" + std::to_string(lim.upper) + " (missing or empty range)");
-    if (!(lim.velocity > 0.0)) fail(origin, "joint '" + name + "' has no positive velocity limit");
-    if (!(lim.effort > 0.0)) fail(origin, "joint '" + name + "' has no positive effort limit");
+      fail(origin, "joint '" + name + "' has limit lower=" + num(lim.lower) + " upper=" + num(lim.upper) +
+                       " (missing or empty range)");
+    if (!(std::abs(lim.lower) <= kMaxLimit_rad) || !(std::abs(lim.upper) <= kMaxLimit_rad))
+      fail(origin, "joint '" + name + "' has limit lower=" + num(lim.lower) + " upper=" + num(lim.upper) +
+                       " (a revolute joint's limits lie within one turn, |q| <= 2 pi)");
+    if (!(lim.velocity > 0.0) || !(lim.velocity <= kMaxVelocity_rads))
+      fail(origin, "joint '" + name + "' has velocity limit " + num(lim.velocity) + "; expected > 0 and <= " +
+                       num(kMaxVelocity_rads) + " rad/s");
+    if (!(lim.effort > 0.0) || !(lim.effort <= kMaxEffort_Nm))
+      fail(origin, "joint '" + name + "' has effort limit " + num(lim.effort) + "; expected > 0 and <= " +
+                       num(kMaxEffort_Nm) + " N m");
     const Eigen::Vector3d axis = toEigen(joint->axis);
-    if (!(axis.norm() > 0.5)) fail(origin, "joint '" + name + "' has a zero rotation axis");
+    if (!(axis.norm() > 0.5) || !axis.allFinite())
+      fail(origin, "joint '" + name + "' has a zero or non-finite rotation axis");
+    checkPose(joint->parent_to_joint_origin_transform, origin, "joint '" + name + "'");
 
     model.p_PJ[j] = toEigen(joint->parent_to_joint_origin_transform.position);
     model.R_PJ[j] = toEigen(joint->parent_to_joint_origin_transform.rotation);
@@ -140,6 +183,7 @@ ArmModel parseArmModel(const std::string& urdf_xml, const std::string& origin) {
   if (hand_joint->type != urdf::Joint::FIXED)
     fail(origin, "joint '" + hand_joint->name + "' to '" + kHandLink + "' is of type " + typeName(hand_joint->type) +
                      "; expected fixed");
+  checkPose(hand_joint->parent_to_joint_origin_transform, origin, "joint '" + hand_joint->name + "'");
   model.p_WH = toEigen(hand_joint->parent_to_joint_origin_transform.position);
   model.R_WH = toEigen(hand_joint->parent_to_joint_origin_transform.rotation);
   return model;

@@ -1,5 +1,6 @@
 #include "nao/model_file.hpp"
 #include "nao/file_io.hpp"
+#include "nao/text_guard.hpp"
 
 #include <algorithm>
 #include <cassert>
@@ -354,6 +355,19 @@ PolicyArch toArch(const RawHeader& h, const std::string& origin) {
   return a;
 }
 
+/// Limits a joint can have: finite, lower < upper, a positive velocity limit (a model trained
+/// for anything else would be checked against the URDF with meaningless numbers).
+std::string jointProblem(const TrainedJoint& j) {
+  if (!std::isfinite(j.lower) || !std::isfinite(j.upper) || !std::isfinite(j.velocity))
+    return "joint '" + j.name + "' has a non-finite limit";
+  if (!(j.lower < j.upper))
+    return "joint '" + j.name + "' has lower limit " + number(j.lower) + " rad not below its upper limit " +
+           number(j.upper) + " rad";
+  if (!(j.velocity > 0.0))
+    return "joint '" + j.name + "' has velocity limit " + number(j.velocity) + " rad/s, expected > 0";
+  return {};
+}
+
 /// The architecture and header contents encodeModel can store, or what is wrong.
 std::string encodeProblem(const ModelHeader& h) {
   if (const std::string p = archProblem(h.arch); !p.empty()) return "architecture: " + p;
@@ -371,12 +385,12 @@ std::string encodeProblem(const ModelHeader& h) {
   };
   for (const TrainedJoint& j : h.joints) {
     if (std::string p = nameProblem("joint", j.name); !p.empty()) return p;
-    if (!std::isfinite(j.lower) || !std::isfinite(j.upper) || !std::isfinite(j.velocity))
-      return "joint '" + j.name + "' has a non-finite limit";
+    if (std::string p = jointProblem(j); !p.empty()) return p;
   }
   for (const std::string& m : h.movement_names)
     if (std::string p = nameProblem("movement", m); !p.empty()) return p;
   if (h.metadata_json.size() > std::numeric_limits<std::uint32_t>::max()) return "metadata is larger than 4 GiB";
+  if (const std::string p = jsonShapeProblem(h.metadata_json); !p.empty()) return "metadata " + p;
   if (h.conditioning != Conditioning::kReference && h.conditioning != Conditioning::kAutonomous)
     return "conditioning " + std::to_string(static_cast<std::uint32_t>(h.conditioning)) + " is unknown";
   return {};
@@ -502,9 +516,10 @@ std::uint64_t writeModelFile(const std::string& path, const ModelHeader& header,
 
 ModelFile decodeModel(std::vector<std::uint8_t> bytes, const std::string& origin) {
   const std::size_t n = bytes.size();
-  // Magic, then version: read from the file's first 12 bytes.
+  // Magic, then version: read from the file's first 12 bytes. An empty vector may have no
+  // storage at all (data() is null, and memcmp on null is undefined even for 0 bytes).
   if (n < sizeof kModelMagic) {
-    if (std::memcmp(bytes.data(), kModelMagic, n) == 0)
+    if (n == 0 || std::memcmp(bytes.data(), kModelMagic, n) == 0)
       fail(origin, "truncated (" + std::to_string(n) + " bytes, header needs at least " +
                        std::to_string(kFixedBytes) + ")");
     fail(origin, "not a nao-rt model (bad magic)");
@@ -545,10 +560,11 @@ ModelFile decodeModel(std::vector<std::uint8_t> bytes, const std::string& origin
     fail(origin, "header: conditioning " + std::to_string(cond) + " is neither 0 (reference) nor 1 (autonomous)");
   h.conditioning = static_cast<Conditioning>(cond);
   for (const TrainedJoint& j : raw.joints)
-    if (!std::isfinite(j.lower) || !std::isfinite(j.upper) || !std::isfinite(j.velocity))
-      fail(origin, "header: joint '" + j.name + "' has a non-finite limit");
+    if (const std::string p = jointProblem(j); !p.empty()) fail(origin, "header: " + p);
   h.joints = std::move(raw.joints);
   h.movement_names = std::move(raw.movements);
+  // The metadata is JSON that nao_rt --info parses and dumps, recursively: bound its nesting.
+  if (const std::string p = jsonShapeProblem(raw.metadata); !p.empty()) fail(origin, "header: metadata " + p);
   h.metadata_json = std::move(raw.metadata);
 
   if (const std::string p = archProblem(h.arch); !p.empty()) fail(origin, "architecture: " + p);

@@ -1,5 +1,6 @@
 #include "nao/tools/calibration.hpp"
 
+#include "nao/text_guard.hpp"
 #include "nao/tools/command.hpp"
 
 #include <Eigen/Geometry>
@@ -70,6 +71,17 @@ std::string num(double v) {
   return s.str();
 }
 
+// Plausible camera geometry. Real focal lengths are tens to thousands of pixels; a value far
+// outside makes every projection degenerate, so triangulation would run and find nothing.
+constexpr double kMinFocal_px = 1.0;
+constexpr double kMaxFocal_px = 1e6;
+// A Rodrigues vector's norm is the rotation angle: writers give it in [0, pi], at most 2 pi.
+constexpr double kMaxRotationAngle = 2.0 * 3.14159265358979323846 + 1e-9;
+// Cameras watch one person: farther than 1 km from the world origin is a unit or sign slip.
+constexpr double kMaxDistance_m = 1000.0;
+// Two cameras whose centres are closer than this see no parallax: nothing triangulates.
+constexpr double kMinBaseline_m = 1e-3;
+
 // One camera from a JSON object (TOML tables are converted to JSON first).
 Camera cameraFromJson(const json& cam_json, const std::string& where, const std::string& default_name) {
   if (!cam_json.is_object()) throw UserError(where + ": a camera must be an object/table, got " + shapeOf(cam_json));
@@ -92,6 +104,15 @@ Camera cameraFromJson(const json& cam_json, const std::string& where, const std:
   cam.K = matrix3(*matrix, where, "matrix");
   if (!(cam.K(0, 0) > 0.0) || !(cam.K(1, 1) > 0.0))
     throw UserError(where + ": focal lengths must be positive, got fx=" + num(cam.K(0, 0)) + ", fy=" + num(cam.K(1, 1)));
+  if (!(cam.K(0, 0) >= kMinFocal_px && cam.K(0, 0) <= kMaxFocal_px && cam.K(1, 1) >= kMinFocal_px &&
+        cam.K(1, 1) <= kMaxFocal_px))
+    throw UserError(where + ": focal lengths fx=" + num(cam.K(0, 0)) + ", fy=" + num(cam.K(1, 1)) +
+                    " px are not plausible (expected " + num(kMinFocal_px) + " to " + num(kMaxFocal_px) + " px)");
+  if (std::abs(cam.K(0, 2)) > 10.0 * cam.width || std::abs(cam.K(1, 2)) > 10.0 * cam.height ||
+      std::abs(cam.K(0, 1)) > kMaxFocal_px)
+    throw UserError(where + ": principal point (" + num(cam.K(0, 2)) + ", " + num(cam.K(1, 2)) + ") or skew " +
+                    num(cam.K(0, 1)) + " px is not plausible for a " + std::to_string(cam.width) + "x" +
+                    std::to_string(cam.height) + " image");
   if (cam.K(1, 0) != 0.0 || cam.K(2, 0) != 0.0 || cam.K(2, 1) != 0.0 || cam.K(2, 2) != 1.0)
     throw UserError(where + ": 'matrix' must have the form [[fx, s, cx], [0, fy, cy], [0, 0, 1]]");
 
@@ -111,10 +132,18 @@ Camera cameraFromJson(const json& cam_json, const std::string& where, const std:
   } else {
     const std::vector<double> r =
         numbers(cam_json, "rotation", {3}, where, "a Rodrigues vector [rx, ry, rz] or a 3x3 rotation matrix");
-    cam.R_CW = rotationFromRodrigues(Eigen::Vector3d(r[0], r[1], r[2]));
+    const Eigen::Vector3d rv(r[0], r[1], r[2]);
+    // The norm of [1e200, 0, 0] overflows to inf and the matrix would be all NaN.
+    if (!(rv.norm() <= kMaxRotationAngle))
+      throw UserError(where + ": 'rotation' [" + num(r[0]) + ", " + num(r[1]) + ", " + num(r[2]) +
+                      "] is not a rotation: a Rodrigues vector's norm is the angle, at most 2 pi");
+    cam.R_CW = rotationFromRodrigues(rv);
   }
   const std::vector<double> t = numbers(cam_json, "translation", {3}, where, "[tx, ty, tz] in metres, world -> camera");
   cam.p_CW = Eigen::Vector3d(t[0], t[1], t[2]);
+  if (!(cam.p_CW.norm() <= kMaxDistance_m))
+    throw UserError(where + ": 'translation' [" + num(t[0]) + ", " + num(t[1]) + ", " + num(t[2]) +
+                    "] puts the camera more than " + num(kMaxDistance_m) + " m away (metres expected)");
   return cam;
 }
 
@@ -136,6 +165,26 @@ json tomlToJson(const toml::node& node) {
   return json("<date/time>");
 }
 
+// Cameras at the same place (a copied block) give no baseline: every point would come out
+// invalid, so the file is refused here, naming both.
+void checkDistinct(const CameraSet& cams, const std::string& source) {
+  for (std::size_t a = 0; a < cams.size(); ++a)
+    for (std::size_t b = a + 1; b < cams.size(); ++b) {
+      const Eigen::Vector3d c_a = -cams[a].R_CW.transpose() * cams[a].p_CW;
+      const Eigen::Vector3d c_b = -cams[b].R_CW.transpose() * cams[b].p_CW;
+      if ((c_a - c_b).norm() < kMinBaseline_m)
+        throw UserError(source + ": cameras '" + cams[a].name + "' and '" + cams[b].name +
+                        "' sit at the same place (centres less than 1 mm apart): triangulation needs a baseline");
+    }
+}
+
+// The library's message without its "[json.exception.<kind>.<id>] " prefix.
+std::string jsonReason(const std::exception& e) {
+  std::string what = e.what();
+  const auto bracket = what.find("] ");
+  return bracket == std::string::npos ? what : what.substr(bracket + 2);
+}
+
 }  // namespace
 
 Eigen::Matrix3d rotationFromRodrigues(const Eigen::Vector3d& r) {
@@ -154,14 +203,13 @@ Eigen::Vector3d rodriguesFromRotation(const Eigen::Matrix3d& R) {
 }
 
 CameraSet parseCalibrationJson(const std::string& text, const std::string& source) {
+  if (const std::string problem = jsonShapeProblem(text); !problem.empty())
+    throw UserError(source + ": not a usable calibration file: the JSON text " + problem);
   json doc;
   try {
     doc = json::parse(text);
-  } catch (const json::parse_error& e) {
-    std::string what = e.what();
-    const auto bracket = what.find("] ");
-    if (bracket != std::string::npos) what = what.substr(bracket + 2);
-    throw UserError(source + ": calibration JSON does not parse: " + what);
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for a number like 1e400
+    throw UserError(source + ": calibration JSON does not parse: " + jsonReason(e));
   }
   if (!doc.is_object() || !doc.contains("cameras"))
     throw UserError(source + ": no 'cameras' array (expected {\"cameras\": [{...}, ...]})");
@@ -175,16 +223,23 @@ CameraSet parseCalibrationJson(const std::string& text, const std::string& sourc
                                  : "cam" + std::to_string(i);
     out.push_back(cameraFromJson(cams[i], source + ": camera " + std::to_string(i) + " '" + name + "'", name));
   }
+  checkDistinct(out, source);
   return out;
 }
 
 CameraSet parseCalibrationToml(const std::string& text, const std::string& source) {
+  if (text.size() > kMaxTextBytes)
+    throw UserError(source + ": not a usable calibration file: " + std::to_string(text.size()) + " bytes");
   toml::table doc;
   try {
     doc = toml::parse(text, source);
   } catch (const toml::parse_error& e) {
     throw UserError(source + ":" + std::to_string(e.source().begin.line) + ":" + std::to_string(e.source().begin.column) +
                     ": calibration TOML does not parse: " + std::string(e.description()));
+  } catch (const std::exception& e) {  // toml++ reports its own limits (nesting, size) as other errors
+    std::string what = e.what();
+    std::replace(what.begin(), what.end(), '\n', ' ');
+    throw UserError(source + ": calibration TOML does not parse: " + what);
   }
   // Camera tables in file order: toml++ keeps tables sorted by key, the source line does not.
   struct Section {
@@ -211,6 +266,7 @@ CameraSet parseCalibrationToml(const std::string& text, const std::string& sourc
   CameraSet out;
   for (const Section& s : sections)
     out.push_back(cameraFromJson(tomlToJson(*s.table), source + ": camera [" + s.key + "]", s.key));
+  checkDistinct(out, source);
   return out;
 }
 

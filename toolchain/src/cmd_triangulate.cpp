@@ -63,6 +63,11 @@ void run(const TriangulateArgs& args) {
             << "\n";
   TriangulationReport report;
   const Skeleton skeleton = triangulateFolders(dirs, calibration, opt, &report);
+  // A skeleton without a single point is no result: say so instead of writing it and exiting 0.
+  if (report.n_points_valid == 0)
+    throw UserError("no valid 3D point in " + std::to_string(report.n_frames) +
+                    " frames (no subject seen by two consistent cameras; check the calibration " + calibration +
+                    " and the keypoint folders); " + args.out + " not written");
   writeSkeletonCsv(args.out, skeleton, true);
 
   const int n_points = report.n_points_valid + report.n_points_missing + report.n_points_interpolated;

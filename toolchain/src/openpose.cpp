@@ -1,5 +1,6 @@
 #include "nao/tools/openpose.hpp"
 
+#include "nao/text_guard.hpp"
 #include "nao/tools/command.hpp"
 
 #include <nlohmann/json.hpp>
@@ -24,6 +25,16 @@ std::string personLabel(const std::string& source, std::size_t person) {
   return source + ": people[" + std::to_string(person) + "]";
 }
 
+// What a JSON value is, for messages: never its text, which may be huge (or, dumped, recurse
+// as deep as it nests).
+std::string kindOf(const json& v) {
+  if (v.is_array()) return "an array";
+  if (v.is_object()) return "an object";
+  if (v.is_string()) return "a string";
+  if (v.is_boolean()) return v.get<bool>() ? "true" : "false";
+  return "not a number";
+}
+
 // Reads `count` x, y, c triples from `array` (already checked to have 3*count entries).
 // Each triple either is a detection or counts as not detected (confidence 0, or pixel 0,0).
 // A finite confidence above 1 is clamped to 1; a negative or non-finite one is an error.
@@ -36,7 +47,7 @@ void readTriples(const json& array, int count, const std::string& where,
       const json& e = array[static_cast<std::size_t>(3 * k + c)];
       if (!e.is_number())
         throw UserError(where + " value " + std::to_string(3 * k + c) + " (point " + std::to_string(k) + ") is " +
-                        (e.is_null() ? std::string("null (a NaN written by some JSON writers)") : "'" + e.dump() + "'") +
+                        (e.is_null() ? std::string("null (a NaN written by some JSON writers)") : kindOf(e)) +
                         ", expected a number");
       v[static_cast<std::size_t>(c)] = e.get<double>();
       if (!std::isfinite(v[static_cast<std::size_t>(c)]))
@@ -88,6 +99,10 @@ std::optional<long long> openPoseFrameIndex(const std::string& file_name) {
 }
 
 std::vector<Person2d> parseOpenPoseJson(const std::string& text, PoseFormat format, const std::string& source) {
+  // nlohmann parses iteratively but copies, compares and dumps recursively: bound the nesting
+  // (an OpenPose frame nests 3 deep) and the size before it builds anything.
+  if (const std::string problem = jsonShapeProblem(text); !problem.empty())
+    throw UserError(source + ": not a usable OpenPose file: the JSON text " + problem);
   json doc;
   try {
     doc = json::parse(text);

@@ -1,5 +1,6 @@
 #include "nao/tools/policy_dataset.hpp"
 
+#include "nao/text_guard.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/csv.hpp"
 
@@ -11,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 namespace nao::tools {
 namespace {
@@ -87,9 +89,14 @@ std::uint64_t fnv1a(const std::vector<std::uint8_t>& bytes) {
 std::map<std::string, std::vector<JointVector>> readCentroids(const fs::path& path, std::string& retarget_json) {
   std::ifstream in(path);
   if (!in) throw UserError("cannot open " + path.string() + " (run nao_toolchain cluster first)");
+  std::ostringstream text;
+  text << in.rdbuf();
+  // "retarget" is dumped back into model.bin: bound the nesting before nlohmann sees it.
+  if (const std::string problem = jsonShapeProblem(text.str()); !problem.empty())
+    throw UserError(path.string() + ": not valid centroids JSON: the text " + problem);
   nlohmann::json j;
   try {
-    j = nlohmann::json::parse(in);
+    j = nlohmann::json::parse(text.str());
   } catch (const nlohmann::json::exception& e) {
     throw UserError(path.string() + ": not valid JSON: " + e.what());
   }

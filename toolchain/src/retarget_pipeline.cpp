@@ -1,10 +1,13 @@
 #include "nao/tools/retarget_pipeline.hpp"
 
+#include "nao/file_io.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/csv.hpp"
 #include "nao/tools/human_scale.hpp"
 
+#include <cmath>
 #include <fstream>
+#include <sstream>
 #include <string>
 
 namespace nao::tools {
@@ -92,8 +95,7 @@ std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& f
 }
 
 void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& rows, const RetargetParams& params) {
-  std::ofstream out(path);
-  if (!out) throw UserError("cannot write " + path);
+  std::ostringstream out;
   out.precision(10);
   out << "t_s";
   for (const char* name : {"qx", "qq"})
@@ -117,7 +119,10 @@ void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& r
     for (int j = 0; j < kNumJoints; ++j) out << ',' << params.posture_weights[j];
     out << '\n';
   }
-  if (!out) throw UserError("error while writing " + path);
+  // Whole or not at all: cluster never reads half a demonstration.
+  const std::string text = out.str();
+  if (const std::string problem = writeFileAtomically(path, text.data(), text.size()); !problem.empty())
+    throw UserError("cannot write " + path + ": " + problem);
 }
 
 std::vector<RetargetRow> readRetargetCsv(const std::string& path, RetargetParams* setting) {
@@ -169,7 +174,13 @@ std::vector<RetargetRow> readRetargetCsv(const std::string& path, RetargetParams
       r.result.p_TH_x[a] = csv.number(c_xyz[3 + a]);
       r.result.p_TH_q[a] = csv.number(c_xyz[6 + a]);
     }
-    r.flags = static_cast<std::uint32_t>(csv.number(c_flags));
+    // Flags are a bit set written as an unsigned integer: anything else (1e20, -1, 0.5) would
+    // be undefined behaviour to cast.
+    const double flags = csv.number(c_flags);
+    if (!(flags >= 0.0 && flags <= 4294967295.0) || flags != std::floor(flags))
+      throw UserError(csv.where() + ": column 'flags' holds " + std::to_string(flags) +
+                      ", expected an integer bit set 0..4294967295");
+    r.flags = static_cast<std::uint32_t>(flags);
     r.result.flags = r.flags & 0xffu;
     rows.push_back(r);
   }

@@ -1,10 +1,11 @@
 #include "nao/tools/skeleton_csv.hpp"
 
+#include "nao/file_io.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/csv.hpp"
 
 #include <cmath>
-#include <fstream>
+#include <sstream>
 
 namespace nao::tools {
 
@@ -27,8 +28,7 @@ void writeSkeletonColumns(std::ostream& out, const SkeletonFrame& frame) {
 }
 
 void writeSkeletonCsv(const std::string& path, const Skeleton& frames, bool with_views) {
-  std::ofstream out(path);
-  if (!out) throw UserError("cannot write " + path);
+  std::ostringstream out;
   out.precision(10);
   out << skeletonCsvHeader();
   if (with_views) {
@@ -44,7 +44,10 @@ void writeSkeletonCsv(const std::string& path, const Skeleton& frames, bool with
     }
     out << '\n';
   }
-  if (!out) throw UserError("error while writing " + path);
+  // Whole or not at all: a reader never sees half a skeleton.
+  const std::string text = out.str();
+  if (const std::string problem = writeFileAtomically(path, text.data(), text.size()); !problem.empty())
+    throw UserError("cannot write " + path + ": " + problem);
 }
 
 Skeleton readSkeletonCsv(const std::string& path) {

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <limits>
 #include <map>
@@ -24,6 +25,12 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kTimeEps = 1e-9;  // s; two times closer than this are the same sample
 constexpr double kMaxCaptureSpan_s = 24.0 * 3600.0;  // longest capture accepted
 constexpr long long kMaxCaptureFrames = 3000000;    // ... and most frames (27 h at 30 fps)
+
+std::string shortNumber(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.6g", v);
+  return buf;
+}
 
 // Points that identify a person across cameras (upper body, present in both layouts).
 constexpr std::array<int, 11> kSubjectPoints = {kNose,      kNeck,   kRShoulder, kRElbow, kRWrist, kLShoulder,
@@ -634,7 +641,13 @@ Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz, double capture
   // was measured there, so nothing is interpolated across.
   const double max_step_s = 1.0 / capture_fps + kTimeEps;
   const double t0 = frames.front().t_s, t_last = frames.back().t_s;
-  const auto n_out = static_cast<std::size_t>(std::floor((t_last - t0) * rate_hz + kTimeEps)) + 1;
+  // The count in double first: (t_last - t0) * rate_hz may not fit a size_t (--rate 1e300), or
+  // fit and still be more than memory (--rate 1e12).
+  const double n_samples = std::floor((t_last - t0) * rate_hz + kTimeEps) + 1.0;
+  if (!(n_samples <= static_cast<double>(kMaxCaptureFrames)))
+    throw UserError("--rate " + shortNumber(rate_hz) + " over the capture's " + shortNumber(t_last - t0) + " s gives " +
+                    shortNumber(n_samples) + " samples, more than the cap of " + std::to_string(kMaxCaptureFrames));
+  const auto n_out = static_cast<std::size_t>(n_samples);
   std::size_t k = 0;
   for (std::size_t j = 0; j < n_out; ++j) {
     const double t = t0 + static_cast<double>(j) / rate_hz;
