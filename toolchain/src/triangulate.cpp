@@ -1,4 +1,5 @@
 #include "nao/tools/triangulate.hpp"
+#include "nao/tools/stats.hpp"
 
 #include "nao/tools/calibration.hpp"
 #include "nao/tools/command.hpp"
@@ -202,15 +203,6 @@ std::vector<Observation> consensusViews(const CameraSet& cameras, const std::vec
     best = std::move(in);
   }
   return best;
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  if (v.size() % 2 == 1) return *mid;
-  const double upper = *mid;
-  return 0.5 * (upper + *std::max_element(v.begin(), mid));
 }
 
 bool usable(const Person2d& p, int i, const TriangulateOptions& opt) {
