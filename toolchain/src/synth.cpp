@@ -2,6 +2,7 @@
 #include "nao/tools/synth.hpp"
 
 #include "nao/tools/command.hpp"
+#include "synth_camera.hpp"
 #include "synth_random.hpp"
 
 #include <Eigen/Geometry>
@@ -184,14 +185,7 @@ HumanJointVector circleJoints(Movement movement, const MotionParams& m, double p
 CameraSet sampleCameras(const Anthropometrics& body, SynthRandom& rng) {
   CameraSet cams;
   for (int i = 0; i < 2; ++i) {
-    Camera c;
-    c.name = "cam" + std::to_string(i);
-    c.width = 1920;
-    c.height = 1080;
-    const double f = rng.uniform(1050.0, 1150.0);
-    c.K << f, 0.0, 960.0 + rng.uniform(-8.0, 8.0), 0.0, f * (1.0 + rng.uniform(-0.002, 0.002)),
-        540.0 + rng.uniform(-8.0, 8.0), 0.0, 0.0, 1.0;
-    c.dist << rng.uniform(-0.12, -0.05), rng.uniform(0.0, 0.08), rng.uniform(-5e-4, 5e-4), rng.uniform(-5e-4, 5e-4), 0.0;
+    Camera c = sampleLabIntrinsics(i, rng);
     const double azimuth = (i == 0 ? -1.0 : 1.0) * rng.uniform(25.0, 35.0) * kDeg;
     const double distance = rng.uniform(2.8, 3.4);
     const Eigen::Vector3d centre_W(distance * std::cos(azimuth), distance * std::sin(azimuth), rng.uniform(1.2, 1.6));

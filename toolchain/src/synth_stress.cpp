@@ -1,6 +1,7 @@
 #include "nao/tools/synth_stress.hpp"
 
 #include "nao/tools/command.hpp"
+#include "synth_camera.hpp"
 #include "synth_random.hpp"
 
 #include <Eigen/Geometry>
@@ -27,14 +28,7 @@ constexpr std::array<int, 3> kLeftArm = {kLShoulder, kLElbow, kLWrist};
 CameraSet stressCameras(const SynthDemo& demo, int n, SynthRandom& rng) {
   CameraSet cams;
   for (int i = 0; i < n; ++i) {
-    Camera c;
-    c.name = "cam" + std::to_string(i);
-    c.width = 1920;
-    c.height = 1080;
-    const double f = rng.uniform(1050.0, 1150.0);
-    c.K << f, 0.0, 960.0 + rng.uniform(-8.0, 8.0), 0.0, f * (1.0 + rng.uniform(-0.002, 0.002)),
-        540.0 + rng.uniform(-8.0, 8.0), 0.0, 0.0, 1.0;
-    c.dist << rng.uniform(-0.12, -0.05), rng.uniform(0.0, 0.08), rng.uniform(-5e-4, 5e-4), rng.uniform(-5e-4, 5e-4), 0.0;
+    Camera c = sampleLabIntrinsics(i, rng);
     const double azimuth = (-65.0 + 130.0 * i / (n - 1) + rng.uniform(-4.0, 4.0)) * kDeg;
     const double distance = rng.uniform(3.0, 3.5);
     const Eigen::Vector3d centre_W(distance * std::cos(azimuth), distance * std::sin(azimuth), rng.uniform(1.2, 1.7));
