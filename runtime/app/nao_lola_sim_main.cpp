@@ -16,6 +16,7 @@
 // array length, close the socket, heat a joint. It records every actuator packet it received
 // (--log CSV) and a summary (--summary JSON) for the tests and the benchmark.
 #include "nao/arm_model.hpp"
+#include "nao/controller.hpp"
 #include "nao/lola.hpp"
 #include "nao/sim_arm.hpp"
 
@@ -52,12 +53,6 @@ constexpr double kAmbientC = 35.0;
 
 volatile std::sig_atomic_t g_quit = 0;
 extern "C" void onQuit(int) { g_quit = 1; }
-
-std::int64_t nowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 void sleepUntil(std::int64_t t_ns) {
   timespec ts{};
@@ -216,7 +211,7 @@ int main(int argc, char** argv) {
   sigaction(SIGTERM, &sa, nullptr);
   std::signal(SIGPIPE, SIG_IGN);
 
-  const std::int64_t t_begin = nowNs();
+  const std::int64_t t_begin = nao::monotonicNs();
   const std::int64_t t_end = seconds > 0 ? t_begin + static_cast<std::int64_t>(seconds * 1e9) : INT64_MAX;
   std::mt19937 rng(7);
   Stats st;
@@ -268,13 +263,13 @@ int main(int argc, char** argv) {
     return false;
   };
 
-  while (g_quit == 0 && nowNs() < t_end) {
+  while (g_quit == 0 && nao::monotonicNs() < t_end) {
     if (client < 0) {
       pollfd pfd{server, POLLIN, 0};
       if (::poll(&pfd, 1, 50) <= 0) continue;
       client = ::accept4(server, nullptr, nullptr, SOCK_CLOEXEC);
       if (client < 0) continue;
-      next_deadline = nowNs();
+      next_deadline = nao::monotonicNs();
       rx_len = 0;
       sent_cycle_queue.clear();
       sent_time_queue.clear();
@@ -347,10 +342,10 @@ int main(int argc, char** argv) {
     }
     if (atCycle(delays, cycle, v)) {
       ++st.delayed;
-      sleepUntil(nowNs() + static_cast<std::int64_t>(v * 1e6));
+      sleepUntil(nao::monotonicNs() + static_cast<std::int64_t>(v * 1e6));
     }
     if (send) {
-      const std::int64_t t_sent = nowNs();
+      const std::int64_t t_sent = nao::monotonicNs();
       std::size_t off = 0;
       while (off < n) {
         const ssize_t w = ::send(client, tx.data() + off, n - off, MSG_NOSIGNAL);
@@ -368,7 +363,7 @@ int main(int argc, char** argv) {
     // 3. Until the next deadline: read answers; the latest is applied from the next cycle.
     bool closed = false;
     for (;;) {
-      const std::int64_t now = nowNs();
+      const std::int64_t now = nao::monotonicNs();
       if (now >= next_deadline || g_quit != 0) break;
       pollfd pfd{client, POLLIN, 0};
       const int pr = ::poll(&pfd, 1, static_cast<int>(std::max<std::int64_t>(1, (next_deadline - now) / 1'000'000)));
@@ -397,7 +392,7 @@ int main(int argc, char** argv) {
           ++st.malformed_received;
           continue;
         }
-        const std::int64_t t_rx = nowNs();
+        const std::int64_t t_rx = nao::monotonicNs();
         latest_pos = reader.actuator().position;
         latest_stiff = reader.actuator().stiffness;
         have_latest = true;

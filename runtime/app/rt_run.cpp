@@ -368,12 +368,6 @@ std::string ticksCsvRow(const TickRecord& r, bool zero_timing) {
   return s;
 }
 
-std::int64_t monotonicNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1000000000 + ts.tv_nsec;
-}
-
 void sleepUntilNs(std::int64_t t_ns) {
   timespec ts{};
   ts.tv_sec = static_cast<time_t>(t_ns / 1000000000);

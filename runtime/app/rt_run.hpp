@@ -182,8 +182,6 @@ struct RealtimeScheduling {
 };
 RealtimeScheduling enterRealtime();
 void leaveRealtime(const RealtimeScheduling& s);
-/// CLOCK_MONOTONIC now, ns. Real-time safe.
-std::int64_t monotonicNs();
 /// Sleeps until the absolute CLOCK_MONOTONIC time t_ns (clock_nanosleep TIMER_ABSTIME; resumes
 /// after signals). Real-time safe.
 void sleepUntilNs(std::int64_t t_ns);

@@ -22,11 +22,6 @@ volatile std::sig_atomic_t g_stop_signal = 0;
 
 extern "C" void onStopSignal(int) { g_stop_signal = 1; }
 
-std::int64_t nowNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 int cyclesFor(double seconds) {
   return std::max(1, static_cast<int>(std::ceil(seconds * 1e9 / static_cast<double>(lola::kCycleNs) - 1e-9)));
@@ -85,7 +80,7 @@ bool LolaBackend::receive() {
       if (r.status == lola::ParseStatus::kComplete || r.status == lola::ParseStatus::kBadContent) {
         std::memmove(rx_.data(), rx_.data() + r.consumed, rx_len_ - r.consumed);
         rx_len_ -= r.consumed;
-        rx_pending_since_ns_ = nowNs();
+        rx_pending_since_ns_ = monotonicNs();
         if (r.status == lola::ParseStatus::kComplete) return true;
         ++counters_.malformed;
         faults_ |= kFaultRobotMalformedPacket;
@@ -98,7 +93,7 @@ bool LolaBackend::receive() {
         continue;
       }
       // Incomplete: wait for the rest, unless it has been waiting too long already.
-      if (nowNs() - rx_pending_since_ns_ > kStaleBytesNs) {
+      if (monotonicNs() - rx_pending_since_ns_ > kStaleBytesNs) {
         rx_len_ = 0;
         ++counters_.malformed;
         faults_ |= kFaultRobotMalformedPacket;
@@ -110,7 +105,7 @@ bool LolaBackend::receive() {
       return false;
     }
     // Wait at most until the next thing to check: the gap threshold, link loss, or stale bytes.
-    const std::int64_t t0 = nowNs();
+    const std::int64_t t0 = monotonicNs();
     const std::int64_t since = t0 - last_packet_ns_;
     const std::int64_t gap_ns = (params_.gap_cycles + 1) * lola::kCycleNs;
     if (have_start_ && since > gap_ns && !in_gap_) {
@@ -127,14 +122,14 @@ bool LolaBackend::receive() {
     if (rx_len_ > 0) timeout_ns = std::min(timeout_ns, std::max<std::int64_t>(1'000'000, kStaleBytesNs));
     pollfd pfd{fd_, POLLIN, 0};
     const int pr = ::poll(&pfd, 1, static_cast<int>((timeout_ns + 999'999) / 1'000'000));
-    wait_ns_ += nowNs() - t0;
+    wait_ns_ += monotonicNs() - t0;
     if (pr < 0) {
       if (errno == EINTR) continue;
       failLink();
       return false;
     }
     if (pr == 0) continue;
-    if (rx_len_ == 0) rx_pending_since_ns_ = nowNs();
+    if (rx_len_ == 0) rx_pending_since_ns_ = monotonicNs();
     const ssize_t n = ::recv(fd_, rx_.data() + rx_len_, rx_.size() - rx_len_, MSG_DONTWAIT);
     if (n == 0) {  // the robot closed the socket
       failLink();
@@ -161,7 +156,7 @@ bool LolaBackend::cycle(bool defer) {
     ++counters_.malformed;
     faults_ |= kFaultRobotMalformedPacket;
   }
-  const std::int64_t t_in = nowNs();
+  const std::int64_t t_in = monotonicNs();
   // The packet waited for us (no blocking wait was needed) and the previous answer is more than
   // a cycle and a half ago: this answer comes after the packet's cycle ended.
   const bool waited = wait_ns_ - wait_before > 200'000;
@@ -268,7 +263,7 @@ void LolaBackend::respond(std::int64_t t_in_ns, bool waited) {
     }
     sent += static_cast<std::size_t>(w);
   }
-  const std::int64_t t_out = nowNs();
+  const std::int64_t t_out = monotonicNs();
   ++counters_.cycles;
   if (latency_ns_.size() < latency_ns_.capacity()) latency_ns_.push_back(t_out - t_in_ns);
   if (t_out - t_in_ns > lola::kCycleNs ||

@@ -88,6 +88,10 @@ struct ControllerClock {
 };
 
 /// CLOCK_MONOTONIC.
+/// CLOCK_MONOTONIC now, ns. Real-time safe (the one reading of the real clock: SteadyClock, the
+/// --realtime pacing, the LoLA backend and nao_lola_sim use it).
+std::int64_t monotonicNs();
+
 struct SteadyClock final : ControllerClock {
   std::int64_t nowNs() override;
 };
