@@ -1,8 +1,11 @@
-// Parity: the runtime's fixed-size float inference (nao/policy.hpp) and libtorch's forward of the
-// training module (toolchain/src/torch/) on the same weights agree within 1e-5 absolute on the
-// actions and on every cross-attention weight, over 1,000 random and 1,000 recorded inputs, for
-// the small configuration (fresh weights, perturbed away from their initialisation) and the
-// paper configuration (the committed models/default.bin).
+// Parity: the runtime's streaming fixed-size float inference (nao/policy.hpp: one tick at a time,
+// key/value rings of W ticks) and libtorch's whole-sequence forward of the training module
+// (toolchain/src/torch/: all T·J tokens at once under the sliding-window mask) agree within 1e-5
+// absolute on the actions, on every decoder layer's cross-attention per body part, on the raw
+// mass and the temporal profile, and (relative) on the norm-based score, at every tick of
+// sequences several windows long (the ring wraps), random and recorded, for the small
+// configuration (fresh weights, perturbed away from their initialisation) and the paper
+// configuration (the committed models).
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/kmeans.hpp"
@@ -24,46 +27,54 @@ using namespace nao;
 namespace {
 
 constexpr double kTolerance = 1e-5;
-constexpr int kInputs = 1000;
 
-struct Inputs {
-  std::vector<PolicyInput> list;
-};
+// One rollout's inputs, tick 0 first (movement fixed, step = tick).
+using Sequence = std::vector<PolicyInput>;
 
 float uniform(std::mt19937_64& rng, double lo, double hi) {
   return static_cast<float>(lo + (hi - lo) * static_cast<double>(rng() >> 11) * 0x1.0p-53);
 }
 
-// Random inputs over the arm's range: q inside the limits, a(t-1) up to 0.2 rad, r anywhere in
-// the limits, every movement, steps across the embedding (and past it: clamped).
-Inputs randomInputs(const ArmModel& arm, int movements, int max_steps, std::uint64_t seed) {
+// Random sequences over the arm's range: q a random walk inside the limits, a(t-1) up to 0.2 rad,
+// r jumping between poses in the limits, every movement; `ticks` long.
+std::vector<Sequence> randomSequences(const ArmModel& arm, int movements, int count, int ticks, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
-  Inputs in;
-  for (int n = 0; n < kInputs; ++n) {
+  std::vector<Sequence> out;
+  for (int n = 0; n < count; ++n) {
+    Sequence s;
     PolicyInput x;
     for (int j = 0; j < kNumJoints; ++j) {
       x.q[j] = uniform(rng, arm.q_min[j], arm.q_max[j]);
-      x.a_prev[j] = uniform(rng, -0.2, 0.2);
       x.r[j] = uniform(rng, arm.q_min[j], arm.q_max[j]);
     }
     x.movement = n % movements;
-    x.step = static_cast<int>(rng() % static_cast<std::uint64_t>(max_steps + 20));
-    in.list.push_back(x);
+    for (int t = 0; t < ticks; ++t) {
+      for (int j = 0; j < kNumJoints; ++j) {
+        x.a_prev[j] = t == 0 ? 0.0f : uniform(rng, -0.2, 0.2);
+        x.q[j] = std::clamp(x.q[j] + x.a_prev[j], static_cast<float>(arm.q_min[j]), static_cast<float>(arm.q_max[j]));
+        if (rng() % 8 == 0) x.r[j] = uniform(rng, arm.q_min[j], arm.q_max[j]);
+      }
+      x.step = t;
+      s.push_back(x);
+    }
+    out.push_back(s);
   }
-  return in;
+  return out;
 }
 
-// Recorded inputs: the states a policy sees on held-out synthetic demonstrations (triangulated,
-// retargeted, feature-extracted with `centroids`), built as the training samples are.
-Inputs recordedInputs(const ArmModel& arm, const std::vector<std::vector<JointVector>>& centroids) {
-  Inputs in;
+// Recorded sequences: the states a policy sees on held-out synthetic demonstrations (triangulated,
+// retargeted, feature-extracted with `centroids`), at most `ticks` long.
+std::vector<Sequence> recordedSequences(const ArmModel& arm, const std::vector<std::vector<JointVector>>& centroids,
+                                        int count, int ticks) {
+  std::vector<Sequence> out;
   const tools::Movement movements[3] = {tools::Movement::kElbow, tools::Movement::kWholeArm, tools::Movement::kWrist};
-  for (int index = 0; static_cast<int>(in.list.size()) < kInputs; ++index) {
+  for (int index = 0; index < count; ++index) {
     const int m = index % 3;  // model movement index: elbow 0, whole_arm 1, wrist 2
     const tools::ReferenceStream ref =
         tools::makeSyntheticReference(arm, movements[m], 77, index, centroids[static_cast<std::size_t>(m)]);
     int label = tools::nearestCentroid(centroids[static_cast<std::size_t>(m)], ref.retargeted.front());
-    for (std::size_t t = 0; t + 1 < ref.target.size() && static_cast<int>(in.list.size()) < kInputs; ++t) {
+    Sequence s;
+    for (std::size_t t = 0; t + 1 < ref.target.size() && static_cast<int>(t) < ticks; ++t) {
       if (ref.measured[t]) label = tools::nearestCentroid(centroids[static_cast<std::size_t>(m)], ref.retargeted[t]);
       PolicyInput x;
       x.q = ref.target[t].cast<float>();
@@ -71,69 +82,83 @@ Inputs recordedInputs(const ArmModel& arm, const std::vector<std::vector<JointVe
       x.r = centroids[static_cast<std::size_t>(m)][static_cast<std::size_t>(label)].cast<float>();
       x.movement = m;
       x.step = static_cast<int>(t);
-      in.list.push_back(x);
+      s.push_back(x);
     }
+    out.push_back(s);
   }
-  return in;
+  return out;
 }
 
-torch::Tensor stack(const Inputs& in, int what) {
-  torch::Tensor t = torch::empty({static_cast<long>(in.list.size()), kNumJoints}, torch::kFloat);
-  auto a = t.accessor<float, 2>();
-  for (std::size_t n = 0; n < in.list.size(); ++n)
+// [1,T,J] of the sequence's q (0), a(t-1) (1) or r (2).
+torch::Tensor stack(const Sequence& in, int what) {
+  torch::Tensor t = torch::empty({1, static_cast<long>(in.size()), kNumJoints}, torch::kFloat);
+  auto a = t.accessor<float, 3>();
+  for (std::size_t n = 0; n < in.size(); ++n)
     for (int j = 0; j < kNumJoints; ++j) {
-      const PolicyInput& x = in.list[n];
-      a[static_cast<long>(n)][j] = what == 0 ? x.q[j] : what == 1 ? x.a_prev[j] : x.r[j];
+      const PolicyInput& x = in[n];
+      a[0][static_cast<long>(n)][j] = what == 0 ? x.q[j] : what == 1 ? x.a_prev[j] : x.r[j];
     }
-  return t;
-}
-
-torch::Tensor indices(const Inputs& in, bool step, int max_steps) {
-  torch::Tensor t = torch::empty({static_cast<long>(in.list.size())}, torch::kLong);
-  auto a = t.accessor<long, 1>();
-  for (std::size_t n = 0; n < in.list.size(); ++n)
-    a[static_cast<long>(n)] = step ? std::min(in.list[n].step, max_steps - 1) : in.list[n].movement;
   return t;
 }
 
 template <class Dims>
-void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights, const Inputs& in,
+void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights, const std::vector<Sequence>& seqs,
                  const std::string& what) {
   torch::NoGradGuard no_grad;
-  tools::PolicyAttention att;
-  const torch::Tensor actions = net->act(stack(in, 0), stack(in, 1), stack(in, 2), indices(in, false, Dims::kMaxSteps),
-                                         indices(in, true, Dims::kMaxSteps), &att)
-                                    .contiguous();
-  auto ta = actions.accessor<float, 2>();
-  std::vector<torch::Tensor> cross;
-  for (const torch::Tensor& c : att.cross) cross.push_back(c.contiguous());
   auto ws = makePolicyWorkspace<Dims>();
-  double worst_action = 0.0, worst_alpha = 0.0, worst_score_rel = 0.0, largest_action = 0.0;
-  for (std::size_t n = 0; n < in.list.size(); ++n) {
-    const auto& a = stepPolicy(weights, *ws, in.list[n]);
-    for (int j = 0; j < kNumJoints; ++j) {
-      worst_action = std::max(worst_action, std::abs(static_cast<double>(a[j]) - ta[static_cast<long>(n)][j]));
-      largest_action = std::max(largest_action, std::abs(static_cast<double>(a[j])));
-      const double s_torch = att.score[static_cast<long>(n)][j].item<float>();
-      worst_score_rel = std::max(worst_score_rel, std::abs(ws->score[j] - s_torch) / std::max(1.0, std::abs(s_torch)));
-    }
-    for (int l = 0; l < Dims::kDecoderLayers; ++l) {
-      auto c = cross[static_cast<std::size_t>(l)].accessor<float, 4>();
-      for (int h = 0; h < Dims::kHeads; ++h)
-        for (int i = 0; i < kNumJoints; ++i)
-          for (int j = 0; j < kNumJoints; ++j)
-            worst_alpha = std::max(worst_alpha, std::abs(static_cast<double>(ws->cross[l][h][i][j]) -
-                                                         c[static_cast<long>(n)][h][i][j]));
+  double worst_action = 0.0, worst_alpha = 0.0, worst_mass = 0.0, worst_profile = 0.0, worst_score_rel = 0.0;
+  double largest_action = 0.0, oldest_mass = 0.0;
+  long ticks = 0;
+  for (const Sequence& seq : seqs) {
+    tools::PolicyAttention att;
+    const torch::Tensor actions =
+        net->act(stack(seq, 0), stack(seq, 1), stack(seq, 2), torch::tensor({static_cast<long>(seq.front().movement)}),
+                 &att)
+            .contiguous();
+    auto ta = actions.accessor<float, 3>();
+    std::vector<torch::Tensor> cross;
+    for (const torch::Tensor& c : att.cross) cross.push_back(c.contiguous());
+    const torch::Tensor mass = att.mass.contiguous(), profile = att.age_profile.contiguous(), score = att.score.contiguous();
+    auto tm = mass.accessor<float, 3>();
+    auto tp = profile.accessor<float, 3>();
+    auto ts = score.accessor<float, 3>();
+    resetPolicyStream(*ws);
+    for (std::size_t n = 0; n < seq.size(); ++n) {
+      const long t = static_cast<long>(n);
+      const auto& a = stepPolicy(weights, *ws, seq[n]);
+      for (int j = 0; j < kNumJoints; ++j) {
+        worst_action = std::max(worst_action, std::abs(static_cast<double>(a[j]) - ta[0][t][j]));
+        largest_action = std::max(largest_action, std::abs(static_cast<double>(a[j])));
+        worst_mass = std::max(worst_mass, std::abs(static_cast<double>(ws->mass[j]) - tm[0][t][j]));
+        const double s_torch = ts[0][t][j];
+        worst_score_rel = std::max(worst_score_rel, std::abs(ws->score[j] - s_torch) / std::max(1.0, std::abs(s_torch)));
+      }
+      for (int age = 0; age < Dims::kWindow; ++age)
+        worst_profile = std::max(worst_profile, std::abs(static_cast<double>(ws->age_profile[age]) - tp[0][t][age]));
+      if (static_cast<int>(n) >= Dims::kWindow - 1) oldest_mass = std::max(oldest_mass, static_cast<double>(ws->age_profile[Dims::kWindow - 1]));
+      for (int l = 0; l < Dims::kDecoderLayers; ++l) {
+        auto c = cross[static_cast<std::size_t>(l)].accessor<float, 5>();
+        for (int h = 0; h < Dims::kHeads; ++h)
+          for (int i = 0; i < kNumJoints; ++i)
+            for (int j = 0; j < kNumJoints; ++j)
+              worst_alpha = std::max(worst_alpha, std::abs(static_cast<double>(ws->cross[l][h][i][j]) - c[0][t][h][i][j]));
+      }
+      ++ticks;
     }
   }
-  MESSAGE(what << ": worst |action difference| " << worst_action << " rad (largest action " << largest_action
-               << " rad), worst |alpha difference| " << worst_alpha << ", worst relative score difference "
-               << worst_score_rel);
+  MESSAGE(what << ": " << ticks << " ticks in " << seqs.size() << " sequences; worst |action difference| " << worst_action
+               << " rad (largest action " << largest_action << " rad), worst |alpha difference| " << worst_alpha
+               << ", |mass difference| " << worst_mass << ", |profile difference| " << worst_profile
+               << ", relative score difference " << worst_score_rel);
   CHECK(worst_action <= kTolerance);
   CHECK(worst_alpha <= kTolerance);
+  CHECK(worst_mass <= kTolerance);
+  CHECK(worst_profile <= kTolerance);
   CHECK(worst_score_rel <= kTolerance);
-  // The comparison is not vacuous: the actions vary.
+  // The comparison is not vacuous: the actions vary, and the oldest tick of a full window is
+  // attended (the ring wrapped and its far end is read).
   CHECK(largest_action > 1e-3);
+  CHECK(oldest_mass > 1e-6);
 }
 
 // Loads model.bin tensors into a freshly built torch module of the same architecture.
@@ -160,7 +185,7 @@ std::vector<const float*> pointers(const std::vector<std::vector<float>>& floats
 
 }  // namespace
 
-TEST_CASE("small configuration: runtime inference equals libtorch within 1e-5 (random and recorded inputs, both modes)") {
+TEST_CASE("small configuration: streaming runtime inference equals libtorch's whole-sequence forward within 1e-5 (random and recorded rollouts, both modes)") {
   torch::set_num_threads(1);
   const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
   // Key poses: k-means++ of the retargeted poses of one held-out demonstration per movement.
@@ -175,8 +200,9 @@ TEST_CASE("small configuration: runtime inference equals libtorch within 1e-5 (r
       centroids.push_back(tools::kmeansPlusPlus(ref.retargeted, options).centroids);
     }
   }
-  const Inputs recorded = recordedInputs(arm, centroids);
-  const Inputs random = randomInputs(arm, 3, smallArch().max_steps, 12);
+  // Longer than W (8) several times over: the ring wraps; steps run past nothing (T < max_steps).
+  const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 6, 200);
+  const std::vector<Sequence> random = randomSequences(arm, 3, 6, 3 * smallArch().window + 5, 12);
 
   for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
     torch::manual_seed(21);
@@ -228,8 +254,9 @@ TEST_CASE("paper configuration: the committed models agree with libtorch within 
     for (int m = 0; m < 3; ++m)
       for (int k = 0; k < PaperPolicyDims::kClusters; ++k)
         centroids[static_cast<std::size_t>(m)].push_back(centroid(weights, m, k).cast<double>());
-    checkParity(net, weights, randomInputs(arm, 3, paperArch().max_steps, 13), std::string(name) + "/random");
-    checkParity(net, weights, recordedInputs(arm, centroids), std::string(name) + "/recorded");
+    // 60 ticks = 3 windows (the whole-sequence record needs (T·J)² · d floats: kept short).
+    checkParity(net, weights, randomSequences(arm, 3, 3, 60, 13), std::string(name) + "/random");
+    checkParity(net, weights, recordedSequences(arm, centroids, 3, 60), std::string(name) + "/recorded");
     ++checked;
   }
   CHECK(checked == 2);

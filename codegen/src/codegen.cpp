@@ -102,6 +102,7 @@ std::string configHeader(const ModelFile& model, const std::string& source) {
   s << "inline constexpr int kMovements = " << a.movements << ";\n";
   s << "inline constexpr int kClusters = " << a.clusters << ";\n";
   s << "inline constexpr int kMaxSteps = " << a.max_steps << ";\n";
+  s << "inline constexpr int kWindow = " << a.window << ";\n";
   s << "inline constexpr Conditioning kConditioning = Conditioning::"
     << (h.conditioning == Conditioning::kReference ? "kReference" : "kAutonomous") << ";\n\n";
 
@@ -163,7 +164,7 @@ std::string dimsHeader(const ModelFile& model) {
        "#include \"nao/policy.hpp\"\n\n"
        "namespace nao::compiled {\n\n"
        "using Dims = nao::PolicyDims<kDModel, kHeads, kEncoderLayers, kDecoderLayers, kFfn0, kFfn1, kFfn2, kMovements,\n"
-       "                             kClusters, kMaxSteps>;\n\n"
+       "                             kClusters, kMaxSteps, kWindow>;\n\n"
        "}  // namespace nao::compiled\n";
   return s.str();
 }

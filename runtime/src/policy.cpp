@@ -23,7 +23,7 @@ std::string archText(const PolicyArch& a) {
          std::to_string(a.encoder_layers) + ", decoder layers " + std::to_string(a.decoder_layers) + ", ffn " + ffn +
          ", tokens " + std::to_string(a.tokens) + ", features " + std::to_string(a.features) + ", movements " +
          std::to_string(a.movements) + ", clusters " + std::to_string(a.clusters) + ", max_steps " +
-         std::to_string(a.max_steps);
+         std::to_string(a.max_steps) + ", window " + std::to_string(a.window);
 }
 
 }  // namespace

@@ -15,7 +15,8 @@ const char* conditioningName(Conditioning c) {
 bool PolicyArch::operator==(const PolicyArch& o) const {
   return d_model == o.d_model && heads == o.heads && encoder_layers == o.encoder_layers &&
          decoder_layers == o.decoder_layers && ffn_hidden == o.ffn_hidden && tokens == o.tokens &&
-         features == o.features && movements == o.movements && clusters == o.clusters && max_steps == o.max_steps;
+         features == o.features && movements == o.movements && clusters == o.clusters && max_steps == o.max_steps &&
+         window == o.window;
 }
 
 PolicyArch paperArch() { return PolicyArch{}; }
@@ -27,6 +28,7 @@ PolicyArch smallArch() {
   a.encoder_layers = 2;
   a.decoder_layers = 2;
   a.ffn_hidden = {64, 64, 64};
+  a.window = 8;
   return a;
 }
 
@@ -46,6 +48,7 @@ std::string archProblem(const PolicyArch& a) {
   if (!positive(a.movements, 256)) return "movements " + std::to_string(a.movements) + " is not in 1..256";
   if (!positive(a.clusters, 1000)) return "clusters " + std::to_string(a.clusters) + " is not in 1..1000";
   if (!positive(a.max_steps, 100000)) return "max_steps " + std::to_string(a.max_steps) + " is not in 1..100000";
+  if (!positive(a.window, 1000)) return "window " + std::to_string(a.window) + " is not in 1..1000 ticks";
   return {};
 }
 
@@ -57,11 +60,14 @@ std::size_t TensorSpec::count() const {
 
 namespace {
 
-void addAttention(std::vector<TensorSpec>& m, const std::string& p, int d) {
+// age_bias [H, W] (attention over time only): b_h(age) added to head h's score of a key
+// `age` ticks older than its query; it depends on the age alone, so cached keys stay valid.
+void addAttention(std::vector<TensorSpec>& m, const std::string& p, int d, int heads = 0, int window = 0) {
   for (const char* w : {"q", "k", "v", "o"}) {
     m.push_back({p + ".w" + w, {d, d}});
     m.push_back({p + ".b" + w, {d}});
   }
+  if (heads > 0) m.push_back({p + ".age_bias", {heads, window}});
 }
 
 void addNorm(std::vector<TensorSpec>& m, const std::string& p, int d) {
@@ -95,7 +101,7 @@ std::vector<TensorSpec> policyManifest(const PolicyArch& a) {
   for (int l = 0; l < a.encoder_layers; ++l) {
     const std::string p = "enc." + std::to_string(l);
     addNorm(m, p + ".ln1", d);
-    addAttention(m, p + ".attn", d);
+    addAttention(m, p + ".attn", d, a.heads, a.window);
     addNorm(m, p + ".ln2", d);
     addFfn(m, p + ".ffn", a);
   }
@@ -105,7 +111,7 @@ std::vector<TensorSpec> policyManifest(const PolicyArch& a) {
     addNorm(m, p + ".ln1", d);
     addAttention(m, p + ".self", d);
     addNorm(m, p + ".ln2", d);
-    addAttention(m, p + ".cross", d);
+    addAttention(m, p + ".cross", d, a.heads, a.window);
     addNorm(m, p + ".ln3", d);
     addFfn(m, p + ".ffn", a);
   }

@@ -180,6 +180,44 @@ const JointVector& stepSim(const SimModel& model, SimData& data, const JointVect
   return data.q;
 }
 
+void captureSim(const SimData& data, SimSnapshot& out) {
+  for (int j = 0; j < kNumJoints; ++j) {
+    std::array<double, 13>& b = out.body[static_cast<std::size_t>(j)];
+    const dReal* p = dBodyGetPosition(data.body[j]);
+    const dReal* q = dBodyGetQuaternion(data.body[j]);
+    const dReal* v = dBodyGetLinearVel(data.body[j]);
+    const dReal* w = dBodyGetAngularVel(data.body[j]);
+    for (int k = 0; k < 3; ++k) b[static_cast<std::size_t>(k)] = p[k];
+    for (int k = 0; k < 4; ++k) b[static_cast<std::size_t>(3 + k)] = q[k];
+    for (int k = 0; k < 3; ++k) b[static_cast<std::size_t>(7 + k)] = v[k];
+    for (int k = 0; k < 3; ++k) b[static_cast<std::size_t>(10 + k)] = w[k];
+  }
+  out.q = data.q;
+  out.qd = data.qd;
+  out.qd_peak = data.qd_peak;
+  out.q_cmd = data.q_cmd;
+  out.v_servo = data.v_servo;
+  out.substeps = data.substeps;
+}
+
+void restoreSim(SimData& data, const SimSnapshot& snap) {
+  for (int j = 0; j < kNumJoints; ++j) {
+    const std::array<double, 13>& b = snap.body[static_cast<std::size_t>(j)];
+    dBodySetPosition(data.body[j], b[0], b[1], b[2]);
+    const dQuaternion q = {b[3], b[4], b[5], b[6]};
+    dBodySetQuaternion(data.body[j], q);
+    dBodySetLinearVel(data.body[j], b[7], b[8], b[9]);
+    dBodySetAngularVel(data.body[j], b[10], b[11], b[12]);
+    dJointSetHingeParam(data.hinge[j], dParamVel, snap.v_servo[j]);
+  }
+  data.q = snap.q;
+  data.qd = snap.qd;
+  data.qd_peak = snap.qd_peak;
+  data.q_cmd = snap.q_cmd;
+  data.v_servo = snap.v_servo;
+  data.substeps = snap.substeps;
+}
+
 void setSimTorqueScale(const SimModel& model, SimData& data, const JointVector& scale) {
   for (int j = 0; j < kNumJoints; ++j)
     dJointSetHingeParam(data.hinge[j], dParamFMax, model.arm.tau_max[j] * std::clamp(scale[j], 0.0, 1.0));

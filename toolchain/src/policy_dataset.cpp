@@ -284,32 +284,161 @@ std::vector<PolicySample> buildSamples(const PolicyData& data, const std::vector
   return out;
 }
 
-std::vector<PolicySample> perturbSamples(const std::vector<PolicySample>& samples, const Perturbation& p,
-                                         std::uint64_t seed) {
-  if (!(p.fraction >= 0.0 && p.fraction <= 1.0))
-    throw UserError("perturbation fraction " + std::to_string(p.fraction) + " is not in [0, 1]");
-  if (p.q_std_rad.empty() && p.fraction > 0.0) throw UserError("perturbation: no q standard deviation given");
-  for (double sd : p.q_std_rad)
-    if (!(sd >= 0.0)) throw UserError("perturbation: standard deviation " + std::to_string(sd) + " is negative");
-  if (!(p.a_ratio >= 0.0)) throw UserError("perturbation: a_ratio must not be negative");
-  std::vector<PolicySample> out = samples;
-  if (p.fraction == 0.0) return out;
-  SplitMix64 rng(seed ^ 0x6a09e667f3bcc909ull);
-  const auto uniform = [&rng] { return (static_cast<double>(rng.next() >> 11) + 0.5) * 0x1.0p-53; };  // (0, 1)
-  constexpr double kTwoPi = 6.283185307179586;
-  const auto normal = [&] {
-    const double u1 = uniform();  // two statements: the order of draws is fixed
-    const double u2 = uniform();
-    return std::sqrt(-2.0 * std::log(u1)) * std::cos(kTwoPi * u2);
+namespace {
+
+// The expert of ExecutionOptions: the command in [lo, hi] for which the arm, from the state in
+// `snap`, ends the tick nearest `target`. Per-joint secant steps on the end-of-tick angle (the
+// servo moves each joint mostly on its own; the iterations absorb the coupling); returns the
+// best command tried. Leaves `sim` in the state of `snap`.
+JointVector expertCommand(const SimModel& model, SimData& sim, const SimSnapshot& snap, const JointVector& target,
+                          const JointVector& lo, const JointVector& hi, const ExecutionOptions& o, double& miss) {
+  const auto clampTo = [&](JointVector c) {
+    for (int j = 0; j < kNumJoints; ++j) c[j] = std::clamp(c[j], lo[j], hi[j]);
+    return c;
   };
-  for (PolicySample& s : out) {
-    if (!(uniform() < p.fraction)) continue;
-    const double sd = p.q_std_rad[rng.below(p.q_std_rad.size())];
-    for (int j = 0; j < kNumJoints; ++j) s.q[j] += sd * normal();
-    for (int j = 0; j < kNumJoints; ++j) s.a_prev[j] += p.a_ratio * sd * normal();
-    s.a = expertAction(p.blend, s);
+  const auto endOf = [&](const JointVector& c) {
+    restoreSim(sim, snap);
+    return JointVector(stepSim(model, sim, c));
+  };
+  JointVector c_prev = clampTo(target);
+  JointVector e_prev = target - endOf(c_prev);
+  JointVector best = c_prev;
+  double best_miss = e_prev.cwiseAbs().maxCoeff();
+  // First step: a first-order servo covers 1 − exp(−K T) of a step in one tick.
+  const double first_gain = 1.0 / (1.0 - std::exp(-model.params.servo_gain_per_s * model.params.dt_s *
+                                                   model.params.substeps_per_tick));
+  JointVector c = clampTo(c_prev + first_gain * e_prev);
+  for (int it = 0; it < o.expert_iterations && best_miss > o.expert_tol_rad; ++it) {
+    const JointVector e = target - endOf(c);
+    const double m = e.cwiseAbs().maxCoeff();
+    if (m < best_miss) {
+      best_miss = m;
+      best = c;
+    }
+    JointVector next = c;
+    for (int j = 0; j < kNumJoints; ++j) {
+      const double de = e_prev[j] - e[j], dc = c[j] - c_prev[j];
+      // Secant on e(c) = target − q_end(c); fall back to the first-order gain when flat.
+      const double slope = std::abs(de) > 1e-12 && std::abs(dc) > 1e-12 ? dc / de : first_gain;
+      next[j] = c[j] + std::clamp(slope, 0.5, 4.0) * e[j];
+    }
+    c_prev = c;
+    e_prev = e;
+    c = clampTo(next);
+  }
+  restoreSim(sim, snap);
+  miss = best_miss;
+  return best;
+}
+
+}  // namespace
+
+std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vector<int>& demos,
+                                         const SimModel& sim_model, const ExecutionOptions& o, std::uint64_t seed,
+                                         std::ostream* progress) {
+  if (o.noisy_rollouts < 0) throw UserError("execution: noisy_rollouts must not be negative");
+  if (o.noisy_rollouts > 0 && o.noise_std_rad.empty()) throw UserError("execution: no noise standard deviation given");
+  for (double sd : o.noise_std_rad)
+    if (!(sd >= 0.0)) throw UserError("execution: noise standard deviation " + std::to_string(sd) + " is negative");
+  if (!(o.noise_corr >= 0.0 && o.noise_corr < 1.0)) throw UserError("execution: noise_corr must be in [0, 1)");
+  if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
+  const ArmModel& arm = sim_model.arm;
+  const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
+  SimData sim(sim_model, JointVector::Zero());
+  SimSnapshot snap;
+  std::vector<PolicySequence> out;
+  const std::size_t total = demos.size() * static_cast<std::size_t>(1 + o.noisy_rollouts);
+  std::size_t done = 0, reported = 0;
+  for (int d : demos) {
+    const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
+    const std::vector<JointVector>& centroids = data.centroids.at(static_cast<std::size_t>(demo.movement));
+    for (int k = 0; k <= o.noisy_rollouts; ++k) {
+      PolicySequence s;
+      s.demo = d;
+      s.movement = demo.movement;
+      s.rollout = k;
+      const double sd = k == 0 ? 0.0 : o.noise_std_rad[static_cast<std::size_t>(k - 1) % o.noise_std_rad.size()];
+      SplitMix64 rng(seed ^ (0x9e3779b97f4a7c15ull * static_cast<std::uint64_t>(d + 1)) ^
+                     (0xc2b2ae3d27d4eb4full * static_cast<std::uint64_t>(k + 1)));
+      const auto uniform = [&rng] { return (static_cast<double>(rng.next() >> 11) + 0.5) * 0x1.0p-53; };
+      const auto normal = [&] {
+        const double u1 = uniform();  // two statements: the order of draws is fixed
+        const double u2 = uniform();
+        return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
+      };
+      resetSim(sim_model, sim, demo.f.front());
+      JointVector q = sim.q, a_prev = JointVector::Zero(), noise = JointVector::Zero();
+      const double innovation = sd * std::sqrt(1.0 - o.noise_corr * o.noise_corr);
+      for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
+        JointVector lo, hi;
+        for (int j = 0; j < kNumJoints; ++j) {
+          const double step = arm.v_max[j] * period;
+          lo[j] = std::max(arm.q_min[j], q[j] - step);
+          hi[j] = std::min(arm.q_max[j], q[j] + step);
+          if (lo[j] > hi[j]) std::swap(lo[j], hi[j]);
+        }
+        captureSim(sim, snap);
+        double miss = 0.0;
+        const JointVector c = expertCommand(sim_model, sim, snap, clampToLimits(arm, demo.f[t + 1]), lo, hi, o, miss);
+        if (k == 0) s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
+        s.q.push_back(q);
+        s.a_prev.push_back(a_prev);
+        s.r.push_back(centroids[static_cast<std::size_t>(demo.label[t])]);
+        s.a.push_back(c - q);
+        JointVector c_exec = c;
+        if (k > 0) {
+          for (int j = 0; j < kNumJoints; ++j) noise[j] = o.noise_corr * noise[j] + innovation * normal();
+          c_exec += noise;
+          for (int j = 0; j < kNumJoints; ++j) c_exec[j] = std::clamp(c_exec[j], lo[j], hi[j]);
+        }
+        a_prev = c_exec - q;
+        q = stepSim(sim_model, sim, c_exec);
+      }
+      out.push_back(std::move(s));
+      ++done;
+      if (progress && done * 10 / total > reported) {
+        reported = done * 10 / total;
+        *progress << "executed " << done << "/" << total << " rollouts" << std::endl;
+      }
+    }
   }
   return out;
+}
+
+NormStats normStats(const std::vector<PolicySequence>& sequences) {
+  std::vector<PolicySample> flat;
+  for (const PolicySequence& s : sequences)
+    for (std::size_t t = 0; t < s.ticks(); ++t) {
+      PolicySample x;
+      x.q = s.q[t];
+      x.a_prev = s.a_prev[t];
+      x.r = s.r[t];
+      x.a = s.a[t];
+      flat.push_back(x);
+    }
+  return normStats(flat);
+}
+
+Baselines baselines(const std::vector<PolicySequence>& sequences) {
+  Baselines b;
+  std::size_t n = 0;
+  for (const PolicySequence& s : sequences)
+    for (std::size_t t = 0; t < s.ticks(); ++t) {
+      b.zero_action += s.a[t].squaredNorm();
+      b.repeat_last += (s.a[t] - s.a_prev[t]).squaredNorm();
+      ++n;
+    }
+  if (n == 0) return b;
+  const double count = static_cast<double>(n) * kNumJoints;
+  b.zero_action /= count;
+  b.repeat_last /= count;
+  return b;
+}
+
+std::size_t tickCount(const std::vector<PolicySequence>& sequences) {
+  std::size_t n = 0;
+  for (const PolicySequence& s : sequences) n += s.ticks();
+  return n;
 }
 
 PolicySplit splitByDemonstration(const PolicyData& data, double val_fraction, std::uint64_t seed) {

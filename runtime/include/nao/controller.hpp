@@ -127,7 +127,8 @@ struct TickRecord {
   JointVector q = JointVector::Zero();       ///< measured joint angles at the end of the tick (LoLA: as measured)
   Eigen::Vector3d ee = Eigen::Vector3d::Zero();  ///< hand point of q
   Eigen::Vector3d ee_ref = Eigen::Vector3d::Constant(std::nan(""));  ///< evaluation target (driver fills)
-  std::array<float, kNumJoints> att{};  ///< per-body-part attention score
+  std::array<float, kNumJoints> att{};   ///< per-body-part norm-based attention score, summed over the window
+  std::array<float, kNumJoints> attm{};  ///< per-body-part raw cross-attention mass (sums to 1)
   std::uint32_t fault = 0;             ///< ControllerFault bits
   int key_pose = 0;                    ///< index of r among the movement's key poses
   /// Stage timings; sim_us is the robot backend's work, tick_us the whole tick, both without
@@ -206,6 +207,7 @@ void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>
   data.last_human_tick = -1;
   data.q_ref = q;
   data.a_prev.setZero();
+  resetPolicyStream(*data.policy);  // a new rollout: the policy's window starts empty
   data.fault_counts.fill(0);
   data.record = TickRecord{};
   data.active = true;
@@ -293,7 +295,10 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
       rec.fault |= kFaultPolicyNonFinite;
       a.setZero();
     }
-    for (int j = 0; j < kNumJoints; ++j) rec.att[static_cast<std::size_t>(j)] = data.policy->score[j];
+    for (int j = 0; j < kNumJoints; ++j) {
+      rec.att[static_cast<std::size_t>(j)] = data.policy->score[j];
+      rec.attm[static_cast<std::size_t>(j)] = data.policy->mass[j];
+    }
   }
   const std::int64_t t2 = data.clock->nowNs();
 

@@ -1,17 +1,28 @@
 // The imitation policy's forward pass (docs/policy.md): a pre-layer-norm encoder-decoder
-// Transformer with one token per robot joint, run as fixed-size float Eigen code.
+// Transformer over time x body part (DESIGN §7), streamed one tick at a time as fixed-size
+// float Eigen code.
 //
 // Model/data split (STYLE 1): PolicyWeights<Dims> holds fixed-size Eigen::Map views of the
 // manifest tensors (model.bin data, .incbin'd by codegen or copied into static storage);
-// PolicyWorkspace<Dims> holds every intermediate and the attention record. stepPolicy reads the
-// first, writes the second, and allocates nothing, throws nothing, does no I/O.
+// PolicyWorkspace<Dims> holds every intermediate, the key/value rings of the last W ticks and
+// the attention record. stepPolicy reads the first, writes the second, and allocates nothing,
+// throws nothing, does no I/O.
 //
-// Notation: d = d_model, J = 5 tokens (robot joints, proximal to distal), H heads,
-// d_h = d / H, M movements, K key poses (clusters) per movement, S step-embedding rows.
+// Tokens: (τ, j) = joint j at tick τ. The encoder is causal in time with a sliding window: in
+// every layer token (τ, j) attends to the tokens (τ', j') of ticks τ − W < τ' ≤ τ, every joint,
+// with a learned per-head bias of the age τ − τ'. Its keys and values never change once made,
+// so the runtime keeps them in a ring of W ticks per layer and computes only the new tick's J
+// tokens per step. The decoder's J action tokens (masked proximal → distal) cross-attend to the
+// encoder memory of the same window, with its own age bias; the memory's cross keys/values are
+// ringed the same way. Training (toolchain/src/torch) runs whole sequences with the equivalent
+// mask; tests/test_torch_parity.cpp holds the two to float tolerance over rollouts longer than W.
+//
+// Notation: d = d_model, J = 5 tokens per tick (robot joints, proximal to distal), H heads,
+// d_h = d / H, W window (ticks), M movements, K key poses per movement, S step-embedding rows.
 // Layout: a manifest matrix [in, out] row-major is the same bytes as a column-major Eigen
 // [out, in] matrix, so y = W x with W the view (the docs' row-vector `x W`). Activations are
-// [d, J] matrices, one column per token, and a product W X runs over W once for all J tokens:
-// the weights (24 MB for the paper config) are nearly all of the memory traffic of a step.
+// [d, J] matrices, one column per token of the new tick, and a product W X runs over W once for
+// all J tokens: the weights (24 MB for the paper config) are nearly all of the memory traffic.
 #pragma once
 
 #include "nao/policy_config.hpp"
@@ -23,6 +34,7 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <memory>
 #include <new>
@@ -34,7 +46,7 @@ namespace nao {
 /// Compile-time dimensions of a policy (STYLE 3). The runtime supports exactly three FFN hidden
 /// layers; a model.bin with another count has a different PolicyArch and is rejected by
 /// checkPolicyArch.
-template <int D, int H, int LE, int LD, int F0, int F1, int F2, int M = 3, int K = 10, int S = 256>
+template <int D, int H, int LE, int LD, int F0, int F1, int F2, int M = 3, int K = 10, int S = 256, int W = 20>
 struct PolicyDims {
   static constexpr int kDModel = D;
   static constexpr int kHeads = H;
@@ -49,11 +61,17 @@ struct PolicyDims {
   static constexpr int kMovements = M;
   static constexpr int kClusters = K;
   static constexpr int kMaxSteps = S;
+  static constexpr int kWindow = W;               ///< ticks of history, the current one included
+  static constexpr int kMemory = W * kTokens;     ///< tokens in a full window
 
   static_assert(D >= 1 && H >= 1 && D % H == 0, "d_model must be a positive multiple of heads");
   static_assert(LE >= 1 && LD >= 1, "at least one encoder and one decoder layer");
   static_assert(F0 >= 1 && F1 >= 1 && F2 >= 1, "FFN hidden widths must be positive");
   static_assert(M >= 1 && K >= 1 && S >= 1, "movements, clusters and max_steps must be positive");
+  static_assert(W >= 1, "the window holds at least the current tick");
+  // The key/value rings are [d, W J] fixed-size matrices, under the same cap.
+  static_assert(static_cast<std::size_t>(D) * W * kTokens * sizeof(float) <= EIGEN_STACK_ALLOCATION_LIMIT,
+                "a [d, W J] key/value ring exceeds Eigen's fixed-size limit");
   static_assert(kFeatures == 3, "token features are q, a(t-1), r");
   // Workspace buffers are fixed-size Eigen matrices, which Eigen caps at 128 KiB each.
   static_assert(static_cast<std::size_t>(std::max({D, F0, F1, F2})) * kTokens * sizeof(float) <=
@@ -73,13 +91,14 @@ struct PolicyDims {
     a.movements = M;
     a.clusters = K;
     a.max_steps = S;
+    a.window = W;
     return a;
   }
 };
 
 /// paperArch() (paper §4.1) and smallArch() (tests) as compiled dimensions.
-using PaperPolicyDims = PolicyDims<128, 4, 4, 4, 512, 512, 512>;
-using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64>;
+using PaperPolicyDims = PolicyDims<128, 4, 4, 4, 512, 512, 512, 3, 10, 256, 20>;
+using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 3, 10, 256, 8>;
 
 /// Read-only fixed-size view of one manifest tensor, Eigen shape [rows, cols] column-major.
 template <int R, int C>
@@ -99,6 +118,13 @@ struct AttentionWeights {
   WeightView<D, 1> bq{nullptr}, bk{nullptr}, bv{nullptr}, bo{nullptr};
 };
 
+/// Attention over the window: plus age_bias(age, h), added to head h's score of a key `age`
+/// ticks older than the query (manifest [H, W]).
+template <class Dims>
+struct TemporalAttentionWeights : AttentionWeights<Dims> {
+  WeightView<Dims::kWindow, Dims::kHeads> age_bias{nullptr};
+};
+
 /// d -> F0 -> F1 -> F2 -> d, ReLU after each hidden layer.
 template <class Dims>
 struct FfnWeights {
@@ -116,7 +142,7 @@ struct FfnWeights {
 template <class Dims>
 struct EncoderLayerWeights {
   LayerNormWeights<Dims> ln1;
-  AttentionWeights<Dims> attn;
+  TemporalAttentionWeights<Dims> attn;  ///< over the window's tokens, causal in time
   LayerNormWeights<Dims> ln2;
   FfnWeights<Dims> ffn;
 };
@@ -126,7 +152,7 @@ struct DecoderLayerWeights {
   LayerNormWeights<Dims> ln1;
   AttentionWeights<Dims> self;   ///< causal self-attention of the action tokens
   LayerNormWeights<Dims> ln2;
-  AttentionWeights<Dims> cross;  ///< queries: action tokens; keys/values: encoder memory
+  TemporalAttentionWeights<Dims> cross;  ///< queries: action tokens; keys/values: the window's memory
   LayerNormWeights<Dims> ln3;
   FfnWeights<Dims> ffn;
 };
@@ -159,23 +185,29 @@ struct PolicyWeights {
   Conditioning conditioning = Conditioning::kReference;
 };
 
-/// Everything stepPolicy writes: intermediates and the attention record of the last step.
-/// About 70 KB for the paper dimensions; build it once at configure time (makePolicyWorkspace),
-/// not as a stack object in the loop.
+/// Everything stepPolicy writes: intermediates, the key/value rings of the last W ticks and the
+/// attention record of the last step. About 1 MB for the paper dimensions; build it once at
+/// configure time (makePolicyWorkspace), not as a stack object in the loop, and clear it with
+/// resetPolicyStream before a new rollout.
 template <class Dims>
 struct PolicyWorkspace {
-  static constexpr int D = Dims::kDModel, J = Dims::kTokens, H = Dims::kHeads;
-  static constexpr int Dh = Dims::kHeadDim, LD = Dims::kDecoderLayers;
-  using Tokens = Eigen::Matrix<float, D, J>;  ///< one column per token
+  static constexpr int D = Dims::kDModel, J = Dims::kTokens, H = Dims::kHeads, W = Dims::kWindow;
+  static constexpr int Dh = Dims::kHeadDim, LE = Dims::kEncoderLayers, LD = Dims::kDecoderLayers;
+  static constexpr int N = Dims::kMemory;
+  using Tokens = Eigen::Matrix<float, D, J>;  ///< one column per token of the new tick
+  using Ring = Eigen::Matrix<float, D, N>;    ///< column slot*J + j: token j of the tick in `slot`
   using JointVec = Eigen::Matrix<float, J, 1>;
+
+  // Stream position: ticks since resetPolicyStream; the new tick goes to slot ticks % W.
+  std::int64_t ticks = 0;
 
   // Inputs as used: normalised features, clamped movement and step.
   JointVec qn = JointVec::Zero(), an = JointVec::Zero(), rn = JointVec::Zero();
   int movement = 0;
   int step = 0;
 
-  Tokens x = Tokens::Zero();       ///< encoder residual stream
-  Tokens memory = Tokens::Zero();  ///< M = LN_enc(x), the cross-attention keys/values input
+  Tokens x = Tokens::Zero();       ///< encoder residual stream of the new tick
+  Tokens memory = Tokens::Zero();  ///< LN_enc(x): the new tick's memory tokens
   Tokens y = Tokens::Zero();       ///< decoder residual stream
   Tokens h = Tokens::Zero();       ///< layer-norm output (sublayer input)
   Tokens q = Tokens::Zero(), k = Tokens::Zero(), v = Tokens::Zero();  ///< attention Q, K, V
@@ -185,16 +217,29 @@ struct PolicyWorkspace {
   Eigen::Matrix<float, Dims::kFfn1, J> f1 = Eigen::Matrix<float, Dims::kFfn1, J>::Zero();
   Eigen::Matrix<float, Dims::kFfn2, J> f2 = Eigen::Matrix<float, Dims::kFfn2, J>::Zero();
   Eigen::Matrix<float, Dh, J> v_head = Eigen::Matrix<float, Dh, J>::Zero();  ///< V_h, contiguous
-  std::array<Tokens, H> f_head{};  ///< column j of [h]: f_h(M_j) of the score
+
+  // Key/value rings: keys and values of every encoder layer's self-attention and every decoder
+  // layer's cross-attention, for the tokens of the last W ticks.
+  std::array<Ring, LE> enc_k{}, enc_v{};
+  std::array<Ring, LD> cross_k{}, cross_v{};
+  /// f_h(M) = Wo_h V_h of the last decoder layer's cross-attention per memory token (norm score).
+  std::array<Ring, H> f_ring{};
   Eigen::Matrix<float, D, 1> contribution = Eigen::Matrix<float, D, 1>::Zero();
-  float alpha[H][J][J] = {};       ///< α of the latest unrecorded attention (scratch)
+  /// α of the latest attention over the window (scratch): [h][query i][age * J + j].
+  float alpha[H][J][N] = {};
 
   /// Attention record. cross[l][h][i][j]: α of decoder layer l's cross-attention, head h,
-  /// action token i (query), body part j (key); every row sums to 1.
+  /// action token i (query), summed over the window's ticks for body part j; rows sum to 1.
   float cross[LD][H][J][J] = {};
-  /// Norm-based score of body part j in the last decoder layer's cross-attention
-  /// (Kobayashi et al. 2020, docs/policy.md).
+  /// Raw cross-attention mass of body part j in the last decoder layer: mean over heads and
+  /// action tokens of cross[LD-1][h][i][j] (sums to 1 over j).
+  JointVec mass = JointVec::Zero();
+  /// Norm-based score of body part j in the last decoder layer's cross-attention (Kobayashi et
+  /// al. 2020), summed over the window: Σ_i Σ_τ ‖Σ_h α_h[i][(τ, j)] f_h(M_{τ,j})‖ (docs/policy.md).
   JointVec score = JointVec::Zero();
+  /// Temporal profile: mass of the last decoder layer's cross-attention per age (0 = this
+  /// tick), mean over heads and action tokens; sums to 1 over the ages in the window so far.
+  Eigen::Matrix<float, W, 1> age_profile = Eigen::Matrix<float, W, 1>::Zero();
   /// Column i: the last decoder layer's cross-attention output of action token i (after Wo, bo,
   /// before the residual add).
   Tokens cross_out = Tokens::Zero();
@@ -256,6 +301,12 @@ void addAttentionSlots(std::vector<WeightSlot>& s, const std::string& p, Attenti
   addSlot(s, p + ".bv", a.bv);
   addSlot(s, p + ".wo", a.wo);
   addSlot(s, p + ".bo", a.bo);
+}
+
+template <class Dims>
+void addAttentionSlots(std::vector<WeightSlot>& s, const std::string& p, TemporalAttentionWeights<Dims>& a) {
+  addAttentionSlots(s, p, static_cast<AttentionWeights<Dims>&>(a));
+  addSlot(s, p + ".age_bias", a.age_bias);
 }
 
 template <class Dims>
@@ -342,66 +393,107 @@ inline void layerNorm(const typename PolicyWorkspace<Dims>::Tokens& x, const Lay
   }
 }
 
-/// ws.out = MHA(x_q, x_kv) with α written to `alpha`; ws.q, ws.k, ws.v, ws.o hold the
-/// intermediates afterwards. Causal: query i sees keys 0..i only (masked α are 0).
+/// ws.out = causal self-attention of the J new action tokens (query i sees tokens 0..i), from
+/// ws.h; ws.q, ws.k, ws.v, ws.o hold the intermediates afterwards.
 template <class Dims>
-inline void multiHeadAttention(const AttentionWeights<Dims>& A, const typename PolicyWorkspace<Dims>::Tokens& x_q,
-                               const typename PolicyWorkspace<Dims>::Tokens& x_kv, bool causal,
-                               float (&alpha)[Dims::kHeads][Dims::kTokens][Dims::kTokens], PolicyWorkspace<Dims>& ws) {
+inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<Dims>& ws) {
   constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim;
-  affine<false>(A.wq, A.bq, x_q, ws.q);
-  affine<false>(A.wk, A.bk, x_kv, ws.k);
-  affine<false>(A.wv, A.bv, x_kv, ws.v);
+  affine<false>(A.wq, A.bq, ws.h, ws.q);
+  affine<false>(A.wk, A.bk, ws.h, ws.k);
+  affine<false>(A.wv, A.bv, ws.h, ws.v);
   const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
   for (int hd = 0; hd < Dims::kHeads; ++hd) {
     const int c0 = hd * Dh;
     for (int i = 0; i < J; ++i) {
       // Masked keys are skipped, not added as exp(-inf) = 0: query i never reads keys > i.
-      const int n_keys = causal ? i + 1 : J;
       float s[J];
       float s_max = -std::numeric_limits<float>::infinity();
-      for (int j = 0; j < n_keys; ++j) {
+      for (int j = 0; j <= i; ++j) {
         s[j] = ws.q.col(i).template segment<Dh>(c0).dot(ws.k.col(j).template segment<Dh>(c0)) * scale;
         s_max = std::max(s_max, s[j]);
       }
       float sum = 0.0f;
-      for (int j = 0; j < n_keys; ++j) {
+      for (int j = 0; j <= i; ++j) {
         s[j] = std::exp(s[j] - s_max);
         sum += s[j];
       }
       ws.o.col(i).template segment<Dh>(c0).setZero();
-      for (int j = 0; j < J; ++j) {
-        alpha[hd][i][j] = j < n_keys ? s[j] / sum : 0.0f;
-        if (j < n_keys) ws.o.col(i).template segment<Dh>(c0) += alpha[hd][i][j] * ws.v.col(j).template segment<Dh>(c0);
-      }
+      for (int j = 0; j <= i; ++j) ws.o.col(i).template segment<Dh>(c0) += (s[j] / sum) * ws.v.col(j).template segment<Dh>(c0);
     }
   }
   affine<false>(A.wo, A.bo, ws.o, ws.out);
 }
 
-/// ws.score from the last cross-attention (α in `alpha`, V in ws.v):
-/// score[j] = Σ_i ‖Σ_h α_h[i][j] f_h(M_j)‖, f_h(M_j) = Wo_h V_h(:, j).
+/// Attention of the J queries in ws.q over the tokens of the last `n` ticks in the rings K, V
+/// (n = min(ticks, W), the newest tick in `slot`), with the age bias: ws.o (before Wo) and α in
+/// ws.alpha[h][i][age * J + j]. Keys are visited newest first, so the sums do not depend on
+/// where the ring happens to start.
 template <class Dims>
-inline void crossAttentionScore(const AttentionWeights<Dims>& A,
-                                const float (&alpha)[Dims::kHeads][Dims::kTokens][Dims::kTokens],
-                                PolicyWorkspace<Dims>& ws) {
-  constexpr int D = Dims::kDModel, J = Dims::kTokens, Dh = Dims::kHeadDim;
+inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typename PolicyWorkspace<Dims>::Ring& K,
+                            const typename PolicyWorkspace<Dims>::Ring& V, int slot, int n, PolicyWorkspace<Dims>& ws) {
+  constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim, W = Dims::kWindow, N = Dims::kMemory;
+  const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
   for (int hd = 0; hd < Dims::kHeads; ++hd) {
-    // Wo_h (rows h·d_h... of the [in, out] tensor) is d_h contiguous columns of the view.
-    ws.v_head = ws.v.template middleRows<Dh>(hd * Dh);
-    affineTokens<D, Dh, J, false>(A.wo.data() + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr,
-                                  ws.v_head.data(), ws.f_head[static_cast<std::size_t>(hd)].data());
-  }
-  for (int j = 0; j < J; ++j) {
-    float score = 0.0f;
+    const int c0 = hd * Dh;
     for (int i = 0; i < J; ++i) {
-      ws.contribution.setZero();
-      for (int hd = 0; hd < Dims::kHeads; ++hd)
-        ws.contribution += alpha[hd][i][j] * ws.f_head[static_cast<std::size_t>(hd)].col(j);
-      score += ws.contribution.norm();
+      float* s = ws.alpha[hd][i];
+      float s_max = -std::numeric_limits<float>::infinity();
+      for (int age = 0; age < n; ++age) {
+        const int base = ((slot - age + W) % W) * J;
+        const float bias = A.age_bias(age, hd);
+        for (int j = 0; j < J; ++j) {
+          const float v = ws.q.col(i).template segment<Dh>(c0).dot(K.col(base + j).template segment<Dh>(c0)) * scale + bias;
+          s[age * J + j] = v;
+          s_max = std::max(s_max, v);
+        }
+      }
+      float sum = 0.0f;
+      for (int m = 0; m < n * J; ++m) {
+        s[m] = std::exp(s[m] - s_max);
+        sum += s[m];
+      }
+      const float inv = 1.0f / sum;
+      ws.o.col(i).template segment<Dh>(c0).setZero();
+      for (int age = 0; age < n; ++age) {
+        const int base = ((slot - age + W) % W) * J;
+        for (int j = 0; j < J; ++j) {
+          float& a = s[age * J + j];
+          a *= inv;
+          ws.o.col(i).template segment<Dh>(c0) += a * V.col(base + j).template segment<Dh>(c0);
+        }
+      }
+      for (int m = n * J; m < N; ++m) s[m] = 0.0f;
     }
-    ws.score[j] = score;
   }
+}
+
+/// The record of the last decoder layer's cross-attention (α in ws.alpha over the last n
+/// ticks): ws.mass, ws.age_profile, ws.score (norm-based, from ws.f_ring).
+template <class Dims>
+inline void crossAttentionRecord(int slot, int n, PolicyWorkspace<Dims>& ws) {
+  constexpr int J = Dims::kTokens, H = Dims::kHeads, W = Dims::kWindow;
+  constexpr float kInv = 1.0f / static_cast<float>(H * J);
+  ws.mass.setZero();
+  ws.age_profile.setZero();
+  ws.score.setZero();
+  for (int hd = 0; hd < H; ++hd)
+    for (int i = 0; i < J; ++i)
+      for (int age = 0; age < n; ++age)
+        for (int j = 0; j < J; ++j) {
+          const float a = ws.alpha[hd][i][age * J + j] * kInv;
+          ws.mass[j] += a;
+          ws.age_profile[age] += a;
+        }
+  for (int i = 0; i < J; ++i)
+    for (int age = 0; age < n; ++age) {
+      const int base = ((slot - age + W) % W) * J;
+      for (int j = 0; j < J; ++j) {
+        ws.contribution.setZero();
+        for (int hd = 0; hd < H; ++hd)
+          ws.contribution += ws.alpha[hd][i][age * J + j] * ws.f_ring[static_cast<std::size_t>(hd)].col(base + j);
+        ws.score[j] += ws.contribution.norm();
+      }
+    }
 }
 
 template <class Dims>
@@ -437,20 +529,31 @@ PolicyWeights<Dims> bindPolicyWeights(const float* const* tensors, std::size_t c
   return w;
 }
 
-/// One policy step (docs/policy.md): normalise the inputs, run the encoder over the J joint
-/// tokens and the decoder over the J action tokens, de-normalise the head's output.
-/// Movement and step are clamped to 0..M-1 and 0..S-1 (a caller's index out of range picks
-/// the nearest embedding rather than reading out of bounds). rn = 0 in autonomous mode;
-/// embed.step is added in both modes (zero in reference-mode files). Non-finite inputs give
-/// non-finite actions (the caller checks). Writes the attention record (ws.cross, ws.score,
-/// ws.cross_out) and the intermediates into ws.
+/// Starts a new rollout: the window is empty (the next step is tick 0 and sees only itself).
+/// Real-time safe. Ring contents are not cleared: a slot is read only after this stream wrote it.
+template <class Dims>
+void resetPolicyStream(PolicyWorkspace<Dims>& ws) {
+  ws.ticks = 0;
+}
+
+/// One policy step (docs/policy.md) at the stream's next tick: normalise the inputs, make the
+/// tick's J encoder tokens, run them through the encoder layers attending to the window (their
+/// keys/values enter the rings), add their memory to the cross-attention rings, run the decoder
+/// over the J action tokens, de-normalise the head's output. Movement and step are clamped to
+/// 0..M-1 and 0..S-1 (a caller's index out of range picks the nearest embedding rather than
+/// reading out of bounds). rn = 0 in autonomous mode; embed.step is added in both modes (zero in
+/// reference-mode files). Non-finite inputs give non-finite actions (the caller checks) and poison
+/// the window until resetPolicyStream. Writes the attention record (ws.cross, ws.mass, ws.score,
+/// ws.age_profile, ws.cross_out) and the intermediates into ws.
 /// @return ws.action: a_j(t), rad per step, joint order. Real-time safe: no allocation, no
 ///         exception, no I/O; deterministic (fixed summation order, no FMA contraction).
 template <class Dims>
 const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws,
                                               const PolicyInput& in) {
-  constexpr int J = Dims::kTokens;
+  constexpr int J = Dims::kTokens, W = Dims::kWindow, H = Dims::kHeads, Dh = Dims::kHeadDim, D = Dims::kDModel;
   static_assert(J == 5, "PolicyInput carries 5 joints");
+  const int slot = static_cast<int>(ws.ticks % W);
+  const int n = static_cast<int>(std::min<std::int64_t>(ws.ticks + 1, W));  // ticks in the window
   ws.movement = std::clamp(in.movement, 0, Dims::kMovements - 1);
   ws.step = std::clamp(in.step, 0, Dims::kMaxSteps - 1);
   ws.qn = ((in.q - w.q_mean).array() / w.q_std.array()).matrix();
@@ -467,26 +570,64 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
     ws.y.col(j) = w.embed_act_weight * ws.an[j] + w.embed_act_bias + w.embed_joint_dec.col(j);
   }
 
-  for (const EncoderLayerWeights<Dims>& L : w.enc) {
+  for (int l = 0; l < Dims::kEncoderLayers; ++l) {
+    const EncoderLayerWeights<Dims>& L = w.enc[static_cast<std::size_t>(l)];
     detail::layerNorm<Dims>(ws.x, L.ln1, ws.h);
-    detail::multiHeadAttention<Dims>(L.attn, ws.h, ws.h, false, ws.alpha, ws);
+    detail::affine<false>(L.attn.wq, L.attn.bq, ws.h, ws.q);
+    detail::affine<false>(L.attn.wk, L.attn.bk, ws.h, ws.k);
+    detail::affine<false>(L.attn.wv, L.attn.bv, ws.h, ws.v);
+    ws.enc_k[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.k;
+    ws.enc_v[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.v;
+    detail::windowAttention<Dims>(L.attn, ws.enc_k[static_cast<std::size_t>(l)], ws.enc_v[static_cast<std::size_t>(l)],
+                                  slot, n, ws);
+    detail::affine<false>(L.attn.wo, L.attn.bo, ws.o, ws.out);
     ws.x += ws.out;
     detail::layerNorm<Dims>(ws.x, L.ln2, ws.h);
     detail::feedForward<Dims>(L.ffn, ws);
     ws.x += ws.out;
   }
   detail::layerNorm<Dims>(ws.x, w.enc_norm, ws.memory);
+  // The new tick's memory tokens enter every decoder layer's cross-attention ring.
+  for (int l = 0; l < Dims::kDecoderLayers; ++l) {
+    const TemporalAttentionWeights<Dims>& C = w.dec[static_cast<std::size_t>(l)].cross;
+    detail::affine<false>(C.wk, C.bk, ws.memory, ws.k);
+    detail::affine<false>(C.wv, C.bv, ws.memory, ws.v);
+    ws.cross_k[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.k;
+    ws.cross_v[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.v;
+  }
+  {
+    // f_h(M) = Wo_h V_h of the last layer (Wo_h: d_h contiguous columns of the view).
+    const TemporalAttentionWeights<Dims>& C = w.dec.back().cross;
+    for (int hd = 0; hd < H; ++hd) {
+      ws.v_head = ws.v.template middleRows<Dh>(hd * Dh);
+      Eigen::Matrix<float, D, J>& f = ws.out;  // scratch
+      detail::affineTokens<D, Dh, J, false>(C.wo.data() + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr, ws.v_head.data(),
+                                    f.data());
+      ws.f_ring[static_cast<std::size_t>(hd)].template middleCols<J>(slot * J) = f;
+    }
+  }
 
   for (int l = 0; l < Dims::kDecoderLayers; ++l) {
     const DecoderLayerWeights<Dims>& L = w.dec[static_cast<std::size_t>(l)];
     detail::layerNorm<Dims>(ws.y, L.ln1, ws.h);
-    detail::multiHeadAttention<Dims>(L.self, ws.h, ws.h, true, ws.alpha, ws);
+    detail::jointSelfAttention<Dims>(L.self, ws);
     ws.y += ws.out;
     detail::layerNorm<Dims>(ws.y, L.ln2, ws.h);
-    detail::multiHeadAttention<Dims>(L.cross, ws.h, ws.memory, false, ws.cross[l], ws);
+    detail::affine<false>(L.cross.wq, L.cross.bq, ws.h, ws.q);
+    detail::windowAttention<Dims>(L.cross, ws.cross_k[static_cast<std::size_t>(l)],
+                                  ws.cross_v[static_cast<std::size_t>(l)], slot, n, ws);
+    detail::affine<false>(L.cross.wo, L.cross.bo, ws.o, ws.out);
+    // Per body part: α summed over the window's ticks.
+    for (int hd = 0; hd < H; ++hd)
+      for (int i = 0; i < J; ++i)
+        for (int j = 0; j < J; ++j) {
+          float sum = 0.0f;
+          for (int age = 0; age < n; ++age) sum += ws.alpha[hd][i][age * J + j];
+          ws.cross[l][hd][i][j] = sum;
+        }
     if (l == Dims::kDecoderLayers - 1) {
       ws.cross_out = ws.out;
-      detail::crossAttentionScore<Dims>(L.cross, ws.cross[l], ws);
+      detail::crossAttentionRecord<Dims>(slot, n, ws);
     }
     ws.y += ws.out;
     detail::layerNorm<Dims>(ws.y, L.ln3, ws.h);
@@ -497,6 +638,7 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
 
   for (int j = 0; j < J; ++j) ws.action_n[j] = w.head_weight.row(0).dot(ws.h.col(j).transpose()) + w.head_bias(0, 0);
   ws.action = (ws.action_n.array() * w.a_std.array() + w.a_mean.array()).matrix();
+  ++ws.ticks;
   return ws.action;
 }
 

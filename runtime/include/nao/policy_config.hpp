@@ -33,6 +33,9 @@ struct PolicyArch {
   int movements = 3;
   int clusters = 10;                           ///< key poses per movement (k-means K)
   int max_steps = 256;                         ///< step-embedding rows (autonomous mode)
+  /// W: ticks of history the encoder and the cross-attention see (the current tick included),
+  /// 20 ticks = 2 s at 10 Hz (DESIGN §7). The runtime keeps a key/value ring of W ticks.
+  int window = 20;
 
   bool operator==(const PolicyArch& o) const;
   bool operator!=(const PolicyArch& o) const { return !(*this == o); }
@@ -40,7 +43,7 @@ struct PolicyArch {
 
 /// Paper configuration (paper §4.1): 4+4 layers, 4 heads, d_model 128, FFN 128-512-512-512-128.
 PolicyArch paperArch();
-/// Small configuration for tests: 2+2 layers, 4 heads, d_model 32, FFN 32-64-64-64-32.
+/// Small configuration for tests: 2+2 layers, 4 heads, d_model 32, FFN 32-64-64-64-32, window 8.
 PolicyArch smallArch();
 
 /// Empty if the architecture is usable, else what is wrong (e.g. "d_model 130 is not a

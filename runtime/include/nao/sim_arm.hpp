@@ -86,6 +86,21 @@ void resetSim(const SimModel& model, SimData& data, const JointVector& q0);
 /// the SimData constructor's warm-up: no allocation, no I/O.
 const JointVector& stepSim(const SimModel& model, SimData& data, const JointVector& q_cmd);
 
+/// The whole dynamic state of a SimData: every body's pose and velocities plus the servo's
+/// memory. restoreSim of a snapshot continues the run from that instant (the offline expert of
+/// the policy's training labels tries commands from one state: toolchain policy_dataset).
+struct SimSnapshot {
+  std::array<std::array<double, 13>, kNumJoints> body{};  ///< position 3, quaternion 4, linear 3, angular 3
+  JointVector q = JointVector::Zero(), qd = JointVector::Zero(), qd_peak = JointVector::Zero();
+  JointVector q_cmd = JointVector::Zero(), v_servo = JointVector::Zero();
+  std::int64_t substeps = 0;
+};
+
+/// Copies the state of `data` into `out`. Real-time safe.
+void captureSim(const SimData& data, SimSnapshot& out);
+/// Puts `data` in the state of `snap` (taken from a SimData of the same model). Real-time safe.
+void restoreSim(SimData& data, const SimSnapshot& snap);
+
 /// Caps each joint motor's torque at scale[j] x its URDF effort (NAO's stiffness is such a
 /// fraction of the motor's maximum current; nao_lola_sim uses it). The default, set by the
 /// SimData constructor, is 1 for every joint; nao_rt's in-process arm never calls this.

@@ -20,8 +20,9 @@ struct TrainArgs {
   std::string config = "paper", out, data, conditioning = "reference", urdf = NAO_DEFAULT_URDF, card;
   std::string rendezvous, interface, checkpoint, resume;
   std::uint64_t seed = 1;
-  int epochs = 200, patience = 10, batch = 32, world_size = 1, rank = 0, max_batches = 0;
-  double val_fraction = 0.2, lr = 6e-5, perturb_fraction = 0.5, timeout = 300;
+  int epochs = 200, patience = 10, batch = 4, world_size = 1, rank = 0, max_batches = 0, window = 0;
+  int noisy_rollouts = ExecutionOptions{}.noisy_rollouts;
+  double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
 // The process's own argv (Linux), shell-quoted where needed; empty if unavailable.
@@ -70,7 +71,8 @@ void run(const TrainArgs& a) {
   o.val_fraction = a.val_fraction;
   o.batch = a.batch;
   o.lr = a.lr;
-  o.perturb.fraction = a.perturb_fraction;
+  o.execution.noisy_rollouts = a.noisy_rollouts;
+  if (a.window > 0) o.arch.window = a.window;
   o.dist.world_size = a.world_size;
   o.dist.rank = a.rank;
   o.dist.rendezvous = a.rendezvous;
@@ -88,8 +90,12 @@ void run(const TrainArgs& a) {
 
   // The URDF first: a bad path should fail before minutes of training.
   std::vector<TrainedJoint> joints;
+  std::unique_ptr<SimModel> sim;
   try {
-    joints = trainedJoints(loadArmModel(a.urdf));
+    const ArmModel arm = loadArmModel(a.urdf);
+    joints = trainedJoints(arm);
+    // The arm the demonstrations are executed on: nao_rt's simulated arm, default servos.
+    sim = std::make_unique<SimModel>(makeSimModel(arm));
   } catch (const ArmModelError& e) {
     throw UserError(e.what());
   }
@@ -99,7 +105,7 @@ void run(const TrainArgs& a) {
   if (!writer) {
     // The other ranks train and check, quietly; rank 0 reports and writes.
     std::fflush(stdout);
-    const TrainResult r = trainPolicy(data, o, nullptr);
+    const TrainResult r = trainPolicy(data, *sim, o, nullptr);
     std::printf("train: rank %d done after %zu epochs (rank 0 writes %s)\n", a.rank, r.history.size(), a.out.c_str());
     return;
   }
@@ -110,7 +116,7 @@ void run(const TrainArgs& a) {
   std::printf(", K %d; %zu parameters\n", data.clusters(), parameterCount(o.arch));
   std::fflush(stdout);
 
-  const TrainResult r = trainPolicy(data, o, &std::cout);
+  const TrainResult r = trainPolicy(data, *sim, o, &std::cout);
   const ModelHeader header = modelHeader(data, o, r, joints);
   std::uint64_t checksum = 0;
   try {
@@ -121,7 +127,7 @@ void run(const TrainArgs& a) {
   std::printf("train: %zu epochs, best %d: val MSE %.4e rad^2 (zero action %.4e, repeat last %.4e), train %.4e rad^2\n",
               r.history.size(), r.best_epoch, r.val.mse_rad2, r.val_baselines.zero_action,
               r.val_baselines.repeat_last, r.train.mse_rad2);
-  std::printf("train: %zu train / %zu val samples -> %s (checksum %s), %.1f s\n", r.train_samples, r.val_samples,
+  std::printf("train: %zu train / %zu val ticks -> %s (checksum %s), %.1f s\n", r.train_samples, r.val_samples,
               a.out.c_str(), hex64(checksum).c_str(), r.seconds);
   if (!a.card.empty()) {
     std::string command = ownCommandLine();
@@ -166,13 +172,19 @@ void setup(CLI::App& app) {
   cmd->add_option("--val-fraction", args->val_fraction, "Validation share of each movement's demonstrations")
       ->check(CLI::Range(0.01, 0.99))
       ->capture_default_str();
-  cmd->add_option("--batch", args->batch, "Batch size")->check(CLI::Range(1, 1 << 20))->capture_default_str();
-  cmd->add_option("--lr", args->lr, "Adam learning rate")->check(CLI::PositiveNumber)->capture_default_str();
-  cmd->add_option("--perturb-fraction", args->perturb_fraction,
-                  "Share of training samples moved off their trajectory each epoch and relabelled with the "
-                  "feature extractor's action there (DAgger-style; 0 trains on demonstrated states only)")
-      ->check(CLI::Range(0.0, 1.0))
+  cmd->add_option("--batch", args->batch, "Sequences (executed rollouts of whole demonstrations) per optimiser step")
+      ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
+  cmd->add_option("--lr", args->lr, "Adam learning rate")->check(CLI::PositiveNumber)->capture_default_str();
+  cmd->add_option("--noisy-rollouts", args->noisy_rollouts,
+                  "Per training demonstration, rollouts executed with AR(1) command noise besides the clean one, "
+                  "labelled by the expert from the states they reach (DART; 0: on-trajectory states only)")
+      ->check(CLI::Range(0, 16))
+      ->capture_default_str();
+  cmd->add_option("--window", args->window,
+                  "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "
+                  "nao_rt is compiled for the paper config's W")
+      ->check(CLI::Range(1, 1000));
   cmd->add_option("--urdf", args->urdf, "Robot description (joint names and limits stored in the model)")
       ->check(CLI::ExistingFile)
       ->capture_default_str();

@@ -53,7 +53,16 @@ torch::Tensor LayerNormImpl::forward(const torch::Tensor& x) const {
   return torch::layer_norm(x, {gain.size(0)}, gain, bias, 1e-5);
 }
 
-AttentionImpl::AttentionImpl(int d, int n_heads) : heads(n_heads) {
+WindowMask windowMask(std::int64_t ticks, int joints, int window) {
+  const torch::Tensor tick = torch::arange(ticks, torch::kInt64).repeat_interleave(joints);  // tick of token
+  const torch::Tensor age = tick.unsqueeze(1) - tick.unsqueeze(0);                          // [query, key]
+  WindowMask m;
+  m.blocked = age.lt(0).logical_or(age.ge(window));
+  m.age = age.clamp(0, window - 1);
+  return m;
+}
+
+AttentionImpl::AttentionImpl(int d, int n_heads, int window) : heads(n_heads) {
   wq = register_parameter("wq", torch::empty({d, d}));
   bq = register_parameter("bq", torch::empty({d}));
   wk = register_parameter("wk", torch::empty({d, d}));
@@ -62,10 +71,31 @@ AttentionImpl::AttentionImpl(int d, int n_heads) : heads(n_heads) {
   bv = register_parameter("bv", torch::empty({d}));
   wo = register_parameter("wo", torch::empty({d, d}));
   bo = register_parameter("bo", torch::empty({d}));
+  if (window > 0) age_bias = register_parameter("age_bias", torch::empty({n_heads, window}));
 }
 
 torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor& z, bool causal, torch::Tensor* alpha,
                                      torch::Tensor* values) const {
+  torch::Tensor bias;
+  if (causal)
+    bias = torch::zeros({x.size(1), z.size(1)})
+               .masked_fill(torch::ones({x.size(1), z.size(1)}, torch::kBool).triu(1),
+                            -std::numeric_limits<float>::infinity());
+  return attend(x, z, bias, alpha, values);
+}
+
+torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor& z, const WindowMask& mask,
+                                     torch::Tensor* alpha, torch::Tensor* values) const {
+  // [H, query, key]: the head's bias of the pair's age; blocked pairs -inf.
+  const torch::Tensor bias =
+      age_bias.index_select(1, mask.age.reshape({-1}))
+          .view({heads, mask.age.size(0), mask.age.size(1)})
+          .masked_fill(mask.blocked, -std::numeric_limits<float>::infinity());
+  return attend(x, z, bias, alpha, values);
+}
+
+torch::Tensor AttentionImpl::attend(const torch::Tensor& x, const torch::Tensor& z, const torch::Tensor& bias,
+                                    torch::Tensor* alpha, torch::Tensor* values) const {
   const std::int64_t n_batch = x.size(0), n_query = x.size(1), n_key = z.size(1), d = wq.size(0);
   const std::int64_t d_h = d / heads;
   // [B,J,d] -> [B,H,J,d_h]: head h owns columns h*d_h .. (h+1)*d_h - 1.
@@ -74,10 +104,7 @@ torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor
   const torch::Tensor k = split(z.matmul(wk).add(bk), n_key);
   const torch::Tensor v = split(z.matmul(wv).add(bv), n_key);
   torch::Tensor scores = q.matmul(k.transpose(-2, -1)).div(std::sqrt(static_cast<double>(d_h)));
-  if (causal) {
-    const torch::Tensor above = torch::ones({n_query, n_key}, torch::kBool).triu(1);
-    scores = scores.masked_fill(above, -std::numeric_limits<float>::infinity());
-  }
+  if (bias.defined()) scores = scores + bias;
   const torch::Tensor a = torch::softmax(scores, -1);
   if (alpha) *alpha = a;
   if (values) *values = v;
@@ -104,14 +131,14 @@ torch::Tensor FfnImpl::forward(torch::Tensor x) const {
 
 EncoderLayerImpl::EncoderLayerImpl(const PolicyArch& arch) {
   ln1 = register_module("ln1", LayerNorm(arch.d_model));
-  attn = register_module("attn", Attention(arch.d_model, arch.heads));
+  attn = register_module("attn", Attention(arch.d_model, arch.heads, arch.window));
   ln2 = register_module("ln2", LayerNorm(arch.d_model));
   ffn = register_module("ffn", Ffn(arch.d_model, arch.ffn_hidden));
 }
 
-torch::Tensor EncoderLayerImpl::forward(torch::Tensor x) const {
+torch::Tensor EncoderLayerImpl::forward(torch::Tensor x, const WindowMask& mask) const {
   const torch::Tensor h = ln1->forward(x);
-  x = x + attn->forward(h, h, false);
+  x = x + attn->forward(h, h, mask);
   return x + ffn->forward(ln2->forward(x));
 }
 
@@ -119,16 +146,21 @@ DecoderLayerImpl::DecoderLayerImpl(const PolicyArch& arch) {
   ln1 = register_module("ln1", LayerNorm(arch.d_model));
   self = register_module("self", Attention(arch.d_model, arch.heads));
   ln2 = register_module("ln2", LayerNorm(arch.d_model));
-  cross = register_module("cross", Attention(arch.d_model, arch.heads));
+  cross = register_module("cross", Attention(arch.d_model, arch.heads, arch.window));
   ln3 = register_module("ln3", LayerNorm(arch.d_model));
   ffn = register_module("ffn", Ffn(arch.d_model, arch.ffn_hidden));
 }
 
-torch::Tensor DecoderLayerImpl::forward(torch::Tensor y, const torch::Tensor& memory, torch::Tensor* alpha,
-                                        torch::Tensor* values, torch::Tensor* cross_out) const {
-  const torch::Tensor h = ln1->forward(y);
-  y = y + self->forward(h, h, true);
-  const torch::Tensor c = cross->forward(ln2->forward(y), memory, false, alpha, values);
+torch::Tensor DecoderLayerImpl::forward(torch::Tensor y, const torch::Tensor& memory, const WindowMask& mask,
+                                        torch::Tensor* alpha, torch::Tensor* values, torch::Tensor* cross_out) const {
+  const std::int64_t n_batch = y.size(0), n_ticks = y.size(1), n_joints = y.size(2), d = y.size(3);
+  // Self-attention among the J action tokens of each tick (masked proximal -> distal).
+  const torch::Tensor h = ln1->forward(y).reshape({n_batch * n_ticks, n_joints, d});
+  y = y + self->forward(h, h, true).view({n_batch, n_ticks, n_joints, d});
+  // Cross-attention of tick t's action tokens to the memory of ticks t-W+1..t.
+  const torch::Tensor c = cross->forward(ln2->forward(y).reshape({n_batch, n_ticks * n_joints, d}), memory, mask, alpha,
+                                         values)
+                              .view({n_batch, n_ticks, n_joints, d});
   if (cross_out) *cross_out = c;
   y = y + c;
   return y + ffn->forward(ln3->forward(y));
@@ -178,6 +210,8 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
       t.zero_();
     else if (name == "embed.joint_enc" || name == "embed.movement" || name == "embed.step" || name == "embed.joint_dec")
       t.normal_(0.0, 0.02);
+    else if (last == "age_bias")
+      t.zero_();  // no preference of age at the start: attention learns it
     else if (last == "gain")
       t.fill_(1.0);
     else if (last == "bias" || last == "bq" || last == "bk" || last == "bv" || last == "bo")
@@ -190,45 +224,57 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
 }
 
 torch::Tensor PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttention* attention) const {
+  const std::int64_t n_batch = batch.qn.size(0), n_ticks = batch.qn.size(1), n_joints = arch_.tokens;
+  const std::int64_t d = arch_.d_model, n_heads = arch_.heads, window = arch_.window;
   const torch::Tensor rn =
       conditioning_ == Conditioning::kAutonomous ? torch::zeros_like(batch.qn) : batch.rn;
-  // Encoder input: [qn, an, rn] per token, shared embedding + joint, movement and step rows.
-  torch::Tensor x = embed_in->forward(torch::stack({batch.qn, batch.an, rn}, -1));
-  x = x + joint_enc + movement_emb.index_select(0, batch.movement).unsqueeze(1) +
-      step_emb.index_select(0, batch.step).unsqueeze(1);
-  for (const EncoderLayer& layer : enc) x = layer->forward(x);
+  // Encoder tokens (τ, j): [qn, an, rn] embedded, plus joint, movement and the tick's step row.
+  const torch::Tensor step = torch::arange(n_ticks, torch::kInt64).clamp_max(arch_.max_steps - 1);
+  torch::Tensor x = embed_in->forward(torch::stack({batch.qn, batch.an, rn}, -1));  // [B,T,J,d]
+  x = x + joint_enc + movement_emb.index_select(0, batch.movement).view({n_batch, 1, 1, d}) +
+      step_emb.index_select(0, step).view({1, n_ticks, 1, d});
+  x = x.reshape({n_batch, n_ticks * n_joints, d});
+  const WindowMask mask = windowMask(n_ticks, static_cast<int>(n_joints), static_cast<int>(window));
+  for (const EncoderLayer& layer : enc) x = layer->forward(x, mask);
   const torch::Tensor memory = enc_norm->forward(x);
 
-  torch::Tensor y = embed_act->forward(batch.an.unsqueeze(-1)) + joint_dec;
+  torch::Tensor y = embed_act->forward(batch.an.unsqueeze(-1)) + joint_dec;  // [B,T,J,d]
   torch::Tensor alpha, values, cross_out;
   if (attention) attention->cross.clear();
   for (const DecoderLayer& layer : dec) {
-    y = layer->forward(y, memory, attention ? &alpha : nullptr, attention ? &values : nullptr,
+    y = layer->forward(y, memory, mask, attention ? &alpha : nullptr, attention ? &values : nullptr,
                        attention ? &cross_out : nullptr);
-    if (attention) attention->cross.push_back(alpha);
+    if (attention)  // α summed over the window's ticks per body part: [B,T,H,J,J]
+      attention->cross.push_back(alpha.view({n_batch, n_heads, n_ticks, n_joints, n_ticks, n_joints})
+                                     .sum(4)
+                                     .permute({0, 2, 1, 3, 4}));
   }
   if (attention) {
-    // Norm-based score (Kobayashi et al. 2020): f_h(M_j) = V_h[j] Wo_h, a d-vector per head and
-    // body part; score[j] = sum_i || sum_h α_h[i][j] f_h(M_j) ||.
-    const std::int64_t n_heads = arch_.heads, d = arch_.d_model;
+    const torch::Tensor a6 = alpha.view({n_batch, n_heads, n_ticks, n_joints, n_ticks, n_joints});
+    attention->mass = a6.sum(4).mean(3).mean(1);  // [B,T,J]
+    // Mass per age: key tick τ = t - age.
+    const torch::Tensor per_key_tick = a6.sum(5).mean(3).mean(1);  // [B,T(query),T(key)]
+    torch::Tensor profile = torch::zeros({n_batch, n_ticks, window});
+    for (std::int64_t age = 0; age < window && age < n_ticks; ++age)
+      profile.select(2, age).slice(1, age, n_ticks).copy_(per_key_tick.diagonal(-age, 1, 2));
+    attention->age_profile = profile;
+    // Norm-based score: f_h(M_k) = V_h[k] Wo_h; score[t][j] = Σ_i Σ_τ ‖Σ_h α_h[(t,i)][(τ,j)] f_h(M_(τ,j))‖.
     const torch::Tensor wo = dec.back()->cross->wo.view({n_heads, d / n_heads, d});
-    const torch::Tensor f = values.matmul(wo);                              // [B,H,J,d]
-    const torch::Tensor g = torch::einsum("bhij,bhjd->bijd", {alpha, f});  // [B,i,j,d]
-    attention->score = g.norm(2, -1).sum(1);                                // [B,J]
+    const torch::Tensor f = values.matmul(wo);                                   // [B,H,TJ,d]
+    const torch::Tensor g = torch::einsum("bhqk,bhkd->bqkd", {alpha, f});        // [B,TJ,TJ,d]
+    attention->score = g.norm(2, -1).view({n_batch, n_ticks, n_joints, n_ticks, n_joints}).sum({2, 3});
     attention->cross_out = cross_out;
   }
-  return head->forward(dec_norm->forward(y)).squeeze(-1);
+  return head->forward(dec_norm->forward(y)).squeeze(-1);  // [B,T,J]
 }
 
 torch::Tensor PolicyNetImpl::act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
-                                 const torch::Tensor& movement, const torch::Tensor& step,
-                                 PolicyAttention* attention) const {
+                                 const torch::Tensor& movement, PolicyAttention* attention) const {
   PolicyBatch batch;
   batch.qn = (q - q_mean) / q_std;
   batch.an = (a_prev - a_mean) / a_std;
   batch.rn = (r - r_mean) / r_std;
   batch.movement = movement;
-  batch.step = step;
   return forward(batch, attention) * a_std + a_mean;
 }
 

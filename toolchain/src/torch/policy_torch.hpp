@@ -6,7 +6,11 @@
 // centroids are buffers "norm.*" and "centroids". manifestTensors() lists them in manifest
 // order; that list is what model.bin stores.
 //
-// Shapes: B = batch, J = tokens (joints), d = d_model, H = heads.
+// Sequences (DESIGN §7): a batch holds B rollouts of T ticks from tick 0, J joints each; the
+// encoder runs over the T·J tokens (τ, j) (index τ·J + j) with the sliding-window causal mask
+// and age bias of the runtime (nao/policy.hpp), each token computed once per sequence.
+//
+// Shapes: B = batch, T = ticks, J = tokens (joints) per tick, d = d_model, H = heads, W = window.
 #pragma once
 
 #include "nao/policy_config.hpp"
@@ -20,21 +24,32 @@
 
 namespace nao::tools {
 
-/// Normalised inputs of one batch (docs/policy.md "Inputs, normalised").
+/// Normalised inputs of one batch of sequences (docs/policy.md "Inputs, normalised"). Every
+/// sequence starts at tick 0; shorter ones are padded at the end (padding is never attended
+/// by earlier ticks: the mask is causal in time).
 struct PolicyBatch {
-  torch::Tensor qn;        ///< [B,J] float
-  torch::Tensor an;        ///< [B,J] float, normalised a(t-1)
-  torch::Tensor rn;        ///< [B,J] float (ignored in autonomous mode: taken as 0)
+  torch::Tensor qn;        ///< [B,T,J] float
+  torch::Tensor an;        ///< [B,T,J] float, normalised a(t-1)
+  torch::Tensor rn;        ///< [B,T,J] float (ignored in autonomous mode: taken as 0)
   torch::Tensor movement;  ///< [B] int64
-  torch::Tensor step;      ///< [B] int64, already clamped to max_steps - 1
 };
 
-/// The attention record of docs/policy.md, per batch element.
+/// The attention record of docs/policy.md, per batch element and tick.
 struct PolicyAttention {
-  std::vector<torch::Tensor> cross;  ///< per decoder layer: α [B,H,J(action),J(body part)]
-  torch::Tensor score;               ///< [B,J] norm-based score of the last cross-attention
-  torch::Tensor cross_out;           ///< [B,J,d] last cross-attention output (after Wo, bo)
+  std::vector<torch::Tensor> cross;  ///< per decoder layer: α summed over the window [B,T,H,J(action),J(body part)]
+  torch::Tensor mass;                ///< [B,T,J] raw mass of the last cross-attention per body part
+  torch::Tensor age_profile;         ///< [B,T,W] mass per age (0 = the query's own tick)
+  torch::Tensor score;               ///< [B,T,J] norm-based score of the last cross-attention
+  torch::Tensor cross_out;           ///< [B,T,J,d] last cross-attention output (after Wo, bo)
 };
+
+/// The sliding-window structure of T ticks: for query token (t, i) and key token (τ, j),
+/// age = t − τ; allowed iff 0 <= age < W.
+struct WindowMask {
+  torch::Tensor age;      ///< [T·J, T·J] int64, clamped to 0..W-1
+  torch::Tensor blocked;  ///< [T·J, T·J] bool: age < 0 or age >= W
+};
+WindowMask windowMask(std::int64_t ticks, int joints, int window);
 
 /// x W + b with W stored [in, out] ("weight", "bias").
 class AffineImpl : public torch::nn::Module {
@@ -54,16 +69,25 @@ class LayerNormImpl : public torch::nn::Module {
 };
 TORCH_MODULE(LayerNorm);
 
-/// Multi-head attention with wq, bq, wk, bk, wv, bv, wo, bo ([d,d] / [d]).
+/// Multi-head attention with wq, bq, wk, bk, wv, bv, wo, bo ([d,d] / [d]); with a window
+/// (temporal attention) also age_bias [H,W].
 class AttentionImpl : public torch::nn::Module {
  public:
-  AttentionImpl(int d, int heads);
+  AttentionImpl(int d, int heads, int window = 0);
   /// x [B,Jq,d] queries, z [B,Jk,d] keys/values; causal: query i sees keys 0..i.
   /// alpha (if given) receives α [B,H,Jq,Jk]; values (if given) receives V [B,H,Jk,d_h].
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& z, bool causal,
                         torch::Tensor* alpha = nullptr, torch::Tensor* values = nullptr) const;
+  /// Over the window: x, z [B,T·J,d] tokens of the same T ticks; scores get age_bias[h, age]
+  /// and the blocked pairs of `mask` are excluded.
+  torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& z, const WindowMask& mask,
+                        torch::Tensor* alpha = nullptr, torch::Tensor* values = nullptr) const;
   int heads;
-  torch::Tensor wq, bq, wk, bk, wv, bv, wo, bo;
+  torch::Tensor wq, bq, wk, bk, wv, bv, wo, bo, age_bias;
+
+ private:
+  torch::Tensor attend(const torch::Tensor& x, const torch::Tensor& z, const torch::Tensor& bias,
+                       torch::Tensor* alpha, torch::Tensor* values) const;
 };
 TORCH_MODULE(Attention);
 
@@ -79,7 +103,7 @@ TORCH_MODULE(Ffn);
 class EncoderLayerImpl : public torch::nn::Module {
  public:
   EncoderLayerImpl(const PolicyArch& arch);
-  torch::Tensor forward(torch::Tensor x) const;
+  torch::Tensor forward(torch::Tensor x, const WindowMask& mask) const;
   LayerNorm ln1{nullptr}, ln2{nullptr};
   Attention attn{nullptr};
   Ffn ffn{nullptr};
@@ -89,9 +113,11 @@ TORCH_MODULE(EncoderLayer);
 class DecoderLayerImpl : public torch::nn::Module {
  public:
   DecoderLayerImpl(const PolicyArch& arch);
-  /// alpha/values/cross_out (if given) receive the cross-attention's α, V and output.
-  torch::Tensor forward(torch::Tensor y, const torch::Tensor& memory, torch::Tensor* alpha = nullptr,
-                        torch::Tensor* values = nullptr, torch::Tensor* cross_out = nullptr) const;
+  /// y [B,T,J,d] action tokens, memory [B,T·J,d]. alpha/values/cross_out (if given) receive the
+  /// cross-attention's α [B,H,T·J,T·J], V [B,H,T·J,d_h] and output [B,T,J,d].
+  torch::Tensor forward(torch::Tensor y, const torch::Tensor& memory, const WindowMask& mask,
+                        torch::Tensor* alpha = nullptr, torch::Tensor* values = nullptr,
+                        torch::Tensor* cross_out = nullptr) const;
   LayerNorm ln1{nullptr}, ln2{nullptr}, ln3{nullptr};
   Attention self{nullptr}, cross{nullptr};
   Ffn ffn{nullptr};
@@ -107,14 +133,14 @@ class PolicyNetImpl : public torch::nn::Module {
   /// norm means 0, stds 1, centroids 0.
   PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning);
 
-  /// Normalised action an' [B,J] for a normalised batch; fills `attention` if given.
+  /// Normalised actions an' [B,T,J] for a normalised batch of sequences; fills `attention` if
+  /// given (memory grows as (T·J)² · d: for short sequences, tests and analysis).
   torch::Tensor forward(const PolicyBatch& batch, PolicyAttention* attention = nullptr) const;
 
-  /// The action a(t) in rad [B,J] from raw inputs in rad (q, a(t-1), r: [B,J] float; movement,
-  /// step: [B] int64), normalised with the norm.* buffers (rn = 0 in autonomous mode).
+  /// The actions a(t) in rad [B,T,J] from raw sequences in rad (q, a(t-1), r: [B,T,J] float;
+  /// movement [B] int64), normalised with the norm.* buffers (rn = 0 in autonomous mode).
   torch::Tensor act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
-                    const torch::Tensor& movement, const torch::Tensor& step,
-                    PolicyAttention* attention = nullptr) const;
+                    const torch::Tensor& movement, PolicyAttention* attention = nullptr) const;
 
   /// Stores the statistics in the norm.* buffers.
   void setNormalisation(const NormStats& stats);

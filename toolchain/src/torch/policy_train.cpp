@@ -19,58 +19,75 @@ using Clock = std::chrono::steady_clock;
 
 double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-// Samples as tensors, normalised with the net's norm.* buffers (the statistics it will carry).
-struct SampleTensors {
-  PolicyBatch in;
-  torch::Tensor target;  ///< normalised a(t) [N,J]
-  std::int64_t size = 0;
+// Executed sequences as normalised tensors (the net's norm.* buffers: the statistics it will
+// carry), one entry per sequence, and how to batch them.
+struct SequenceTensors {
+  std::vector<torch::Tensor> qn, an, rn, target;  ///< each [T_i, J]
+  std::vector<std::int64_t> movement;
+  std::int64_t ticks = 0;                         ///< all sequences together
+  std::size_t size() const { return qn.size(); }
 };
 
-SampleTensors toTensors(const PolicyNet& net, const std::vector<PolicySample>& samples) {
-  const auto n = static_cast<std::int64_t>(samples.size());
-  torch::Tensor q = torch::empty({n, kNumJoints}), a_prev = torch::empty({n, kNumJoints}),
-                r = torch::empty({n, kNumJoints}), a = torch::empty({n, kNumJoints});
-  torch::Tensor movement = torch::empty({n}, torch::kInt64), step = torch::empty({n}, torch::kInt64);
-  auto q_acc = q.accessor<float, 2>(), ap_acc = a_prev.accessor<float, 2>(), r_acc = r.accessor<float, 2>(),
-       a_acc = a.accessor<float, 2>();
-  auto m_acc = movement.accessor<std::int64_t, 1>(), s_acc = step.accessor<std::int64_t, 1>();
-  for (std::int64_t i = 0; i < n; ++i) {
-    const PolicySample& s = samples[static_cast<std::size_t>(i)];
-    for (int j = 0; j < kNumJoints; ++j) {
-      q_acc[i][j] = static_cast<float>(s.q[j]);
-      ap_acc[i][j] = static_cast<float>(s.a_prev[j]);
-      r_acc[i][j] = static_cast<float>(s.r[j]);
-      a_acc[i][j] = static_cast<float>(s.a[j]);
-    }
-    m_acc[i] = s.movement;
-    s_acc[i] = s.step;
+SequenceTensors toTensors(const PolicyNet& net, const std::vector<PolicySequence>& seqs) {
+  SequenceTensors t;
+  const auto put = [](const std::vector<JointVector>& v) {
+    torch::Tensor x = torch::empty({static_cast<std::int64_t>(v.size()), kNumJoints});
+    auto acc = x.accessor<float, 2>();
+    for (std::size_t i = 0; i < v.size(); ++i)
+      for (int j = 0; j < kNumJoints; ++j) acc[static_cast<std::int64_t>(i)][j] = static_cast<float>(v[i][j]);
+    return x;
+  };
+  for (const PolicySequence& s : seqs) {
+    t.qn.push_back((put(s.q) - net->q_mean) / net->q_std);
+    t.an.push_back((put(s.a_prev) - net->a_mean) / net->a_std);
+    t.rn.push_back((put(s.r) - net->r_mean) / net->r_std);
+    t.target.push_back((put(s.a) - net->a_mean) / net->a_std);
+    t.movement.push_back(s.movement);
+    t.ticks += static_cast<std::int64_t>(s.ticks());
   }
-  SampleTensors t;
-  t.in.qn = (q - net->q_mean) / net->q_std;
-  t.in.an = (a_prev - net->a_mean) / net->a_std;
-  t.in.rn = (r - net->r_mean) / net->r_std;
-  t.in.movement = movement;
-  t.in.step = step;
-  t.target = (a - net->a_mean) / net->a_std;
-  t.size = n;
   return t;
 }
 
-PolicyBatch rows(const PolicyBatch& b, const torch::Tensor& index) {
-  return {b.qn.index_select(0, index), b.an.index_select(0, index), b.rn.index_select(0, index),
-          b.movement.index_select(0, index), b.step.index_select(0, index)};
+// Sequences `index` padded to the longest: inputs, targets [B,T,J] and the mask of real ticks [B,T,1].
+struct Padded {
+  PolicyBatch in;
+  torch::Tensor target, mask;
+  std::int64_t ticks = 0;  ///< real ticks
+};
+
+Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index) {
+  std::int64_t longest = 0;
+  for (std::size_t i : index) longest = std::max(longest, t.qn[i].size(0));
+  const auto n = static_cast<std::int64_t>(index.size());
+  Padded p;
+  p.in.qn = torch::zeros({n, longest, kNumJoints});
+  p.in.an = torch::zeros({n, longest, kNumJoints});
+  p.in.rn = torch::zeros({n, longest, kNumJoints});
+  p.target = torch::zeros({n, longest, kNumJoints});
+  p.mask = torch::zeros({n, longest, 1});
+  std::vector<std::int64_t> movement;
+  for (std::int64_t b = 0; b < n; ++b) {
+    const std::size_t i = index[static_cast<std::size_t>(b)];
+    const std::int64_t len = t.qn[i].size(0);
+    p.in.qn[b].slice(0, 0, len).copy_(t.qn[i]);
+    p.in.an[b].slice(0, 0, len).copy_(t.an[i]);
+    p.in.rn[b].slice(0, 0, len).copy_(t.rn[i]);
+    p.target[b].slice(0, 0, len).copy_(t.target[i]);
+    p.mask[b].slice(0, 0, len).fill_(1.0);
+    movement.push_back(t.movement[i]);
+    p.ticks += len;
+  }
+  p.in.movement = torch::tensor(movement, torch::kInt64);
+  return p;
 }
 
-// Sums of the squared normalised and rad errors over samples [begin, end) (chunks of 4096).
-std::pair<double, double> errorSums(const PolicyNet& net, const SampleTensors& t, std::int64_t begin, std::int64_t end) {
+// Sums of the squared normalised and rad errors over sequences [begin, end), one at a time.
+std::pair<double, double> errorSums(const PolicyNet& net, const SequenceTensors& t, std::size_t begin, std::size_t end) {
   torch::NoGradGuard no_grad;
-  const std::int64_t chunk = 4096;
   double sum_n = 0.0, sum_rad2 = 0.0;
-  for (std::int64_t b = begin; b < end; b += chunk) {
-    const std::int64_t e = std::min(b + chunk, end);
-    const PolicyBatch in{t.in.qn.slice(0, b, e), t.in.an.slice(0, b, e), t.in.rn.slice(0, b, e),
-                         t.in.movement.slice(0, b, e), t.in.step.slice(0, b, e)};
-    const torch::Tensor err = net->forward(in) - t.target.slice(0, b, e);
+  for (std::size_t i = begin; i < end; ++i) {
+    const Padded p = pad(t, {i});
+    const torch::Tensor err = net->forward(p.in) - p.target;
     sum_n += err.square().sum().item<double>();
     sum_rad2 += (err * net->a_std).square().sum().item<double>();
   }
@@ -78,20 +95,21 @@ std::pair<double, double> errorSums(const PolicyNet& net, const SampleTensors& t
 }
 
 // Loss over all of `t`; with a group each rank evaluates its shard and the sums are all-reduced.
-SplitLoss evaluate(const PolicyNet& net, const SampleTensors& t, ProcessGroup* group = nullptr) {
+SplitLoss evaluate(const PolicyNet& net, const SequenceTensors& t, ProcessGroup* group = nullptr) {
   SplitLoss loss;
-  if (t.size == 0) return loss;
+  if (t.size() == 0) return loss;
   std::pair<double, double> sums;
   if (group) {
-    const auto [begin, end] = shardRange(t.size, group->worldSize(), group->rank());
-    const std::pair<double, double> mine = errorSums(net, t, begin, end);
+    const auto [begin, end] = shardRange(static_cast<std::int64_t>(t.size()), group->worldSize(), group->rank());
+    const std::pair<double, double> mine =
+        errorSums(net, t, static_cast<std::size_t>(begin), static_cast<std::size_t>(end));
     torch::Tensor both = torch::tensor({mine.first, mine.second}, torch::kFloat64);
     group->sum(both, "validation sums");
     sums = {both[0].item<double>(), both[1].item<double>()};
   } else {
-    sums = errorSums(net, t, 0, t.size);
+    sums = errorSums(net, t, 0, t.size());
   }
-  const double count = static_cast<double>(t.size) * kNumJoints;
+  const double count = static_cast<double>(t.ticks) * kNumJoints;
   loss.normalised = sums.first / count;
   loss.mse_rad2 = sums.second / count;
   return loss;
@@ -119,7 +137,7 @@ void check(const PolicyData& data, const TrainOptions& o) {
                     std::to_string(data.clusters()));
   if (o.max_epochs < 1) throw UserError("epochs must be at least 1");
   if (o.patience < 1) throw UserError("patience must be at least 1");
-  if (o.batch < 1) throw UserError("batch must be at least 1");
+  if (o.batch < 1) throw UserError("batch must be at least 1 sequence");
   if (!(o.lr > 0.0)) throw UserError("learning rate must be positive");
 }
 
@@ -131,9 +149,10 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   k.precision(17);
   k << "nao-rt checkpoint 1; data " << hex64(fingerprint) << "; config " << o.config_name << " "
     << parameterCount(o.arch) << "; " << conditioningName(o.conditioning) << "; seed " << o.seed << "; val "
-    << o.val_fraction << "; batch " << o.batch << "; lr " << o.lr << "; perturb " << o.perturb.fraction << " "
-    << o.perturb.a_ratio << " " << o.perturb.blend.pole;
-  for (double q : o.perturb.q_std_rad) k << " " << q;
+    << o.val_fraction << "; batch " << o.batch << "; lr " << o.lr << "; window " << o.arch.window << "; execution "
+    << o.execution.noisy_rollouts << " " << o.execution.noise_corr << " " << o.execution.expert_iterations << " "
+    << o.execution.expert_tol_rad;
+  for (double q : o.execution.noise_std_rad) k << " " << q;
   k << "; batches " << o.max_batches;
   return k.str();
 }
@@ -234,11 +253,11 @@ Checkpoint readCheckpoint(const std::string& path, const std::string& key, std::
 
 }  // namespace
 
-SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySample>& samples) {
-  return evaluate(net, toTensors(net, samples));
+SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>& sequences) {
+  return evaluate(net, toTensors(net, sequences));
 }
 
-TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostream* progress) {
+TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const TrainOptions& o, std::ostream* progress) {
   check(data, o);
   const Clock::time_point t_start = Clock::now();
   // Determinism: one thread (no reduction-order races), deterministic kernels, seeded init.
@@ -256,19 +275,36 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
   if (res.split.val.empty())
     throw UserError("no validation demonstration: early stopping needs a movement with at least 2 demonstrations "
                     "and a positive validation fraction");
-  const std::vector<PolicySample> train_samples = buildSamples(data, res.split.train, o.arch.max_steps);
-  const std::vector<PolicySample> val_samples = buildSamples(data, res.split.val, o.arch.max_steps);
-  res.train_samples = train_samples.size();
-  res.val_samples = val_samples.size();
-  res.stats = normStats(train_samples);
-  res.train_baselines = baselines(train_samples);
-  res.val_baselines = baselines(val_samples);
+  // The executed rollouts (every rank makes the same ones: seeded, deterministic). Validation:
+  // the clean rollouts of the validation demonstrations.
+  const Clock::time_point t_exec = Clock::now();
+  if (progress) *progress << "executing the demonstrations on the simulated arm (expert labels)" << std::endl;
+  const std::vector<PolicySequence> train_seqs = executeDemos(data, res.split.train, sim, o.execution, o.seed, progress);
+  ExecutionOptions clean = o.execution;
+  clean.noisy_rollouts = 0;
+  const std::vector<PolicySequence> val_seqs = executeDemos(data, res.split.val, sim, clean, o.seed, nullptr);
+  for (const PolicySequence& s : train_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
+  for (const PolicySequence& s : val_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
+  res.execution_seconds = secondsSince(t_exec);
+  res.train_samples = tickCount(train_seqs);
+  res.val_samples = tickCount(val_seqs);
+  res.train_sequences = train_seqs.size();
+  res.stats = normStats(train_seqs);
+  res.train_baselines = baselines(train_seqs);
+  res.val_baselines = baselines(val_seqs);
+  if (progress) {
+    char line[200];
+    std::snprintf(line, sizeof line, "%zu training rollouts (%zu ticks), %zu validation (%zu ticks) in %.0f s; expert's worst miss %.2g rad",
+                  train_seqs.size(), res.train_samples, val_seqs.size(), res.val_samples, res.execution_seconds,
+                  res.expert_worst_miss_rad);
+    *progress << line << std::endl;
+  }
 
   PolicyNet net(o.arch, o.conditioning);
   net->setNormalisation(res.stats);
   net->setCentroids(data.centroids);
-  SampleTensors train = toTensors(net, train_samples);
-  const SampleTensors val = toTensors(net, val_samples);
+  const SequenceTensors train = toTensors(net, train_seqs);
+  const SequenceTensors val = toTensors(net, val_seqs);
 
   std::vector<torch::Tensor> params = net->trainableParameters();
   torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
@@ -307,51 +343,41 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
   for (int epoch = first_epoch; epoch <= o.max_epochs && !done_before; ++epoch) {
     const Clock::time_point t_epoch = Clock::now();
     net->train();
-    // Off-trajectory states for this epoch: one stream per (seed, epoch), fresh every epoch.
-    if (o.perturb.fraction > 0.0)
-      train = toTensors(net, perturbSamples(train_samples, o.perturb,
-                                            o.seed * 0xbf58476d1ce4e5b9ull + static_cast<std::uint64_t>(epoch)));
     // Batch order: one stream per (seed, epoch), independent of torch's generator and of the
-    // world size (a global batch is the same samples for every world size).
+    // world size (a global batch is the same sequences for every world size).
     const std::vector<std::size_t> order =
-        shuffledIndices(train_samples.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
-    const torch::Tensor perm =
-        torch::tensor(std::vector<std::int64_t>(order.begin(), order.end()), torch::kInt64);
-    const std::int64_t n_batches = (train.size + o.batch - 1) / o.batch;
+        shuffledIndices(train.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
+    const auto n_seq = static_cast<std::int64_t>(train.size());
+    const std::int64_t n_batches = (n_seq + o.batch - 1) / o.batch;
     const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
     double loss_sum = 0.0;
     std::int64_t seen = 0;
     Clock::time_point t_live = Clock::now();
     for (std::int64_t k = 0; k < n_run; ++k) {
-      const std::int64_t b = k * o.batch, e = std::min<std::int64_t>(b + o.batch, train.size);
-      if (!group) {
-        const torch::Tensor index = perm.slice(0, b, e);
-        const torch::Tensor loss = torch::mse_loss(net->forward(rows(train.in, index)), train.target.index_select(0, index));
-        optimiser.zero_grad();
-        loss.backward();
-        optimiser.step();
-        loss_sum += loss.item<double>() * static_cast<double>(index.size(0));
-      } else {
-        // This rank's shard of the global batch; the loss is its share of the global batch's
-        // mean, so the all-reduced sum of the gradients is the gradient of that mean.
-        const auto [lo, hi] = shardRange(e - b, o.dist.world_size, o.dist.rank);
-        optimiser.zero_grad();
-        if (hi > lo) {
-          const torch::Tensor index = perm.slice(0, b + lo, b + hi);
-          const torch::Tensor sse =
-              (net->forward(rows(train.in, index)) - train.target.index_select(0, index)).square().sum();
-          (sse / static_cast<double>((e - b) * kNumJoints)).backward();
-          loss_sum += sse.item<double>() / kNumJoints;
-        }
-        group->sumGradients(params);
-        optimiser.step();
+      const std::int64_t b = k * o.batch, e = std::min<std::int64_t>(b + o.batch, n_seq);
+      // The global batch's real ticks: every rank knows them, so each can scale its share.
+      std::int64_t global_ticks = 0;
+      for (std::int64_t i = b; i < e; ++i) global_ticks += train.qn[order[static_cast<std::size_t>(i)]].size(0);
+      const auto [lo, hi] = group ? shardRange(e - b, o.dist.world_size, o.dist.rank) : std::pair<std::int64_t, std::int64_t>{0, e - b};
+      optimiser.zero_grad();
+      if (hi > lo) {
+        std::vector<std::size_t> index;
+        for (std::int64_t i = b + lo; i < b + hi; ++i) index.push_back(order[static_cast<std::size_t>(i)]);
+        const Padded p = pad(train, index);
+        // This rank's share of the global batch's mean over real ticks and joints: the all-reduced
+        // sum of the gradients is the gradient of that mean.
+        const torch::Tensor sse = ((net->forward(p.in) - p.target) * p.mask).square().sum();
+        (sse / static_cast<double>(global_ticks * kNumJoints)).backward();
+        loss_sum += sse.item<double>() / kNumJoints;
       }
-      seen += e - b;
+      if (group) group->sumGradients(params);
+      optimiser.step();
+      seen += global_ticks;
       if (live && secondsSince(t_live) >= 0.5) {
         t_live = Clock::now();
         const double s = secondsSince(t_epoch);
         char line[160];
-        std::snprintf(line, sizeof line, "\r\033[Kepoch %d/%d  batch %lld/%lld  %.0f samples/s  epoch ~%s left", epoch,
+        std::snprintf(line, sizeof line, "\r\033[Kepoch %d/%d  batch %lld/%lld  %.0f ticks/s  epoch ~%s left", epoch,
                       o.max_epochs, static_cast<long long>(k + 1), static_cast<long long>(n_run), static_cast<double>(seen) / s,
                       duration(s / static_cast<double>(k + 1) * static_cast<double>(n_run - k - 1)).c_str());
         *progress << line << std::flush;
@@ -366,7 +392,7 @@ TrainResult trainPolicy(const PolicyData& data, const TrainOptions& o, std::ostr
     EpochStats st;
     st.epoch = epoch;
     st.samples = static_cast<std::size_t>(seen);
-    st.train_loss = loss_sum / static_cast<double>(o.max_batches > 0 ? seen : train.size);
+    st.train_loss = loss_sum / static_cast<double>(seen);
     const SplitLoss v = evaluate(net, val, group.get());
     st.val_loss = v.normalised;
     st.val_mse_rad2 = v.mse_rad2;
@@ -429,6 +455,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   c["movements"] = o.arch.movements;
   c["clusters"] = o.arch.clusters;
   c["max_steps"] = o.arch.max_steps;
+  c["window"] = o.arch.window;
   c["layer_norm"] = "pre";
   c["conditioning"] = conditioningName(o.conditioning);
   auto& t = j["training"];
@@ -443,12 +470,15 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   // Only when they change the result: single-process files keep their bytes.
   if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;
   if (o.max_batches > 0) t["max_batches_per_epoch"] = o.max_batches;
-  auto& pt = t["perturbation"];
-  pt["fraction"] = o.perturb.fraction;
-  pt["q_std_rad"] = o.perturb.q_std_rad;
-  pt["a_ratio"] = o.perturb.a_ratio;
-  pt["expert"] = "key-pose blend";
-  pt["blend_pole"] = o.perturb.blend.pole;
+  t["batch_unit"] = "sequences";
+  auto& ex = t["execution"];
+  ex["arm"] = "ODE arm, servo-lagged (runtime sim_arm)";
+  ex["expert"] = "command ending the tick at f(t+1)";
+  ex["noisy_rollouts"] = o.execution.noisy_rollouts;
+  ex["noise_std_rad"] = o.execution.noise_std_rad;
+  ex["noise_corr"] = o.execution.noise_corr;
+  ex["expert_iterations"] = o.execution.expert_iterations;
+  ex["expert_tol_rad"] = o.execution.expert_tol_rad;
   auto& d = j["data"];
   d["fingerprint"] = hex64(r.fingerprint);
   // nao_rt retargets the live human the same way (runtime/app reads it back).
@@ -505,12 +535,17 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "| layer norm | pre-LN (LN before every sub-layer, final LN on encoder memory and decoder output) |\n";
   s << "| tokens / movements / clusters / max_steps | " << o.arch.tokens << " / " << o.arch.movements << " / "
     << o.arch.clusters << " / " << o.arch.max_steps << " |\n";
+  s << "| window | " << o.arch.window << " ticks (" << o.arch.window * 0.1 << " s): tokens (tick, joint), encoder causal in time, age bias |\n";
   s << "| parameters (manifest floats) | " << parameterCount(o.arch) << " |\n";
-  s << "| optimiser | Adam, lr " << o.lr << ", batch " << o.batch << " |\n";
-  s << "| off-trajectory states | " << o.perturb.fraction * 100.0 << " % of samples per epoch, q moved by N(0, σ²), σ in {";
-  for (std::size_t i = 0; i < o.perturb.q_std_rad.size(); ++i) s << (i ? ", " : "") << o.perturb.q_std_rad[i];
-  s << "} rad, a(t−1) by " << o.perturb.a_ratio << " σ, relabelled by the key-pose blend (pole "
-    << o.perturb.blend.pole << ") |\n";
+  s << "| optimiser | Adam, lr " << o.lr << ", batch " << o.batch << " sequences |\n";
+  s << "| training rollouts | per demonstration 1 clean + " << o.execution.noisy_rollouts
+    << " with AR(1) command noise (ρ " << o.execution.noise_corr << ", σ in {";
+  for (std::size_t i = 0; i < o.execution.noise_std_rad.size(); ++i) s << (i ? ", " : "") << o.execution.noise_std_rad[i];
+  s << "} rad) on the servo-lagged ODE arm; labels: the expert's command ending each tick at f(t+1) (worst miss ";
+  std::snprintf(buf, sizeof buf, "%.2g rad", r.expert_worst_miss_rad);
+  s << buf << "; " << r.train_sequences << " training sequences, executed in ";
+  std::snprintf(buf, sizeof buf, "%.0f s", r.execution_seconds);
+  s << buf << ") |\n";
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs << ", patience " << o.patience
     << "), best " << r.best_epoch << " (exported) |\n";

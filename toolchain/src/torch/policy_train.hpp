@@ -25,9 +25,9 @@ struct TrainOptions {
   int max_epochs = 200;               ///< iteration cap; early stopping usually ends sooner
   int patience = 10;                  ///< epochs without a new best validation loss before stopping
   double val_fraction = 0.2;          ///< of each movement's demonstrations
-  int batch = 32;
+  int batch = 4;                      ///< sequences (whole executed rollouts) per optimiser step
   double lr = 6e-5;                   ///< Adam
-  Perturbation perturb;               ///< expert-relabelled off-trajectory states (fraction 0: off)
+  ExecutionOptions execution;         ///< how the demonstrations are executed and labelled
   DistOptions dist;                   ///< world size 1: this process alone, the single-process loop
   std::string checkpoint;             ///< if set, rank 0 writes the state here after every epoch
   std::string resume;                 ///< if set, continue from this checkpoint (any world size)
@@ -55,7 +55,10 @@ struct TrainResult {
   PolicySplit split;
   NormStats stats;
   std::uint64_t fingerprint = 0;
-  std::size_t train_samples = 0, val_samples = 0;
+  std::size_t train_samples = 0, val_samples = 0;  ///< ticks
+  std::size_t train_sequences = 0;
+  double expert_worst_miss_rad = 0.0;  ///< largest end-of-tick miss of the expert (clean rollouts)
+  double execution_seconds = 0.0;      ///< wall time of executing the rollouts
   std::vector<EpochStats> history;
   int best_epoch = 0;           ///< 1-based epoch whose weights were kept
   SplitLoss train, val;         ///< of the kept weights
@@ -67,7 +70,9 @@ struct TrainResult {
   int resumed_after = 0;        ///< epoch of the checkpoint this run continued from (0: none)
 };
 
-/// Trains a policy on `data`. Sets torch to one thread and deterministic algorithms, seeds
+/// Trains a policy on `data`: executes the training split's demonstrations on the simulated arm
+/// `sim` (clean and noisy rollouts, expert labels: ExecutionOptions; validation: the clean
+/// rollouts of the validation split), then fits the whole sequences. Sets torch to one thread and deterministic algorithms, seeds
 /// torch's generator with options.seed before initialisation, shuffles batches with a local
 /// generator. Prints one line per epoch to `progress` (if not null, flushed).
 /// With options.dist.world_size > 1 this is one rank of a data-parallel group: it joins the
@@ -77,10 +82,10 @@ struct TrainResult {
 /// Throws UserError for options that do not fit the data (architecture movements/clusters
 /// differ from the data's, no validation demonstration, bad batch/epochs/patience/lr), a
 /// checkpoint of other data or options, and a failed rendezvous or collective (a rank died).
-TrainResult trainPolicy(const PolicyData& data, const TrainOptions& options, std::ostream* progress);
+TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const TrainOptions& options, std::ostream* progress);
 
-/// Normalised and rad^2 MSE of `net` on `samples` (evaluation mode, no gradients).
-SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySample>& samples);
+/// Normalised and rad^2 MSE of `net` on `sequences` (evaluation mode, no gradients).
+SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>& sequences);
 
 /// The metadata JSON stored in model.bin: config, seed, data fingerprint, split, epochs run,
 /// best epoch, final losses, baselines; the world size and batch cap only when not 1 / not
