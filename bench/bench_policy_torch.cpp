@@ -1,5 +1,6 @@
 // BM_Policy_Libtorch: libtorch eager (the training module, toolchain/src/torch/) on the same
-// weights and inputs as BM_Policy_StaticEigen, one input per call, one thread, no autograd.
+// weights and inputs as BM_Policy_StaticEigen, one tick per call (a forward over the whole
+// window: libtorch has no key/value cache here), one thread, no autograd.
 #include "bench_policy_common.hpp"
 #include "policy_torch.hpp"
 
@@ -23,18 +24,28 @@ void BM_Policy_Libtorch(benchmark::State& state) {
                                           {static_cast<long>(model.tensors[i].spec.count())}, torch::kFloat));
   }
   net->eval();
-  // Inputs as tensors, prepared before timing.
+  // Without a key/value cache, one tick's action is a forward over the whole window: W ticks of
+  // inputs [1,W,5] ending at each bench input (prepared before timing); the action is the last tick's.
+  const int window = model.header.arch.window;
   struct Args {
-    torch::Tensor q, a, r, m, s;
+    torch::Tensor q, a, r, m;
   };
   std::vector<Args> args;
-  for (const PolicyInput& in : benchInputs()) {
+  const std::vector<PolicyInput>& inputs = benchInputs();
+  for (std::size_t k = 0; k < inputs.size(); ++k) {
     Args x;
-    x.q = torch::from_blob(const_cast<float*>(in.q.data()), {1, 5}, torch::kFloat).clone();
-    x.a = torch::from_blob(const_cast<float*>(in.a_prev.data()), {1, 5}, torch::kFloat).clone();
-    x.r = torch::from_blob(const_cast<float*>(in.r.data()), {1, 5}, torch::kFloat).clone();
-    x.m = torch::full({1}, in.movement, torch::kLong);
-    x.s = torch::full({1}, std::min(in.step, model.header.arch.max_steps - 1), torch::kLong);
+    x.q = torch::empty({1, window, 5});
+    x.a = torch::empty({1, window, 5});
+    x.r = torch::empty({1, window, 5});
+    for (int t = 0; t < window; ++t) {
+      const PolicyInput& in = inputs[(k + inputs.size() * 4 - static_cast<std::size_t>(window - 1 - t)) % inputs.size()];
+      for (int j = 0; j < 5; ++j) {
+        x.q[0][t][j] = in.q[j];
+        x.a[0][t][j] = in.a_prev[j];
+        x.r[0][t][j] = in.r[j];
+      }
+    }
+    x.m = torch::full({1}, inputs[k].movement, torch::kLong);
     args.push_back(x);
   }
   Percentiles rec;
@@ -42,7 +53,7 @@ void BM_Policy_Libtorch(benchmark::State& state) {
   for (auto _ : state) {
     const Args& x = args[i++ % args.size()];
     const BenchClock::time_point t0 = BenchClock::now();
-    torch::Tensor a = net->act(x.q, x.a, x.r, x.m, x.s);
+    torch::Tensor a = net->act(x.q, x.a, x.r, x.m).select(1, window - 1);
     benchmark::DoNotOptimize(a.data_ptr<float>());
     const double s = secondsSince(t0);
     state.SetIterationTime(s);

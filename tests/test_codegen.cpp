@@ -76,6 +76,7 @@ TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S 
                                  "inline constexpr int kFfn0 = 64;", "inline constexpr int kFfn2 = 64;",
                                  "inline constexpr int kTokens = 5;", "inline constexpr int kMovements = 3;",
                                  "inline constexpr int kClusters = 10;", "inline constexpr int kMaxSteps = 256;",
+                                 "inline constexpr int kWindow = 8;",
                                  "inline constexpr Conditioning kConditioning = Conditioning::kAutonomous;"})
     CHECK_MESSAGE(config.find(line) != std::string::npos, line);
   char checksum[64];

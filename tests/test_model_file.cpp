@@ -119,13 +119,13 @@ TEST_CASE("model.bin round trip: decode(encode(x)) gives the header, the tensors
 TEST_CASE("model.bin is little-endian with the documented fixed header") {
   const auto b = smallModelBytes();
   CHECK(std::memcmp(b.data(), "NAOPOLCY", 8) == 0);
-  CHECK(getU32(b, 8) == 1);
+  CHECK(getU32(b, 8) == 2);
   const nao::PolicyArch a = nao::smallArch();
-  const std::uint32_t fields[11] = {32, 4, 2, 2, 3, 5, 3, 3, 10, 256, 0};
-  for (int i = 0; i < 11; ++i) CHECK(getU32(b, 16 + 4 * static_cast<std::size_t>(i)) == fields[i]);
-  CHECK(getU32(b, 60) == static_cast<std::uint32_t>(a.ffn_hidden[0]));
+  const std::uint32_t fields[12] = {32, 4, 2, 2, 3, 5, 3, 3, 10, 256, 8, 0};  // ..., max_steps, window, conditioning
+  for (int i = 0; i < 12; ++i) CHECK(getU32(b, 16 + 4 * static_cast<std::size_t>(i)) == fields[i]);
+  CHECK(getU32(b, 64) == static_cast<std::uint32_t>(a.ffn_hidden[0]));
   // The first joint name follows the three FFN widths.
-  CHECK(std::string(reinterpret_cast<const char*>(b.data() + 72)) == "RShoulderPitch");
+  CHECK(std::string(reinterpret_cast<const char*>(b.data() + 76)) == "RShoulderPitch");
   // Tensor table: entry 0 is embed.in.weight [3,32] at the first 64-byte boundary after the header.
   const std::size_t n = nao::policyManifest(a).size();
   const std::size_t e0 = entryAt(b, 0, n);
@@ -190,7 +190,7 @@ TEST_CASE("decodeModel rejects a file that is not a model, or of another format 
   b = smallModelBytes();
   putU32(b, 8, 7);
   reseal(b);
-  CHECK(decodeError(b) == "x.bin: format version 7 is not supported (this build reads 1)");
+  CHECK(decodeError(b) == "x.bin: format version 7 is not supported (this build reads 2)");
 }
 
 TEST_CASE("decodeModel reports a file cut short, in the header or in the data, as truncated") {
@@ -204,10 +204,10 @@ TEST_CASE("decodeModel reports a file cut short, in the header or in the data, a
     const char* expect;
   };
   const Cut cuts[] = {
-      {0, "x.bin: truncated (0 bytes, header needs at least 60)"},
-      {5, "x.bin: truncated (5 bytes, header needs at least 60)"},
-      {10, "x.bin: truncated (10 bytes, header needs at least 60)"},
-      {20, "x.bin: truncated (20 bytes, header needs at least 60)"},
+      {0, "x.bin: truncated (0 bytes, header needs at least 64)"},
+      {5, "x.bin: truncated (5 bytes, header needs at least 64)"},
+      {10, "x.bin: truncated (10 bytes, header needs at least 64)"},
+      {20, "x.bin: truncated (20 bytes, header needs at least 64)"},
       {40, "x.bin: truncated (40 bytes, header needs "},
       {61, "x.bin: truncated (61 bytes, header needs "},
       {300, "x.bin: truncated (300 bytes, header needs "},
@@ -347,7 +347,7 @@ TEST_CASE("decodeModel rejects an unusable architecture, and encodeModel refuses
   CHECK(decodeError(b) == "x.bin: architecture: d_model 30 is not a multiple of heads 4");
 
   b = smallModelBytes();
-  putU32(b, 56, 2);  // conditioning
+  putU32(b, 60, 2);  // conditioning
   reseal(b);
   CHECK(decodeError(b) == "x.bin: header: conditioning 2 is neither 0 (reference) nor 1 (autonomous)");
 
@@ -434,7 +434,7 @@ TEST_CASE("trainedJoints lists the arm's joints in order with their limits") {
 TEST_CASE("the paper manifest's parameter count equals a hand count from docs/policy.md") {
   // d = 128, J = 5 tokens, F = 3 features, M = 3 movements, K = 10 clusters, S = 256 steps,
   // FFN d-512-512-512-d.
-  const std::size_t d = 128, J = 5, F = 3, M = 3, K = 10, S = 256, h = 512;
+  const std::size_t d = 128, J = 5, F = 3, M = 3, K = 10, S = 256, h = 512, H = 4, W = 20;
   const std::size_t embed = F * d + d     // embed.in
                             + J * d       // embed.joint_enc
                             + M * d       // embed.movement
@@ -443,9 +443,10 @@ TEST_CASE("the paper manifest's parameter count equals a hand count from docs/po
                             + J * d;      // embed.joint_dec
   const std::size_t ln = 2 * d;
   const std::size_t attn = 4 * (d * d + d);
+  const std::size_t age_bias = H * W;  // temporal attention only: encoder self, decoder cross
   const std::size_t ffn = (d * h + h) + (h * h + h) + (h * h + h) + (h * d + d);
-  const std::size_t enc_layer = 2 * ln + attn + ffn;
-  const std::size_t dec_layer = 3 * ln + 2 * attn + ffn;
+  const std::size_t enc_layer = 2 * ln + attn + age_bias + ffn;
+  const std::size_t dec_layer = 3 * ln + 2 * attn + age_bias + ffn;
   const std::size_t total = embed + 4 * enc_layer + ln + 4 * dec_layer + ln  //
                             + (d + 1)                                        // head
                             + 6 * J                                          // norm.{q,a,r}_{mean,std}
@@ -453,12 +454,12 @@ TEST_CASE("the paper manifest's parameter count equals a hand count from docs/po
   // The same sum with the numbers written out.
   CHECK(embed == 35200);
   CHECK(ffn == 657024);
-  CHECK(enc_layer == 723584);
-  CHECK(dec_layer == 789888);
-  CHECK(total == 6089909);
+  CHECK(enc_layer == 723664);
+  CHECK(dec_layer == 789968);
+  CHECK(total == 6090549);
   CHECK(nao::parameterCount(nao::paperArch()) == total);
-  // 8 embeddings, 20 tensors per encoder layer, 30 per decoder layer, 2 norms, head 2, norm 6, centroids.
-  CHECK(nao::policyManifest(nao::paperArch()).size() == 8 + 4 * 20 + 2 + 4 * 30 + 2 + 2 + 6 + 1);
+  // 8 embeddings, 21 tensors per encoder layer, 31 per decoder layer, 2 norms, head 2, norm 6, centroids.
+  CHECK(nao::policyManifest(nao::paperArch()).size() == 8 + 4 * 21 + 2 + 4 * 31 + 2 + 2 + 6 + 1);
 }
 
 TEST_CASE("a paper-size model round-trips") {
@@ -474,12 +475,12 @@ TEST_CASE("a paper-size model round-trips") {
 
 TEST_CASE("an empty file, unordered joint limits and non-positive velocity limits are refused (issue 16)") {
   // memcmp on the null data() of an empty vector was undefined behaviour.
-  CHECK(decodeError({}) == "x.bin: truncated (0 bytes, header needs at least 60)");
+  CHECK(decodeError({}) == "x.bin: truncated (0 bytes, header needs at least 64)");
 
-  // Joint j's lower/upper/velocity doubles follow the 60 fixed bytes, the FFN widths and the
+  // Joint j's lower/upper/velocity doubles follow the 64 fixed bytes, the FFN widths and the
   // 56-byte records of the joints before it (docs/policy.md).
   const std::vector<std::uint8_t> good = smallModelBytes();
-  const std::size_t joints = 60 + 4 * nao::smallArch().ffn_hidden.size();
+  const std::size_t joints = 64 + 4 * nao::smallArch().ffn_hidden.size();
   auto withJoint = [&](int j, int field, double v) {
     std::vector<std::uint8_t> b = good;
     std::uint64_t bits;

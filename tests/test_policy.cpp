@@ -1,7 +1,10 @@
-// The policy forward pass (nao/policy.hpp) against an independent double-precision reference
-// written here from docs/policy.md (plain loops over the manifest tensors by name, row-vector
-// convention, no Eigen), plus the properties the architecture promises: attention rows sum to
-// 1, the decoder is causal, the conditioning inputs that must not matter do not.
+// The streaming policy forward pass (nao/policy.hpp) against an independent double-precision
+// reference written here from docs/policy.md: the whole sequence at once, every layer over all
+// T·J tokens with the sliding-window mask and the age bias (plain loops over the manifest
+// tensors by name, row-vector convention, no Eigen, no rings), plus the properties the
+// architecture promises: attention rows sum to 1, the decoder is causal across joints, the
+// encoder causal in time with a finite receptive field, the conditioning inputs that must not
+// matter do not, a reset stream repeats bitwise.
 #include "nao/policy.hpp"
 #include "support/random_policy.hpp"
 
@@ -65,6 +68,8 @@ TestModel randomModel(const PolicyArch& arch, std::uint64_t seed, bool zero_step
         x = uniform(rng, -1.5, 1.5);
       else if (startsWith(n, "embed.joint") || n == "embed.movement" || n == "embed.step")
         x = uniform(rng, -0.5, 0.5);
+      else if (endsWith(n, ".age_bias"))
+        x = uniform(rng, -1.0, 1.0);  // a clear preference of ages, different per head
       else if (endsWith(n, ".gain"))
         x = uniform(rng, 0.8, 1.2);
       else if (s.shape.size() == 2) {
@@ -84,74 +89,91 @@ PolicyInput randomInput(std::mt19937_64& rng, int movement, int step) {
   return test::randomPolicyInput(rng, movement, step, 1.5);
 }
 
-// ---- The reference: docs/policy.md, literally, in double. ----
+// ---- The reference: docs/policy.md, literally, in double, whole sequences. ----
 
 using Tokens = std::vector<std::vector<double>>;  // [token][feature]
 
-struct Reference {
+struct Reference {                // one tick
   std::vector<double> action;     // [J]
-  std::vector<double> cross;      // [l][h][i][j]
+  std::vector<double> cross;      // [l][h][i][j], α summed over the window's ticks
   std::vector<double> score;      // [J]
+  std::vector<double> mass;       // [J]
+  std::vector<double> profile;    // [W]
   Tokens cross_out;               // [i][d]
 };
 
 class ReferencePolicy {
  public:
-  ReferencePolicy(const TestModel& m, const PolicyArch& a) : m_(m), a_(a), d_(a.d_model), J_(a.tokens) {}
+  ReferencePolicy(const TestModel& m, const PolicyArch& a) : m_(m), a_(a), d_(a.d_model), J_(a.tokens), W_(a.window) {}
 
-  Reference run(const PolicyInput& in, Conditioning c) const {
-    Reference out;
-    const int m_idx = std::clamp(in.movement, 0, a_.movements - 1);
-    const int s_idx = std::clamp(in.step, 0, a_.max_steps - 1);
-    std::vector<double> qn(5), an(5), rn(5);
-    for (int j = 0; j < J_; ++j) {
-      qn[j] = (in.q[j] - double(t("norm.q_mean")[j])) / double(t("norm.q_std")[j]);
-      an[j] = (in.a_prev[j] - double(t("norm.a_mean")[j])) / double(t("norm.a_std")[j]);
-      rn[j] = c == Conditioning::kAutonomous ? 0.0 : (in.r[j] - double(t("norm.r_mean")[j])) / double(t("norm.r_std")[j]);
-    }
-    Tokens x(J_, std::vector<double>(d_)), y(J_, std::vector<double>(d_));
+  // Token (t, j) is entry t*J + j.
+  std::vector<Reference> run(const std::vector<PolicyInput>& seq, Conditioning c) const {
+    const int T = static_cast<int>(seq.size()), H = a_.heads;
+    Tokens x(static_cast<std::size_t>(T * J_), std::vector<double>(d_)), y = x;
     const auto& w_in = t("embed.in.weight");  // [3, d]
-    for (int j = 0; j < J_; ++j)
-      for (int k = 0; k < d_; ++k) {
-        x[j][k] = qn[j] * w_in[0 * d_ + k] + an[j] * w_in[1 * d_ + k] + rn[j] * w_in[2 * d_ + k] +
-                  t("embed.in.bias")[k] + t("embed.joint_enc")[j * d_ + k] + t("embed.movement")[m_idx * d_ + k] +
-                  t("embed.step")[s_idx * d_ + k];
-        y[j][k] = an[j] * t("embed.act.weight")[k] + t("embed.act.bias")[k] + t("embed.joint_dec")[j * d_ + k];
+    for (int tk = 0; tk < T; ++tk) {
+      const PolicyInput& in = seq[static_cast<std::size_t>(tk)];
+      const int m_idx = std::clamp(in.movement, 0, a_.movements - 1);
+      const int s_idx = std::clamp(in.step, 0, a_.max_steps - 1);
+      for (int j = 0; j < J_; ++j) {
+        const double qn = (in.q[j] - double(t("norm.q_mean")[j])) / double(t("norm.q_std")[j]);
+        const double an = (in.a_prev[j] - double(t("norm.a_mean")[j])) / double(t("norm.a_std")[j]);
+        const double rn =
+            c == Conditioning::kAutonomous ? 0.0 : (in.r[j] - double(t("norm.r_mean")[j])) / double(t("norm.r_std")[j]);
+        std::vector<double>& xt = x[static_cast<std::size_t>(tk * J_ + j)];
+        std::vector<double>& yt = y[static_cast<std::size_t>(tk * J_ + j)];
+        for (int k = 0; k < d_; ++k) {
+          xt[k] = qn * w_in[0 * d_ + k] + an * w_in[1 * d_ + k] + rn * w_in[2 * d_ + k] + t("embed.in.bias")[k] +
+                  t("embed.joint_enc")[j * d_ + k] + t("embed.movement")[m_idx * d_ + k] + t("embed.step")[s_idx * d_ + k];
+          yt[k] = an * t("embed.act.weight")[k] + t("embed.act.bias")[k] + t("embed.joint_dec")[j * d_ + k];
+        }
       }
+    }
     for (int l = 0; l < a_.encoder_layers; ++l) {
       const std::string p = "enc." + std::to_string(l);
       Tokens h = layerNorm(p + ".ln1", x);
-      add(x, attention(p + ".attn", h, h, false, nullptr, nullptr));
+      add(x, attention(p + ".attn", h, h, Mask::kWindow, nullptr, nullptr));
       add(x, ffn(p + ".ffn", layerNorm(p + ".ln2", x)));
     }
     const Tokens memory = layerNorm("enc.norm", x);
-    const int H = a_.heads;
-    out.cross.assign(static_cast<std::size_t>(a_.decoder_layers * H * J_ * J_), 0.0);
+    std::vector<Reference> out(static_cast<std::size_t>(T));
+    for (Reference& r : out) r.cross.assign(static_cast<std::size_t>(a_.decoder_layers * H * J_ * J_), 0.0);
     for (int l = 0; l < a_.decoder_layers; ++l) {
       const std::string p = "dec." + std::to_string(l);
       Tokens h = layerNorm(p + ".ln1", y);
-      add(y, attention(p + ".self", h, h, true, nullptr, nullptr));
-      std::vector<double> alpha;
+      add(y, attention(p + ".self", h, h, Mask::kJointsCausal, nullptr, nullptr));
+      std::vector<double> alpha;  // [h][query token][key token]
       Tokens v;
-      const Tokens co = attention(p + ".cross", layerNorm(p + ".ln2", y), memory, false, &alpha, &v);
-      std::copy(alpha.begin(), alpha.end(), out.cross.begin() + static_cast<std::ptrdiff_t>(l) * H * J_ * J_);
-      if (l == a_.decoder_layers - 1) {
-        out.cross_out = co;
-        out.score = score(p + ".cross", alpha, v);
+      const Tokens co = attention(p + ".cross", layerNorm(p + ".ln2", y), memory, Mask::kWindow, &alpha, &v);
+      const std::size_t n = static_cast<std::size_t>(T * J_);
+      for (int tk = 0; tk < T; ++tk) {
+        Reference& r = out[static_cast<std::size_t>(tk)];
+        for (int hd = 0; hd < H; ++hd)
+          for (int i = 0; i < J_; ++i)
+            for (std::size_t key = 0; key < n; ++key)
+              r.cross[static_cast<std::size_t>(((l * H + hd) * J_ + i) * J_) + key % J_] +=
+                  alpha[(hd * n + static_cast<std::size_t>(tk * J_ + i)) * n + key];
+        if (l == a_.decoder_layers - 1) {
+          r.cross_out.assign(co.begin() + tk * J_, co.begin() + (tk + 1) * J_);
+          record(p + ".cross", tk, T, alpha, v, r);
+        }
       }
       add(y, co);
       add(y, ffn(p + ".ffn", layerNorm(p + ".ln3", y)));
     }
     const Tokens yn = layerNorm("dec.norm", y);
-    for (int j = 0; j < J_; ++j) {
-      double a = t("head.bias")[0];
-      for (int k = 0; k < d_; ++k) a += yn[j][k] * t("head.weight")[k];
-      out.action.push_back(a * t("norm.a_std")[j] + t("norm.a_mean")[j]);
-    }
+    for (int tk = 0; tk < T; ++tk)
+      for (int j = 0; j < J_; ++j) {
+        double a = t("head.bias")[0];
+        for (int k = 0; k < d_; ++k) a += yn[static_cast<std::size_t>(tk * J_ + j)][k] * t("head.weight")[k];
+        out[static_cast<std::size_t>(tk)].action.push_back(a * t("norm.a_std")[j] + t("norm.a_mean")[j]);
+      }
     return out;
   }
 
  private:
+  enum class Mask { kWindow, kJointsCausal };
+
   const std::vector<float>& t(const std::string& name) const { return m_[name]; }
 
   static void add(Tokens& x, const Tokens& dx) {
@@ -200,31 +222,43 @@ class ReferencePolicy {
     return h;
   }
 
-  // MHA; alpha_out [h][i][j], v_out = Z Wv + bv.
-  Tokens attention(const std::string& p, const Tokens& X, const Tokens& Z, bool causal, std::vector<double>* alpha_out,
+  // MHA over all tokens of the sequence. kWindow: query (t, i) sees keys (τ, j) with
+  // 0 <= t − τ < W, score + age_bias[h][t − τ]; kJointsCausal: keys of its own tick, j <= i.
+  // alpha_out [h][query][key] (0 where masked), v_out = Z Wv + bv.
+  Tokens attention(const std::string& p, const Tokens& X, const Tokens& Z, Mask mask, std::vector<double>* alpha_out,
                    Tokens* v_out) const {
     const Tokens Q = linear(p + ".wq", p + ".bq", X), K = linear(p + ".wk", p + ".bk", Z),
                  V = linear(p + ".wv", p + ".bv", Z);
     const int H = a_.heads, dh = d_ / H;
-    Tokens O(X.size(), std::vector<double>(d_, 0.0));
-    std::vector<double> alpha(static_cast<std::size_t>(H * J_ * J_), 0.0);
+    const std::size_t n = X.size();
+    Tokens O(n, std::vector<double>(d_, 0.0));
+    std::vector<double> alpha(static_cast<std::size_t>(H) * n * n, 0.0);
     for (int h = 0; h < H; ++h)
-      for (int i = 0; i < J_; ++i) {
-        std::vector<double> s(J_, -INFINITY);
+      for (std::size_t qi = 0; qi < n; ++qi) {
+        const int tq = static_cast<int>(qi) / J_, iq = static_cast<int>(qi) % J_;
+        std::vector<double> s(n, -INFINITY);
         double s_max = -INFINITY;
-        for (int j = 0; j < J_; ++j) {
-          if (causal && j > i) continue;  // mask −inf above the diagonal
+        for (std::size_t kj = 0; kj < n; ++kj) {
+          const int tk = static_cast<int>(kj) / J_, jk = static_cast<int>(kj) % J_;
+          const int age = tq - tk;
+          double bias = 0.0;
+          if (mask == Mask::kWindow) {
+            if (age < 0 || age >= W_) continue;
+            bias = t(p + ".age_bias")[static_cast<std::size_t>(h * W_ + age)];
+          } else if (age != 0 || jk > iq) {
+            continue;
+          }
           double dot = 0.0;
-          for (int c = h * dh; c < (h + 1) * dh; ++c) dot += Q[i][c] * K[j][c];
-          s[j] = dot / std::sqrt(double(dh));
-          s_max = std::max(s_max, s[j]);
+          for (int c = h * dh; c < (h + 1) * dh; ++c) dot += Q[qi][c] * K[kj][c];
+          s[kj] = dot / std::sqrt(double(dh)) + bias;
+          s_max = std::max(s_max, s[kj]);
         }
         double sum = 0.0;
-        for (int j = 0; j < J_; ++j) sum += std::exp(s[j] - s_max);
-        for (int j = 0; j < J_; ++j) {
-          const double a = std::exp(s[j] - s_max) / sum;
-          alpha[(h * J_ + i) * J_ + j] = a;
-          for (int c = h * dh; c < (h + 1) * dh; ++c) O[i][c] += a * V[j][c];
+        for (std::size_t kj = 0; kj < n; ++kj) sum += std::exp(s[kj] - s_max);
+        for (std::size_t kj = 0; kj < n; ++kj) {
+          const double a = std::exp(s[kj] - s_max) / sum;
+          alpha[(static_cast<std::size_t>(h) * n + qi) * n + kj] = a;
+          for (int c = h * dh; c < (h + 1) * dh; ++c) O[qi][c] += a * V[kj][c];
         }
       }
     if (alpha_out) *alpha_out = alpha;
@@ -232,31 +266,46 @@ class ReferencePolicy {
     return linear(p + ".wo", p + ".bo", O);
   }
 
-  // score[j] = Σ_i ‖Σ_h α_h[i][j] f_h(M_j)‖, f_h(M_j) = V_h(j) · Wo_h (rows h·d_h... of Wo).
-  std::vector<double> score(const std::string& p, const std::vector<double>& alpha, const Tokens& V) const {
+  // Tick tk's record: mass[j] and profile[age] (means over heads and action tokens) and the
+  // norm-based score[j] = Σ_i Σ_τ ‖Σ_h α_h[(tk,i)][(τ,j)] f_h(M_(τ,j))‖, f_h(M) = V_h(M) · Wo_h.
+  void record(const std::string& p, int tk, int T, const std::vector<double>& alpha, const Tokens& V,
+              Reference& r) const {
     const int H = a_.heads, dh = d_ / H;
+    const std::size_t n = static_cast<std::size_t>(T * J_);
     const auto& Wo = t(p + ".wo");
-    std::vector<double> sc(J_, 0.0);
-    for (int j = 0; j < J_; ++j)
-      for (int i = 0; i < J_; ++i) {
+    r.mass.assign(static_cast<std::size_t>(J_), 0.0);
+    r.profile.assign(static_cast<std::size_t>(W_), 0.0);
+    r.score.assign(static_cast<std::size_t>(J_), 0.0);
+    for (int h = 0; h < H; ++h)
+      for (int i = 0; i < J_; ++i)
+        for (std::size_t key = 0; key < n; ++key) {
+          const double a = alpha[(static_cast<std::size_t>(h) * n + static_cast<std::size_t>(tk * J_ + i)) * n + key];
+          const int age = tk - static_cast<int>(key) / J_;
+          if (a == 0.0) continue;
+          r.mass[key % J_] += a / (H * J_);
+          r.profile[static_cast<std::size_t>(age)] += a / (H * J_);
+        }
+    for (int i = 0; i < J_; ++i)
+      for (std::size_t key = 0; key < n; ++key) {
+        const int age = tk - static_cast<int>(key) / J_;
+        if (age < 0 || age >= W_) continue;
         double sq = 0.0;
         for (int o = 0; o < d_; ++o) {
           double v = 0.0;
           for (int h = 0; h < H; ++h) {
             double f = 0.0;
-            for (int c = h * dh; c < (h + 1) * dh; ++c) f += V[j][c] * Wo[c * d_ + o];
-            v += alpha[(h * J_ + i) * J_ + j] * f;
+            for (int c = h * dh; c < (h + 1) * dh; ++c) f += V[key][c] * Wo[c * d_ + o];
+            v += alpha[(static_cast<std::size_t>(h) * n + static_cast<std::size_t>(tk * J_ + i)) * n + key] * f;
           }
           sq += v * v;
         }
-        sc[j] += std::sqrt(sq);
+        r.score[key % J_] += std::sqrt(sq);
       }
-    return sc;
   }
 
   const TestModel& m_;
   PolicyArch a_;
-  int d_, J_;
+  int d_, J_, W_;
 };
 
 // Largest |got - want| / max(1, |want|) over a comparison, and where it was.
@@ -273,8 +322,8 @@ struct Worst {
 };
 
 template <class Dims>
-void checkAgainstReference(std::uint64_t seed) {
-  constexpr int J = Dims::kTokens, H = Dims::kHeads, LD = Dims::kDecoderLayers, D = Dims::kDModel;
+void checkAgainstReference(std::uint64_t seed, int ticks) {
+  constexpr int J = Dims::kTokens, H = Dims::kHeads, LD = Dims::kDecoderLayers, D = Dims::kDModel, W = Dims::kWindow;
   const PolicyArch arch = Dims::arch();
   const TestModel model = randomModel(arch, seed, false);
   const std::vector<const float*> ptrs = model.pointers();
@@ -283,33 +332,42 @@ void checkAgainstReference(std::uint64_t seed) {
     const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c);
     const auto ws = makePolicyWorkspace<Dims>();
     const ReferencePolicy ref(model, arch);
-    // Every movement, steps inside and outside the table (clamped by both sides).
+    // One rollout longer than the window (the rings wrap); steps inside and outside the table
+    // (clamped by both sides).
+    std::vector<PolicyInput> seq;
     const int steps[] = {0, 17, Dims::kMaxSteps - 1, Dims::kMaxSteps + 40, -5};
-    for (int n = 0; n < 5; ++n) {
-      const PolicyInput in = randomInput(rng, n % Dims::kMovements, steps[n]);
-      const Eigen::Matrix<float, 5, 1> action = stepPolicy(w, *ws, in);
-      const Reference r = ref.run(in, c);
-      Worst wa, wc, ws_, wo;
-      for (int j = 0; j < J; ++j) wa.note(action[j], r.action[j], "action " + std::to_string(j));
+    for (int tk = 0; tk < ticks; ++tk) seq.push_back(randomInput(rng, 1 % Dims::kMovements, steps[tk % 5]));
+    const std::vector<Reference> r_all = ref.run(seq, c);
+    resetPolicyStream(*ws);
+    Worst wa, wc, ws_, wo, wm, wp;
+    for (int tk = 0; tk < ticks; ++tk) {
+      const Eigen::Matrix<float, 5, 1> action = stepPolicy(w, *ws, seq[static_cast<std::size_t>(tk)]);
+      const Reference& r = r_all[static_cast<std::size_t>(tk)];
+      const std::string at = "tick " + std::to_string(tk) + " ";
+      for (int j = 0; j < J; ++j) wa.note(action[j], r.action[j], at + "action " + std::to_string(j));
       for (int l = 0; l < LD; ++l)
         for (int h = 0; h < H; ++h)
           for (int i = 0; i < J; ++i)
             for (int j = 0; j < J; ++j)
               wc.note(ws->cross[l][h][i][j], r.cross[((l * H + h) * J + i) * J + j],
-                      "cross[" + std::to_string(l) + "][" + std::to_string(h) + "][" + std::to_string(i) + "][" +
+                      at + "cross[" + std::to_string(l) + "][" + std::to_string(h) + "][" + std::to_string(i) + "][" +
                           std::to_string(j) + "]");
-      for (int j = 0; j < J; ++j) ws_.note(ws->score[j], r.score[j], "score " + std::to_string(j));
+      for (int j = 0; j < J; ++j) ws_.note(ws->score[j], r.score[j], at + "score " + std::to_string(j));
+      for (int j = 0; j < J; ++j) wm.note(ws->mass[j], r.mass[j], at + "mass " + std::to_string(j));
+      for (int age = 0; age < W; ++age) wp.note(ws->age_profile[age], r.profile[static_cast<std::size_t>(age)], at + "age " + std::to_string(age));
       for (int i = 0; i < J; ++i)
         for (int k = 0; k < D; ++k)
-          wo.note(ws->cross_out(k, i), r.cross_out[i][k], "cross_out[" + std::to_string(i) + "][" + std::to_string(k) + "]");
-      INFO(conditioningName(c), " input ", n, " (movement ", in.movement, ", step ", in.step, ")");
-      CHECK_MESSAGE(wa.err <= 1e-5, "actions: worst ", wa.where);
-      CHECK_MESSAGE(wc.err <= 1e-5, "cross α: worst ", wc.where);
-      CHECK_MESSAGE(ws_.err <= 1e-5, "score: worst ", ws_.where);
-      CHECK_MESSAGE(wo.err <= 1e-5, "cross_out: worst ", wo.where);
+          wo.note(ws->cross_out(k, i), r.cross_out[i][k], at + "cross_out[" + std::to_string(i) + "][" + std::to_string(k) + "]");
       // The comparison is not vacuous: the actions are not all equal to one value.
       CHECK(action.maxCoeff() - action.minCoeff() > 1e-3f);
     }
+    INFO(conditioningName(c), ", ", ticks, " ticks, window ", W);
+    CHECK_MESSAGE(wa.err <= 1e-5, "actions: worst ", wa.where);
+    CHECK_MESSAGE(wc.err <= 1e-5, "cross α: worst ", wc.where);
+    CHECK_MESSAGE(ws_.err <= 1e-5, "score: worst ", ws_.where);
+    CHECK_MESSAGE(wm.err <= 1e-5, "mass: worst ", wm.where);
+    CHECK_MESSAGE(wp.err <= 1e-5, "age profile: worst ", wp.where);
+    CHECK_MESSAGE(wo.err <= 1e-5, "cross_out: worst ", wo.where);
   }
 }
 
@@ -325,7 +383,18 @@ struct Fixture {
         ptrs(model.pointers()),
         w(bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c)) {}
 
-  Eigen::Matrix<float, 5, 1> run(const PolicyInput& in) { return stepPolicy(w, *ws, in); }
+  /// A one-tick rollout (fresh stream).
+  Eigen::Matrix<float, 5, 1> run(const PolicyInput& in) {
+    resetPolicyStream(*ws);
+    return stepPolicy(w, *ws, in);
+  }
+  /// The actions of a whole rollout, from a fresh stream.
+  std::vector<Eigen::Matrix<float, 5, 1>> rollout(const std::vector<PolicyInput>& seq) {
+    resetPolicyStream(*ws);
+    std::vector<Eigen::Matrix<float, 5, 1>> out;
+    for (const PolicyInput& in : seq) out.push_back(stepPolicy(w, *ws, in));
+    return out;
+  }
 };
 
 bool bitwiseEqual(const Eigen::Matrix<float, 5, 1>& a, const Eigen::Matrix<float, 5, 1>& b) {
@@ -342,17 +411,44 @@ TEST_CASE("compiled dimensions equal the runtime architectures") {
   CHECK(parameterCount(paperArch()) > 6'000'000);
 }
 
-TEST_CASE("stepPolicy matches the double-precision reference of docs/policy.md, small dims") {
-  checkAgainstReference<SmallPolicyDims>(101);
+TEST_CASE("streaming stepPolicy matches the whole-sequence double-precision reference of docs/policy.md, small dims") {
+  checkAgainstReference<SmallPolicyDims>(101, 3 * SmallPolicyDims::kWindow + 3);
 }
 
-TEST_CASE("stepPolicy matches the double-precision reference of docs/policy.md, paper dims") {
-  checkAgainstReference<PaperPolicyDims>(202);
+TEST_CASE("streaming stepPolicy matches the whole-sequence double-precision reference of docs/policy.md, paper dims") {
+  checkAgainstReference<PaperPolicyDims>(202, PaperPolicyDims::kWindow + 6);
 }
 
-TEST_CASE("odd dimensions (no multiple of the packet width) match the reference too") {
+TEST_CASE("odd dimensions (no multiple of the packet width, a window of 3) match the reference too") {
   // d_model 36 / head dim 9 / FFN 20-13-7 exercise the kernel's leftover rows and columns.
-  checkAgainstReference<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>>(303);
+  checkAgainstReference<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16, 3>>(303, 11);
+}
+
+TEST_CASE("the encoder is causal in time with a finite receptive field: tick 0 reaches exactly the ticks within (LE + 1)(W − 1)") {
+  // A change at tick 0 spreads W − 1 ticks per encoder layer and W − 1 more through the
+  // cross-attention; beyond that no computation reads it, so the actions are bitwise equal.
+  using Dims = SmallPolicyDims;
+  constexpr int reach = (Dims::kEncoderLayers + 1) * (Dims::kWindow - 1);
+  Fixture<Dims> f(71, Conditioning::kReference, false);
+  std::mt19937_64 rng(72);
+  std::vector<PolicyInput> seq;
+  for (int tk = 0; tk < reach + 6; ++tk) seq.push_back(randomInput(rng, 1, tk));
+  const auto base = f.rollout(seq);
+  std::vector<PolicyInput> changed_seq = seq;
+  for (int j = 0; j < 5; ++j) changed_seq[0].q[j] += 0.3f;
+  const auto changed = f.rollout(changed_seq);
+  for (int tk = 0; tk <= reach; ++tk)
+    CHECK_MESSAGE(!bitwiseEqual(changed[static_cast<std::size_t>(tk)], base[static_cast<std::size_t>(tk)]), "tick ", tk,
+                  " did not see the change at tick 0");
+  for (int tk = reach + 1; tk < reach + 6; ++tk)
+    CHECK_MESSAGE(bitwiseEqual(changed[static_cast<std::size_t>(tk)], base[static_cast<std::size_t>(tk)]), "tick ", tk,
+                  " still depends on tick 0");
+  // Ticks before a change never depend on it (causal in time).
+  std::vector<PolicyInput> late = seq;
+  late[10].q[2] -= 0.4f;
+  const auto after = f.rollout(late);
+  for (int tk = 0; tk < 10; ++tk) CHECK(bitwiseEqual(after[static_cast<std::size_t>(tk)], base[static_cast<std::size_t>(tk)]));
+  CHECK_FALSE(bitwiseEqual(after[10], base[10]));
 }
 
 TEST_CASE("bindPolicyWeights views each tensor in place: Eigen [out, in] is the manifest's [in, out]") {
@@ -487,16 +583,22 @@ TEST_CASE("movement and step out of range are clamped to the nearest embedding")
   CHECK_FALSE(bitwiseEqual(first, last));
 }
 
-TEST_CASE("stepPolicy is deterministic: two workspaces, repeated calls, bitwise-equal outputs") {
+TEST_CASE("stepPolicy is deterministic: two workspaces, a reset stream repeats bitwise, whatever ran before") {
   Fixture<PaperPolicyDims> f(51, Conditioning::kReference, false);
   const auto ws2 = makePolicyWorkspace<PaperPolicyDims>();
   std::mt19937_64 rng(52);
-  const PolicyInput a = randomInput(rng, 0, 10), b = randomInput(rng, 1, 20);
-  const Eigen::Matrix<float, 5, 1> first = f.run(a);
+  std::vector<PolicyInput> seq, other_seq;
+  for (int tk = 0; tk < 27; ++tk) seq.push_back(randomInput(rng, 0, tk));
+  for (int tk = 0; tk < 13; ++tk) other_seq.push_back(randomInput(rng, 1, tk));
+  const Eigen::Matrix<float, 5, 1> first = f.rollout(seq).back();
   const Eigen::Matrix<float, 5, 1> cross_first = f.ws->score;
-  f.run(b);  // a different step in between leaves nothing behind
-  const Eigen::Matrix<float, 5, 1> again = f.run(a);
-  const Eigen::Matrix<float, 5, 1> other = stepPolicy(f.w, *ws2, a);
+  f.rollout(other_seq);  // another rollout in between (the rings start elsewhere) leaves nothing behind
+  const Eigen::Matrix<float, 5, 1> again = f.rollout(seq).back();
+  resetPolicyStream(*ws2);
+  for (int k = 0; k < 3; ++k) stepPolicy(f.w, *ws2, other_seq[static_cast<std::size_t>(k)]);  // stale ring contents
+  resetPolicyStream(*ws2);
+  Eigen::Matrix<float, 5, 1> other;
+  for (const PolicyInput& in : seq) other = stepPolicy(f.w, *ws2, in);
   CHECK(bitwiseEqual(again, first));
   CHECK(bitwiseEqual(other, first));
   CHECK(bitwiseEqual(ws2->score, cross_first));

@@ -18,8 +18,9 @@ float uniform(std::mt19937_64& rng, double lo, double hi) {
   return static_cast<float>(lo + (hi - lo) * (static_cast<double>(rng() >> 11) * 0x1.0p-53));
 }
 
-// Runs n_steps policy steps over inputs prepared beforehand (movement and step indices
-// include out-of-range values, every 97th input is NaN) and returns the allocations counted.
+// Runs n_steps policy steps over inputs prepared beforehand, as rollouts of 97 ticks (the
+// stream is reset between them, the rings wrap inside them; movement and step indices include
+// out-of-range values, the last input of every rollout is NaN) and returns the allocations counted.
 template <class Dims>
 std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink) {
   const std::vector<TensorSpec> manifest = policyManifest(Dims::arch());
@@ -44,13 +45,15 @@ std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink) {
       in.a_prev[j] = uniform(rng, -0.1, 0.1);
       in.r[j] = uniform(rng, -1.5, 1.5);
     }
-    if (i % 97 == 0) in.q[1] = std::nanf("");
+    if (i % 97 == 96) in.q[1] = std::nanf("");
     in.movement = i % (Dims::kMovements + 2) - 1;
     in.step = i % (Dims::kMaxSteps + 20) - 5;
   }
 
   CountAllocations counter;
+  int i = 0;
   for (const PolicyInput& in : inputs) {
+    if (i++ % 97 == 0) resetPolicyStream(*ws);
     const Eigen::Matrix<float, 5, 1>& a = stepPolicy(w, *ws, in);
     if (a.allFinite()) sink += static_cast<double>(a[0]) + static_cast<double>(ws->score[4]);
     sink += static_cast<double>(snapToCentroid(w, in.movement, in.q));

@@ -3,6 +3,7 @@
 // computation, the split and the fingerprint are deterministic, bad files are named.
 #include "nao/tools/command.hpp"
 #include "nao/tools/policy_dataset.hpp"
+#include "nao/sim_arm.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -358,7 +359,7 @@ PolicyData blendedSet(const KeyPoseBlend& blend) {
 
 TEST_CASE("demonstrated actions are the expert's: the blend applied to (q, a(t-1), r) of each sample") {
   // Cross-check of two independent paths: differences of the feature-extracted trajectory
-  // (buildSamples) and the blend law evaluated on the sample's inputs (expertAction).
+  // (buildSamples) and the blend law evaluated on the sample's inputs.
   KeyPoseBlend blend;
   blend.pole = 0.6;
   const PolicyData data = blendedSet(blend);
@@ -366,7 +367,7 @@ TEST_CASE("demonstrated actions are the expert's: the blend applied to (q, a(t-1
   REQUIRE(samples.size() > 500);
   double worst = 0.0, largest = 0.0;
   for (const PolicySample& s : samples) {
-    worst = std::max(worst, (s.a - expertAction(blend, s)).cwiseAbs().maxCoeff());
+    worst = std::max(worst, (s.a - blend.velocity(s.a_prev, s.q, s.r)).cwiseAbs().maxCoeff());
     largest = std::max(largest, s.a.cwiseAbs().maxCoeff());
   }
   CHECK(worst < 1e-12);
@@ -375,59 +376,134 @@ TEST_CASE("demonstrated actions are the expert's: the blend applied to (q, a(t-1
   KeyPoseBlend other;
   other.pole = 0.8;
   double off = 0.0;
-  for (const PolicySample& s : samples) off = std::max(off, (s.a - expertAction(other, s)).cwiseAbs().maxCoeff());
+  for (const PolicySample& s : samples) off = std::max(off, (s.a - other.velocity(s.a_prev, s.q, s.r)).cwiseAbs().maxCoeff());
   CHECK(off > 1e-3);
 }
 
-TEST_CASE("perturbed samples: seeded, the stated share and spread, relabelled by the expert") {
-  Perturbation p;
-  p.blend.pole = 0.6;
-  const PolicyData data = blendedSet(p.blend);
-  const std::vector<PolicySample> one = buildSamples(data, allDemos(data), 256);
-  std::vector<PolicySample> base;
-  while (base.size() < 20000) base.insert(base.end(), one.begin(), one.end());  // many draws
+namespace {
 
-  const std::vector<PolicySample> a = perturbSamples(base, p, 11);
-  const std::vector<PolicySample> b = perturbSamples(base, p, 11);
-  const std::vector<PolicySample> c = perturbSamples(base, p, 12);
-  REQUIRE(a.size() == base.size());
-  std::size_t moved = 0, differs = 0;
-  double sum_dq2 = 0.0, sum_da2 = 0.0;
-  for (std::size_t i = 0; i < base.size(); ++i) {
-    CHECK(a[i].q == b[i].q);  // same seed, same samples
-    CHECK(a[i].a == b[i].a);
-    if (!(a[i].q == c[i].q)) ++differs;
-    CHECK(a[i].r == base[i].r);  // the reference, movement and step are never touched
-    CHECK(a[i].step == base[i].step);
-    if (a[i].q == base[i].q) {
-      CHECK(a[i].a == base[i].a);  // untouched samples keep the demonstrated action
-      continue;
-    }
-    ++moved;
-    sum_dq2 += (a[i].q - base[i].q).squaredNorm();
-    sum_da2 += (a[i].a_prev - base[i].a_prev).squaredNorm();
-    CHECK((a[i].a - expertAction(p.blend, a[i])).cwiseAbs().maxCoeff() < 1e-15);
+// Replays a rollout on a fresh simulated arm with the commands it applied (q(t) + a(t−1) of the
+// next tick) and, at every tick, tries the label from a snapshot of the replayed state: returns
+// the largest |q(t+1) − f(t+1)| the labels leave over the ticks whose clamped target is within
+// one tick's reach, and the largest difference between the replayed and the recorded q.
+struct Replay {
+  double worst_label_miss = 0.0, worst_q_diff = 0.0, worst_off_trajectory = 0.0;
+  std::size_t ticks_checked = 0, ticks_on_target = 0;  ///< label ends within 1e-5 rad of f(t+1)
+};
+
+Replay replay(const PolicyData& data, const PolicySequence& s, const SimModel& model) {
+  const PolicyDemo& d = data.demos[static_cast<std::size_t>(s.demo)];
+  const ArmModel& arm = model.arm;
+  SimData sim(model, d.f.front());
+  SimSnapshot snap;
+  Replay r;
+  for (std::size_t t = 0; t < s.ticks(); ++t) {
+    r.worst_q_diff = std::max(r.worst_q_diff, (sim.q - s.q[t]).cwiseAbs().maxCoeff());
+    const JointVector target = clampToLimits(arm, d.f[t + 1]);
+    r.worst_off_trajectory = std::max(r.worst_off_trajectory, (sim.q - clampToLimits(arm, d.f[t])).cwiseAbs().maxCoeff());
+    captureSim(sim, snap);
+    const JointVector end = stepSim(model, sim, sim.q + s.a[t]);
+    const double miss = (end - target).cwiseAbs().maxCoeff();
+    r.worst_label_miss = std::max(r.worst_label_miss, miss);
+    ++r.ticks_checked;
+    if (miss < 1e-5) ++r.ticks_on_target;
+    restoreSim(sim, snap);
+    const JointVector applied = t + 1 < s.ticks() ? JointVector(s.q[t] + s.a_prev[t + 1]) : JointVector(sim.q + s.a[t]);
+    stepSim(model, sim, applied);
   }
-  const double n = static_cast<double>(base.size());
-  // Binomial(n, 0.5): 5 standard deviations is 0.0177 n at n = 20000.
-  CHECK(std::abs(static_cast<double>(moved) / n - p.fraction) < 0.018);
-  CHECK(differs > base.size() / 4);
-  // σ is drawn from the list: per joint E[dq²] = mean of σ², a(t−1) moves a_ratio as far.
-  double mean_var = 0.0;
-  for (double sd : p.q_std_rad) mean_var += sd * sd / static_cast<double>(p.q_std_rad.size());
-  const double dq_var = sum_dq2 / (static_cast<double>(moved) * kNumJoints);
-  const double da_var = sum_da2 / (static_cast<double>(moved) * kNumJoints);
-  CHECK(dq_var == doctest::Approx(mean_var).epsilon(0.06));
-  CHECK(da_var == doctest::Approx(mean_var * p.a_ratio * p.a_ratio).epsilon(0.06));
+  return r;
+}
 
-  Perturbation off = p;
-  off.fraction = 0.0;
-  const std::vector<PolicySample> none = perturbSamples(base, off, 11);
-  for (std::size_t i = 0; i < base.size(); ++i) CHECK(none[i].q == base[i].q);
-  Perturbation bad = p;
-  bad.fraction = 1.5;
-  CHECK_THROWS_WITH_AS(perturbSamples(base, bad, 1), doctest::Contains("not in [0, 1]"), UserError);
-  bad = p;
-  bad.q_std_rad = {0.1, -0.2};
-  CHECK_THROWS_WITH_AS(perturbSamples(base, bad, 1), doctest::Contains("negative"), UserError);
+}  // namespace
+
+// Demonstrations an arm can follow: key poses in the middle of the joint ranges, blended with
+// pole 0.8, segments of 8-10 ticks.
+PolicyData reachableSet(const ArmModel& arm, const KeyPoseBlend& blend) {
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(0.3, 0.7);
+  std::map<std::string, std::vector<JointVector>> centroids;
+  std::vector<PolicyDemo> demos;
+  for (const char* m : {"elbow", "whole_arm", "wrist"}) {
+    std::vector<JointVector> c(4);
+    for (JointVector& x : c)
+      for (int j = 0; j < kNumJoints; ++j) x[j] = arm.q_min[j] + u(rng) * (arm.q_max[j] - arm.q_min[j]);
+    centroids[m] = c;
+    for (int i = 0; i < 3; ++i) {
+      std::vector<double> t;
+      std::vector<JointVector> q;
+      for (int k = 0; k < 60; ++k) {
+        t.push_back(0.1 * k);
+        q.push_back(c[static_cast<std::size_t>((k / (8 + i)) % 4)]);
+      }
+      demos.push_back(demo(std::string(m) + "_00" + std::to_string(i), featureTrajectory(c, t, q, blend),
+                           keyPoseLabels(c, t, q, t)));
+    }
+  }
+  return makePolicyData(centroids, demos);
+}
+
+TEST_CASE("executed rollouts: the expert's labels put the servo-lagged arm on f(t+1), clean and noisy, seeded") {
+  KeyPoseBlend blend;
+  blend.pole = 0.8;
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const PolicyData data = reachableSet(arm, blend);
+  const SimModel model = makeSimModel(arm);
+  ExecutionOptions o;
+  o.noisy_rollouts = 2;
+  const std::vector<int> demos = {0, 4, 8};
+  const std::vector<PolicySequence> a = executeDemos(data, demos, model, o, 11);
+  REQUIRE(a.size() == 9);
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const PolicySequence& s = a[i];
+    INFO("demo " << s.demo << " rollout " << s.rollout);
+    CHECK(s.demo == demos[i / 3]);
+    CHECK(s.rollout == static_cast<int>(i % 3));
+    CHECK(s.ticks() == data.demos[static_cast<std::size_t>(s.demo)].f.size() - 1);
+    CHECK(s.a_prev.front() == JointVector::Zero());
+    // An independent replay on a fresh arm: the recorded states are the arm's, and from each of
+    // them the label ends the tick on the target (the expert's secant stops at 1e-7 rad).
+    const Replay r = replay(data, s, model);
+    MESSAGE("labels on target (1e-5 rad) at " << r.ticks_on_target << " of " << r.ticks_checked
+                                                << " ticks, worst miss " << r.worst_label_miss << " rad; replay |dq| "
+                                                << r.worst_q_diff << ", farthest from f " << r.worst_off_trajectory << " rad");
+    CHECK(r.ticks_checked == s.ticks());
+    CHECK(r.worst_q_diff < 1e-9);
+    // Clean rollouts follow f (their misses are the expert's own record); noisy ones leave it
+    // (the states the policy's own errors reach) and are labelled back from there.
+    if (s.rollout == 0) {
+      CHECK(r.ticks_on_target == r.ticks_checked);
+      CHECK(r.worst_label_miss <= s.worst_miss_rad + 1e-9);
+      CHECK(r.worst_off_trajectory < 1e-5);
+    } else {
+      CHECK(r.ticks_on_target >= r.ticks_checked * 9 / 10);
+      CHECK(r.worst_off_trajectory > 0.02);
+    }
+    // The label is not the key-pose blend of its own inputs: the servo lag is in it.
+    double off_blend = 0.0;
+    for (std::size_t t = 1; t < s.ticks(); ++t)
+      off_blend = std::max(off_blend, (s.a[t] - blend.velocity(s.a_prev[t], s.q[t], s.r[t])).cwiseAbs().maxCoeff());
+    CHECK(off_blend > 1e-3);
+  }
+  // Seeded: the same seed gives the same sequences, another seed other noise (clean ones equal).
+  const std::vector<PolicySequence> b = executeDemos(data, demos, model, o, 11);
+  const std::vector<PolicySequence> c = executeDemos(data, demos, model, o, 12);
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(a[i].q == b[i].q);
+    CHECK(a[i].a == b[i].a);
+    if (a[i].rollout == 0)
+      CHECK(a[i].a == c[i].a);
+    else
+      CHECK_FALSE(a[i].q == c[i].q);
+  }
+  // A demo's rollouts do not depend on which other demos are listed.
+  const std::vector<PolicySequence> alone = executeDemos(data, {4}, model, o, 11);
+  CHECK(alone[2].a == a[5].a);
+
+  ExecutionOptions bad = o;
+  bad.noise_std_rad = {0.1, -0.2};
+  CHECK_THROWS_WITH_AS(executeDemos(data, demos, model, bad, 1), doctest::Contains("negative"), UserError);
+  bad = o;
+  bad.noise_corr = 1.0;
+  CHECK_THROWS_WITH_AS(executeDemos(data, demos, model, bad, 1), doctest::Contains("noise_corr"), UserError);
+  CHECK_THROWS_WITH_AS(executeDemos(data, {99}, model, o, 1), doctest::Contains("out of range"), UserError);
 }

@@ -35,6 +35,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 using nao::test::smallOptions;
+using nao::test::smallSim;
 
 // A fresh directory per use, removed afterwards: a FileStore must never see a previous run's file.
 struct TempDir {
@@ -117,7 +118,7 @@ std::vector<std::vector<std::uint8_t>> trainRanks(const TrainOptions& base, int 
     TrainOptions o = base;
     o.dist = dist(world, r, dir);
     std::ofstream progress(dir + "/progress.txt");
-    const TrainResult res = trainPolicy(smallData(), o, &progress);
+    const TrainResult res = trainPolicy(smallData(), smallSim(), o, &progress);
     const std::vector<std::uint8_t> bytes = modelBytes(o, res);
     std::ofstream(dir + "/rank" + std::to_string(r) + ".bin", std::ios::binary)
         .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
@@ -158,14 +159,13 @@ TEST_CASE("shardRange splits every global batch into disjoint contiguous shards 
 TEST_CASE("the Gloo-summed shard gradients equal the single-process gradient of the global batch") {
   torch::set_num_threads(1);
   const PolicyArch arch = smallArch();
-  const std::int64_t n = 32;
-  // The global batch: seeded normalised inputs and targets, the same in every process.
+  const std::int64_t n = 8, ticks = 12;  // sequences of 12 ticks (longer than the window)
+  // The global batch: seeded normalised sequences and targets, the same in every process.
   const auto batch = [&] {
     torch::manual_seed(7);
-    PolicyBatch in{torch::randn({n, arch.tokens}), torch::randn({n, arch.tokens}), torch::randn({n, arch.tokens}),
-                   torch::randint(0, arch.movements, {n}, torch::kInt64),
-                   torch::randint(0, arch.max_steps, {n}, torch::kInt64)};
-    return std::make_pair(in, torch::randn({n, arch.tokens}));
+    PolicyBatch in{torch::randn({n, ticks, arch.tokens}), torch::randn({n, ticks, arch.tokens}),
+                   torch::randn({n, ticks, arch.tokens}), torch::randint(0, arch.movements, {n}, torch::kInt64)};
+    return std::make_pair(in, torch::randn({n, ticks, arch.tokens}));
   };
   const auto freshNet = [&] {
     torch::manual_seed(3);
@@ -180,7 +180,7 @@ TEST_CASE("the Gloo-summed shard gradients equal the single-process gradient of 
 
   const TempDir tmp;
   const std::string& dir = tmp.path;
-  const int world = 3;  // uneven shards: 11 + 11 + 10
+  const int world = 3;  // uneven shards: 3 + 3 + 2
   const std::vector<RankExit> exits = runRanks(world, dir, [&](int r) {
     torch::set_num_threads(1);
     ProcessGroup group(dist(world, r, dir));
@@ -189,8 +189,8 @@ TEST_CASE("the Gloo-summed shard gradients equal the single-process gradient of 
     const auto [lo, hi] = shardRange(n, world, r);
     const torch::Tensor idx = torch::arange(lo, hi, torch::kInt64);
     const PolicyBatch shard{b_in.qn.index_select(0, idx), b_in.an.index_select(0, idx), b_in.rn.index_select(0, idx),
-                            b_in.movement.index_select(0, idx), b_in.step.index_select(0, idx)};
-    ((net->forward(shard) - b_target.index_select(0, idx)).square().sum() / static_cast<double>(n * arch.tokens))
+                            b_in.movement.index_select(0, idx)};
+    ((net->forward(shard) - b_target.index_select(0, idx)).square().sum() / static_cast<double>(n * ticks * arch.tokens))
         .backward();
     const std::vector<torch::Tensor> p = net->trainableParameters();
     group.sumGradients(p);
@@ -245,7 +245,7 @@ TEST_CASE("world size 2 twice gives byte-identical model.bin bytes on every rank
   CHECK_MESSAGE(a[0] == b[0], "two world-size-2 runs with seed 11 gave different bytes");
   CHECK_MESSAGE(a[0] == a[1], "ranks 0 and 1 ended with different models");
 
-  const TrainResult single = trainPolicy(smallData(), o, nullptr);
+  const TrainResult single = trainPolicy(smallData(), smallSim(), o, nullptr);
   const std::vector<std::uint8_t> one = modelBytes(o, single);
   CHECK(one != a[0]);  // the metadata records the world size, and the sums differ in rounding
   const nlohmann::json meta = nlohmann::json::parse(decodeModel(a[0], "world 2").header.metadata_json);
@@ -295,7 +295,7 @@ std::pair<RankExit, double> signalRank1(int sig, double timeout_s) {
         TrainOptions o = base;
         o.dist = dist(2, r, dir, timeout_s);
         std::ofstream progress(dir + "/progress.txt");
-        trainPolicy(smallData(), o, r == 0 ? &progress : nullptr);
+        trainPolicy(smallData(), smallSim(), o, r == 0 ? &progress : nullptr);
       },
       [&](const std::vector<pid_t>& pids) {
         const Clock::time_point t0 = Clock::now();
@@ -354,7 +354,7 @@ TEST_CASE("ranks started with different options refuse to train, every one with 
     TrainOptions o = smallOptions(5, 1);
     if (r == 1) o.lr = 2e-3;
     o.dist = dist(2, r, dir);
-    trainPolicy(smallData(), o, nullptr);
+    trainPolicy(smallData(), smallSim(), o, nullptr);
   });
   for (int r = 0; r < 2; ++r) {
     const RankExit& x = exits[static_cast<std::size_t>(r)];
@@ -372,7 +372,7 @@ TEST_CASE("a rank whose peers never come fails the rendezvous with an error afte
   const std::vector<RankExit> exits = runRanks(1, dir, [&](int) {
     TrainOptions o = smallOptions(5, 1);
     o.dist = dist(2, 0, dir, timeout_s);  // rank 0 of 2; rank 1 never starts
-    trainPolicy(smallData(), o, nullptr);
+    trainPolicy(smallData(), smallSim(), o, nullptr);
   });
   CHECK(exits[0].exited);
   CHECK(exits[0].code == 1);
@@ -388,16 +388,16 @@ TEST_CASE("a checkpoint resumes to the uninterrupted run's bytes, and under anot
   const TempDir tmp;
   const std::string& dir = tmp.path;
   const TrainOptions full = smallOptions(13, 3);
-  const std::vector<std::uint8_t> uninterrupted = modelBytes(full, trainPolicy(smallData(), full, nullptr));
+  const std::vector<std::uint8_t> uninterrupted = modelBytes(full, trainPolicy(smallData(), smallSim(), full, nullptr));
 
   TrainOptions first = smallOptions(13, 2);
   first.checkpoint = dir + "/ck.pt";
-  trainPolicy(smallData(), first, nullptr);
+  trainPolicy(smallData(), smallSim(), first, nullptr);
   REQUIRE(std::filesystem::exists(first.checkpoint));
 
   TrainOptions rest = smallOptions(13, 3);
   rest.resume = first.checkpoint;
-  const TrainResult resumed = trainPolicy(smallData(), rest, nullptr);
+  const TrainResult resumed = trainPolicy(smallData(), smallSim(), rest, nullptr);
   CHECK(resumed.resumed_after == 2);
   REQUIRE(resumed.history.size() == 3);
   CHECK_MESSAGE(modelBytes(rest, resumed) == uninterrupted, "resumed after epoch 2 of 3, the bytes differ");
@@ -412,5 +412,5 @@ TEST_CASE("a checkpoint resumes to the uninterrupted run's bytes, and under anot
   // Another run's checkpoint is refused with the reason.
   TrainOptions other = smallOptions(14, 3);
   other.resume = first.checkpoint;
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), other, nullptr), doctest::Contains("belongs to another run"), UserError);
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), other, nullptr), doctest::Contains("belongs to another run"), UserError);
 }

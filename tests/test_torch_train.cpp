@@ -24,11 +24,12 @@ namespace {
 
 using nao::test::smallData;
 using nao::test::smallOptions;
+using nao::test::smallSim;
 
 std::vector<TrainedJoint> urdfJoints() { return trainedJoints(loadArmModel(nao::test::kUrdfPath)); }
 
 std::vector<std::uint8_t> trainBytes(const TrainOptions& o, TrainResult* out = nullptr) {
-  TrainResult r = trainPolicy(smallData(), o, nullptr);
+  TrainResult r = trainPolicy(smallData(), smallSim(), o, nullptr);
   std::vector<std::uint8_t> bytes = encodeModel(modelHeader(smallData(), o, r, urdfJoints()), manifestFloats(r.net));
   if (out) *out = r;
   return bytes;
@@ -73,7 +74,7 @@ TEST_CASE("the torch module's tensors are the manifest: same names, shapes and o
     }
 }
 
-TEST_CASE("the attention record follows docs/policy.md: rows sum to 1, causal self-attention, the norm-based score") {
+TEST_CASE("the attention record follows docs/policy.md: per-body-part rows sum to 1, mass and age profile are distributions, causal self-attention") {
   torch::manual_seed(3);
   const PolicyArch arch = smallArch();
   const PolicyNet net(arch, Conditioning::kReference);
@@ -83,50 +84,60 @@ TEST_CASE("the attention record follows docs/policy.md: rows sum to 1, causal se
     for (auto& p : net->parameters())
       if (p.dim() == 1 && p.requires_grad()) p.add_(torch::randn_like(p) * 0.1);
   }
-  const std::int64_t n_batch = 3, n_joints = arch.tokens, d = arch.d_model, n_heads = arch.heads, d_h = d / n_heads;
-  PolicyBatch in{torch::randn({n_batch, n_joints}), torch::randn({n_batch, n_joints}), torch::randn({n_batch, n_joints}),
-                 torch::tensor({0, 1, 2}, torch::kInt64), torch::tensor({0, 5, 255}, torch::kInt64)};
+  const std::int64_t n_batch = 2, n_ticks = arch.window + 4, n_joints = arch.tokens, d = arch.d_model,
+                     n_heads = arch.heads, window = arch.window;
+  PolicyBatch in{torch::randn({n_batch, n_ticks, n_joints}), torch::randn({n_batch, n_ticks, n_joints}),
+                 torch::randn({n_batch, n_ticks, n_joints}), torch::tensor({0, 2}, torch::kInt64)};
   PolicyAttention att;
   const torch::Tensor out = net->forward(in, &att);
-  CHECK(out.sizes().vec() == std::vector<std::int64_t>{n_batch, n_joints});
+  CHECK(out.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_joints});
   REQUIRE(att.cross.size() == static_cast<std::size_t>(arch.decoder_layers));
   for (const torch::Tensor& a : att.cross) {
-    CHECK(a.sizes().vec() == std::vector<std::int64_t>{n_batch, n_heads, n_joints, n_joints});
-    CHECK((a.sum(-1) - 1).abs().max().item<float>() < 1e-6f);
+    CHECK(a.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_heads, n_joints, n_joints});
+    CHECK((a.sum(-1) - 1).abs().max().item<float>() < 1e-5f);
   }
-  CHECK(att.cross_out.sizes().vec() == std::vector<std::int64_t>{n_batch, n_joints, d});
-
-  // The score, recomputed by loops from the module's own tensors (memory recomputed here).
-  torch::NoGradGuard no_grad;
-  torch::Tensor x = net->embed_in->forward(torch::stack({in.qn, in.an, in.rn}, -1)) + net->joint_enc +
-                    net->movement_emb.index_select(0, in.movement).unsqueeze(1) +
-                    net->step_emb.index_select(0, in.step).unsqueeze(1);
-  for (const EncoderLayer& l : net->enc) x = l->forward(x);
-  const torch::Tensor memory = net->enc_norm->forward(x);
-  const Attention& cross = net->dec.back()->cross;
-  const torch::Tensor v = memory.matmul(cross->wv) + cross->bv;  // [B,J,d]
-  const torch::Tensor& alpha = att.cross.back();
-  for (std::int64_t b = 0; b < n_batch; ++b)
-    for (std::int64_t j = 0; j < n_joints; ++j) {
-      double score = 0.0;
-      for (std::int64_t i = 0; i < n_joints; ++i) {
-        torch::Tensor sum = torch::zeros({d});
-        for (std::int64_t h = 0; h < n_heads; ++h) {
-          const torch::Tensor f_h = v[b][j].slice(0, h * d_h, (h + 1) * d_h).matmul(cross->wo.slice(0, h * d_h, (h + 1) * d_h));
-          sum += alpha[b][h][i][j] * f_h;
-        }
-        score += sum.norm().item<double>();
-      }
-      CHECK(att.score[b][j].item<double>() == doctest::Approx(score).epsilon(1e-5));
-    }
+  CHECK(att.mass.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_joints});
+  CHECK((att.mass.sum(-1) - 1).abs().max().item<float>() < 1e-5f);
+  CHECK(att.age_profile.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, window});
+  CHECK((att.age_profile.sum(-1) - 1).abs().max().item<float>() < 1e-5f);
+  // Tick t has t + 1 ticks of history at most: no mass at older ages.
+  for (std::int64_t t = 0; t + 1 < window; ++t)
+    CHECK(att.age_profile.select(1, t).slice(1, t + 1, window).abs().max().item<float>() == 0.0f);
+  CHECK(att.age_profile.select(1, n_ticks - 1).select(1, window - 1).min().item<float>() > 0.0f);
+  CHECK(att.score.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_joints});
+  CHECK(att.score.min().item<float>() > 0.0f);
+  CHECK(att.cross_out.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_joints, d});
 
   // Causal self-attention: query i gets weight 0 on keys above i, the rest sums to 1.
+  torch::NoGradGuard no_grad;
   torch::Tensor self_alpha;
   const torch::Tensor tokens = torch::randn({n_batch, n_joints, d});
   net->dec.front()->self->forward(tokens, tokens, true, &self_alpha);
   CHECK(self_alpha.triu(1).abs().max().item<float>() == 0.0f);
   CHECK((self_alpha.sum(-1) - 1).abs().max().item<float>() < 1e-6f);
   CHECK(self_alpha.tril(-1).abs().max().item<float>() > 0.0f);
+
+  // The window mask: ages 0..W-1 allowed, the future and older ticks blocked.
+  const WindowMask m = windowMask(n_ticks, static_cast<int>(n_joints), static_cast<int>(window));
+  CHECK_FALSE(m.blocked[3 * n_joints + 1][3 * n_joints + 4].item<bool>());  // same tick, any joint
+  CHECK(m.blocked[3 * n_joints][4 * n_joints].item<bool>());               // the next tick
+  CHECK_FALSE(m.blocked[(window - 1) * n_joints][0].item<bool>());         // age W-1
+  CHECK(m.blocked[window * n_joints][0].item<bool>());                     // age W
+  CHECK(m.age[(window - 1) * n_joints][0].item<std::int64_t>() == window - 1);
+}
+
+TEST_CASE("a later tick never changes an earlier action (causal in time), a whole-sequence forward equals shorter prefixes") {
+  torch::manual_seed(5);
+  const PolicyArch arch = smallArch();
+  const PolicyNet net(arch, Conditioning::kAutonomous);
+  torch::NoGradGuard no_grad;
+  const std::int64_t n_ticks = 2 * arch.window + 3;
+  PolicyBatch in{torch::randn({1, n_ticks, 5}), torch::randn({1, n_ticks, 5}), torch::randn({1, n_ticks, 5}),
+                 torch::tensor({1}, torch::kInt64)};
+  const torch::Tensor full = net->forward(in);
+  const std::int64_t cut = arch.window + 1;
+  PolicyBatch prefix{in.qn.slice(1, 0, cut), in.an.slice(1, 0, cut), in.rn.slice(1, 0, cut), in.movement};
+  CHECK((net->forward(prefix) - full.slice(1, 0, cut)).abs().max().item<float>() < 1e-5f);
 }
 
 TEST_CASE("reference mode ignores the step, autonomous mode ignores the reference") {
@@ -134,15 +145,20 @@ TEST_CASE("reference mode ignores the step, autonomous mode ignores the referenc
   const PolicyArch arch = smallArch();
   const PolicyNet ref(arch, Conditioning::kReference), aut(arch, Conditioning::kAutonomous);
   torch::NoGradGuard no_grad;
-  PolicyBatch in{torch::randn({2, 5}), torch::randn({2, 5}), torch::randn({2, 5}), torch::tensor({0, 2}, torch::kInt64),
-                 torch::tensor({3, 7}, torch::kInt64)};
-  PolicyBatch other_step = in, other_ref = in;
-  other_step.step = torch::tensor({100, 0}, torch::kInt64);
-  other_ref.rn = torch::randn({2, 5});
-  CHECK(torch::equal(ref->forward(in), ref->forward(other_step)));
+  PolicyBatch in{torch::randn({2, 6, 5}), torch::randn({2, 6, 5}), torch::randn({2, 6, 5}),
+                 torch::tensor({0, 2}, torch::kInt64)};
+  PolicyBatch other_ref = in;
+  other_ref.rn = torch::randn({2, 6, 5});
   CHECK_FALSE(torch::equal(ref->forward(in), ref->forward(other_ref)));
   CHECK(torch::equal(aut->forward(in), aut->forward(other_ref)));
-  CHECK_FALSE(torch::equal(aut->forward(in), aut->forward(other_step)));
+  // The step rows: zero and frozen in reference mode (see the manifest test), used in autonomous.
+  CHECK(ref->step_emb.abs().max().item<float>() == 0.0f);
+  const torch::Tensor with_steps = aut->forward(in);
+  const torch::Tensor saved = aut->step_emb.clone();
+  aut->step_emb.zero_();
+  const torch::Tensor without_steps = aut->forward(in);
+  aut->step_emb.copy_(saved);
+  CHECK_FALSE(torch::equal(with_steps, without_steps));
 }
 
 TEST_CASE("training twice with one seed gives byte-identical model.bin bytes, another seed other bytes") {
@@ -163,7 +179,7 @@ TEST_CASE("training twice with one seed gives byte-identical model.bin bytes, an
 
 TEST_CASE("the written model.bin reads back: header, metadata and every tensor equal the trained module's") {
   const TrainOptions o = smallOptions(21, 2);
-  const TrainResult r = trainPolicy(smallData(), o, nullptr);
+  const TrainResult r = trainPolicy(smallData(), smallSim(), o, nullptr);
   const std::string path = nao::test::writeTempFile("torch_train_model.bin", "");
   writeModelFile(path, modelHeader(smallData(), o, r, urdfJoints()), manifestFloats(r.net));
   const ModelFile file = readModelFile(path);
@@ -199,12 +215,15 @@ TEST_CASE("early stopping exports the best epoch's weights") {
   TrainOptions o = smallOptions(31, 4);
   o.lr = 3e-2;  // large enough that validation loss is not monotone
   o.patience = 2;
-  const TrainResult r = trainPolicy(smallData(), o, nullptr);
+  const TrainResult r = trainPolicy(smallData(), smallSim(), o, nullptr);
   REQUIRE(r.best_epoch >= 1);
   double best = 1e300;
   for (const EpochStats& e : r.history) best = std::min(best, e.val_loss);
   CHECK(r.history[static_cast<std::size_t>(r.best_epoch - 1)].val_loss == best);
   CHECK(r.val.normalised == r.history[static_cast<std::size_t>(r.best_epoch - 1)].val_loss);
-  CHECK(evaluatePolicy(r.net, buildSamples(smallData(), r.split.val, o.arch.max_steps)).normalised == r.val.normalised);
+  ExecutionOptions clean = o.execution;
+  clean.noisy_rollouts = 0;
+  CHECK(evaluatePolicy(r.net, executeDemos(smallData(), r.split.val, smallSim(), clean, o.seed)).normalised ==
+        r.val.normalised);
   CHECK(static_cast<int>(r.history.size()) <= std::min(o.max_epochs, r.best_epoch + o.patience));
 }

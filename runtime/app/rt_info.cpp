@@ -40,6 +40,7 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source) {
   j["clusters"] = a.clusters;
   j["movements"] = h.movement_names;
   j["max_steps"] = a.max_steps;
+  j["window"] = a.window;  // W, ticks of history the policy attends to
   j["parameters"] = parameterCount(a);
   j["tensors"] = model.tensors.size();
   j["bytes"] = model.bytes.size();

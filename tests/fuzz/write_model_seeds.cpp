@@ -23,6 +23,7 @@ nao::PolicyArch tinyArch() {
   a.movements = 1;
   a.clusters = 2;
   a.max_steps = 2;
+  a.window = 2;
   return a;
 }
 

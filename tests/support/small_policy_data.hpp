@@ -4,6 +4,7 @@
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/policy_dataset.hpp"
 #include "policy_train.hpp"
+#include "support/test_util.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -57,6 +58,12 @@ inline const nao::tools::PolicyData& smallData() {
     return nao::tools::makePolicyData(centroids, demos);
   }();
   return data;
+}
+
+// The simulated arm the training rollouts are executed on (the project's URDF, default servos).
+inline const nao::SimModel& smallSim() {
+  static const nao::SimModel sim = nao::makeSimModel(nao::loadArmModel(nao::test::kUrdfPath));
+  return sim;
 }
 
 // Training options of the small configuration on smallData(): `epochs` epochs (and as patience),

@@ -7,6 +7,10 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <atomic>
+#include <exception>
+#include <mutex>
+#include <thread>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -333,6 +337,62 @@ JointVector expertCommand(const SimModel& model, SimData& sim, const SimSnapshot
 
 }  // namespace
 
+namespace {
+
+// Rollout k of demonstration d (see executeDemos), on `sim` (any state; reset here).
+PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimModel& sim_model, SimData& sim,
+                              const ExecutionOptions& o, std::uint64_t seed) {
+  const ArmModel& arm = sim_model.arm;
+  const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
+  const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
+  const std::vector<JointVector>& centroids = data.centroids.at(static_cast<std::size_t>(demo.movement));
+  PolicySequence s;
+  s.demo = d;
+  s.movement = demo.movement;
+  s.rollout = k;
+  const double sd = k == 0 ? 0.0 : o.noise_std_rad[static_cast<std::size_t>(k - 1) % o.noise_std_rad.size()];
+  SplitMix64 rng(seed ^ (0x9e3779b97f4a7c15ull * static_cast<std::uint64_t>(d + 1)) ^
+                 (0xc2b2ae3d27d4eb4full * static_cast<std::uint64_t>(k + 1)));
+  const auto uniform = [&rng] { return (static_cast<double>(rng.next() >> 11) + 0.5) * 0x1.0p-53; };
+  const auto normal = [&] {
+    const double u1 = uniform();  // two statements: the order of draws is fixed
+    const double u2 = uniform();
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
+  };
+  SimSnapshot snap;
+  resetSim(sim_model, sim, demo.f.front());
+  JointVector q = sim.q, a_prev = JointVector::Zero(), noise = JointVector::Zero();
+  const double innovation = sd * std::sqrt(1.0 - o.noise_corr * o.noise_corr);
+  for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
+    JointVector lo, hi;
+    for (int j = 0; j < kNumJoints; ++j) {
+      const double step = arm.v_max[j] * period;
+      lo[j] = std::max(arm.q_min[j], q[j] - step);
+      hi[j] = std::min(arm.q_max[j], q[j] + step);
+      if (lo[j] > hi[j]) std::swap(lo[j], hi[j]);
+    }
+    captureSim(sim, snap);
+    double miss = 0.0;
+    const JointVector c = expertCommand(sim_model, sim, snap, clampToLimits(arm, demo.f[t + 1]), lo, hi, o, miss);
+    if (k == 0) s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
+    s.q.push_back(q);
+    s.a_prev.push_back(a_prev);
+    s.r.push_back(centroids[static_cast<std::size_t>(demo.label[t])]);
+    s.a.push_back(c - q);
+    JointVector c_exec = c;
+    if (k > 0) {
+      for (int j = 0; j < kNumJoints; ++j) noise[j] = o.noise_corr * noise[j] + innovation * normal();
+      c_exec += noise;
+      for (int j = 0; j < kNumJoints; ++j) c_exec[j] = std::clamp(c_exec[j], lo[j], hi[j]);
+    }
+    a_prev = c_exec - q;
+    q = stepSim(sim_model, sim, c_exec);
+  }
+  return s;
+}
+
+}  // namespace
+
 std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vector<int>& demos,
                                          const SimModel& sim_model, const ExecutionOptions& o, std::uint64_t seed,
                                          std::ostream* progress) {
@@ -342,66 +402,44 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
     if (!(sd >= 0.0)) throw UserError("execution: noise standard deviation " + std::to_string(sd) + " is negative");
   if (!(o.noise_corr >= 0.0 && o.noise_corr < 1.0)) throw UserError("execution: noise_corr must be in [0, 1)");
   if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
-  const ArmModel& arm = sim_model.arm;
-  const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
-  SimData sim(sim_model, JointVector::Zero());
-  SimSnapshot snap;
-  std::vector<PolicySequence> out;
-  const std::size_t total = demos.size() * static_cast<std::size_t>(1 + o.noisy_rollouts);
-  std::size_t done = 0, reported = 0;
-  for (int d : demos) {
-    const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
-    const std::vector<JointVector>& centroids = data.centroids.at(static_cast<std::size_t>(demo.movement));
-    for (int k = 0; k <= o.noisy_rollouts; ++k) {
-      PolicySequence s;
-      s.demo = d;
-      s.movement = demo.movement;
-      s.rollout = k;
-      const double sd = k == 0 ? 0.0 : o.noise_std_rad[static_cast<std::size_t>(k - 1) % o.noise_std_rad.size()];
-      SplitMix64 rng(seed ^ (0x9e3779b97f4a7c15ull * static_cast<std::uint64_t>(d + 1)) ^
-                     (0xc2b2ae3d27d4eb4full * static_cast<std::uint64_t>(k + 1)));
-      const auto uniform = [&rng] { return (static_cast<double>(rng.next() >> 11) + 0.5) * 0x1.0p-53; };
-      const auto normal = [&] {
-        const double u1 = uniform();  // two statements: the order of draws is fixed
-        const double u2 = uniform();
-        return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
-      };
-      resetSim(sim_model, sim, demo.f.front());
-      JointVector q = sim.q, a_prev = JointVector::Zero(), noise = JointVector::Zero();
-      const double innovation = sd * std::sqrt(1.0 - o.noise_corr * o.noise_corr);
-      for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
-        JointVector lo, hi;
-        for (int j = 0; j < kNumJoints; ++j) {
-          const double step = arm.v_max[j] * period;
-          lo[j] = std::max(arm.q_min[j], q[j] - step);
-          hi[j] = std::min(arm.q_max[j], q[j] + step);
-          if (lo[j] > hi[j]) std::swap(lo[j], hi[j]);
+  if (o.threads < 1) throw UserError("execution: threads must be at least 1");
+  for (int d : demos)
+    if (d < 0 || static_cast<std::size_t>(d) >= data.demos.size())
+      throw UserError("execution: demonstration index " + std::to_string(d) + " is out of range");
+  const std::size_t per_demo = static_cast<std::size_t>(1 + o.noisy_rollouts);
+  const std::size_t total = demos.size() * per_demo;
+  std::vector<PolicySequence> out(total);
+  // Rollouts are independent (own seed stream, reset arm): threads take them in turn and each
+  // result goes to its own slot, so the output does not depend on the thread count.
+  std::atomic<std::size_t> next{0}, done{0};
+  std::mutex report;
+  std::size_t reported = 0;
+  std::exception_ptr failure;
+  const auto work = [&] {
+    try {
+      SimData sim(sim_model, JointVector::Zero());  // ODE data per thread: built on this thread
+      for (std::size_t i = next++; i < total; i = next++) {
+        out[i] = executeRollout(data, demos[i / per_demo], static_cast<int>(i % per_demo), sim_model, sim, o, seed);
+        const std::size_t n = ++done;
+        if (progress) {
+          const std::lock_guard<std::mutex> lock(report);
+          if (n * 10 / total > reported) {
+            reported = n * 10 / total;
+            *progress << "executed " << n << "/" << total << " rollouts" << std::endl;
+          }
         }
-        captureSim(sim, snap);
-        double miss = 0.0;
-        const JointVector c = expertCommand(sim_model, sim, snap, clampToLimits(arm, demo.f[t + 1]), lo, hi, o, miss);
-        if (k == 0) s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
-        s.q.push_back(q);
-        s.a_prev.push_back(a_prev);
-        s.r.push_back(centroids[static_cast<std::size_t>(demo.label[t])]);
-        s.a.push_back(c - q);
-        JointVector c_exec = c;
-        if (k > 0) {
-          for (int j = 0; j < kNumJoints; ++j) noise[j] = o.noise_corr * noise[j] + innovation * normal();
-          c_exec += noise;
-          for (int j = 0; j < kNumJoints; ++j) c_exec[j] = std::clamp(c_exec[j], lo[j], hi[j]);
-        }
-        a_prev = c_exec - q;
-        q = stepSim(sim_model, sim, c_exec);
       }
-      out.push_back(std::move(s));
-      ++done;
-      if (progress && done * 10 / total > reported) {
-        reported = done * 10 / total;
-        *progress << "executed " << done << "/" << total << " rollouts" << std::endl;
-      }
+    } catch (...) {
+      const std::lock_guard<std::mutex> lock(report);
+      if (!failure) failure = std::current_exception();
+      next = total;
     }
-  }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 1; t < o.threads; ++t) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+  if (failure) std::rethrow_exception(failure);
   return out;
 }
 

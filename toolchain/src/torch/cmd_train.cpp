@@ -20,7 +20,7 @@ struct TrainArgs {
   std::string config = "paper", out, data, conditioning = "reference", urdf = NAO_DEFAULT_URDF, card;
   std::string rendezvous, interface, checkpoint, resume;
   std::uint64_t seed = 1;
-  int epochs = 200, patience = 10, batch = 4, world_size = 1, rank = 0, max_batches = 0, window = 0;
+  int epochs = 200, patience = 10, batch = 2, world_size = 1, rank = 0, max_batches = 0, window = 0;
   int noisy_rollouts = ExecutionOptions{}.noisy_rollouts;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };

@@ -25,7 +25,7 @@ struct TrainOptions {
   int max_epochs = 200;               ///< iteration cap; early stopping usually ends sooner
   int patience = 10;                  ///< epochs without a new best validation loss before stopping
   double val_fraction = 0.2;          ///< of each movement's demonstrations
-  int batch = 4;                      ///< sequences (whole executed rollouts) per optimiser step
+  int batch = 2;                      ///< sequences (whole executed rollouts) per optimiser step
   double lr = 6e-5;                   ///< Adam
   ExecutionOptions execution;         ///< how the demonstrations are executed and labelled
   DistOptions dist;                   ///< world size 1: this process alone, the single-process loop

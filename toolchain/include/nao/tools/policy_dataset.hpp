@@ -107,11 +107,14 @@ std::vector<PolicySample> buildSamples(const PolicyData& data, const std::vector
 /// policy's own errors reach, labelled by the expert from there); the inputs are what the
 /// controller sees (measured q, the applied a(t−1), the key pose r).
 struct ExecutionOptions {
-  int noisy_rollouts = 2;                          ///< per demonstration, besides the clean one
-  std::vector<double> noise_std_rad = {0.02, 0.05};  ///< σ of noisy rollout k: entry k % size
+  int noisy_rollouts = 1;                          ///< per demonstration, besides the clean one
+  std::vector<double> noise_std_rad = {0.03, 0.06};  ///< σ of noisy rollout k: entry (k − 1) % size
   double noise_corr = 0.8;                         ///< ρ of the AR(1) noise, per tick
   int expert_iterations = 8;                       ///< secant steps per tick (iteration cap)
   double expert_tol_rad = 1e-7;                    ///< stop when every joint ends this close to f(t+1)
+  /// Worker threads (the result does not depend on it). 1: Debian's ODE 0.16 crashed (segfault
+  /// in libode) with two worlds stepped on two threads here; more only with an ODE built for it.
+  int threads = 1;
 };
 
 /// One executed rollout of a demonstration: T − 1 ticks (every sample with a successor), rad.
@@ -130,8 +133,8 @@ struct PolicySequence {
 /// Executes the listed demonstrations (clean + noisy rollouts each, in list order) on the
 /// simulated arm of `sim_model` with the controller's per-tick bounds (period = the model's
 /// substeps × dt). Seeded: the noise of (demo, rollout) comes from its own splitmix64 stream,
-/// so the result does not depend on which other demos are listed. Deterministic (ODE's direct
-/// solver). Prints a progress line per 10 % to `progress` if not null. Throws UserError for bad
+/// so the result does not depend on which other demos are listed or on options.threads.
+/// Deterministic (ODE's direct solver). Prints a progress line per 10 % to `progress` if not null. Throws UserError for bad
 /// options.
 std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vector<int>& demos,
                                          const SimModel& sim_model, const ExecutionOptions& options,
