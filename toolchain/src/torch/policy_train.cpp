@@ -472,7 +472,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   if (o.max_batches > 0) t["max_batches_per_epoch"] = o.max_batches;
   t["batch_unit"] = "sequences";
   auto& ex = t["execution"];
-  ex["arm"] = "ODE arm, servo-lagged (runtime sim_arm)";
+  ex["arm"] = "simulated ODE arm of nao_rt (sim_arm), servo-lagged";
   ex["expert"] = "command ending the tick at f(t+1)";
   ex["noisy_rollouts"] = o.execution.noisy_rollouts;
   ex["noise_std_rad"] = o.execution.noise_std_rad;
