@@ -428,3 +428,89 @@ TEST_CASE("an autonomous model may run against a reference, which then only serv
   CHECK(std::isfinite(r.report.ee_rmse_m));
   CHECK(r.report.faults[0] == 0);  // no_human: the reference is not an input
 }
+
+TEST_CASE("--start-demo rolls out from one validation demonstration's s_0 for its length and names the nearest demonstration") {
+  const std::string model = writeModel(
+      "autonomous_start.bin", Conditioning::kAutonomous,
+      R"({"split":{"train":["elbow_000"],"val":["elbow_003","whole_arm_001","elbow_010","wrist_003"]}})");
+  const fs::path dir = tempDir("start_demo");
+  rt::RunOptions o = options(model, "none", dir);
+  o.movement = "elbow";
+  o.start_demo = 1;
+  const Outcome r = run(o);
+  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
+  CHECK(s["start_demo"] == "elbow_010");
+  CHECK(s["start_demo_index"] == 1);
+  const std::vector<double> per_demo = s["ee_dtw_per_demo_m"].get<std::vector<double>>();
+  REQUIRE(per_demo.size() == 2);
+  CHECK(s["ee_dtw_m"].get<double>() == (per_demo[0] + per_demo[1]) / 2.0);
+  const std::size_t nearest = per_demo[1] < per_demo[0] ? 1 : 0;
+  CHECK(s["ee_dtw_nearest_m"].get<double>() == per_demo[nearest]);
+  CHECK(s["ee_dtw_nearest_index"] == nearest);
+  CHECK(s["ee_dtw_nearest_demo"] == (nearest == 1 ? "elbow_010" : "elbow_003"));
+  CHECK(r.report.ee_dtw_nearest_m == per_demo[nearest]);
+
+  // It starts where elbow_010's feature-extracted trajectory starts and runs as long as it.
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const ModelFile file = readModelFile(model);
+  std::vector<JointVector> centroids;
+  const float* c = file.data(file.find("centroids"));
+  for (int k = 0; k < Dims::kClusters; ++k) {
+    JointVector q;
+    for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];  // movement 0 = elbow
+    centroids.push_back(q);
+  }
+  const tools::ReferenceStream d10 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 10, centroids);
+  CHECK(r.report.ticks == static_cast<std::int64_t>(d10.target.size()));
+  CHECK(r.out.find("elbow_010") != std::string::npos);
+
+  // Without the flag the run is the mean-s_0 rollout and says so.
+  rt::RunOptions mean = options(model, "none", tempDir("start_demo_mean"));
+  mean.movement = "elbow";
+  REQUIRE(run(mean).report.status == 0);
+  const nlohmann::json sm = nlohmann::json::parse(bytes(fs::path(mean.log_dir) / "summary.json"));
+  CHECK(sm["start_demo"].is_null());
+
+  int status = 0;
+  rt::RunOptions beyond = options(model, "none");
+  beyond.movement = "elbow";
+  beyond.start_demo = 2;  // elbow has 2 validation demonstrations
+  CHECK(oneLine(errorLine(beyond, status)));
+  CHECK(status == 2);
+  rt::RunOptions with_reference = options(referenceModel(), "synthetic:elbow");
+  with_reference.start_demo = 0;
+  CHECK(errorLine(with_reference, status).find("--start-demo") != std::string::npos);
+  CHECK(status == 2);
+}
+
+TEST_CASE("--blend-law-pole runs the blend-law baseline on a reference model, is refused for an autonomous one, and is recorded") {
+  rt::CommandLine cl;
+  std::ostringstream out, err;
+  const char* argv[] = {"nao_rt", "--start-demo", "3", "--blend-law-pole", "0.7"};
+  REQUIRE(rt::parseCommandLine(5, argv, cl, out, err) == -1);
+  CHECK(cl.run.start_demo == 3);
+  CHECK(cl.run.controller.blend_law_pole == 0.7);
+  const char* bad[] = {"nao_rt", "--blend-law-pole", "1.5"};
+  CHECK(rt::parseCommandLine(3, bad, cl, out, err) == 2);
+
+  const fs::path dir = tempDir("blend_law");
+  rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
+  o.ticks = 30;
+  o.controller.blend_law_pole = 0.7;
+  const Outcome r = run(o);
+  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
+  CHECK(s["blend_law_pole"] == 0.7);
+  // Without the flag: no such key.
+  rt::RunOptions policy = options(referenceModel(), "synthetic:elbow", tempDir("blend_law_policy"));
+  policy.ticks = 30;
+  REQUIRE(run(policy).report.status == 0);
+  CHECK_FALSE(nlohmann::json::parse(bytes(fs::path(policy.log_dir) / "summary.json")).contains("blend_law_pole"));
+
+  rt::RunOptions autonomous = options(writeModel("autonomous_law.bin", Conditioning::kAutonomous), "synthetic:elbow");
+  autonomous.controller.blend_law_pole = 0.7;
+  int status = 0;
+  CHECK(errorLine(autonomous, status).find("autonomous") != std::string::npos);
+  CHECK(status == 2);
+}

@@ -34,6 +34,18 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
   app.add_option("--movement", o.movement,
                  "Movement as named in model.bin: required for file: and none, implied by synthetic:")
       ->type_name("M");
+  app.add_option("--start-demo", o.start_demo,
+                 "none only: start at s_0 of this held-out demonstration (index into the model's\n"
+                 "validation demonstrations of --movement, split.val order) and run its length\n"
+                 "(default: the mean s_0 and mean length of all of them)")
+      ->type_name("I")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--blend-law-pole", o.controller.blend_law_pole,
+                 "Baseline, reference-conditioned models only: replace the policy by the key-pose\n"
+                 "blend law its labels follow, a = p^2 a(t-1) + (1-p)^2 (r - q), with pole p in\n"
+                 "(0, 1) (the training labels: 0.7), on the same arm (default 0: the policy)")
+      ->type_name("P")
+      ->check(CLI::Range(0.0, 0.999999));
   app.add_option("--seed", o.seed, "Seed of the synthetic reference")->type_name("N")->capture_default_str();
   auto* ticks = app.add_option("--ticks", o.ticks,
                                "Ticks (100 ms each) to run (default: the reference's length; none: the mean\n"

@@ -49,6 +49,10 @@ struct RunOptions {
   std::string reference = "synthetic:whole_arm";
   std::string movement;        ///< required for file: and none; implied by synthetic:
   std::uint64_t seed = 1;      ///< synthetic reference: run seed kReferenceSeedBase + seed
+  /// none only: >= 0 starts the rollout at s_0 of this validation demonstration (index into
+  /// the movement's held-out demonstrations, in split.val order) and runs its length; -1: the
+  /// mean s_0 and mean length of all of them (--start-demo).
+  int start_demo = -1;
   std::int64_t ticks = 0;      ///< > 0: run this many ticks
   double seconds = 0.0;        ///< > 0: run this long (rounded to whole ticks); else the default length
   bool realtime = false;       ///< absolute 10 Hz deadlines (clock_nanosleep), SCHED_FIFO + mlockall if permitted
@@ -93,6 +97,9 @@ struct RunReport {
   std::int64_t allocations_after_activate = -1;            ///< -1: not counted
   double ee_rmse_m = std::numeric_limits<double>::quiet_NaN();
   double ee_dtw_m = std::numeric_limits<double>::quiet_NaN();
+  /// none only: DTW to the nearest validation demonstration, and its index (-1: none).
+  double ee_dtw_nearest_m = std::numeric_limits<double>::quiet_NaN();
+  int ee_dtw_nearest_index = -1;
   LatencyStats tick_us, retarget_us, policy_us, sim_us;
   std::string summary_json;    ///< the text of summary.json (also without --log)
 };

@@ -66,9 +66,29 @@ def analyze(args, command):
         raise AnalysisError("cannot create the output directory %s: %s" % (out_dir, e.strerror)) from None
     options = {"detrend": args.detrend, "bootstrap": args.bootstrap, "seed": args.seed, "out": out_dir}
 
-    rows = []
-    for run, label in zip(runs, labels):
-        rows += t2.table2_rows(run, label, args.detrend, args.bootstrap, args.seed, progress)
+    from . import protocol
+    pooled = protocol.is_protocol(runs)
+    if pooled:
+        # The paper's protocol: several runs per movement, pooled with the run as the unit.
+        groups = protocol.group_runs(runs)
+        progress("protocol: %s" % ", ".join("%s %d run(s)" % (m, len(v)) for m, v in sorted(groups.items())))
+        rows_by_prefix = protocol.protocol_rows(runs, args.detrend, args.bootstrap, args.seed, progress)
+        rows = rows_by_prefix["att"]
+        if "attm" in rows_by_prefix:
+            with open(os.path.join(out_dir, "table2_attm.csv"), "w") as f:
+                f.write(t2.table2_csv(rows_by_prefix["attm"]))
+        found = protocol.findings(rows, groups)
+        table, notes = protocol.offsets_markdown(groups, sorted(rows_by_prefix))
+        with open(os.path.join(out_dir, "findings.md"), "w") as f:
+            f.write("\n".join(["# Findings checklist", ""] + protocol.findings_markdown(found)
+                              + ["", "# Attention offsets", ""] + table + [""] + notes) + "\n")
+        # Figures of one run per movement (the first); the UMAP takes every run.
+        shown = [(r, lab) for r, lab in zip(runs, labels) if r is groups[r.movement][0]]
+    else:
+        rows = []
+        for run, label in zip(runs, labels):
+            rows += t2.table2_rows(run, label, args.detrend, args.bootstrap, args.seed, progress)
+        shown = list(zip(runs, labels))
     with open(os.path.join(out_dir, "table2.csv"), "w") as f:
         f.write(t2.table2_csv(rows))
     from . import report  # after the statistics: the tables are written even if a figure fails
@@ -78,7 +98,7 @@ def analyze(args, command):
     from . import figures, kinematics
     arm = kinematics.load_arm_model()
     made = {}
-    for run, label in zip(runs, labels):
+    for run, label in shown:
         progress("%s: figures" % label)
         made[label] = [
             (figures.figure_ee(run, label, arm, out_dir),
@@ -99,7 +119,23 @@ def analyze(args, command):
         from .screenshot import screenshot_report
         progress("screenshot of report.html with headless Chromium")
         screenshot_report(os.path.join(out_dir, "report.html"), args.screenshot)
-    if args.reproduction:
+    if args.reproduction and pooled:
+        from .reproduction import DOC, FIG_DIR, copy_figure
+        progress("writing docs/reproduction.md and docs/figures/ (the paper's protocol)")
+        names = []
+        for run, label in shown:
+            names += [("fig_attention_%s" % label, "%s: attention per body part and the robot pose at a–d "
+                       "(paper Figs. 11–13), one autonomous rollout" % label),
+                      ("fig_motion_%s" % label, "%s: joint angle, velocity, acceleration and attention "
+                       "(paper Figs. 14–16), one autonomous rollout" % label)]
+        names.append(("fig_umap", "UMAP of the last decoder layer's cross-attention outputs of every rollout, "
+                      "by run, time and movement phase"))
+        os.makedirs(FIG_DIR, exist_ok=True)
+        for name, _ in names:
+            copy_figure(os.path.join(out_dir, name + ".png"), os.path.join(FIG_DIR, name + ".png"))
+        with open(DOC, "w") as f:
+            f.write(protocol.reproduction_markdown(groups, rows_by_prefix, found, command, names))
+    elif args.reproduction:
         from .reproduction import write_reproduction
         progress("writing docs/reproduction.md and docs/figures/")
         write_reproduction(out_dir, runs, labels, rows, options, command)

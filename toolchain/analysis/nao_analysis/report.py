@@ -171,7 +171,7 @@ def report_html(runs, labels, rows, figures, options, command):
              _paper_html(rows)]
     for run, lab in zip(runs, labels):
         parts.append("<h2>Run %s</h2>" % html.escape(lab))
-        for name, caption in figures[lab]:
+        for name, caption in figures.get(lab, []):
             parts.append(_img(out_dir, name, caption))
     if figures.get("umap"):
         parts.append("<h2>UMAP of the cross-attention outputs</h2>")

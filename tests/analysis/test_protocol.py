@@ -1,0 +1,65 @@
+"""The paper's protocol in the analysis (nao_analysis/protocol.py): several runs per movement pooled
+with the run as the resampling unit, the findings checklist and the attention offsets."""
+
+import os
+import shutil
+import tempfile
+import unittest
+
+import numpy as np
+import scipy.stats
+
+import run_fixture
+from nao_analysis import JOINT_NAMES, protocol, stats
+from nao_analysis.rundir import read_run
+
+PLANTED = 3  # RElbowRoll: its score follows its velocity in the fixtures
+
+
+class ProtocolTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.mkdtemp(prefix="nao_protocol_")
+        cls.runs = [read_run(run_fixture.write_run(os.path.join(cls.tmp, "elbow_%d" % i), "elbow", n=60, seed=i,
+                                                   planted_joint=PLANTED)) for i in range(4)]
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    def test_several_runs_of_a_movement_switch_to_the_pooled_protocol(self):
+        self.assertTrue(protocol.is_protocol(self.runs))
+        self.assertFalse(protocol.is_protocol(self.runs[:1]))
+
+    def test_pooled_rows_find_the_planted_joint_with_run_bootstrap_intervals(self):
+        rows = protocol.pooled_rows(self.runs, "elbow", "linear", 100, 1)
+        self.assertEqual([r["joint"] for r in rows], list(JOINT_NAMES))
+        planted = rows[PLANTED]
+        self.assertEqual(planted["run"], "pooled:4")
+        self.assertEqual(planted["n_ticks"], 4 * 60)
+        self.assertGreater(planted["pearson_r_ci_lo"], 0.0)
+        self.assertLess(planted["pearson_r_p"], 0.05)
+        for r in rows:
+            for s in stats.STAT_NAMES:
+                self.assertLessEqual(r[s + "_ci_lo"], r[s + "_ci_hi"])
+        # Deterministic: the same runs give the same rows.
+        self.assertEqual(rows, protocol.pooled_rows(self.runs, "elbow", "linear", 100, 1))
+
+    def test_pooled_kendall_is_the_own_tau_b(self):
+        x = np.random.default_rng(3).standard_normal(150)
+        y = x + np.random.default_rng(4).standard_normal(150)
+        self.assertAlmostEqual(scipy.stats.kendalltau(x, y, variant="b").statistic, stats.kendall_tau_b(x, y), 12)
+
+    def test_offsets_are_shares_of_ticks_and_findings_have_verdicts(self):
+        share, mean, total = protocol.attention_offsets(self.runs)
+        self.assertAlmostEqual(float(share.sum()), 1.0, 12)
+        self.assertEqual(total, 4 * 60)
+        rows = protocol.pooled_rows(self.runs, "elbow", "linear", 100, 1)
+        found = protocol.findings(rows, protocol.group_runs(self.runs))
+        self.assertEqual([f["id"] for f in found], ["i", "ii", "iii"])
+        for f in found:
+            self.assertIn(f["verdict"], ("reproduced", "partly", "not reproduced", "not analysed"))
+
+
+if __name__ == "__main__":
+    unittest.main()
