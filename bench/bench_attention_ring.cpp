@@ -1,6 +1,6 @@
 // Attention ring: what a reader costs the writer (DESIGN §9: readers never slow the writer).
 //
-// Every benchmark pushes one paper-size record (AttentionPayload<4, 4, 128>, 4208 bytes) per
+// Every benchmark pushes one paper-size record (AttentionPayload<4, 4, 128, 20>, 4304 bytes) per
 // iteration into the default 1024-slot ring (4.3 MB: the writer walks through it like the
 // controller, one slot per tick). The *_HammeringReader variants run a second thread that reads
 // the newest record with readFromNonRT in a tight loop, the worst reader there is. Counters:
@@ -45,7 +45,7 @@
 
 namespace {
 
-using PaperPayload = nao::AttentionPayload<4, 4, 128>;
+using PaperPayload = nao::AttentionPayload<4, 4, 128, 20>;
 using PaperRing = nao::AttentionRing<PaperPayload>;
 using Clock = std::chrono::steady_clock;
 

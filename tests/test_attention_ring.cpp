@@ -28,8 +28,8 @@ using namespace nao;
 
 namespace {
 
-using PaperPayload = AttentionPayload<4, 4, 128>;  // paper architecture: 4 decoder layers, 4 heads, d 128
-using SmallPayload = AttentionPayload<2, 4, 32>;   // small test architecture
+using PaperPayload = AttentionPayload<4, 4, 128, 20>;  // paper architecture: 4 decoder layers, 4 heads, d 128
+using SmallPayload = AttentionPayload<2, 4, 32, 8>;   // small test architecture
 using PaperRing = AttentionRing<PaperPayload>;
 using SmallRing = AttentionRing<SmallPayload>;
 
@@ -41,6 +41,8 @@ void fillPayload(P& p, std::uint64_t tick, std::mt19937_64& rng) {
   p.fault = static_cast<std::uint32_t>(rng() & 0xffu);
   p.reserved = 0;
   for (float& v : p.score) v = u(rng);
+  for (float& v : p.mass) v = u(rng);
+  for (float& v : p.age_profile) v = u(rng);
   for (auto& l : p.cross)
     for (auto& h : l)
       for (auto& i : h)
@@ -195,15 +197,18 @@ TEST_CASE("the ring block and the payload have the documented layout") {
   CHECK(h.total_bytes == sizeof(PaperRing));
   CHECK(reinterpret_cast<std::uintptr_t>(&ring->slots[0]) % kCacheLineBytes == 0);
   CHECK(reinterpret_cast<std::uintptr_t>(&ring->slots[1]) % kCacheLineBytes == 0);
-  const std::uint32_t want[8] = {kAttentionPayloadFormat, 4, 4, 5, 128, 0, 0, 0};
+  const std::uint32_t want[8] = {kAttentionPayloadFormat, 4, 4, 5, 128, 20, 0, 0};
   for (int i = 0; i < 8; ++i) CHECK(h.descriptor[i] == want[i]);
+  CHECK(kAttentionPayloadFormat == 2);
 
-  // Paper payload: 16 + 4 (5 + 4*4*25 + 5*128) = 4196 bytes of data, 4 of padding, checksum.
+  // Paper payload: 16 + 4 (5 + 5 + 20 + 4*4*25 + 5*128) = 4296 bytes of data, no padding, checksum.
   CHECK(offsetof(PaperPayload, score) == 16);
-  CHECK(offsetof(PaperPayload, cross) == 36);
-  CHECK(offsetof(PaperPayload, cross_out) == 36 + 4 * 4 * 4 * 25);
-  CHECK(offsetof(PaperPayload, checksum) == 4200);
-  CHECK(sizeof(PaperPayload) == 4208);
+  CHECK(offsetof(PaperPayload, mass) == 36);
+  CHECK(offsetof(PaperPayload, age_profile) == 56);
+  CHECK(offsetof(PaperPayload, cross) == 136);
+  CHECK(offsetof(PaperPayload, cross_out) == 136 + 4 * 4 * 4 * 25);
+  CHECK(offsetof(PaperPayload, checksum) == 4296);
+  CHECK(sizeof(PaperPayload) == 4304);
   CHECK(validateAttentionRing(ring.get(), sizeof(PaperRing), "in-process").header == &ring->header);
 }
 

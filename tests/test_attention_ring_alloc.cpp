@@ -16,7 +16,7 @@ using nao::test::CountAllocations;
 
 namespace {
 
-using PaperPayload = AttentionPayload<4, 4, 128>;
+using PaperPayload = AttentionPayload<4, 4, 128, 20>;
 using PaperRing = AttentionRing<PaperPayload>;
 constexpr int kPushes = 10000;
 

@@ -271,7 +271,7 @@ std::vector<const float*> policyTensorPointers(const PreparedRun& p) {
 // The run.
 
 template <class Dims>
-using RunPayload = AttentionPayload<Dims::kDecoderLayers, Dims::kHeads, Dims::kDModel>;
+using RunPayload = AttentionPayload<Dims::kDecoderLayers, Dims::kHeads, Dims::kDModel, Dims::kWindow>;
 template <class Dims>
 using RunRing = AttentionRing<RunPayload<Dims>, kDefaultAttentionCapacity>;
 
@@ -296,7 +296,12 @@ void fillPayload(const TickRecord& rec, const PolicyWorkspace<Dims>& ws, RunPayl
   payload.tick = static_cast<std::uint64_t>(rec.tick);
   payload.fault = rec.fault;
   payload.reserved = 0;
-  for (int j = 0; j < Dims::kTokens; ++j) payload.score[j] = rec.att[static_cast<std::size_t>(j)];
+  for (int j = 0; j < Dims::kTokens; ++j) {
+    payload.score[j] = rec.att[static_cast<std::size_t>(j)];
+    payload.mass[j] = rec.attm[static_cast<std::size_t>(j)];
+  }
+  // Like cross: the workspace's last policy step (a bypassed tick shows in the fault bits).
+  for (int a = 0; a < Dims::kWindow; ++a) payload.age_profile[a] = ws.age_profile[a];
   std::memcpy(payload.cross, ws.cross, sizeof(payload.cross));
   // Column i of the workspace's [D, J] column-major matrix is action token i: row i of cross_out.
   std::memcpy(payload.cross_out, ws.cross_out.data(), sizeof(payload.cross_out));

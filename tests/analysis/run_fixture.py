@@ -79,22 +79,25 @@ def write_run(path, movement, n=80, seed=0, planted_joint=3, bypass=(), layers=1
                     + [_f(x) for x in ee_ref[i]] + [_f(x) for x in att[i]] + [str(fault[i]), "0", "0", "0", "0"])
             f.write(",".join(vals) + "\n")
 
-    # attention.bin: payload format 1 with a small architecture.
+    # attention.bin: payload format 2 with a small architecture and a window of 4 ticks.
     rng = np.random.default_rng(seed + 100)
-    T = 5
-    data_bytes = 36 + 4 * (layers * heads * T * T + T * d_model)
+    T, W = 5, 4
+    data_bytes = 16 + 4 * (T + T + W + layers * heads * T * T + T * d_model)
     pad = (8 - data_bytes % 8) % 8
     payload = data_bytes + pad + 8
     records = []
     for i in range(n):
         logits = rng.standard_normal((layers, heads, T, T))
         alpha = np.exp(logits) / np.exp(logits).sum(axis=-1, keepdims=True)
+        mass = alpha[-1].mean(axis=(0, 1))
+        ages = rng.random(W)
         body = (struct.pack("<QII", i, int(fault[i]), 0) + att[i].astype("<f4").tobytes()
+                + mass.astype("<f4").tobytes() + (ages / ages.sum()).astype("<f4").tobytes()
                 + alpha.astype("<f4").tobytes()
                 + (rng.standard_normal((T, d_model)) + 0.01 * i).astype("<f4").tobytes() + b"\0" * pad)
         records.append(body + struct.pack("<Q", fnv1a64(body)))
     header = struct.pack(HEADER_FORMAT, b"NAOATTN1", 1, 96, n, 0, payload, 1024, n,
-                         1, layers, heads, T, d_model, 0, 0, 0, 0)
+                         2, layers, heads, T, d_model, W, 0, 0, 0)
     assert len(header) == 96 and all(len(rec) == payload for rec in records)
     with open(os.path.join(path, "attention.bin"), "wb") as f:
         f.write(header + b"".join(records))

@@ -266,40 +266,44 @@ AttentionRingView attentionRingView(const AttentionRing<Payload, Capacity>& ring
 // ---------------------------------------------------------------------------------------------
 // The controller's payload.
 
-/// Value of descriptor[0] for AttentionPayload version 1 (docs/attention_bin.md).
-inline constexpr std::uint32_t kAttentionPayloadFormat = 1;
-/// Byte offsets every AttentionPayload shares, whatever L, H, D (what nao_attn_tail relies on).
+/// Value of descriptor[0] for AttentionPayload version 2 (docs/attention_bin.md; version 1 had no
+/// mass and no temporal profile: the single-instant policy).
+inline constexpr std::uint32_t kAttentionPayloadFormat = 2;
+/// Byte offsets every AttentionPayload shares, whatever L, H, D, W (what nao_attn_tail relies on).
 inline constexpr std::size_t kAttentionPayloadTickOffset = 0;
 inline constexpr std::size_t kAttentionPayloadFaultOffset = 8;
 inline constexpr std::size_t kAttentionPayloadScoreOffset = 16;
 
 /// One tick's attention record as the controller pushes it (docs/policy.md "Attention record";
 /// byte layout in docs/attention_bin.md). Fixed layout, little-endian floats and integers.
-/// @tparam L decoder layers, H heads, D d_model; tokens = body parts = kNumJoints.
-template <int L, int H, int D>
+/// @tparam L decoder layers, H heads, D d_model, W window (ticks); tokens = body parts = kNumJoints.
+template <int L, int H, int D, int W>
 struct AttentionPayload {
-  static_assert(L >= 1 && H >= 1 && D >= 1, "attention payload dimensions must be positive");
+  static_assert(L >= 1 && H >= 1 && D >= 1 && W >= 1, "attention payload dimensions must be positive");
   static constexpr int kLayers = L;
   static constexpr int kHeads = H;
   static constexpr int kDModel = D;
+  static constexpr int kWindow = W;
   static constexpr int kTokens = kNumJoints;
 
   std::uint64_t tick = 0;      ///< controller tick index
   std::uint32_t fault = 0;     ///< the tick's fault bits (0 = none)
   std::uint32_t reserved = 0;  ///< 0
-  float score[kTokens] = {};   ///< per-body-part norm-based score, last decoder layer, joint order
-  float cross[L][H][kTokens][kTokens] = {};  ///< cross-attention α[l][h][action token i][body part j]
+  float score[kTokens] = {};   ///< per-body-part norm-based score, last decoder layer, summed over the window
+  float mass[kTokens] = {};    ///< per-body-part raw cross-attention mass, last decoder layer (sums to 1)
+  float age_profile[W] = {};   ///< last decoder layer's attention mass per age, 0 = this tick (sums to 1)
+  float cross[L][H][kTokens][kTokens] = {};  ///< cross-attention α[l][h][action token i][body part j], summed over the window
   float cross_out[kTokens][D] = {};          ///< last decoder layer's cross-attention output per action token
   // 0 or 4 bytes of padding here (zeroed by sealPayload) so that checksum is 8-byte aligned.
   std::uint64_t checksum = 0;  ///< FNV-1a 64 of every byte before this field (sealPayload)
 };
 
-/// The descriptor a ring of AttentionPayload<L, H, D> carries: {format, L, H, tokens, D, 0, 0, 0}.
+/// The descriptor a ring of AttentionPayload<L, H, D, W> carries: {format, L, H, tokens, D, W, 0, 0}.
 template <typename Payload>
 constexpr AttentionDescriptor attentionPayloadDescriptor() {
   return {kAttentionPayloadFormat, static_cast<std::uint32_t>(Payload::kLayers),
           static_cast<std::uint32_t>(Payload::kHeads), static_cast<std::uint32_t>(Payload::kTokens),
-          static_cast<std::uint32_t>(Payload::kDModel), 0, 0, 0};
+          static_cast<std::uint32_t>(Payload::kDModel), static_cast<std::uint32_t>(Payload::kWindow), 0, 0};
 }
 
 /// FNV-1a 64 over `size` bytes (the payload checksum; same function as model.bin's).
@@ -314,9 +318,9 @@ inline std::uint64_t attentionFnv1a64(const void* data, std::size_t size) {
 }
 
 /// Checksum of a payload: FNV-1a 64 of its bytes before `checksum`. Real-time safe.
-template <int L, int H, int D>
-std::uint64_t payloadChecksum(const AttentionPayload<L, H, D>& payload) {
-  using P = AttentionPayload<L, H, D>;
+template <int L, int H, int D, int W>
+std::uint64_t payloadChecksum(const AttentionPayload<L, H, D, W>& payload) {
+  using P = AttentionPayload<L, H, D, W>;
   static_assert(std::is_standard_layout_v<P> && std::is_trivially_copyable_v<P>);
   static_assert(offsetof(P, tick) == kAttentionPayloadTickOffset && offsetof(P, fault) == kAttentionPayloadFaultOffset &&
                 offsetof(P, score) == kAttentionPayloadScoreOffset, "fixed part of the payload layout");
@@ -327,9 +331,9 @@ std::uint64_t payloadChecksum(const AttentionPayload<L, H, D>& payload) {
 /// Zeroes the padding before `checksum` (so equal payloads have equal bytes: determinism of
 /// attention.bin) and sets `checksum`. Call after filling the payload, before pushFromRT.
 /// Real-time safe.
-template <int L, int H, int D>
-void sealPayload(AttentionPayload<L, H, D>& payload) {
-  using P = AttentionPayload<L, H, D>;
+template <int L, int H, int D, int W>
+void sealPayload(AttentionPayload<L, H, D, W>& payload) {
+  using P = AttentionPayload<L, H, D, W>;
   constexpr std::size_t data_end = offsetof(P, cross_out) + sizeof(payload.cross_out);
   constexpr std::size_t pad = offsetof(P, checksum) - data_end;
   if constexpr (pad > 0) std::memset(reinterpret_cast<unsigned char*>(&payload) + data_end, 0, pad);
@@ -337,8 +341,8 @@ void sealPayload(AttentionPayload<L, H, D>& payload) {
 }
 
 /// True if the payload's checksum matches its bytes. Any thread.
-template <int L, int H, int D>
-bool payloadIntact(const AttentionPayload<L, H, D>& payload) {
+template <int L, int H, int D, int W>
+bool payloadIntact(const AttentionPayload<L, H, D, W>& payload) {
   return payload.checksum == payloadChecksum(payload);
 }
 

@@ -37,11 +37,15 @@ ATTENTION_HEADER = np.dtype([("magic", "S8"), ("version", "<u4"), ("header_bytes
 assert ATTENTION_HEADER.itemsize == 96
 
 
-def attention_payload_dtype(n_layers, n_heads, n_tokens, d_model):
-    """numpy dtype of one attention record (docs/attention_bin.md, payload format 1)."""
-    data = 36 + 4 * (n_layers * n_heads * n_tokens * n_tokens + n_tokens * d_model)
-    fields = [("tick", "<u8"), ("fault", "<u4"), ("reserved", "<u4"), ("score", "<f4", (n_tokens,)),
-              ("cross", "<f4", (n_layers, n_heads, n_tokens, n_tokens)), ("cross_out", "<f4", (n_tokens, d_model))]
+def attention_payload_dtype(n_layers, n_heads, n_tokens, d_model, window=0):
+    """numpy dtype of one attention record (docs/attention_bin.md): payload format 2 (the
+    temporal policy: mass per body part and the profile over `window` ages after the score) when
+    window > 0, format 1 (the single-instant policy) when window == 0."""
+    extra = [("mass", "<f4", (n_tokens,)), ("age_profile", "<f4", (window,))] if window else []
+    data = 16 + 4 * (n_tokens + (n_tokens + window if window else 0) + n_layers * n_heads * n_tokens * n_tokens
+                     + n_tokens * d_model)
+    fields = ([("tick", "<u8"), ("fault", "<u4"), ("reserved", "<u4"), ("score", "<f4", (n_tokens,))] + extra
+              + [("cross", "<f4", (n_layers, n_heads, n_tokens, n_tokens)), ("cross_out", "<f4", (n_tokens, d_model))])
     if data % 8:
         fields.append(("pad", "V%d" % (8 - data % 8)))
     return np.dtype(fields + [("checksum", "<u8")])
@@ -72,6 +76,9 @@ class Attention:
     score: np.ndarray      # (n, T) per-body-part score, float32
     cross: np.ndarray      # (n, L, H, T, T) cross-attention alpha
     cross_out: np.ndarray  # (n, T, D) last decoder layer's cross-attention output
+    window: int = 0                   # W of format 2 (0: format 1)
+    mass: np.ndarray = None           # (n, T) raw cross-attention mass per body part (format 2)
+    age_profile: np.ndarray = None    # (n, W) attention mass per age, 0 = the tick itself (format 2)
 
 
 @dataclass(frozen=True)
@@ -144,13 +151,17 @@ def read_attention(path):
                             % (path, bytes(h["magic"]), ATTENTION_MAGIC))
     if int(h["version"]) != 1:
         raise AnalysisError("%s: version %d, this analysis reads version 1" % (path, int(h["version"])))
-    fmt, n_layers, n_heads, n_tokens, d_model = (int(v) for v in h["descriptor"][:5])
-    if fmt != 1:
-        raise AnalysisError("%s: payload format %d, this analysis reads format 1" % (path, fmt))
+    fmt, n_layers, n_heads, n_tokens, d_model, window = (int(v) for v in h["descriptor"][:6])
+    if fmt not in (1, 2):
+        raise AnalysisError("%s: payload format %d, this analysis reads formats 1 and 2" % (path, fmt))
+    if fmt == 1:
+        window = 0
+    elif window < 1:
+        raise AnalysisError("%s: payload format 2 with window %d: expected a positive window" % (path, window))
     if n_tokens != N_JOINTS or min(n_layers, n_heads, d_model) < 1:
         raise AnalysisError("%s: descriptor L=%d H=%d T=%d D=%d: expected T=%d and positive L, H, D"
                             % (path, n_layers, n_heads, n_tokens, d_model, N_JOINTS))
-    rec = attention_payload_dtype(n_layers, n_heads, n_tokens, d_model)
+    rec = attention_payload_dtype(n_layers, n_heads, n_tokens, d_model, window)
     if int(h["payload_bytes"]) != rec.itemsize:
         raise AnalysisError("%s: payload_bytes %d, the descriptor implies %d"
                             % (path, int(h["payload_bytes"]), rec.itemsize))
@@ -176,7 +187,9 @@ def read_attention(path):
                      first_record=int(h["first_record"]), records_written=int(h["records_written"]),
                      ring_capacity=int(h["ring_capacity"]), tick=records["tick"].astype(np.int64),
                      fault=records["fault"].astype(np.int64), score=records["score"].copy(),
-                     cross=records["cross"].copy(), cross_out=records["cross_out"].copy())
+                     cross=records["cross"].copy(), cross_out=records["cross_out"].copy(), window=window,
+                     mass=records["mass"].copy() if window else None,
+                     age_profile=records["age_profile"].copy() if window else None)
 
 
 def read_summary(path):
