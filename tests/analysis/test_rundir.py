@@ -4,6 +4,7 @@ is read exactly as written (run_fixture writes the documented formats independen
 import contextlib
 import io
 import os
+import struct
 import shutil
 import subprocess
 import tempfile
@@ -105,7 +106,9 @@ class RunDirectory(unittest.TestCase):
 
     def test_a_flipped_byte_fails_the_record_checksum(self):
         with open(self.path("attention.bin"), "r+b") as f:
-            f.seek(96 + 408 * 7 + 50)  # inside record 7's cross-attention weights
+            f.seek(32)
+            payload = struct.unpack("<Q", f.read(8))[0]  # payload_bytes of the header
+            f.seek(96 + payload * 7 + 150)  # inside record 7's cross-attention weights
             b = f.read(1)
             f.seek(-1, os.SEEK_CUR)
             f.write(bytes([b[0] ^ 0x40]))

@@ -112,6 +112,10 @@ def analyze(args, command):
     progress("UMAP of %d runs' cross-attention outputs (numba compiles first: ~30 s)" % len(runs))
     made["umap"] = [(figures.figure_umap(runs, labels, out_dir),
                      "UMAP of the cross-attention outputs, coloured by run, time and movement phase")]
+    profile = figures.figure_age_profile(runs, labels, out_dir)
+    if profile is not None:
+        made["age_profile"] = [(profile, "temporal attention profile: mean cross-attention mass per age of the "
+                                         "attended tick, per movement (band: range over runs)")]
     with open(os.path.join(out_dir, "report.html"), "w") as f:
         f.write(report.report_html(runs, labels, rows, made, options, command))
 
@@ -130,6 +134,9 @@ def analyze(args, command):
                        "(paper Figs. 14–16), one autonomous rollout" % label)]
         names.append(("fig_umap", "UMAP of the last decoder layer's cross-attention outputs of every rollout, "
                       "by run, time and movement phase"))
+        if "age_profile" in made:
+            names.append(("fig_age_profile", "temporal attention profile: the last decoder layer's mean "
+                          "cross-attention mass per age of the attended tick, per movement"))
         os.makedirs(FIG_DIR, exist_ok=True)
         for name, _ in names:
             copy_figure(os.path.join(out_dir, name + ".png"), os.path.join(FIG_DIR, name + ".png"))

@@ -257,3 +257,35 @@ def figure_umap(runs, labels, out_dir):
                  "random_state %d)" % UMAP_SEED)
     fig.tight_layout()
     return save(fig, out_dir, "fig_umap")
+
+
+def figure_age_profile(runs, labels, out_dir):
+    """The temporal attention profile (attention.bin format 2): the last decoder layer's mean
+    cross-attention mass per age (0 = the tick itself) over the ticks of full windows, per
+    movement, with the spread over runs; None when no run carries it (format 1)."""
+    by_movement = {}
+    for run in runs:
+        att = run.attention
+        if att is None or att.age_profile is None or att.window < 1:
+            continue
+        full = att.tick >= att.window - 1  # ticks whose window holds W ticks of history
+        if not full.any():
+            continue
+        by_movement.setdefault(run.movement, []).append(att.age_profile[full].mean(axis=0))
+    if not by_movement:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for movement in sorted(by_movement):
+        per_run = np.array(by_movement[movement])
+        ages = np.arange(per_run.shape[1]) * 0.1
+        mean = per_run.mean(axis=0)
+        ax.plot(ages, mean, marker="o", ms=3, label="%s (%d runs)" % (movement, per_run.shape[0]))
+        if per_run.shape[0] > 1:
+            ax.fill_between(ages, per_run.min(axis=0), per_run.max(axis=0), alpha=0.2)
+    ax.set_xlabel("age of the attended tick [s] (0 = the current tick)")
+    ax.set_ylabel("cross-attention mass [-] (sums to 1)")
+    ax.set_title("Temporal attention profile, last decoder layer (band: range over runs)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    return save(fig, out_dir, "fig_age_profile")
