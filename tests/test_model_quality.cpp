@@ -1,11 +1,13 @@
 // The committed models beat the two trivial predictors on their own validation split, as their
 // model cards state: the validation demonstrations named in model.bin are regenerated from the
-// synthesiser (training set seed 1, as toolchain/nao train makes it), the samples are rebuilt
-// as docs/policy.md defines them, and the runtime's inference is scored against the zero action
-// and the repeat-last-action baselines.
+// synthesiser (training set seed 1, as toolchain/nao train makes it), executed on the simulated
+// arm with the expert's labels as docs/policy.md defines them, and the runtime's streaming
+// inference is scored against the zero action and the repeat-last-action baselines.
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/kmeans.hpp"
+#include "nao/tools/policy_dataset.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/test_util.hpp"
 
@@ -13,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -43,43 +46,57 @@ Scores score(const std::string& path) {
   REQUIRE(val.size() >= 3);
   Scores s;
   double sum_model = 0.0, sum_zero = 0.0, sum_repeat = 0.0;
+  std::map<std::string, std::vector<JointVector>> centroid_map;
+  for (std::size_t m = 0; m < model.header.movement_names.size(); ++m)
+    for (int k = 0; k < PaperPolicyDims::kClusters; ++k)
+      centroid_map[model.header.movement_names[m]].push_back(centroid(w, static_cast<int>(m), k).cast<double>());
+  std::vector<tools::PolicyDemo> demos;
   for (const std::string& name : val) {
     const std::size_t cut = name.rfind('_');
     const std::string movement = name.substr(0, cut);
     const int index = std::stoi(name.substr(cut + 1));
-    int m = -1;
-    for (std::size_t k = 0; k < model.header.movement_names.size(); ++k)
-      if (model.header.movement_names[k] == movement) m = static_cast<int>(k);
-    REQUIRE(m >= 0);
-    std::vector<JointVector> centroids;
-    for (int k = 0; k < PaperPolicyDims::kClusters; ++k) centroids.push_back(centroid(w, m, k).cast<double>());
+    REQUIRE(centroid_map.count(movement) == 1);
+    const std::vector<JointVector>& centroids = centroid_map[movement];
     const tools::ReferenceStream ref =
         tools::makeDemoReference(arm, tools::parseMovement(movement), kTrainingSeed, index, centroids);
     // Labels as nao_toolchain cluster writes them (the key pose in force at each tick).
-    std::vector<double> t_grid, t_meas;
+    tools::PolicyDemo d;
+    d.name = name;
+    std::vector<double> t_meas;
     std::vector<JointVector> q_meas;
     for (std::size_t t = 0; t < ref.retargeted.size(); ++t) {
-      t_grid.push_back(static_cast<double>(t) / ref.rate_hz);
+      d.t_s.push_back(static_cast<double>(t) / ref.rate_hz);
+      d.measured.push_back(ref.measured[t] ? 1 : 0);
       if (!ref.measured[t]) continue;
-      t_meas.push_back(t_grid.back());
+      t_meas.push_back(d.t_s.back());
       q_meas.push_back(ref.retargeted[t]);
     }
     REQUIRE(!q_meas.empty());
-    const std::vector<int> labels = tools::keyPoseLabels(centroids, t_meas, q_meas, t_grid);
-    const std::vector<JointVector>& f = ref.target;
-    for (std::size_t t = 0; t + 1 < f.size(); ++t) {
-      const JointVector a_prev = t == 0 ? JointVector::Zero() : JointVector(f[t] - f[t - 1]);
-      const JointVector target = f[t + 1] - f[t];
+    d.label = tools::keyPoseLabels(centroids, t_meas, q_meas, d.t_s);
+    d.f = ref.target;
+    demos.push_back(d);
+  }
+  // The validation rollouts as training makes them: executed on the simulated arm, clean.
+  const tools::PolicyData data = tools::makePolicyData(centroid_map, demos);
+  std::vector<int> all;
+  for (std::size_t i = 0; i < data.demos.size(); ++i) all.push_back(static_cast<int>(i));
+  tools::ExecutionOptions clean;
+  clean.noisy_rollouts = 0;
+  const std::vector<tools::PolicySequence> seqs =
+      tools::executeDemos(data, all, makeSimModel(arm), clean, meta.at("training").at("seed").get<std::uint64_t>());
+  for (const tools::PolicySequence& seq : seqs) {
+    resetPolicyStream(*ws);
+    for (std::size_t t = 0; t < seq.ticks(); ++t) {
       PolicyInput in;
-      in.q = f[t].cast<float>();
-      in.a_prev = a_prev.cast<float>();
-      in.r = centroids[static_cast<std::size_t>(labels[t])].cast<float>();
-      in.movement = m;
+      in.q = seq.q[t].cast<float>();
+      in.a_prev = seq.a_prev[t].cast<float>();
+      in.r = seq.r[t].cast<float>();
+      in.movement = seq.movement;
       in.step = static_cast<int>(std::min<std::size_t>(t, PaperPolicyDims::kMaxSteps - 1));
       const JointVector a = stepPolicy(w, *ws, in).cast<double>();
-      sum_model += (a - target).squaredNorm();
-      sum_zero += target.squaredNorm();
-      sum_repeat += (a_prev - target).squaredNorm();
+      sum_model += (a - seq.a[t]).squaredNorm();
+      sum_zero += seq.a[t].squaredNorm();
+      sum_repeat += (seq.a_prev[t] - seq.a[t]).squaredNorm();
       ++s.samples;
     }
   }

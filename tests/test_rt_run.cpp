@@ -114,7 +114,7 @@ TEST_CASE("ticks.csv's header is exactly the contract's columns, in order") {
   const std::string expected =
       "tick,t_s,q_ref_0,q_ref_1,q_ref_2,q_ref_3,q_ref_4,r_0,r_1,r_2,r_3,r_4,a_0,a_1,a_2,a_3,a_4,"
       "q_cmd_0,q_cmd_1,q_cmd_2,q_cmd_3,q_cmd_4,q_0,q_1,q_2,q_3,q_4,ee_x,ee_y,ee_z,ee_ref_x,ee_ref_y,ee_ref_z,"
-      "att_0,att_1,att_2,att_3,att_4,fault,tick_us,retarget_us,policy_us,sim_us";
+      "att_0,att_1,att_2,att_3,att_4,fault,tick_us,retarget_us,policy_us,sim_us,attm_0,attm_1,attm_2,attm_3,attm_4";
   CHECK(rt::ticksCsvHeader() == expected);
 }
 

@@ -356,8 +356,9 @@ std::string ticksCsvHeader() {
     for (int j = 0; j < kNumJoints; ++j) s += std::string(",") + name + "_" + std::to_string(j);
   s += ",ee_x,ee_y,ee_z,ee_ref_x,ee_ref_y,ee_ref_z";
   for (int j = 0; j < kNumJoints; ++j) s += ",att_" + std::to_string(j);
-  for (int j = 0; j < kNumJoints; ++j) s += ",attm_" + std::to_string(j);
   s += ",fault,tick_us,retarget_us,policy_us,sim_us";
+  // Appended (the columns before keep their positions): the raw attention mass.
+  for (int j = 0; j < kNumJoints; ++j) s += ",attm_" + std::to_string(j);
   return s;
 }
 
@@ -377,16 +378,19 @@ std::string ticksCsvRow(const TickRecord& r, bool zero_timing) {
       s += ',';
       appendNumber(s, (*p)[k]);
     }
-  for (const std::array<float, kNumJoints>* v : {&r.att, &r.attm})
-    for (float a : *v) {
-      s += ',';
-      appendNumber(s, a);
-    }
+  for (float a : r.att) {
+    s += ',';
+    appendNumber(s, a);
+  }
   s += ',';
   appendInt(s, r.fault);
   for (double us : {r.tick_us, r.retarget_us, r.policy_us, r.sim_us}) {
     s += ',';
     appendNumber(s, zero_timing ? 0.0 : us);
+  }
+  for (float a : r.attm) {
+    s += ',';
+    appendNumber(s, a);
   }
   return s;
 }
