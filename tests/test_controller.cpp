@@ -3,6 +3,7 @@
 // here with a random small policy; imitation quality with trained models elsewhere.
 #include "nao/controller.hpp"
 #include "nao/tools/reference_source.hpp"
+#include "nao/tools/kmeans.hpp"
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
@@ -265,4 +266,36 @@ TEST_CASE("detector gaps of up to 2 ticks are bridged on the held reference; fro
   const Run late = run(ControllerParams{}, c1, [](int t) { return t < 2; }, never, 5);
   CHECK((late.records[0].fault & kFaultNoHuman) != 0);
   CHECK((late.records[1].fault & kFaultNoHuman) != 0);
+}
+
+TEST_CASE("the reference-mode policy is fed the feature-extracted target f(t+1) of the snapped key poses, as the toolchain makes it") {
+  // Online (controller) and offline (toolchain featureTrajectory) blends of the same key-pose
+  // sequence: after tick t the controller's f is the offline f(t+1).
+  Fixture& f = fixture();
+  FakeClock clock;
+  const ControllerModel<Dims> model = configureController(f.arm, f.weights, ControllerParams{});
+  ControllerData<Dims> data(model.sim, f.ref.target.front());
+  activateController(model, data, f.ref.target.front(), 0, clock);
+  std::vector<JointVector> online, keys;
+  std::vector<double> t_s;
+  for (std::size_t i = 0; i < f.ref.frames.size(); ++i) {
+    const TickRecord& rec = updateController(model, data, f.ref.present[i] ? &f.ref.frames[i] : nullptr);
+    online.push_back(data.feature_f);
+    keys.push_back(rec.r);
+    t_s.push_back(0.1 * static_cast<double>(i));
+  }
+  deactivateController(model, data);
+  keys.push_back(keys.back());
+  t_s.push_back(0.1 * static_cast<double>(keys.size() - 1));
+  std::vector<JointVector> centroids;
+  for (int k = 0; k < Dims::kClusters; ++k) centroids.push_back(centroid(f.weights, 0, k).cast<double>());
+  const std::vector<JointVector> offline = tools::featureTrajectory(centroids, t_s, keys);
+  REQUIRE(offline.size() == online.size() + 1);
+  double worst = 0.0, moved = 0.0;
+  for (std::size_t t = 0; t < online.size(); ++t) {
+    worst = std::max(worst, (online[t] - offline[t + 1]).cwiseAbs().maxCoeff());
+    moved = std::max(moved, (online[t] - online.front()).cwiseAbs().maxCoeff());
+  }
+  CHECK(worst < 1e-12);
+  CHECK(moved > 0.05);  // not vacuous: the key poses change and the blend follows
 }

@@ -478,11 +478,20 @@ TEST_CASE("executed rollouts: the expert's labels put the servo-lagged arm on f(
       CHECK(r.ticks_on_target >= r.ticks_checked * 9 / 10);
       CHECK(r.worst_off_trajectory > 0.02);
     }
-    // The label is not the key-pose blend of its own inputs: the servo lag is in it.
-    double off_blend = 0.0;
-    for (std::size_t t = 1; t < s.ticks(); ++t)
-      off_blend = std::max(off_blend, (s.a[t] - blend.velocity(s.a_prev[t], s.q[t], s.r[t])).cwiseAbs().maxCoeff());
+    // The reference input is the tick's feature-extracted target f(t+1) (clamped), and the label
+    // is neither the key-pose blend of the inputs nor the step to that target: the servo lag
+    // is in it.
+    const PolicyDemo& d = data.demos[static_cast<std::size_t>(s.demo)];
+    const std::vector<JointVector>& keys = data.centroids[static_cast<std::size_t>(d.movement)];
+    double off_blend = 0.0, off_step = 0.0;
+    for (std::size_t t = 1; t < s.ticks(); ++t) {
+      CHECK(s.r[t] == clampToLimits(arm, d.f[t + 1]));
+      const JointVector key = keys[static_cast<std::size_t>(d.label[t])];
+      off_blend = std::max(off_blend, (s.a[t] - blend.velocity(s.a_prev[t], s.q[t], key)).cwiseAbs().maxCoeff());
+      off_step = std::max(off_step, (s.a[t] - (s.r[t] - s.q[t])).cwiseAbs().maxCoeff());
+    }
     CHECK(off_blend > 1e-3);
+    CHECK(off_step > 1e-3);
   }
   // Seeded: the same seed gives the same sequences, another seed other noise (clean ones equal).
   const std::vector<PolicySequence> b = executeDemos(data, demos, model, o, 11);

@@ -345,7 +345,6 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
   const ArmModel& arm = sim_model.arm;
   const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
   const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
-  const std::vector<JointVector>& centroids = data.centroids.at(static_cast<std::size_t>(demo.movement));
   PolicySequence s;
   s.demo = d;
   s.movement = demo.movement;
@@ -373,11 +372,14 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
     }
     captureSim(sim, snap);
     double miss = 0.0;
-    const JointVector c = expertCommand(sim_model, sim, snap, clampToLimits(arm, demo.f[t + 1]), lo, hi, o, miss);
+    const JointVector target = clampToLimits(arm, demo.f[t + 1]);
+    const JointVector c = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
     if (k == 0) s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
     s.q.push_back(q);
     s.a_prev.push_back(a_prev);
-    s.r.push_back(centroids[static_cast<std::size_t>(demo.label[t])]);
+    // The reference input: the tick's feature-extracted target f(t+1), which the controller
+    // computes online from the snapped key poses (controller.hpp, kFeatureBlendPole).
+    s.r.push_back(target);
     s.a.push_back(c - q);
     JointVector c_exec = c;
     if (k > 0) {

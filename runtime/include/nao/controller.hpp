@@ -28,6 +28,11 @@
 
 namespace nao {
 
+/// The pole of the key-pose blend that makes the feature-extracted trajectory (DESIGN §6;
+/// toolchain KeyPoseBlend uses this value): f(t+1) = f(t) + v(t),
+/// v(t) = pole² v(t−1) + (1 − pole)² (c(t) − f(t)), f(0) = c(0), v(−1) = 0.
+inline constexpr double kFeatureBlendPole = 0.7;
+
 /// Fault bits of a tick (ticks.csv column `fault`). Bits 0-7 and 14 come from the tick itself and
 /// never stop the loop; bits 8-13 come from the robot backend (LoLA; the ODE arm raises none).
 enum ControllerFault : std::uint32_t {
@@ -114,6 +119,9 @@ struct ControllerParams {
   /// a = pole^2 a(t-1) + (1 - pole)^2 (r - q) (toolchain KeyPoseBlend), driving the same arm,
   /// so a test can measure what the servos alone cost. 0: the policy. Reference mode only.
   double blend_law_pole = 0.0;
+  /// Pole of the online feature-extracted reference the policy is fed in reference mode (the
+  /// blend of the snapped key poses, as the training data's f; must equal the data's).
+  double feature_pole = kFeatureBlendPole;
 };
 
 /// One tick as recorded (ticks.csv; angles rad, positions m in the torso frame).
@@ -166,6 +174,10 @@ struct ControllerData {
   std::int64_t last_human_tick = -1;     ///< last tick with a usable human (-1: none yet)
   JointVector q_ref = JointVector::Zero();
   JointVector a_prev = JointVector::Zero();
+  /// The online feature-extracted trajectory of the snapped key poses: f(t) and v(t−1); the
+  /// reference-mode policy's input r is f(t+1) (docs/policy.md "Data").
+  JointVector feature_f = JointVector::Zero(), feature_v = JointVector::Zero();
+  bool feature_started = false;
   std::array<std::int64_t, kNumControllerFaults> fault_counts{};
   TickRecord record;                     ///< the last tick
 };
@@ -207,6 +219,9 @@ void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>
   data.last_human_tick = -1;
   data.q_ref = q;
   data.a_prev.setZero();
+  data.feature_f = q;
+  data.feature_v.setZero();
+  data.feature_started = false;
   resetPolicyStream(*data.policy);  // a new rollout: the policy's window starts empty
   data.fault_counts.fill(0);
   data.record = TickRecord{};
@@ -271,6 +286,18 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   const JointVector& q = data.robot->measured();
   rec.key_pose = snapToCentroid(model.policy, data.movement, data.q_ref);
   rec.r = centroid(model.policy, data.movement, rec.key_pose).template cast<double>();
+  // The feature-extracted target of this tick, f(t+1): the blend toward the key pose in force,
+  // started at rest on the first key pose (as the toolchain's featureTrajectory).
+  if (!data.feature_started) {
+    data.feature_f = rec.r;
+    data.feature_v.setZero();
+    data.feature_started = true;
+  }
+  {
+    const double pole = p.feature_pole;
+    data.feature_v = pole * pole * data.feature_v + (1.0 - pole) * (1.0 - pole) * (rec.r - data.feature_f);
+    data.feature_f += data.feature_v;
+  }
   JointVector a = JointVector::Zero();
   if (rec.fault & kFaultHumanTimeout) {
     // Toward home at half the velocity limits: no policy input is trustworthy any more.
@@ -285,7 +312,7 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
     PolicyInput in;
     in.q = q.cast<float>();
     in.a_prev = data.a_prev.template cast<float>();
-    in.r = rec.r.template cast<float>();
+    in.r = clampToLimits(model.arm, data.feature_f).template cast<float>();
     in.movement = data.movement;
     in.step = static_cast<int>(std::min<std::int64_t>(data.tick, Dims::kMaxSteps - 1));
     a = stepPolicy(model.policy, *data.policy, in).template cast<double>();

@@ -2,6 +2,8 @@
 // feature-extracted trajectories built from them (DESIGN §6).
 #pragma once
 
+#include "nao/controller.hpp"  // kFeatureBlendPole: the runtime feeds the policy the same blend
+
 #include "nao/arm_model.hpp"
 
 #include <cstdint>
@@ -48,7 +50,7 @@ KMeansResult kmeansPlusPlus(const std::vector<JointVector>& points, const KMeans
 /// policy's inputs (q, a(t−1), r), so the reference-conditioned policy can follow it.
 /// After a key-pose change f(t) − c = e0 (1 + (1 − pole) n) poleⁿ (n ticks later).
 struct KeyPoseBlend {
-  double pole = 0.7;  ///< per tick: 1 % of a step left after 19 ticks (1.9 s)
+  double pole = kFeatureBlendPole;  ///< 0.7 per tick: 1 % of a step left after 19 ticks (1.9 s)
   double gamma() const { return 1.0 - pole * pole; }
   double kappa() const { return (1.0 - pole) * (1.0 - pole); }
   /// v(t) from v(t−1), f(t) and c(t).
