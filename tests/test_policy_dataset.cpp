@@ -485,10 +485,10 @@ TEST_CASE("executed rollouts: the expert's labels put the servo-lagged arm on f(
     const std::vector<JointVector>& keys = data.centroids[static_cast<std::size_t>(d.movement)];
     double off_blend = 0.0, off_step = 0.0;
     for (std::size_t t = 1; t < s.ticks(); ++t) {
-      CHECK(s.r[t] == clampToLimits(arm, d.f[t + 1]));
+      CHECK(s.r[t] == clampToLimits(arm, d.f[t + 1]) - s.q[t]);
       const JointVector key = keys[static_cast<std::size_t>(d.label[t])];
       off_blend = std::max(off_blend, (s.a[t] - blend.velocity(s.a_prev[t], s.q[t], key)).cwiseAbs().maxCoeff());
-      off_step = std::max(off_step, (s.a[t] - (s.r[t] - s.q[t])).cwiseAbs().maxCoeff());
+      off_step = std::max(off_step, (s.a[t] - s.r[t]).cwiseAbs().maxCoeff());
     }
     CHECK(off_blend > 1e-3);
     CHECK(off_step > 1e-3);

@@ -377,9 +377,11 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
     if (k == 0) s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
     s.q.push_back(q);
     s.a_prev.push_back(a_prev);
-    // The reference input: the tick's feature-extracted target f(t+1), which the controller
-    // computes online from the snapped key poses (controller.hpp, kFeatureBlendPole).
-    s.r.push_back(target);
+    // The reference input: how far the tick's feature-extracted target f(t+1) (computed online
+    // by the controller from the snapped key poses: controller.hpp, kFeatureBlendPole) is from
+    // the measured q(t). As a difference, not as f(t+1) itself: in normalised units the label
+    // needs r − q to ~1e-3 of the angles' spread, which the net learnt only slowly (measured).
+    s.r.push_back(target - q);
     s.a.push_back(c - q);
     JointVector c_exec = c;
     if (k > 0) {

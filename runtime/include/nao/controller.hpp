@@ -312,7 +312,7 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
     PolicyInput in;
     in.q = q.cast<float>();
     in.a_prev = data.a_prev.template cast<float>();
-    in.r = clampToLimits(model.arm, data.feature_f).template cast<float>();
+    in.r = (clampToLimits(model.arm, data.feature_f) - q).template cast<float>();  // target − q (docs/policy.md)
     in.movement = data.movement;
     in.step = static_cast<int>(std::min<std::int64_t>(data.tick, Dims::kMaxSteps - 1));
     a = stepPolicy(model.policy, *data.policy, in).template cast<double>();

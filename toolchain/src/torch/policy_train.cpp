@@ -474,7 +474,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   auto& ex = t["execution"];
   ex["arm"] = "simulated ODE arm of nao_rt (sim_arm), servo-lagged";
   ex["expert"] = "command ending the tick at f(t+1)";
-  ex["reference_input"] = "f(t+1): online blend of the snapped key poses, pole " + std::to_string(kFeatureBlendPole);
+  ex["reference_input"] = "f(t+1) - q(t), f: online blend of the snapped key poses, pole " + std::to_string(kFeatureBlendPole);
   ex["noisy_rollouts"] = o.execution.noisy_rollouts;
   ex["noise_std_rad"] = o.execution.noise_std_rad;
   ex["noise_corr"] = o.execution.noise_corr;

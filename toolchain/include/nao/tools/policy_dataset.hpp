@@ -105,8 +105,8 @@ std::vector<PolicySample> buildSamples(const PolicyData& data, const std::vector
 /// as the controller applies it. Besides one clean rollout per demonstration, `noisy_rollouts`
 /// more execute c(t) + n(t) with AR(1) command noise n (DART: the states off the trajectory the
 /// policy's own errors reach, labelled by the expert from there); the inputs are what the
-/// controller sees (measured q, the applied a(t−1), and as r the feature-extracted target f(t+1)
-/// that the controller computes online from the snapped key poses).
+/// controller sees (measured q, the applied a(t−1), and as r the offset f(t+1) − q(t) of the
+/// feature-extracted target the controller computes online from the snapped key poses).
 struct ExecutionOptions {
   int noisy_rollouts = 1;                          ///< per demonstration, besides the clean one
   std::vector<double> noise_std_rad = {0.03, 0.06};  ///< σ of noisy rollout k: entry (k − 1) % size
@@ -125,7 +125,7 @@ struct PolicySequence {
   int rollout = 0;   ///< 0: clean, k >= 1: noisy rollout k
   std::vector<JointVector> q;       ///< measured q(t) at the start of tick t (q(0) = f(0), at rest)
   std::vector<JointVector> a_prev;  ///< a(t−1) as applied (c(t−1) − q(t−1)), 0 at t = 0
-  std::vector<JointVector> r;       ///< reference input: f(t+1), the tick's feature-extracted target (clamped)
+  std::vector<JointVector> r;       ///< reference input: f(t+1) − q(t), f(t+1) the tick's feature-extracted target (clamped)
   std::vector<JointVector> a;       ///< label: the expert's c(t) − q(t)
   double worst_miss_rad = 0.0;      ///< largest |q(t+1) − f(t+1)| of the expert's command (clean rollout)
   std::size_t ticks() const { return a.size(); }
