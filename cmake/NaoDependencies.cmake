@@ -18,8 +18,14 @@ nao_require(URDFDOM_FOUND "urdfdom" liburdfdom-dev)
 pkg_check_modules(ODE QUIET IMPORTED_TARGET ode>=0.16)
 nao_require(ODE_FOUND "ODE 0.16" libode-dev)
 
-find_package(Ceres 2.1 QUIET)
-nao_require(Ceres_FOUND "Ceres Solver 2.1" libceres-dev)
+# ceres::TinySolver (header-only, triangulation): also nao_rt's reference library, which links
+# no Ceres library.
+find_path(NAO_TINY_SOLVER_INCLUDE_DIR ceres/tiny_solver.h)
+nao_require(NAO_TINY_SOLVER_INCLUDE_DIR "Ceres Solver's headers (ceres/tiny_solver.h)" libceres-dev)
+if(NOT NAO_RUNTIME_ONLY)
+  find_package(Ceres 2.1 QUIET)
+  nao_require(Ceres_FOUND "Ceres Solver 2.1" libceres-dev)
+endif()
 
 find_package(CLI11 QUIET CONFIG)
 nao_require(CLI11_FOUND "CLI11" libcli11-dev)
