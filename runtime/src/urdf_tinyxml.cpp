@@ -130,8 +130,8 @@ std::shared_ptr<urdf::ModelInterface> parseUrdfTinyXml(const std::string& urdf_x
     reason = "no <robot> element";
     return nullptr;
   }
+  auto model = std::make_shared<urdf::ModelInterface>();
   try {
-    auto model = std::make_shared<urdf::ModelInterface>();
     model->clear();
     model->name_ = requiredAttribute(*robot, "name", "<robot>");
     for (const TiXmlElement* e = robot->FirstChildElement("link"); e != nullptr; e = e->NextSiblingElement("link")) {
@@ -154,6 +154,13 @@ std::shared_ptr<urdf::ModelInterface> parseUrdfTinyXml(const std::string& urdf_x
     return model;
   } catch (const std::exception& e) {
     reason = e.what();
+    // A rejected tree may hold a cycle of shared pointers (a link that is its own child): cut the
+    // links' ownership of their children so everything is freed.
+    for (auto& entry : model->links_) {
+      entry.second->child_links.clear();
+      entry.second->child_joints.clear();
+      entry.second->parent_joint.reset();
+    }
     return nullptr;
   }
 }
