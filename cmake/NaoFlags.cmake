@@ -5,6 +5,11 @@ target_compile_options(nao_flags INTERFACE
   # Determinism: no fused multiply-add contraction, so results do not depend on what the
   # compiler chose to fuse (DESIGN section 9).
   -ffp-contract=off)
+if(NAO_STATIC)
+  # The robot build: one self-contained executable (glibc, libstdc++, ODE, TinyXML inside), so it
+  # runs on the NAO's own OS whatever its library versions (docs/embedded.md).
+  target_link_options(nao_flags INTERFACE -static)
+endif()
 if(NAO_SANITIZE)
   target_compile_options(nao_flags INTERFACE -fsanitize=address,undefined -fno-omit-frame-pointer
                                              -fno-sanitize-recover=undefined)

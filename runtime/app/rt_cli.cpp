@@ -17,8 +17,9 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
       "nao_rt"};
   app.get_formatter()->column_width(28);
   app.add_option("--weights", o.weights_path,
-                 "Policy model.bin to load into static storage after checking that its\n"
-                 "architecture is the compiled one (default: the compiled-in model)")
+                 "Policy model.bin to run instead of the compiled-in model: checked (its\n"
+                 "architecture must be the compiled one), then copied into aligned memory\n"
+                 "allocated at start-up (none without --weights)")
       ->type_name("FILE");
   app.add_option("--urdf", o.urdf_path, "Robot description (torso + right arm); the model's joints must match it")
       ->type_name("FILE")

@@ -33,6 +33,7 @@
 #include <iosfwd>
 #include <limits>
 #include <memory>
+#include <new>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -215,9 +216,11 @@ void finishRun(const RunOptions& options, const PreparedRun& prepared, const std
 std::string oneLine(std::string s);
 
 // ---------------------------------------------------------------------------------------------
-// Weights in static storage (DESIGN §8: --weights is copied into static storage).
+// Weights of a --weights file (DESIGN §8): copied at configure time into 64-byte aligned storage
+// that exists only when a file is loaded. The compiled-in model is bound in place and costs
+// nothing here (this replaced a 24 MB static array in .bss; issue 14).
 
-/// Floats of static storage for every manifest tensor of Dims, each padded to 64 bytes (the
+/// Floats of weight storage for every manifest tensor of Dims, each padded to 64 bytes (the
 /// manifest of policy_config.cpp, counted at compile time; prepareRun's binder checks it).
 template <class Dims>
 constexpr std::size_t policyStorageFloats() {
@@ -234,19 +237,23 @@ constexpr std::size_t policyStorageFloats() {
   return n;
 }
 
-/// The static, 64-byte aligned float array --weights is copied into (one per Dims, in .bss:
-/// untouched pages cost nothing when the compiled-in model is used).
-template <class Dims>
-float* policyStaticStorage() {
-  alignas(64) static float storage[policyStorageFloats<Dims>()];
-  return storage;
-}
+/// The aligned floats a --weights model's tensors are copied into; empty (no memory) for the
+/// compiled-in model. Owned by the run, alive until the loop has ended.
+struct WeightStorage {
+  struct Free {
+    void operator()(float* f) const noexcept { ::operator delete[](f, std::align_val_t{kModelAlignment}); }
+  };
+  std::unique_ptr<float[], Free> floats;
+  std::size_t n_floats = 0;
+};
 
 /// Tensor pointers of the prepared model: into the compiled-in bytes, or (a --weights file) into
-/// policyStaticStorage<Dims> after copying each tensor there. Configure time; throws
-/// std::logic_error if the storage is too small (a programming error in policyStorageFloats).
+/// `storage`, which this allocates (policyStorageFloats<Dims>, zero-filled: the 64-byte padding
+/// between tensors reads as zeros) and fills with each tensor. Configure time: allocates; throws
+/// std::bad_alloc, or std::logic_error if the storage is too small (a programming error in
+/// policyStorageFloats).
 template <class Dims>
-std::vector<const float*> policyTensorPointers(const PreparedRun& p) {
+std::vector<const float*> policyTensorPointers(const PreparedRun& p, WeightStorage& storage) {
   std::vector<const float*> pointers;
   pointers.reserve(p.model.tensors.size());
   if (p.model_bytes != nullptr) {
@@ -254,14 +261,18 @@ std::vector<const float*> policyTensorPointers(const PreparedRun& p) {
       pointers.push_back(reinterpret_cast<const float*>(p.model_bytes + t.offset));
     return pointers;
   }
-  float* storage = policyStaticStorage<Dims>();
+  storage.n_floats = policyStorageFloats<Dims>();
+  storage.floats.reset(static_cast<float*>(
+      ::operator new[](storage.n_floats * sizeof(float), std::align_val_t{kModelAlignment})));
+  float* floats = storage.floats.get();
+  std::fill(floats, floats + storage.n_floats, 0.0f);
   std::size_t used = 0;
   for (std::size_t i = 0; i < p.model.tensors.size(); ++i) {
     const std::size_t n = p.model.tensors[i].spec.count();
-    if (used + n > policyStorageFloats<Dims>())
-      throw std::logic_error("nao_rt: static weight storage is smaller than the model's manifest");
-    std::memcpy(storage + used, p.model.data(i), n * sizeof(float));
-    pointers.push_back(storage + used);
+    if (used + n > storage.n_floats)
+      throw std::logic_error("nao_rt: the weight storage is smaller than the model's manifest");
+    std::memcpy(floats + used, p.model.data(i), n * sizeof(float));
+    pointers.push_back(floats + used);
     used += (n + 15) / 16 * 16;
   }
   return pointers;
@@ -325,9 +336,13 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     if (robot.lola && options.realtime)
       throw UsageError("--realtime paces the in-process arm; with --robot lola the robot's packets are the clock");
     PreparedRun p = prepareRun(options, Dims::arch());
-    const std::vector<const float*> tensors = policyTensorPointers<Dims>(p);
+    WeightStorage weight_storage;
+    const std::vector<const float*> tensors = policyTensorPointers<Dims>(p, weight_storage);
     const PolicyWeights<Dims> weights =
         bindPolicyWeights<Dims>(tensors.data(), tensors.size(), p.model.header.conditioning);
+    // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
+    // longer read, so its memory goes back before the loop (resident set, docs/embedded.md).
+    std::vector<std::uint8_t>().swap(p.model.bytes);
     ControllerParams controller_params = options.controller;
     controller_params.retarget = p.retarget;
     const ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, options.sim);

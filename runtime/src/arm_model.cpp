@@ -1,10 +1,9 @@
 #include "nao/arm_model.hpp"
 #include "nao/text_guard.hpp"
+#include "nao/urdf_reader.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-#include <console_bridge/console.h>
-#include <urdf_parser/urdf_parser.h>
 
 #include <cmath>
 #include <cstdio>
@@ -13,22 +12,6 @@
 
 namespace nao {
 namespace {
-
-// urdfdom reports why it rejects a file only through console_bridge; collect those lines so
-// the exception can carry them instead of letting them scroll past on stderr.
-class CollectErrors : public console_bridge::OutputHandler {
- public:
-  void log(const std::string& text, console_bridge::LogLevel level, const char*, int) override {
-    if (level >= console_bridge::CONSOLE_BRIDGE_LOG_ERROR) {
-      if (!text_.empty()) text_ += "; ";
-      text_ += text;
-    }
-  }
-  const std::string& text() const { return text_; }
-
- private:
-  std::string text_;
-};
 
 [[noreturn]] void fail(const std::string& origin, const std::string& what) {
   throw ArmModelError(origin + ": " + what);
@@ -116,18 +99,22 @@ ArmModel parseArmModel(const std::string& urdf_xml, const std::string& origin) {
   // TinyXML recurses per element and trusts UTF-8 lead bytes: bound the text first.
   if (const std::string problem = xmlShapeProblem(urdf_xml); !problem.empty())
     fail(origin, "not a usable URDF: the text " + problem);
-  urdf::ModelInterfaceSharedPtr urdf;
-  {
-    CollectErrors errors;
-    console_bridge::useOutputHandler(&errors);
-    urdf = urdf::parseURDF(urdf_xml);
-    console_bridge::restorePreviousOutputHandler();
-    if (!urdf) {
-      fail(origin, "not a valid URDF (" +
-                       (errors.text().empty() ? std::string("urdfdom gave no reason") : errors.text()) + ")");
-    }
-  }
+#if NAO_URDF_READER_TINYXML
+  const char* reader = "the URDF reader";
+  std::string reason;
+  const std::shared_ptr<urdf::ModelInterface> urdf = parseUrdfTinyXml(urdf_xml, reason);
+#else
+  const char* reader = "urdfdom";
+  std::string reason;
+  const std::shared_ptr<urdf::ModelInterface> urdf = parseUrdfUrdfdom(urdf_xml, reason);
+#endif
+  if (!urdf)
+    fail(origin, "not a valid URDF (" + (reason.empty() ? std::string(reader) + " gave no reason" : reason) + ")");
+  return armModelFromUrdf(*urdf, origin);
+}
 
+ArmModel armModelFromUrdf(const urdf::ModelInterface& urdf_model, const std::string& origin) {
+  const urdf::ModelInterface* urdf = &urdf_model;
   ArmModel model;
   std::string parent_link = kTorsoLink;
   if (!urdf->getLink(parent_link)) fail(origin, "has no link named '" + parent_link + "'");

@@ -13,6 +13,15 @@ void* __libc_memalign(std::size_t, std::size_t);
 void __libc_free(void*);
 }
 
+// A static link (NAO_STATIC, the robot build) cannot define malloc itself: libc.a's malloc.o,
+// which holds __libc_malloc, defines it too. There the C functions are __wrap_<name> and the
+// linker routes every call of <name> to them (-Wl,--wrap=<name>, runtime/CMakeLists.txt).
+#if NAO_ALLOC_COUNTER_WRAP
+#define NAO_ALLOC_C_NAME(name) __wrap_##name
+#else
+#define NAO_ALLOC_C_NAME(name) name
+#endif
+
 namespace {
 // Plain thread-local integers: reading them allocates nothing and needs no constructor.
 thread_local int t_armed = 0;
@@ -38,34 +47,34 @@ void* newAlignedImpl(std::size_t n, std::size_t align) {
 }  // namespace
 
 extern "C" {
-void* malloc(std::size_t n) {
+void* NAO_ALLOC_C_NAME(malloc)(std::size_t n) {
   note();
   return __libc_malloc(n);
 }
-void* calloc(std::size_t n, std::size_t size) {
+void* NAO_ALLOC_C_NAME(calloc)(std::size_t n, std::size_t size) {
   note();
   return __libc_calloc(n, size);
 }
-void* realloc(void* p, std::size_t n) {
+void* NAO_ALLOC_C_NAME(realloc)(void* p, std::size_t n) {
   note();
   return __libc_realloc(p, n);
 }
-void* memalign(std::size_t align, std::size_t n) {
+void* NAO_ALLOC_C_NAME(memalign)(std::size_t align, std::size_t n) {
   note();
   return __libc_memalign(align, n);
 }
-void* aligned_alloc(std::size_t align, std::size_t n) {
+void* NAO_ALLOC_C_NAME(aligned_alloc)(std::size_t align, std::size_t n) {
   note();
   return __libc_memalign(align, n);
 }
-int posix_memalign(void** out, std::size_t align, std::size_t n) {
+int NAO_ALLOC_C_NAME(posix_memalign)(void** out, std::size_t align, std::size_t n) {
   note();
   void* p = __libc_memalign(align, n);
   if (!p) return ENOMEM;
   *out = p;
   return 0;
 }
-void free(void* p) { __libc_free(p); }
+void NAO_ALLOC_C_NAME(free)(void* p) { __libc_free(p); }
 }
 
 void* operator new(std::size_t n) { return newImpl(n); }

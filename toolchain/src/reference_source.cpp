@@ -48,7 +48,7 @@ void prepareReference(const ArmModel& arm, ReferenceStream& s, const std::vector
   const HumanArmLengths lengths = estimateHumanArmLengths(seen, options.human);
   if (lengths.n_arm_frames == 0) throw UserError(s.description + ": no frame has a measurable right arm");
   s.human = withDemoScale(options.human, lengths);
-  const std::vector<RetargetRow> rows = retargetSkeleton(arm, seen, options);
+  const std::vector<RetargetRow> rows = retargetSkeletonLm(arm, seen, options);
   std::vector<double> t_meas, t_grid;
   std::vector<JointVector> q_meas;
   s.retargeted.clear();

@@ -1,4 +1,5 @@
 #include "nao/tools/retarget_ceres.hpp"
+#include "nao/tools/retarget_pipeline.hpp"
 
 #include <ceres/ceres.h>
 
@@ -223,6 +224,18 @@ RetargetAgreement compareRetarget(const std::vector<RetargetResult>& a, const st
     }
   }
   return agreement;
+}
+
+// The Ceres-capable sequence: here, not in retarget_pipeline.cpp, so that nao_reference (nao_rt's
+// reference library) stays free of Ceres.
+std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options) {
+  if (!options.use_ceres) return retargetSkeletonLm(arm, frames, options);
+  CeresRetargetData ceres;
+  resetRetarget(ceres);
+  return retargetSkeletonWith(arm, frames, options,
+                              [&](const RetargetFrame& t, const Eigen::Vector3d* u) -> const RetargetResult& {
+                                return solveRetargetCeres(arm, options.params, ceres, t.p_target_TH, t.q_target, u);
+                              });
 }
 
 }  // namespace nao::tools

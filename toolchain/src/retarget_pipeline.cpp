@@ -55,15 +55,13 @@ nlohmann::json retargetSettingJson(const RetargetParams& params) {
                                                   params.posture_weights.data() + kNumJoints)}};
 }
 
-std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options) {
+std::vector<RetargetRow> retargetSkeletonWith(const ArmModel& arm, const Skeleton& frames,
+                                              const RetargetOptions& options, const RetargetFrameSolver& solve) {
   std::vector<bool> ok, hand_seen;
   const std::vector<RetargetFrame> targets = retargetTargets(arm, frames, options, ok, hand_seen);
 
   std::vector<RetargetRow> rows(frames.size());
-  RetargetData lm;
-  CeresRetargetData ceres;
-  resetRetarget(lm);
-  resetRetarget(ceres);
+  ArmData kin;
   const RetargetRow* previous = nullptr;
   for (std::size_t i = 0; i < frames.size(); ++i) {
     RetargetRow& row = rows[i];
@@ -76,7 +74,7 @@ std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& f
       } else {
         // Before the first measurement: the zero pose clamped, so every row stays inside the limits.
         row.result.q_x = row.result.q_q = row.result.q_r = clampToLimits(arm, JointVector::Zero());
-        row.result.p_TH_x = row.result.p_TH_q = forwardKinematics(arm, lm.arm, row.result.q_x);
+        row.result.p_TH_x = row.result.p_TH_q = forwardKinematics(arm, kin, row.result.q_x);
       }
       row.result.flags = 0;
       row.flags = kRowHumanMissing;
@@ -84,14 +82,20 @@ std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& f
     }
     row.target = targets[i];
     const Eigen::Vector3d* u = row.target.has_pointing ? &row.target.u_target_TH : nullptr;
-    row.result = options.use_ceres ? solveRetargetCeres(arm, options.params, ceres, row.target.p_target_TH,
-                                                        row.target.q_target, u)
-                                   : solveRetarget(arm, options.params, lm, row.target.p_target_TH,
-                                                   row.target.q_target, u);
+    row.result = solve(row.target, u);
     row.flags = row.result.flags | (hand_seen[i] ? 0u : kRowHandNotSeen);
     previous = &row;
   }
   return rows;
+}
+
+std::vector<RetargetRow> retargetSkeletonLm(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options) {
+  RetargetData lm;
+  resetRetarget(lm);
+  return retargetSkeletonWith(arm, frames, options,
+                              [&](const RetargetFrame& t, const Eigen::Vector3d* u) -> const RetargetResult& {
+                                return solveRetarget(arm, options.params, lm, t.p_target_TH, t.q_target, u);
+                              });
 }
 
 void writeRetargetCsv(const std::string& path, const std::vector<RetargetRow>& rows, const RetargetParams& params) {

@@ -12,15 +12,12 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <limits>
 #include <map>
 #include <utility>
 
 namespace nao::tools {
 namespace {
-
-namespace fs = std::filesystem;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kTimeEps = 1e-9;  // s; two times closer than this are the same sample
@@ -666,42 +663,6 @@ Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz, double capture
     out.push_back(f);
   }
   return out;
-}
-
-Skeleton triangulateFolders(const std::vector<std::string>& camera_dirs, const std::string& calibration_path,
-                            const TriangulateOptions& opt, TriangulationReport* report) {
-  const CameraSet cameras = readCalibration(calibration_path);
-  if (cameras.size() != camera_dirs.size())
-    throw UserError("calibration " + calibration_path + " has " + std::to_string(cameras.size()) + " cameras but " +
-                    std::to_string(camera_dirs.size()) + " keypoint folders were given (cameras pair with folders in order)");
-  if (!(opt.rate_hz > 0.0) || !std::isfinite(opt.rate_hz))
-    throw UserError("--rate must be a positive number of samples per second");
-  std::vector<CameraKeypoints> keypoints;
-  for (const std::string& dir : camera_dirs) keypoints.push_back(readOpenPoseFolder(dir, opt.format));
-  return resampleSkeleton(triangulateCapture(cameras, keypoints, opt, report), opt.rate_hz, opt.fps);
-}
-
-std::vector<std::string> demoCameraDirs(const std::string& demo_dir) {
-  std::error_code ec;
-  if (!fs::is_directory(demo_dir, ec)) throw UserError("demonstration folder " + demo_dir + " does not exist");
-  std::vector<std::pair<long long, std::string>> dirs;
-  for (const fs::directory_entry& e : fs::directory_iterator(demo_dir)) {
-    const std::string name = e.path().filename().string();
-    if (!e.is_directory() || name.compare(0, 3, "cam") != 0) continue;
-    const std::string suffix = name.substr(3);
-    const bool numbered = !suffix.empty() && suffix.size() < 18 &&
-                          std::all_of(suffix.begin(), suffix.end(), [](char c) { return c >= '0' && c <= '9'; });
-    dirs.emplace_back(numbered ? std::stoll(suffix) : std::numeric_limits<long long>::max(), e.path().string());
-  }
-  if (dirs.empty()) throw UserError(demo_dir + ": no cam*/ keypoint folders (expected cam0/, cam1/, ...)");
-  std::sort(dirs.begin(), dirs.end());
-  std::vector<std::string> out;
-  for (auto& d : dirs) out.push_back(std::move(d.second));
-  return out;
-}
-
-Skeleton triangulateDemo(const std::string& demo_dir, const TriangulateOptions& opt, TriangulationReport* report) {
-  return triangulateFolders(demoCameraDirs(demo_dir), (fs::path(demo_dir) / "calibration.json").string(), opt, report);
 }
 
 }  // namespace nao::tools

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -47,8 +48,24 @@ std::vector<RetargetFrame> retargetTargets(const ArmModel& arm, const Skeleton& 
                                            const RetargetOptions& options, std::vector<bool>& ok,
                                            std::vector<bool>& hand_seen);
 
-/// Algorithm 1 over the whole sequence, warm-started frame to frame. A frame whose human arm
-/// was not measured holds the previous solution and is flagged.
+/// Solves one frame of Algorithm 1 for retargetSkeletonWith: (targets, pointing direction or
+/// nullptr) -> the frame's result; warm starts are the solver's own state.
+using RetargetFrameSolver =
+    std::function<const RetargetResult&(const RetargetFrame& target, const Eigen::Vector3d* u_target_TH)>;
+
+/// Algorithm 1 over the whole sequence, each measured frame solved by `solve`, in order. A frame
+/// whose human arm was not measured holds the previous solution and is flagged.
+std::vector<RetargetRow> retargetSkeletonWith(const ArmModel& arm, const Skeleton& frames,
+                                              const RetargetOptions& options, const RetargetFrameSolver& solve);
+
+/// retargetSkeletonWith the runtime's fixed-size LM (nao::solveRetarget), warm-started frame to
+/// frame; options.use_ceres is ignored. Needs no Ceres: nao_rt's reference library
+/// (nao_reference) has it.
+std::vector<RetargetRow> retargetSkeletonLm(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options);
+
+/// retargetSkeletonWith the solver options.use_ceres names: Ceres (offline reference) or the
+/// runtime's LM (retargetSkeletonLm). Defined in retarget_ceres.cpp: links Ceres
+/// (nao_toolchain_lib, not nao_reference).
 std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options);
 
 /// Header and rows of the retarget CSV; `params` holds the setting the rows' q_r was made with

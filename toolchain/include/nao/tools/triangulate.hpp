@@ -171,7 +171,8 @@ int fillShortGaps(Skeleton& frames, double max_gap_s, double capture_fps);
 /// 1 / capture_fps apart), and is missing otherwise: nothing is invented inside a gap.
 Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz, double capture_fps);
 
-/// Folders (one per camera, in calibration order) + calibration file -> resampled skeleton.
+/// From files (triangulate_files.cpp: nao_toolchain_lib only, it reads calibration files with
+/// toml++). Folders (one per camera, in calibration order) + calibration file -> resampled skeleton.
 Skeleton triangulateFolders(const std::vector<std::string>& camera_dirs, const std::string& calibration_path,
                             const TriangulateOptions& opt, TriangulationReport* report = nullptr);
 
