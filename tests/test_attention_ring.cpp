@@ -218,14 +218,24 @@ TEST_CASE("sealPayload zeroes the padding and sets a checksum that any changed b
   std::mt19937_64 rng(3);
   fillPayload(a, 7, rng);
   CHECK(payloadIntact(a));
-  const auto* bytes = reinterpret_cast<const unsigned char*>(&a);
-  for (std::size_t i = 4196; i < 4200; ++i) CHECK(bytes[i] == 0);
-  CHECK(a.checksum == attentionFnv1a64(&a, 4200));
-  for (std::size_t at : {std::size_t{0}, std::size_t{16}, std::size_t{2000}, std::size_t{4199}}) {
+  // The paper payload has no padding (4296 bytes of data, a multiple of 8).
+  static_assert(offsetof(PaperPayload, checksum) == 4296);
+  CHECK(a.checksum == attentionFnv1a64(&a, 4296));
+  for (std::size_t at : {std::size_t{0}, std::size_t{16}, std::size_t{60}, std::size_t{2000}, std::size_t{4295}}) {
     PaperPayload b = a;
     reinterpret_cast<unsigned char*>(&b)[at] ^= 1;
     CHECK_MESSAGE(!payloadIntact(b), "flipping byte " << at << " left the checksum valid");
   }
+  // A payload with padding: L 1, H 1, D 4, W 3: 16 + 4 (5 + 5 + 3 + 25 + 20) = 248 bytes of
+  // data... a multiple of 8 too; W 2 gives 244 and 4 bytes of padding.
+  using PaddedPayload = AttentionPayload<1, 1, 4, 2>;
+  static_assert(offsetof(PaddedPayload, checksum) == 248);
+  PaddedPayload pp;
+  std::memset(static_cast<void*>(&pp), 0xAB, sizeof pp);
+  fillPayload(pp, 3, rng);
+  const auto* pb = reinterpret_cast<const unsigned char*>(&pp);
+  for (std::size_t i = 244; i < 248; ++i) CHECK(pb[i] == 0);
+  CHECK(pp.checksum == attentionFnv1a64(&pp, 248));
   // FNV-1a 64 reference values ("" and "a").
   CHECK(attentionFnv1a64("", 0) == 0xcbf29ce484222325ull);
   CHECK(attentionFnv1a64("a", 1) == 0xaf63dc4c8601ec8cull);
@@ -443,11 +453,11 @@ TEST_CASE("attention.bin holds the documented header and the ring's records in r
   CHECK(le(h + 32, 8) == payload_bytes);
   CHECK(le(h + 40, 8) == 1024);    // ring capacity
   CHECK(le(h + 48, 8) == 1500);    // records written
-  const std::uint64_t want_desc[8] = {1, 2, 4, 5, 32, 0, 0, 0};  // format, L, H, tokens, d_model
+  const std::uint64_t want_desc[8] = {2, 2, 4, 5, 32, 8, 0, 0};  // format, L, H, tokens, d_model, window
   for (int i = 0; i < 8; ++i) CHECK(le(h + 56 + 4 * i, 4) == want_desc[i]);
   CHECK(le(h + 88, 8) == 0);
   // Payload bytes as pushed; parse the fixed fields and the checksum independently.
-  const std::size_t n_data = 16 + 4 * (5 + 2 * 4 * 25 + 5 * 32);
+  const std::size_t n_data = 16 + 4 * (5 + 5 + 8 + 2 * 4 * 25 + 5 * 32);
   for (std::size_t i = 0; i < 1024; ++i) {
     const unsigned char* rec = f.data() + 96 + i * payload_bytes;
     REQUIRE(std::memcmp(rec, &pushed[476 + i], payload_bytes) == 0);

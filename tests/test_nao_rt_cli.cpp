@@ -72,7 +72,7 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(r.status == 0);
   CHECK(r.err.empty());
   const nlohmann::json j = nlohmann::json::parse(r.out);
-  CHECK(j["format_version"] == 1);
+  CHECK(j["format_version"] == 2);
   CHECK(j["d_model"] == 32);
   CHECK(j["heads"] == 4);
   CHECK(j["encoder_layers"] == 2);
@@ -85,6 +85,7 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(j["parameters"] == nao::parameterCount(nao::smallArch()));
   CHECK(j["tensors"] == nao::policyManifest(nao::smallArch()).size());
   CHECK(j["max_steps"] == 256);
+  CHECK(j["window"] == 8);  // the small architecture's
   char hex[32];
   std::snprintf(hex, sizeof hex, "0x%016llx", static_cast<unsigned long long>(checksum));
   CHECK(j["checksum"] == hex);

@@ -1,5 +1,6 @@
 #include "nao/compiled_model.hpp"
 
+#include "nao/model_file.hpp"
 #include "nao_model_config.hpp"
 
 // Defined by the generated nao_model_weights.S.
@@ -12,6 +13,6 @@ ModelBytes modelBytes() {
   return {nao_model_blob, static_cast<std::size_t>(nao_model_blob_end - nao_model_blob)};
 }
 
-static_assert(kFormatVersion == 1, "the generated config is of another model.bin format");
+static_assert(kFormatVersion == kModelFormatVersion, "the generated config is of another model.bin format");
 
 }  // namespace nao::compiled

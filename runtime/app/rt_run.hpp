@@ -231,8 +231,9 @@ constexpr std::size_t policyStorageFloats() {
   const std::size_t attention = 4 * (pad(D * D) + pad(D));
   const std::size_t ffn = pad(D * F0) + pad(F0) + pad(F0 * F1) + pad(F1) + pad(F1 * F2) + pad(F2) + pad(F2 * D) + pad(D);
   std::size_t n = pad(Dims::kFeatures * D) + pad(D) + pad(J * D) + pad(M * D) + pad(S * D) + pad(D) + pad(D) + pad(J * D);
-  n += Dims::kEncoderLayers * (norm + attention + norm + ffn) + norm;
-  n += Dims::kDecoderLayers * (norm + attention + norm + attention + norm + ffn) + norm;
+  const std::size_t age_bias = pad(static_cast<std::size_t>(Dims::kHeads) * Dims::kWindow);  // window attention only
+  n += Dims::kEncoderLayers * (norm + attention + age_bias + norm + ffn) + norm;
+  n += Dims::kDecoderLayers * (norm + attention + norm + attention + age_bias + norm + ffn) + norm;
   n += pad(D) + pad(1) + 6 * pad(J) + pad(M * K * J);
   return n;
 }
