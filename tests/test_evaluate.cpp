@@ -203,8 +203,12 @@ TEST_CASE("evaluate on the committed models writes the summary contract; issue 1
     MESSAGE(movement << ": autonomous DTW " << autonomous * 1e3 << " mm, demo NN " << demo_nn * 1e3
                      << " mm, linear AR " << ar * 1e3 << " mm; reference RMSE " << reference * 1e3
                      << " mm, blend law " << law * 1e3 << " mm");
-    // ISSUE 13: the committed models (trained before issue 13) miss these; they become CHECKs
-    // with the retrained models.
+    // Issue 13's thresholds. Measured with the retrained models (README): the reference model
+    // beats the blend law on every movement (median of 5 seeds; a hard check) and meets 3 mm on
+    // wrist only; the autonomous model misses both autonomous thresholds on every movement.
+    // Unmet thresholds stay WARN (reported, not counted as passed) until a model meets them.
+    CHECK_MESSAGE(reference < law, movement << ": reference-mode hand RMSE " << reference * 1e3
+                                            << " mm is not below the blend law's " << law * 1e3 << " mm");
     WARN_MESSAGE(autonomous <= demo_nn, movement << ": autonomous rollout DTW " << autonomous * 1e3
                                                  << " mm > demonstrations' nearest-neighbour DTW " << demo_nn * 1e3
                                                  << " mm (issue 13)");

@@ -36,7 +36,7 @@ float uniform(std::mt19937_64& rng, double lo, double hi) {
 }
 
 // Random sequences over the arm's range: q a random walk inside the limits, a(t-1) up to 0.2 rad,
-// r jumping between poses in the limits, every movement; `ticks` long.
+// r (the offset f(t+1) − q(t)) jumping within ±0.2 rad, every movement; `ticks` long.
 std::vector<Sequence> randomSequences(const ArmModel& arm, int movements, int count, int ticks, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::vector<Sequence> out;
@@ -45,14 +45,14 @@ std::vector<Sequence> randomSequences(const ArmModel& arm, int movements, int co
     PolicyInput x;
     for (int j = 0; j < kNumJoints; ++j) {
       x.q[j] = uniform(rng, arm.q_min[j], arm.q_max[j]);
-      x.r[j] = uniform(rng, arm.q_min[j], arm.q_max[j]);
+      x.r[j] = uniform(rng, -0.2, 0.2);  // r is the offset f(t+1) − q(t) (docs/policy.md)
     }
     x.movement = n % movements;
     for (int t = 0; t < ticks; ++t) {
       for (int j = 0; j < kNumJoints; ++j) {
         x.a_prev[j] = t == 0 ? 0.0f : uniform(rng, -0.2, 0.2);
         x.q[j] = std::clamp(x.q[j] + x.a_prev[j], static_cast<float>(arm.q_min[j]), static_cast<float>(arm.q_max[j]));
-        if (rng() % 8 == 0) x.r[j] = uniform(rng, arm.q_min[j], arm.q_max[j]);
+        if (rng() % 8 == 0) x.r[j] = uniform(rng, -0.2, 0.2);
       }
       x.step = t;
       s.push_back(x);
@@ -72,14 +72,13 @@ std::vector<Sequence> recordedSequences(const ArmModel& arm, const std::vector<s
     const int m = index % 3;  // model movement index: elbow 0, whole_arm 1, wrist 2
     const tools::ReferenceStream ref =
         tools::makeSyntheticReference(arm, movements[m], 77, index, centroids[static_cast<std::size_t>(m)]);
-    int label = tools::nearestCentroid(centroids[static_cast<std::size_t>(m)], ref.retargeted.front());
     Sequence s;
     for (std::size_t t = 0; t + 1 < ref.target.size() && static_cast<int>(t) < ticks; ++t) {
-      if (ref.measured[t]) label = tools::nearestCentroid(centroids[static_cast<std::size_t>(m)], ref.retargeted[t]);
       PolicyInput x;
       x.q = ref.target[t].cast<float>();
       x.a_prev = (t == 0 ? JointVector::Zero() : JointVector(ref.target[t] - ref.target[t - 1])).cast<float>();
-      x.r = centroids[static_cast<std::size_t>(m)][static_cast<std::size_t>(label)].cast<float>();
+      // The reference input: the offset of the next feature-extracted pose (docs/policy.md).
+      x.r = JointVector(ref.target[t + 1] - ref.target[t]).cast<float>();
       x.movement = m;
       x.step = static_cast<int>(t);
       s.push_back(x);
