@@ -81,20 +81,6 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
   }
 }
 
-// Key poses of movement m from the model's centroids tensor [M, K, J].
-std::vector<JointVector> modelCentroids(const ModelFile& model, int m) {
-  const PolicyArch& a = model.header.arch;
-  const float* c = model.data(model.find("centroids"));
-  std::vector<JointVector> out;
-  for (int k = 0; k < a.clusters; ++k) {
-    JointVector q;
-    for (int j = 0; j < kNumJoints; ++j)
-      q[j] = static_cast<double>(c[(static_cast<std::size_t>(m) * a.clusters + k) * a.tokens + j]);
-    out.push_back(q);
-  }
-  return out;
-}
-
 void appendNumber(std::string& s, double v) {
   char buf[64];
   const auto r = std::to_chars(buf, buf + sizeof buf, v);
@@ -273,7 +259,7 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   if (o.controller.blend_law_pole > 0.0 && h.conditioning == Conditioning::kAutonomous)
     throw UsageError("--blend-law-pole replaces a reference-conditioned policy; " + p.model_source +
                      " is an autonomous-mode model (the blend law needs the snapped human key pose)");
-  p.centroids = modelCentroids(p.model, p.movement_index);
+  p.centroids = modelKeyPoses(p.model, p.movement_index);
   // The reference is retargeted the way the model's training data was.
   p.retarget = modelRetargetSetting(h.metadata_json, o.controller.retarget, p.model_source);
 

@@ -667,6 +667,19 @@ ModelFile readModelFile(const std::string& path) {
 
 // ---- joints ---------------------------------------------------------------------------------
 
+std::vector<JointVector> modelKeyPoses(const ModelFile& model, int m) {
+  const PolicyArch& a = model.header.arch;
+  const float* c = model.data(model.find("centroids"));
+  std::vector<JointVector> out;
+  for (int k = 0; k < a.clusters; ++k) {
+    JointVector q;
+    for (int j = 0; j < kNumJoints; ++j)
+      q[j] = static_cast<double>(c[(static_cast<std::size_t>(m) * a.clusters + k) * a.tokens + j]);
+    out.push_back(q);
+  }
+  return out;
+}
+
 void checkJointsMatch(const ModelFile& model, const ArmModel& arm, const std::string& origin) {
   const std::vector<TrainedJoint>& joints = model.header.joints;
   if (joints.size() != static_cast<std::size_t>(kNumJoints))

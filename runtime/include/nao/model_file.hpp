@@ -87,6 +87,9 @@ ModelFile readModelFile(const std::string& path);
 /// kJointNames order, limits within 1e-9 rad or rad/s).
 void checkJointsMatch(const ModelFile& model, const ArmModel& arm, const std::string& origin);
 
+/// Key poses of movement `m` (0..M-1) from the model's centroids tensor [M, K, J], rad.
+std::vector<JointVector> modelKeyPoses(const ModelFile& model, int m);
+
 /// The joints of `arm` as model.bin stores them.
 std::vector<TrainedJoint> trainedJoints(const ArmModel& arm);
 

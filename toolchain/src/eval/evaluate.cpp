@@ -40,19 +40,6 @@ NearestDemo nearestDemo(const HandPath& path, const std::vector<HandPath>& demos
   return best;
 }
 
-std::vector<JointVector> modelKeyPoses(const ModelFile& model, int m) {
-  const PolicyArch& a = model.header.arch;
-  const float* c = model.data(model.find("centroids"));
-  std::vector<JointVector> out;
-  for (int k = 0; k < a.clusters; ++k) {
-    JointVector q;
-    for (int j = 0; j < kNumJoints; ++j)
-      q[j] = static_cast<double>(c[(static_cast<std::size_t>(m) * a.clusters + k) * a.tokens + j]);
-    out.push_back(q);
-  }
-  return out;
-}
-
 std::vector<std::vector<JointVector>> regenerateTargets(const ArmModel& arm, const std::string& movement,
                                                         std::uint64_t seed, const std::vector<int>& indices,
                                                         const std::vector<JointVector>& key_poses,

@@ -46,9 +46,6 @@ struct HeldOutDemos {
   std::vector<HandPath> hand;                    ///< its hand path
 };
 
-/// Key poses of movement `m` from a model's centroids tensor.
-std::vector<JointVector> modelKeyPoses(const ModelFile& model, int m);
-
 /// Regenerates demonstrations `indices` of `movement` (synth run seed `seed`) like nao_rt does.
 std::vector<std::vector<JointVector>> regenerateTargets(const ArmModel& arm, const std::string& movement,
                                                         std::uint64_t seed, const std::vector<int>& indices,
