@@ -10,6 +10,7 @@
 #include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/test_util.hpp"
+#include "rt_run.hpp"
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
@@ -37,8 +38,9 @@ Scores score(const std::string& path) {
   checkPolicyArch<PaperPolicyDims>(model.header.arch);
   std::vector<const float*> p;
   for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
-  const PolicyWeights<PaperPolicyDims> w =
+  PolicyWeights<PaperPolicyDims> w =
       bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
+  w.residual_gain = rt::modelResidualGain(model.header.metadata_json, path);
   auto ws = makePolicyWorkspace<PaperPolicyDims>();
 
   const nlohmann::json meta = nlohmann::json::parse(model.header.metadata_json);

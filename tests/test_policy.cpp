@@ -658,3 +658,23 @@ TEST_CASE("snapToCentroid picks the nearest key pose of the movement, ties to th
   c[(1 * K + 6) * 5 + 2] = 0.5f;  // now 6 is strictly nearer
   CHECK(snapToCentroid(f.w, 1, q) == 6);
 }
+
+TEST_CASE("a residual gain adds exactly g·r in reference mode (same float operations) and nothing in autonomous mode") {
+  std::mt19937_64 rng(41);
+  std::vector<PolicyInput> seq;
+  for (int t = 0; t < 3 * SmallPolicyDims::kWindow; ++t) seq.push_back(randomInput(rng, 1, t));
+  for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
+    Fixture<SmallPolicyDims> plain(42, c, c == Conditioning::kReference);
+    Fixture<SmallPolicyDims> residual(42, c, c == Conditioning::kReference);
+    residual.w.residual_gain = 1.0894f;
+    const auto a0 = plain.rollout(seq), a1 = residual.rollout(seq);
+    for (std::size_t t = 0; t < seq.size(); ++t) {
+      // The network part is untouched (the gain enters after the head): the whole rollout
+      // stays comparable tick by tick.
+      const Eigen::Matrix<float, 5, 1> expected =
+          c == Conditioning::kReference ? Eigen::Matrix<float, 5, 1>(a0[t] + 1.0894f * seq[t].r) : a0[t];
+      CHECK(bitwiseEqual(a1[t], expected));
+    }
+    if (c == Conditioning::kReference) CHECK_FALSE(bitwiseEqual(a1[5], a0[5]));
+  }
+}

@@ -19,6 +19,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <vector>
 
@@ -523,4 +524,109 @@ TEST_CASE("--blend-law-pole runs the blend-law baseline on a reference model, is
   int status = 0;
   CHECK(errorLine(autonomous, status).find("autonomous") != std::string::npos);
   CHECK(status == 2);
+}
+
+namespace {
+// The columns of ticks.csv by name: one vector of numbers per column.
+std::map<std::string, std::vector<double>> readTicks(const fs::path& file) {
+  std::ifstream csv(file);
+  std::string line;
+  REQUIRE(std::getline(csv, line));
+  std::vector<std::string> names;
+  std::stringstream header(line);
+  for (std::string name; std::getline(header, name, ',');) names.push_back(name);
+  std::map<std::string, std::vector<double>> columns;
+  while (std::getline(csv, line)) {
+    std::stringstream row(line);
+    std::string cell;
+    for (std::size_t i = 0; i < names.size() && std::getline(row, cell, ','); ++i)
+      columns[names[i]].push_back(std::strtod(cell.c_str(), nullptr));
+  }
+  return columns;
+}
+}  // namespace
+
+TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature target, recomputed here from the snapped key poses") {
+  rt::CommandLine cl;
+  std::ostringstream out, err;
+  const char* argv[] = {"nao_rt", "--gain-law", "1.0894"};
+  REQUIRE(rt::parseCommandLine(3, argv, cl, out, err) == -1);
+  CHECK(cl.run.controller.gain_law == 1.0894);
+  const char* bad[] = {"nao_rt", "--gain-law", "-1"};
+  CHECK(rt::parseCommandLine(3, bad, cl, out, err) == 2);
+
+  const double gain = 1.0894;
+  const fs::path dir = tempDir("gain_law");
+  rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
+  o.ticks = 60;
+  o.controller.gain_law = gain;
+  const Outcome r = run(o);
+  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  CHECK(nlohmann::json::parse(bytes(dir / "summary.json"))["gain_law"] == gain);
+
+  // f: the online blend toward the snapped key pose r (pole 0.7), started at rest on r(0); the
+  // action is G times its distance, clamped to the limits, from the angles the tick started at.
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const auto t = readTicks(dir / "ticks.csv");
+  REQUIRE(t.at("tick").size() == 60u);
+  const double pole = kFeatureBlendPole;
+  JointVector f, v = JointVector::Zero(), q_start;
+  for (int j = 0; j < kNumJoints; ++j) {
+    f[j] = t.at("r_" + std::to_string(j))[0];
+    q_start[j] = t.at("q_cmd_" + std::to_string(j))[0] - t.at("a_" + std::to_string(j))[0];
+  }
+  double worst = 0.0, largest = 0.0;
+  int checked = 0;
+  for (std::size_t i = 0; i < 60; ++i) {
+    JointVector rr, q_prev, a;
+    for (int j = 0; j < kNumJoints; ++j) {
+      const std::string s = std::to_string(j);
+      rr[j] = t.at("r_" + s)[i];
+      q_prev[j] = i == 0 ? q_start[j] : t.at("q_" + s)[i - 1];
+      a[j] = t.at("a_" + s)[i];
+    }
+    v = pole * pole * v + (1.0 - pole) * (1.0 - pole) * (rr - f);
+    f += v;
+    const JointVector expected = gain * (clampToLimits(arm, f) - q_prev);
+    worst = std::max(worst, (a - expected).cwiseAbs().maxCoeff());
+    largest = std::max(largest, a.cwiseAbs().maxCoeff());
+    ++checked;
+  }
+  MESSAGE(checked << " ticks: worst |a - G (f - q)| " << worst << " rad");
+  // ticks.csv prints 17 significant digits; q_start is recovered as q_cmd - a (two roundings).
+  CHECK(worst < 1e-9);
+  CHECK(largest > 1e-3);  // the arm moved: the comparison is not of zeros
+
+  rt::RunOptions both = o;
+  both.controller.blend_law_pole = 0.7;
+  int status = 0;
+  CHECK(errorLine(both, status).find("exclude") != std::string::npos);
+  CHECK(status == 2);
+  rt::RunOptions autonomous = options(writeModel("autonomous_gain.bin", Conditioning::kAutonomous), "synthetic:elbow");
+  autonomous.controller.gain_law = gain;
+  CHECK(errorLine(autonomous, status).find("autonomous") != std::string::npos);
+  CHECK(status == 2);
+}
+
+TEST_CASE("a reference model's residual gain (metadata training.residual_gain) adds G r to the policy's action") {
+  CHECK(rt::modelResidualGain("{}", "m") == 0.0f);
+  CHECK(rt::modelResidualGain(R"({"training":{"seed":1}})", "m") == 0.0f);
+  CHECK(rt::modelResidualGain(R"({"training":{"residual_gain":1.5}})", "m") == 1.5f);
+  for (const char* bad : {R"({"training":{"residual_gain":-1}})", R"({"training":{"residual_gain":"1"}})",
+                          R"({"training":{"residual_gain":1e9}})"})
+    CHECK_THROWS_WITH_AS(rt::modelResidualGain(bad, "model.bin"), doctest::Contains("training.residual_gain"),
+                         std::runtime_error);
+
+  // nao_rt binds it (PolicyWeights::residual_gain; what it adds is checked in test_policy) and
+  // records it in summary.json.
+  const std::string with = writeModel("residual.bin", Conditioning::kReference, R"({"training":{"residual_gain":1.5}})");
+  const fs::path d1 = tempDir("residual");
+  rt::RunOptions o1 = options(with, "synthetic:wrist", d1);
+  o1.ticks = 3;
+  REQUIRE(run(o1).report.status == 0);
+  CHECK(nlohmann::json::parse(bytes(d1 / "summary.json"))["model"]["residual_gain"] == 1.5);
+  rt::RunOptions o0 = options(referenceModel(), "synthetic:wrist", tempDir("residual_none"));
+  o0.ticks = 3;
+  REQUIRE(run(o0).report.status == 0);
+  CHECK(nlohmann::json::parse(bytes(fs::path(o0.log_dir) / "summary.json"))["model"]["residual_gain"] == 0.0);
 }

@@ -11,6 +11,7 @@
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "policy_torch.hpp"
+#include "rt_run.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -224,7 +225,11 @@ TEST_CASE("small configuration: streaming runtime inference equals libtorch's wh
     }
     const std::vector<std::vector<float>> floats = tools::manifestFloats(net);
     const std::vector<const float*> p = pointers(floats);
-    const PolicyWeights<SmallPolicyDims> weights = bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), c);
+    PolicyWeights<SmallPolicyDims> weights = bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), c);
+    // A residual gain (reference mode adds g·r to the action; autonomous mode ignores it): both
+    // sides must add it in the same place and precision.
+    net->residual_gain = 1.0894;
+    weights.residual_gain = 1.0894f;
     const std::string mode = conditioningName(c);
     checkParity(net, weights, random, "small/" + mode + "/random");
     checkParity(net, weights, recorded, "small/" + mode + "/recorded");
@@ -247,8 +252,10 @@ TEST_CASE("paper configuration: the committed models agree with libtorch within 
     loadInto(net, model);
     std::vector<const float*> p;
     for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
-    const PolicyWeights<PaperPolicyDims> weights =
+    PolicyWeights<PaperPolicyDims> weights =
         bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
+    weights.residual_gain = rt::modelResidualGain(model.header.metadata_json, path.string());
+    net->residual_gain = weights.residual_gain;
     std::vector<std::vector<JointVector>> centroids(3);
     for (int m = 0; m < 3; ++m)
       for (int k = 0; k < PaperPolicyDims::kClusters; ++k)

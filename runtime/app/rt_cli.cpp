@@ -47,6 +47,13 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                  "(0, 1) (the training labels: 0.7), on the same arm (default 0: the policy)")
       ->type_name("P")
       ->check(CLI::Range(0.0, 0.999999));
+  app.add_option("--gain-law", o.controller.gain_law,
+                 "Baseline, reference-conditioned models only: replace the policy by the fixed-gain\n"
+                 "servo inversion a = G (f(t+1) - q) on the policy's feature-extracted target; G = 1 /\n"
+                 "(1 - exp(-K T)) = 1.089 inverts the simulated first-order servo (K 25/s, T 0.1 s)\n"
+                 "exactly (default 0: the policy)")
+      ->type_name("G")
+      ->check(CLI::Range(0.0, 100.0));
   app.add_option("--seed", o.seed, "Seed of the synthetic reference")->type_name("N")->capture_default_str();
   auto* ticks = app.add_option("--ticks", o.ticks,
                                "Ticks (100 ms each) to run (default: the reference's length; none: the mean\n"

@@ -194,6 +194,17 @@ ValidationSet validationDemos(const std::string& metadata_json, const std::strin
   return v;
 }
 
+float modelResidualGain(const std::string& metadata_json, const std::string& origin) {
+  const nlohmann::json j = nlohmann::json::parse(metadata_json, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object() || !j.contains("training") || !j["training"].is_object() ||
+      !j["training"].contains("residual_gain"))
+    return 0.0f;
+  const nlohmann::json& g = j["training"]["residual_gain"];
+  if (!g.is_number() || !std::isfinite(g.get<double>()) || !(g.get<double>() >= 0.0) || g.get<double>() > 100.0)
+    throw std::runtime_error(origin + ": the model's metadata has an unusable training.residual_gain (a number in [0, 100])");
+  return static_cast<float>(g.get<double>());
+}
+
 RetargetParams modelRetargetSetting(const std::string& metadata_json, const RetargetParams& defaults,
                                     const std::string& origin) {
   RetargetParams r = defaults;
@@ -232,6 +243,10 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
     throw UsageError("--start-demo needs --reference none (it picks the held-out demonstration to start from)");
   if (!(o.controller.blend_law_pole >= 0.0 && o.controller.blend_law_pole < 1.0))
     throw UsageError("--blend-law-pole must be in [0, 1)");
+  if (!(o.controller.gain_law >= 0.0 && std::isfinite(o.controller.gain_law)))
+    throw UsageError("--gain-law must be a finite gain >= 0");
+  if (o.controller.gain_law > 0.0 && o.controller.blend_law_pole > 0.0)
+    throw UsageError("--gain-law and --blend-law-pole exclude each other (each replaces the policy)");
   if (o.ticks < 0) throw UsageError("--ticks must be positive");
   if (o.seconds < 0.0 || !std::isfinite(o.seconds)) throw UsageError("--seconds must be positive");
   if (o.ticks > 0 && o.seconds > 0.0) throw UsageError("--ticks and --seconds exclude each other");
@@ -259,9 +274,13 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   if (o.controller.blend_law_pole > 0.0 && h.conditioning == Conditioning::kAutonomous)
     throw UsageError("--blend-law-pole replaces a reference-conditioned policy; " + p.model_source +
                      " is an autonomous-mode model (the blend law needs the snapped human key pose)");
+  if (o.controller.gain_law > 0.0 && h.conditioning == Conditioning::kAutonomous)
+    throw UsageError("--gain-law replaces a reference-conditioned policy; " + p.model_source +
+                     " is an autonomous-mode model (the gain law needs the feature-extracted reference)");
   p.centroids = modelKeyPoses(p.model, p.movement_index);
   // The reference is retargeted the way the model's training data was.
   p.retarget = modelRetargetSetting(h.metadata_json, o.controller.retarget, p.model_source);
+  p.residual_gain = modelResidualGain(h.metadata_json, p.model_source);
 
   std::int64_t default_ticks = 0;
   switch (p.spec.kind) {
@@ -538,9 +557,11 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
     j["start_demo_index"] = o.start_demo >= 0 ? ordered_json(o.start_demo) : ordered_json(nullptr);
   }
   if (o.controller.blend_law_pole > 0.0) j["blend_law_pole"] = o.controller.blend_law_pole;
+  if (o.controller.gain_law > 0.0) j["gain_law"] = o.controller.gain_law;
   j["model"] = {{"path", p.model_source},
                 {"checksum", hex64(p.model.checksum)},
-                {"conditioning", conditioningName(p.model.header.conditioning)}};
+                {"conditioning", conditioningName(p.model.header.conditioning)},
+                {"residual_gain", p.residual_gain}};
   j["reference"] = p.reference.description;
   j["retarget"] = {{"priority", retargetPriorityName(p.retarget.priority)},
                    {"lambda_q", p.retarget.lambda_q},

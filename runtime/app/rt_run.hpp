@@ -152,6 +152,7 @@ struct PreparedRun {
   int movement_index = 0;              ///< into model.header.movement_names
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
   RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
+  float residual_gain = 0.0f;          ///< the model's training.residual_gain (PolicyWeights)
   tools::ReferenceStream reference;    ///< synthetic/file (empty for none)
   ValidationSet validation;            ///< none only
   std::vector<tools::ReferenceStream> validation_demos;  ///< none only
@@ -165,6 +166,11 @@ struct PreparedRun {
 /// std::runtime_error naming `origin` for a setting that is present but unusable.
 RetargetParams modelRetargetSetting(const std::string& metadata_json, const RetargetParams& defaults,
                                     const std::string& origin);
+
+/// The residual gain a reference-mode model was trained with (metadata training.residual_gain,
+/// PolicyWeights::residual_gain); 0 when the metadata has none. Throws std::runtime_error naming
+/// `origin` for a value that is present but not a finite number >= 0.
+float modelResidualGain(const std::string& metadata_json, const std::string& origin);
 
 /// Configure-time checks and preparation, in the order that fails fastest: reference syntax,
 /// URDF, model (file checks, joints against the URDF, architecture against `compiled_arch`),
@@ -339,8 +345,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     PreparedRun p = prepareRun(options, Dims::arch());
     WeightStorage weight_storage;
     const std::vector<const float*> tensors = policyTensorPointers<Dims>(p, weight_storage);
-    const PolicyWeights<Dims> weights =
-        bindPolicyWeights<Dims>(tensors.data(), tensors.size(), p.model.header.conditioning);
+    PolicyWeights<Dims> weights = bindPolicyWeights<Dims>(tensors.data(), tensors.size(), p.model.header.conditioning);
+    weights.residual_gain = p.residual_gain;
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
     // longer read, so its memory goes back before the loop (resident set, docs/embedded.md).
     std::vector<std::uint8_t>().swap(p.model.bytes);

@@ -119,6 +119,12 @@ struct ControllerParams {
   /// a = pole^2 a(t-1) + (1 - pole)^2 (r - q) (toolchain KeyPoseBlend), driving the same arm,
   /// so a test can measure what the servos alone cost. 0: the policy. Reference mode only.
   double blend_law_pole = 0.0;
+  /// Baseline: > 0 replaces the policy by a fixed-gain inversion of a first-order servo,
+  /// a = g (clamp(f(t+1)) - q), on the same feature-extracted target the policy is fed. With
+  /// g = 1 / (1 - exp(-K T)) (sim servo gain K, period T) it is the closed form the execution
+  /// labels would follow if the arm were exactly first order: the bar for what the policy
+  /// learns beyond it. 0: the policy. Reference mode only; excludes blend_law_pole.
+  double gain_law = 0.0;
   /// Pole of the online feature-extracted reference the policy is fed in reference mode (the
   /// blend of the snapped key poses, as the training data's f; must equal the data's).
   double feature_pole = kFeatureBlendPole;
@@ -308,6 +314,8 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   } else if (p.blend_law_pole > 0.0 && !autonomous) {
     const double pole = p.blend_law_pole;
     a = pole * pole * data.a_prev + (1.0 - pole) * (1.0 - pole) * (rec.r - q);
+  } else if (p.gain_law > 0.0 && !autonomous) {
+    a = p.gain_law * (clampToLimits(model.arm, data.feature_f) - q);
   } else {
     PolicyInput in;
     in.q = q.cast<float>();

@@ -183,6 +183,10 @@ struct PolicyWeights {
   WeightView<J, 1> r_mean{nullptr}, r_std{nullptr};  ///< rad
   WeightView<J, M * K> centroids{nullptr};  ///< column m*K + k: key pose k of movement m, rad
   Conditioning conditioning = Conditioning::kReference;
+  /// Residual gain g of reference-mode models: the action is g·r plus the network's output, the
+  /// net learning only what a first-order servo inversion of the target r = f(t+1) − q misses
+  /// (docs/policy.md). From the model's metadata (training.residual_gain); 0: none.
+  float residual_gain = 0.0f;
 };
 
 /// Everything stepPolicy writes: intermediates, the key/value rings of the last W ticks and the
@@ -638,6 +642,7 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
 
   for (int j = 0; j < J; ++j) ws.action_n[j] = w.head_weight.row(0).dot(ws.h.col(j).transpose()) + w.head_bias(0, 0);
   ws.action = (ws.action_n.array() * w.a_std.array() + w.a_mean.array()).matrix();
+  if (w.conditioning == Conditioning::kReference && w.residual_gain != 0.0f) ws.action += w.residual_gain * in.r;
   ++ws.ticks;
   return ws.action;
 }

@@ -9,6 +9,9 @@
 //   reference_rmse_m   median over --seeds of nao_rt's hand RMSE in reference mode
 //                      (--reference synthetic:M --seed s) with the reference model
 //   blend_law_rmse_m   the same run with the blend law instead of the policy (--blend-law-pole)
+//   gain_law_rmse_m    the same run with the fixed-gain first-order servo inversion (--gain-law):
+//                      the closed form the execution labels would follow on an exactly
+//                      first-order arm, i.e. the bar for what the policy learns beyond a formula
 #include "nao/kinematics.hpp"
 #include "nao/model_file.hpp"
 #include "nao/sim_arm.hpp"
@@ -249,6 +252,9 @@ void evaluate(const Args& a) {
   const std::vector<std::string> train_names = splitNames(meta, "train");
   const SimModel sim = makeSimModel(arm, SimParams{});
   const double period_s = ControllerParams{}.period_s;
+  // The gain that inverts the simulated first-order servo over one tick (the expert's first step).
+  const double gain = 1.0 / (1.0 - std::exp(-sim.params.servo_gain_per_s * sim.params.dt_s *
+                                            sim.params.substeps_per_tick));
 
   struct MovementWork {
     std::string name;
@@ -258,7 +264,7 @@ void evaluate(const Args& a) {
     std::vector<NearestDemo> ar_nearest;
     std::vector<int> ar_limited;
     std::size_t ar_train_demos = 0;
-    std::vector<std::size_t> auto_jobs, ref_jobs, law_jobs;
+    std::vector<std::size_t> auto_jobs, ref_jobs, law_jobs, gain_jobs;
   };
   std::vector<MovementWork> work;
   std::vector<Job> jobs;
@@ -326,7 +332,7 @@ void evaluate(const Args& a) {
 
     // nao_rt runs: one autonomous rollout per held-out demonstration, reference mode per seed.
     const fs::path mdir = out / name;
-    for (const char* sub : {"autonomous", "reference", "blend_law"}) fs::remove_all(mdir / sub, ec);
+    for (const char* sub : {"autonomous", "reference", "blend_law", "gain_law"}) fs::remove_all(mdir / sub, ec);
     for (std::size_t i = 0; i < v.names.size(); ++i) {
       w.auto_jobs.push_back(jobs.size());
       jobs.push_back({name + " autonomous " + v.names[i],
@@ -335,8 +341,9 @@ void evaluate(const Args& a) {
                        (mdir / "autonomous" / v.names[i]).string()},
                       mdir / "autonomous" / v.names[i]});
     }
-    char pole_text[32];
+    char pole_text[32], gain_text[32];
     std::snprintf(pole_text, sizeof pole_text, "%.17g", pole);
+    std::snprintf(gain_text, sizeof gain_text, "%.17g", gain);
     for (std::uint64_t s : a.seeds) {
       const std::string seed = std::to_string(s);
       const fs::path rdir = mdir / "reference" / ("seed_" + seed), ldir = mdir / "blend_law" / ("seed_" + seed);
@@ -351,6 +358,13 @@ void evaluate(const Args& a) {
                        "synthetic:" + name, "--seed", seed, "--blend-law-pole", pole_text, "--zero-timing", "--log",
                        ldir.string()},
                       ldir});
+      const fs::path gdir = mdir / "gain_law" / ("seed_" + seed);
+      w.gain_jobs.push_back(jobs.size());
+      jobs.push_back({name + " gain law seed " + seed,
+                      {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf, "--reference",
+                       "synthetic:" + name, "--seed", seed, "--gain-law", gain_text, "--zero-timing", "--log",
+                       gdir.string()},
+                      gdir});
     }
     work.push_back(std::move(w));
   }
@@ -360,12 +374,12 @@ void evaluate(const Args& a) {
   runJobs(jobs, a.jobs);
 
   json summary, detail;
-  std::printf("%-10s %18s %16s %18s %18s %18s\n", "movement", "autonomous DTW mm", "demo NN DTW mm", "linear AR DTW mm",
-              "reference RMSE mm", "blend law RMSE mm");
+  std::printf("%-10s %18s %16s %18s %18s %18s %18s\n", "movement", "autonomous DTW mm", "demo NN DTW mm",
+              "linear AR DTW mm", "reference RMSE mm", "blend law RMSE mm", "gain law RMSE mm");
   for (const MovementWork& w : work) {
-    std::vector<double> auto_dtw, nn_dtw, ar_dtw, ref_rmse, law_rmse;
+    std::vector<double> auto_dtw, nn_dtw, ar_dtw, ref_rmse, law_rmse, gain_rmse;
     json auto_runs = json::array(), nn = json::array(), ar_runs = json::array(), ref_runs = json::array(),
-         law_runs = json::array();
+         law_runs = json::array(), gain_runs = json::array();
     for (std::size_t i = 0; i < w.auto_jobs.size(); ++i) {
       const Job& job = jobs[w.auto_jobs[i]];
       const json s = readSummary(job);
@@ -397,12 +411,13 @@ void evaluate(const Args& a) {
                          {"command_limited_ticks", w.ar_limited[i]}});
     }
     for (std::size_t k = 0; k < a.seeds.size(); ++k) {
-      for (int law = 0; law < 2; ++law) {
-        const Job& job = jobs[(law ? w.law_jobs : w.ref_jobs)[k]];
+      for (int law = 0; law < 3; ++law) {  // 0 policy, 1 blend law, 2 gain law
+        const std::vector<std::size_t>& job_list = law == 0 ? w.ref_jobs : law == 1 ? w.law_jobs : w.gain_jobs;
+        const Job& job = jobs[job_list[k]];
         const json s = readSummary(job);
         const double r = numberAt(s, "ee_rmse_m", job);
-        (law ? law_rmse : ref_rmse).push_back(r);
-        (law ? law_runs : ref_runs)
+        (law == 0 ? ref_rmse : law == 1 ? law_rmse : gain_rmse).push_back(r);
+        (law == 0 ? ref_runs : law == 1 ? law_runs : gain_runs)
             .push_back({{"seed", a.seeds[k]},
                         {"run_dir", fs::relative(job.dir, out).string()},
                         {"reference", s["reference"]},
@@ -417,6 +432,7 @@ void evaluate(const Args& a) {
     m["linear_ar_dtw_m"] = numberOrNull(median(ar_dtw));
     m["reference_rmse_m"] = numberOrNull(median(ref_rmse));
     m["blend_law_rmse_m"] = numberOrNull(median(law_rmse));
+    m["gain_law_rmse_m"] = numberOrNull(median(gain_rmse));
     m["autonomous_runs"] = auto_dtw.size();
     m["heldout_demos"] = w.held.names.size();
     m["autonomous_dtw_per_run_m"] = auto_dtw;
@@ -425,6 +441,7 @@ void evaluate(const Args& a) {
     m["seeds"] = a.seeds;
     m["reference_rmse_per_seed_m"] = ref_rmse;
     m["blend_law_rmse_per_seed_m"] = law_rmse;
+    m["gain_law_rmse_per_seed_m"] = gain_rmse;
     m["linear_ar_orders"] = json::array();
     for (const LinearArJoint& j : w.ar.joints) m["linear_ar_orders"].push_back(j.order);
     summary[w.name] = m;
@@ -438,10 +455,12 @@ void evaluate(const Args& a) {
     d["linear_ar"] = {{"training_demos", w.ar_train_demos}, {"joints", arJson(w.ar)}, {"rollouts", ar_runs}};
     d["reference"] = ref_runs;
     d["blend_law"] = law_runs;
+    d["gain_law"] = gain_runs;
     detail[w.name] = d;
-    std::printf("%-10s %18s %16s %18s %18s %18s\n", w.name.c_str(), millimetres(median(auto_dtw)).c_str(),
+    std::printf("%-10s %18s %16s %18s %18s %18s %18s\n", w.name.c_str(), millimetres(median(auto_dtw)).c_str(),
                 millimetres(median(nn_dtw)).c_str(), millimetres(median(ar_dtw)).c_str(),
-                millimetres(median(ref_rmse)).c_str(), millimetres(median(law_rmse)).c_str());
+                millimetres(median(ref_rmse)).c_str(), millimetres(median(law_rmse)).c_str(),
+                millimetres(median(gain_rmse)).c_str());
   }
   summary["evaluation"] = {
       {"format", "nao-rt evaluate 1"},
@@ -451,6 +470,7 @@ void evaluate(const Args& a) {
       {"linear_ar_training_data", data_source},
       {"linear_ar_max_order", a.max_order},
       {"blend_law_pole", pole},
+      {"gain_law", gain},
       {"detail", "detail.json"}};
   const std::string text = summary.dump(2) + "\n", detail_text = detail.dump(2) + "\n";
   for (const auto& [file, body] : {std::pair{out / "summary.json", &text}, std::pair{out / "detail.json", &detail_text}}) {

@@ -22,6 +22,8 @@ struct TrainArgs {
   std::uint64_t seed = 1;
   int epochs = 200, patience = 10, batch = 2, world_size = 1, rank = 0, max_batches = 0, window = 0;
   int noisy_rollouts = ExecutionOptions{}.noisy_rollouts;
+  std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
+  double residual_gain = -1.0;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
@@ -72,6 +74,8 @@ void run(const TrainArgs& a) {
   o.batch = a.batch;
   o.lr = a.lr;
   o.execution.noisy_rollouts = a.noisy_rollouts;
+  o.execution.noise_std_rad = a.noise_std;
+  o.residual_gain = a.residual_gain;
   if (a.window > 0) o.arch.window = a.window;
   o.dist.world_size = a.world_size;
   o.dist.rank = a.rank;
@@ -180,6 +184,19 @@ void setup(CLI::App& app) {
                   "Per training demonstration, rollouts executed with AR(1) command noise besides the clean one, "
                   "labelled by the expert from the states they reach (DART; 0: on-trajectory states only)")
       ->check(CLI::Range(0, 16))
+      ->capture_default_str();
+  cmd->add_option("--noise-std", args->noise_std,
+                  "Standard deviations (rad) of the noisy rollouts' stationary AR(1) command noise, comma-separated: "
+                  "rollout k uses entry (k-1) modulo the count. Larger values put training states further off "
+                  "the demonstration (where an autonomous rollout drifts to), labelled back by the expert")
+      ->delimiter(',')
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--residual-gain", args->residual_gain,
+                  "Reference mode: the policy learns the residual of a = G (f(t+1) - q), the first-order servo "
+                  "inversion, and nao_rt adds G r back. Negative: G = 1/(1 - exp(-K T)) of the simulated servo "
+                  "(1.089); 0: the network predicts the whole action. Ignored in autonomous mode")
+      ->check(CLI::Range(-1.0, 100.0))
       ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "

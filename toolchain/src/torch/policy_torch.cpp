@@ -275,7 +275,10 @@ torch::Tensor PolicyNetImpl::act(const torch::Tensor& q, const torch::Tensor& a_
   batch.an = (a_prev - a_mean) / a_std;
   batch.rn = (r - r_mean) / r_std;
   batch.movement = movement;
-  return forward(batch, attention) * a_std + a_mean;
+  torch::Tensor a = forward(batch, attention) * a_std + a_mean;
+  if (conditioning_ == Conditioning::kReference && residual_gain != 0.0)
+    a = a + static_cast<float>(residual_gain) * r;  // float, as the runtime computes it
+  return a;
 }
 
 void PolicyNetImpl::setNormalisation(const NormStats& s) {

@@ -153,6 +153,10 @@ class PolicyNetImpl : public torch::nn::Module {
   const PolicyArch& arch() const { return arch_; }
   Conditioning conditioning() const { return conditioning_; }
 
+  /// Reference mode: act() returns g·r plus the de-normalised network output, so forward()
+  /// learns the residual of the first-order servo inversion (runtime PolicyWeights::residual_gain).
+  double residual_gain = 0.0;
+
  private:
   PolicyArch arch_;
   Conditioning conditioning_;

@@ -41,7 +41,9 @@ SequenceTensors toTensors(const PolicyNet& net, const std::vector<PolicySequence
     t.qn.push_back((put(s.q) - net->q_mean) / net->q_std);
     t.an.push_back((put(s.a_prev) - net->a_mean) / net->a_std);
     t.rn.push_back((put(s.r) - net->r_mean) / net->r_std);
-    t.target.push_back((put(s.a) - net->a_mean) / net->a_std);
+    // Reference mode learns the residual of the servo inversion g·r (act() adds it back).
+    const float g = net->conditioning() == Conditioning::kReference ? static_cast<float>(net->residual_gain) : 0.0f;
+    t.target.push_back((put(s.a) - g * put(s.r) - net->a_mean) / net->a_std);
     t.movement.push_back(s.movement);
     t.ticks += static_cast<std::int64_t>(s.ticks());
   }
@@ -154,6 +156,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
     << o.execution.expert_tol_rad;
   for (double q : o.execution.noise_std_rad) k << " " << q;
   k << "; batches " << o.max_batches;
+  if (o.conditioning == Conditioning::kReference && o.residual_gain != 0.0) k << "; residual " << o.residual_gain;
   return k.str();
 }
 
@@ -257,6 +260,13 @@ SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>
   return evaluate(net, toTensors(net, sequences));
 }
 
+double residualGain(const TrainOptions& o, const SimModel& sim) {
+  if (o.conditioning != Conditioning::kReference) return 0.0;
+  if (o.residual_gain >= 0.0) return o.residual_gain;
+  const double period = sim.params.dt_s * sim.params.substeps_per_tick;
+  return 1.0 / (1.0 - std::exp(-sim.params.servo_gain_per_s * period));
+}
+
 TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const TrainOptions& o, std::ostream* progress) {
   check(data, o);
   const Clock::time_point t_start = Clock::now();
@@ -301,6 +311,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   }
 
   PolicyNet net(o.arch, o.conditioning);
+  net->residual_gain = res.residual_gain = residualGain(o, sim);
   net->setNormalisation(res.stats);
   net->setCentroids(data.centroids);
   const SequenceTensors train = toTensors(net, train_seqs);
@@ -467,6 +478,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["optimizer"] = "adam";
   t["lr"] = o.lr;
   t["loss"] = "mse of normalised actions";
+  if (r.residual_gain != 0.0) t["residual_gain"] = r.residual_gain;  // absent: none (older files)
   // Only when they change the result: single-process files keep their bytes.
   if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;
   if (o.max_batches > 0) t["max_batches_per_epoch"] = o.max_batches;

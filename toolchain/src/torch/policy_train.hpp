@@ -33,7 +33,13 @@ struct TrainOptions {
   std::string resume;                 ///< if set, continue from this checkpoint (any world size)
   int max_batches = 0;                ///< > 0: each epoch stops after this many global batches (timing)
   bool live_progress = false;         ///< rank 0 also redraws a '\r' line during the epoch (terminals)
+  /// Reference mode: the net learns the residual of a = g·r (r = f(t+1) − q). < 0: g inverts the
+  /// simulated first-order servo over one tick, 1 / (1 − exp(−K T)); 0: no residual. Autonomous: 0.
+  double residual_gain = -1.0;
 };
+
+/// The residual gain training uses for `o` on `sim` (see TrainOptions::residual_gain).
+double residualGain(const TrainOptions& o, const SimModel& sim);
 
 struct EpochStats {
   int epoch = 0;             ///< 1-based
@@ -59,6 +65,7 @@ struct TrainResult {
   std::size_t train_sequences = 0;
   double expert_worst_miss_rad = 0.0;  ///< largest end-of-tick miss of the expert (clean rollouts)
   double execution_seconds = 0.0;      ///< wall time of executing the rollouts
+  double residual_gain = 0.0;          ///< g of the exported model (metadata training.residual_gain)
   std::vector<EpochStats> history;
   int best_epoch = 0;           ///< 1-based epoch whose weights were kept
   SplitLoss train, val;         ///< of the kept weights
