@@ -352,6 +352,13 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     std::vector<std::uint8_t>().swap(p.model.bytes);
     ControllerParams controller_params = options.controller;
     controller_params.retarget = p.retarget;
+    // The human's scale d_h is calibrated once per reference, as the training data and the
+    // evaluation target were retargeted (one scale per demonstration from all its frames:
+    // toolchain retargetTargets), not re-estimated per frame: per-frame link lengths jitter with
+    // the keypoint noise, which moved the hand target, flipped key-pose snaps and left the
+    // controller tracking another trajectory than the one it is scored against.
+    if (controller_params.human.scale_m <= 0.0 && p.reference.human.scale_m > 0.0)
+      controller_params.human = p.reference.human;
     const ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, options.sim);
     auto data = std::make_unique<ControllerData<Dims>>(model.sim, p.q_start);
     std::unique_ptr<LolaBackend> lola;
