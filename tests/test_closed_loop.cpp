@@ -4,9 +4,10 @@
 // on held-out demonstrations (run seeds 1,000,000 + s, never used for training), beside the
 // blend-law baseline under the same servos. The hand's RMSE against the toolchain's
 // feature-extracted trajectory of the same demonstration is reported; no joint may ever leave
-// its URDF limits (what is asserted, and why whole_arm's 1 cm is only logged: the test case).
+// its URDF limits (what is asserted: the test case).
 #include "rt_run.hpp"
 #include "nao/arm_model.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/tools/kmeans.hpp"
 #include "support/test_util.hpp"
 
@@ -14,6 +15,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -67,25 +69,32 @@ double worstLimitExcess(const fs::path& ticks_csv, const ArmModel& arm, std::siz
 
 // Fault counters by bit (controller.hpp).
 constexpr std::size_t kNoHuman = 0, kLimited = 6, kBridged = 14;
+
+// The one-tick inverse of the simulated first-order servo, 1 / (1 - exp(-K T)) (sim_arm.hpp).
+const double kServoInversionGain =
+    1.0 / (1.0 - std::exp(-SimParams{}.servo_gain_per_s * SimParams{}.dt_s * SimParams{}.substeps_per_tick));
 static_assert(kNumControllerFaults == 15, "fault bits renumbered: update the indices above");
 
 }  // namespace
 
-TEST_CASE("the default model imitates held-out demonstrations inside the limits, within 2 mm of the blend law under the same servos, and within 1 cm RMS on elbow and wrist") {
+TEST_CASE("the default model imitates held-out demonstrations inside the limits within 3 mm RMS, better than the blend law and the servo-inversion gain law under the same servos") {
   // Baseline in the same run (STYLE 16): the key-pose blend law the policy's labels follow,
   // driving the same servos. What it misses is the servo lag no policy of these labels removes.
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   for (const char* movement : {"whole_arm", "elbow", "wrist"}) {
     for (std::uint64_t seed : {1u, 2u, 3u}) {
-      double rmse[2] = {0.0, 0.0};
-      for (int baseline = 0; baseline < 2; ++baseline) {
+      // 0: the policy, 1: the blend law, 2: the first-order servo inversion (gain law).
+      double rmse[3] = {0.0, 0.0, 0.0};
+      for (int baseline = 0; baseline < 3; ++baseline) {
         rt::RunOptions o;
         o.weights_path = modelPath();
         o.reference = std::string("synthetic:") + movement;
         o.seed = seed;
         o.zero_timing = true;
-        if (baseline) o.controller.blend_law_pole = tools::KeyPoseBlend{}.pole;
-        const fs::path dir = runDir(std::string(movement) + "_" + std::to_string(seed) + (baseline ? "_law" : ""));
+        if (baseline == 1) o.controller.blend_law_pole = tools::KeyPoseBlend{}.pole;
+        if (baseline == 2) o.controller.gain_law = kServoInversionGain;
+        const char* const suffix[] = {"", "_law", "_gain"};
+        const fs::path dir = runDir(std::string(movement) + "_" + std::to_string(seed) + suffix[baseline]);
         fs::remove_all(dir);
         fs::create_directories(dir.parent_path());
         o.log_dir = dir.string();
@@ -95,7 +104,8 @@ TEST_CASE("the default model imitates held-out demonstrations inside the limits,
         std::size_t rows = 0;
         const double excess = worstLimitExcess(dir / "ticks.csv", arm, rows);
         rmse[baseline] = r.ee_rmse_m;
-        MESSAGE(std::string(movement) << " seed " << seed << (baseline ? " blend law" : " policy   ") << ": " << r.ticks
+        const char* const name[] = {" policy   ", " blend law", " gain law "};
+        MESSAGE(std::string(movement) << " seed " << seed << name[baseline] << ": " << r.ticks
                                       << " ticks, end-effector RMSE " << r.ee_rmse_m * 1000.0 << " mm, worst limit excess "
                                       << excess << " rad, faults no_human " << r.faults[kNoHuman] << ", human_bridged "
                                       << r.faults[kBridged] << ", command_limited " << r.faults[kLimited]);
@@ -106,25 +116,20 @@ TEST_CASE("the default model imitates held-out demonstrations inside the limits,
         // policy holds RWristYaw on its limit). 1e-12 rad is far below any physical excess.
         CHECK(excess <= 1e-12);
       }
-      // Issue 13: the policy now learns the servo-lagged arm's execution (docs/policy.md "Data")
-      // and beats the blend law under the same servos on 8 of these 9 runs (wrist 1.9-3.0 mm,
-      // elbow 3.9-5.1 mm, whole_arm seeds 2-3 5.1 / 13.2 mm). whole_arm seed 1 is an open defect:
-      // the rollout leaves the trajectory (75 mm, blend law 11 mm); it is reported, not counted
-      // as passed (WARN), until a retrained model closes it. Every other run is held to the
-      // 1 cm bar where the blend law's floor allows it and to beating the blend law.
-      const bool open_defect = std::string(movement) == "whole_arm" && seed == 1;
-      if (std::string(movement) == "whole_arm")
-        WARN_MESSAGE(rmse[0] < 0.01, movement << " seed " << seed << ": policy RMSE " << rmse[0] * 1e3
-                                              << " mm (blend law under the same servos: " << rmse[1] * 1e3 << " mm)");
-      else
-        CHECK_MESSAGE(rmse[0] < 0.01, movement << " seed " << seed << ": policy RMSE " << rmse[0] * 1e3
-                                               << " mm (blend law under the same servos: " << rmse[1] * 1e3 << " mm)");
-      if (open_defect)
-        WARN_MESSAGE(rmse[0] <= rmse[1], movement << " seed " << seed << ": policy RMSE " << rmse[0] * 1e3
-                                                  << " mm, worse than the blend law's " << rmse[1] * 1e3 << " mm (open defect)");
-      else
-        CHECK_MESSAGE(rmse[0] <= rmse[1], movement << " seed " << seed << ": policy RMSE " << rmse[0] * 1e3
-                                                   << " mm, worse than the blend law's " << rmse[1] * 1e3 << " mm");
+      // Issue 13: the policy learns the residual of the first-order servo inversion from
+      // execution labels (docs/policy.md), and nao_rt retargets with the demonstration's
+      // calibrated human scale (the target it tracks is the one it is scored against). Measured
+      // on these 9 runs: 0.30-0.84 mm, the gain law 0.50-1.05 mm, the blend law 5.1-9.2 mm.
+      // Held to issue 13's 3 mm (and issue 11's 1 cm) on every run, and to beating both laws
+      // under the same servos: what the network adds beyond the closed form is measured here.
+      CHECK_MESSAGE(rmse[0] < 3e-3, movement << " seed " << seed << ": policy RMSE " << rmse[0] * 1e3
+                                             << " mm (blend law " << rmse[1] * 1e3 << " mm, gain law "
+                                             << rmse[2] * 1e3 << " mm)");
+      CHECK_MESSAGE(rmse[0] <= rmse[1], movement << " seed " << seed << ": policy RMSE " << rmse[0] * 1e3
+                                                 << " mm, worse than the blend law's " << rmse[1] * 1e3 << " mm");
+      CHECK_MESSAGE(rmse[0] < rmse[2], movement << " seed " << seed << ": policy RMSE " << rmse[0] * 1e3
+                                                << " mm, not below the first-order servo inversion's "
+                                                << rmse[2] * 1e3 << " mm");
     }
   }
   std::error_code ec;

@@ -182,7 +182,8 @@ TEST_CASE("evaluate on the committed models writes the summary contract; issue 1
     REQUIRE(s.contains(movement));
     const nlohmann::json& m = s[movement];
     for (const char* key :
-         {"autonomous_dtw_m", "demo_nn_dtw_m", "linear_ar_dtw_m", "reference_rmse_m", "blend_law_rmse_m"}) {
+         {"autonomous_dtw_m", "demo_nn_dtw_m", "linear_ar_dtw_m", "reference_rmse_m", "blend_law_rmse_m",
+          "gain_law_rmse_m"}) {
       CAPTURE(key);
       REQUIRE(m.contains(key));
       REQUIRE(m[key].is_number());
@@ -193,6 +194,7 @@ TEST_CASE("evaluate on the committed models writes the summary contract; issue 1
     CHECK(m["autonomous_dtw_per_run_m"].size() == m["autonomous_runs"].get<std::size_t>());
     CHECK(m["reference_rmse_per_seed_m"].size() == m["seeds"].size());
     CHECK(m["blend_law_rmse_per_seed_m"].size() >= 3);
+    CHECK(m["gain_law_rmse_per_seed_m"].size() == m["seeds"].size());
     CHECK(detail[movement]["autonomous"].size() == m["autonomous_runs"].get<std::size_t>());
     // Each autonomous run directory is there for toolchain/nao analyze.
     for (const auto& run : detail[movement]["autonomous"])
@@ -203,19 +205,22 @@ TEST_CASE("evaluate on the committed models writes the summary contract; issue 1
     MESSAGE(movement << ": autonomous DTW " << autonomous * 1e3 << " mm, demo NN " << demo_nn * 1e3
                      << " mm, linear AR " << ar * 1e3 << " mm; reference RMSE " << reference * 1e3
                      << " mm, blend law " << law * 1e3 << " mm");
-    // Issue 13's thresholds. Measured with the retrained models (README): the reference model
-    // beats the blend law on every movement (median of 5 seeds; a hard check) and meets 3 mm on
-    // wrist only; the autonomous model misses both autonomous thresholds on every movement.
+    const double gain = m["gain_law_rmse_m"];
+    // Issue 13's thresholds. Measured with the committed models (README): reference mode meets
+    // 3 mm on every movement (0.41-0.54 mm) and beats both the blend law and the first-order
+    // servo inversion; the autonomous model misses both autonomous thresholds on every movement.
     // Unmet thresholds stay WARN (reported, not counted as passed) until a model meets them.
     CHECK_MESSAGE(reference < law, movement << ": reference-mode hand RMSE " << reference * 1e3
                                             << " mm is not below the blend law's " << law * 1e3 << " mm");
+    CHECK_MESSAGE(reference < gain, movement << ": reference-mode hand RMSE " << reference * 1e3
+                                             << " mm is not below the gain law's " << gain * 1e3 << " mm");
+    CHECK_MESSAGE(reference <= 3e-3, movement << ": reference-mode hand RMSE " << reference * 1e3
+                                              << " mm > 3 mm (issue 13; blend law " << law * 1e3 << " mm)");
     WARN_MESSAGE(autonomous <= demo_nn, movement << ": autonomous rollout DTW " << autonomous * 1e3
                                                  << " mm > demonstrations' nearest-neighbour DTW " << demo_nn * 1e3
                                                  << " mm (issue 13)");
     WARN_MESSAGE(autonomous <= 0.5 * ar, movement << ": autonomous rollout DTW " << autonomous * 1e3
                                                   << " mm > 0.5 x linear AR baseline's " << ar * 1e3 << " mm (issue 13)");
-    WARN_MESSAGE(reference <= 3e-3, movement << ": reference-mode hand RMSE " << reference * 1e3
-                                             << " mm > 3 mm (issue 13; blend law " << law * 1e3 << " mm)");
   }
   // Deterministic: the same evaluation twice gives the same summary, byte for byte.
   const std::string again = std::string("'") + NAO_TOOLCHAIN_EXE + "' evaluate --autonomous-model '" +
