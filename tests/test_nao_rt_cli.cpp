@@ -96,6 +96,8 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(j["joints"][3]["velocity"].get<double>() == arm.v_max[3]);
   CHECK(j["metadata"]["seed"] == 3);
   CHECK(j["source"] == path);
+  CHECK(j["weights"] == "file");
+  CHECK(j["precision"] == "fp32");
 }
 
 TEST_CASE("nao_rt --info describes the compiled-in model, and says when there is none") {
@@ -112,6 +114,7 @@ TEST_CASE("nao_rt --info describes the compiled-in model, and says when there is
   r = info(o);
   CHECK(r.status == 0);
   CHECK(nlohmann::json::parse(r.out)["source"] == "compiled-in");
+  CHECK(nlohmann::json::parse(r.out)["weights"] == "compiled");
 }
 
 TEST_CASE("nao_rt --info fails with exactly one stderr line on a bad model, joints or URDF") {

@@ -45,6 +45,9 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source) {
   j["tensors"] = model.tensors.size();
   j["bytes"] = model.bytes.size();
   j["checksum"] = checksum;
+  // Issue 14's contract: where the weights come from and their precision (fp32 only so far).
+  j["weights"] = source == "compiled-in" ? "compiled" : "file";
+  j["precision"] = "fp32";
   ordered_json joints = ordered_json::array();
   for (const TrainedJoint& t : h.joints)
     joints.push_back({{"name", t.name}, {"lower", t.lower}, {"upper", t.upper}, {"velocity", t.velocity}});

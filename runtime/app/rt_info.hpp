@@ -20,8 +20,9 @@ struct InfoOptions {
 };
 
 /// The JSON description of a checked model (pretty-printed, no trailing newline): format_version,
-/// dimensions, conditioning, movements, parameters, checksum ("0x%016x"), tensors, joints,
-/// metadata (parsed JSON if it parses, else the string), source.
+/// dimensions, conditioning, movements, parameters, checksum ("0x%016x"), weights ("compiled" or
+/// "file"), precision ("fp32"), tensors, joints, metadata (parsed JSON if it parses, else the
+/// string), source.
 std::string modelInfoJson(const ModelFile& model, const std::string& source);
 
 /// Checks the model and prints modelInfoJson + newline on `out`: returns 0. On any problem
