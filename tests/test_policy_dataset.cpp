@@ -516,3 +516,96 @@ TEST_CASE("executed rollouts: the expert's labels put the servo-lagged arm on f(
   CHECK_THROWS_WITH_AS(executeDemos(data, demos, model, bad, 1), doctest::Contains("noise_corr"), UserError);
   CHECK_THROWS_WITH_AS(executeDemos(data, {99}, model, o, 1), doctest::Contains("out of range"), UserError);
 }
+
+TEST_CASE("DAgger rollouts execute the policy's clamped action and the expert labels the states it reaches") {
+  KeyPoseBlend blend;
+  blend.pole = 0.8;
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const PolicyData data = reachableSet(arm, blend);
+  const SimModel model = makeSimModel(arm);
+  const double period = model.params.dt_s * model.params.substeps_per_tick;
+  const ExecutionOptions o;
+  // Policies that keep their momentum and push past the target (the autonomous failure):
+  // stateless functions of their inputs, so the test can recompute every action. `push` rad per
+  // tick on the movement's joint drives it into its limits (the clamp).
+  const auto law = [](double push, int movement, const JointVector& q, const JointVector& a_prev, const JointVector& r) {
+    JointVector a = 0.9 * a_prev + 0.3 * r;
+    for (int j = 0; j < kNumJoints; ++j) a[j] += 0.01 * (movement + 1) + 0.02 * std::sin(3.0 * q[j]);
+    a[movement] += push;
+    return a;
+  };
+  const std::vector<int> demos = {1, 5, 7};
+  for (const double push : {0.0, 0.3}) {
+    INFO("push " << push);
+    std::vector<int> starts;  // t == 0 once per rollout, then t counts up
+    int expect_t = 0;
+    bool ticks_in_order = true;
+    const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
+                                     const JointVector& r) -> JointVector {
+      if (t == 0) {
+        starts.push_back(movement);
+        expect_t = 0;
+      }
+      ticks_in_order = ticks_in_order && t == expect_t++;
+      return law(push, movement, q, a_prev, r);
+    };
+    const std::vector<PolicySequence> seqs = executePolicyRollouts(data, demos, model, o, policy, 2);
+    REQUIRE(seqs.size() == demos.size());
+    CHECK(ticks_in_order);
+    REQUIRE(starts.size() == demos.size());
+    std::size_t saturated = 0;
+    for (std::size_t i = 0; i < seqs.size(); ++i) {
+      const PolicySequence& s = seqs[i];
+      const PolicyDemo& d = data.demos[static_cast<std::size_t>(s.demo)];
+      INFO("demo " << s.demo);
+      CHECK(s.demo == demos[i]);
+      CHECK(s.rollout == -2);
+      CHECK(starts[i] == d.movement);
+      REQUIRE(s.ticks() == d.f.size() - 1);
+      CHECK((s.q.front() - d.f.front()).cwiseAbs().maxCoeff() < 1e-9);
+      CHECK(s.a_prev.front() == JointVector::Zero());
+      // (b) The executed command (q(t) + the next a(t−1)) is the policy's action as the
+      // controller applies it: q + a inside the position limits and one period's reach.
+      double worst_exec = 0.0;
+      for (std::size_t t = 0; t + 1 < s.ticks(); ++t) {
+        CHECK(s.r[t] == clampToLimits(arm, d.f[t + 1]) - s.q[t]);
+        const JointVector a = law(push, d.movement, s.q[t], s.a_prev[t], s.r[t]);
+        JointVector c;
+        for (int j = 0; j < kNumJoints; ++j) {
+          const double step = arm.v_max[j] * period;
+          const double lo = std::max(arm.q_min[j], s.q[t][j] - step), hi = std::min(arm.q_max[j], s.q[t][j] + step);
+          c[j] = std::clamp(s.q[t][j] + a[j], std::min(lo, hi), std::max(lo, hi));
+          if (c[j] != s.q[t][j] + a[j]) ++saturated;
+        }
+        worst_exec = std::max(worst_exec, (s.q[t] + s.a_prev[t + 1] - c).cwiseAbs().maxCoeff());
+      }
+      CHECK(worst_exec < 1e-12);
+      // (a) An independent replay on a fresh arm: the recorded states are the arm's under those
+      // commands, the labels are the expert's from exactly those states (the replay reproduces
+      // its recorded misses), and where the policy stays within reach they end the tick on f(t+1).
+      const Replay r = replay(data, s, model);
+      MESSAGE("policy rollout (push " << push << "): labels on target (1e-5 rad) at " << r.ticks_on_target << " of "
+                                      << r.ticks_checked << " ticks; drift " << s.drift_rad << " rad, expert's worst miss "
+                                      << s.worst_miss_rad << " rad");
+      CHECK(r.ticks_checked == s.ticks());
+      CHECK(r.worst_q_diff < 1e-9);
+      CHECK(r.worst_label_miss <= s.worst_miss_rad + 1e-9);
+      CHECK(s.drift_rad >= r.worst_off_trajectory - 1e-9);
+      CHECK(r.worst_off_trajectory > 0.02);  // the policy's own states, off the demonstration
+      if (push == 0.0) CHECK(r.ticks_on_target >= r.ticks_checked / 2);
+    }
+    if (push > 0.0) CHECK(saturated > 0);  // the clamp was exercised
+  }
+  // Deterministic: the same policy gives the same sequences.
+  const RolloutPolicy mild = [&](int movement, int, const JointVector& q, const JointVector& a_prev,
+                                 const JointVector& r) -> JointVector { return law(0.0, movement, q, a_prev, r); };
+  const std::vector<PolicySequence> a = executePolicyRollouts(data, demos, model, o, mild, 1);
+  const std::vector<PolicySequence> b = executePolicyRollouts(data, demos, model, o, mild, 1);
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    CHECK(a[i].q == b[i].q);
+    CHECK(a[i].a == b[i].a);
+  }
+  CHECK_THROWS_WITH_AS(executePolicyRollouts(data, {99}, model, o, mild, 1), doctest::Contains("out of range"), UserError);
+  CHECK_THROWS_WITH_AS(executePolicyRollouts(data, demos, model, o, RolloutPolicy{}, 1), doctest::Contains("no policy"),
+                       UserError);
+}

@@ -2,6 +2,7 @@
 // seed, the exported file reads back to the module's tensors, the loss goes down, early
 // stopping exports the best epoch, the attention record follows docs/policy.md.
 #include "nao/model_file.hpp"
+#include "nao/tools/command.hpp"
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/policy_dataset.hpp"
 #include "policy_torch.hpp"
@@ -226,4 +227,130 @@ TEST_CASE("early stopping exports the best epoch's weights") {
   CHECK(evaluatePolicy(r.net, executeDemos(smallData(), r.split.val, smallSim(), clean, o.seed)).normalised ==
         r.val.normalised);
   CHECK(static_cast<int>(r.history.size()) <= std::min(o.max_epochs, r.best_epoch + o.patience));
+}
+
+namespace {
+
+torch::Tensor stacked(const std::vector<JointVector>& v) {
+  torch::Tensor t = torch::empty({1, static_cast<std::int64_t>(v.size()), kNumJoints}, torch::kFloat);
+  auto acc = t.accessor<float, 3>();
+  for (std::size_t i = 0; i < v.size(); ++i)
+    for (int j = 0; j < kNumJoints; ++j) acc[0][static_cast<std::int64_t>(i)][j] = static_cast<float>(v[i][j]);
+  return t;
+}
+
+}  // namespace
+
+TEST_CASE("DAgger rollouts execute the net's own action (libtorch's forward on the recorded inputs, clamped as the controller does)") {
+  const ArmModel& arm = smallSim().arm;
+  const double period = smallSim().params.dt_s * smallSim().params.substeps_per_tick;
+  const std::vector<int> demos = {0, 5, 10};
+  ExecutionOptions clean;
+  clean.noisy_rollouts = 0;
+  const NormStats stats = normStats(executeDemos(smallData(), demos, smallSim(), clean, 1));
+  for (Conditioning c : {Conditioning::kAutonomous, Conditioning::kReference}) {
+    INFO(std::string(conditioningName(c)));
+    torch::manual_seed(7);
+    PolicyNet net(smallArch(), c);
+    {
+      // Away from the initialisation so that the actions are large enough to reach the clamp.
+      torch::NoGradGuard no_grad;
+      for (auto& p : net->parameters())
+        if (p.requires_grad()) p.add_(torch::randn_like(p) * 0.2);
+    }
+    net->setNormalisation(stats);
+    net->setCentroids(smallData().centroids);
+    net->residual_gain = c == Conditioning::kReference ? 1.0894 : 0.0;
+    net->eval();
+    const std::vector<PolicySequence> seqs = daggerRollouts(smallData(), demos, smallSim(), clean, net, 1);
+    REQUIRE(seqs.size() == demos.size());
+    torch::NoGradGuard no_grad;
+    double worst = 0.0, largest_action = 0.0, drift = 0.0;
+    std::size_t saturated = 0;
+    for (const PolicySequence& s : seqs) {
+      CHECK(s.rollout == -1);
+      const torch::Tensor act =
+          net->act(stacked(s.q), stacked(s.a_prev), stacked(s.r), torch::tensor({static_cast<std::int64_t>(s.movement)}))
+              .contiguous();
+      auto a = act.accessor<float, 3>();
+      for (std::size_t t = 0; t + 1 < s.ticks(); ++t)
+        for (int j = 0; j < kNumJoints; ++j) {
+          const double step = arm.v_max[j] * period;
+          const double lo = std::max(arm.q_min[j], s.q[t][j] - step), hi = std::min(arm.q_max[j], s.q[t][j] + step);
+          const double want = s.q[t][j] + a[0][static_cast<std::int64_t>(t)][j];
+          const double cmd = std::clamp(want, std::min(lo, hi), std::max(lo, hi));
+          if (cmd != want) ++saturated;
+          largest_action = std::max(largest_action, std::abs(static_cast<double>(a[0][static_cast<std::int64_t>(t)][j])));
+          worst = std::max(worst, std::abs(s.q[t][j] + s.a_prev[t + 1][j] - cmd));
+        }
+      drift = std::max(drift, s.drift_rad);
+    }
+    MESSAGE(std::string(conditioningName(c)) << ": executed vs libtorch's clamped action " << worst << " rad, largest action "
+                                << largest_action << " rad, " << saturated << " clamped joint-ticks, drift " << drift << " rad");
+    CHECK(worst < 1e-5);
+    CHECK(largest_action > 1e-3);
+    CHECK(drift > 1e-3);
+  }
+}
+
+TEST_CASE("training with one DAgger round adds one policy rollout per training demonstration and stays deterministic") {
+  TrainOptions o = smallOptions(41, 3);
+  o.conditioning = Conditioning::kAutonomous;
+  o.dagger_rounds = 1;
+  o.dagger_start = 1;
+  TrainResult r;
+  const std::vector<std::uint8_t> a = trainBytes(o, &r);
+  REQUIRE(r.dagger.size() == 1);
+  const DaggerRound& round = r.dagger.front();
+  std::size_t demo_ticks = 0;
+  for (int d : r.split.train) demo_ticks += smallData().demos[static_cast<std::size_t>(d)].f.size() - 1;
+  MESSAGE("DAgger round (small config, " << round.sequences << " demos, " << round.ticks << " ticks): " << round.seconds
+                                         << " s, drift " << round.drift_rad << " rad");
+  CHECK(round.after_epoch == 1);
+  CHECK(round.sequences == r.split.train.size());
+  CHECK(round.ticks == demo_ticks);
+  // Epoch 1 trains on the executed rollouts, epochs 2 and 3 on those plus the round's.
+  REQUIRE(r.history.size() == 3);
+  CHECK(r.history[0].samples == r.train_samples);
+  CHECK(r.history[1].samples == r.train_samples + round.ticks);
+  CHECK(r.history[2].samples == r.train_samples + round.ticks);
+  const nlohmann::json meta = nlohmann::json::parse(modelMetadata(smallData(), o, r));
+  CHECK(meta["training"]["dagger"]["rounds"] == 1);
+  CHECK(meta["training"]["dagger"]["run"][0]["sequences"] == round.sequences);
+  CHECK(modelCard(smallData(), o, r, "test", "m.bin").find("| DAgger | 1 round") != std::string::npos);
+
+  const std::vector<std::uint8_t> b = trainBytes(o);
+  CHECK_MESSAGE(a == b, "two DAgger runs with seed 41 gave different bytes");
+  // Off: no DAgger key (older files keep their bytes) and other weights.
+  TrainOptions off = o;
+  off.dagger_rounds = 0;
+  TrainResult r_off;
+  const std::vector<std::uint8_t> c = trainBytes(off, &r_off);
+  CHECK(r_off.dagger.empty());
+  CHECK(modelMetadata(smallData(), off, r_off).find("dagger") == std::string::npos);
+  // Epoch 1 is the same run; epoch 2 trained on other data.
+  CHECK(r_off.history[0].val_loss == r.history[0].val_loss);
+  CHECK(r_off.history[1].val_loss != r.history[1].val_loss);
+  CHECK(a != c);
+}
+
+TEST_CASE("DAgger is refused with world size > 1, with --resume and for an architecture the runtime is not compiled for") {
+  TrainOptions o = smallOptions(1, 1);
+  o.dagger_rounds = 1;
+  TrainOptions dist = o;
+  dist.dist.world_size = 2;
+  dist.dist.rendezvous = "file:///nonexistent/rendezvous";
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), dist, nullptr), doctest::Contains("world size 1"), UserError);
+  TrainOptions resume = o;
+  resume.resume = "/nonexistent/checkpoint.pt";
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), resume, nullptr), doctest::Contains("--resume"), UserError);
+  TrainOptions window = o;
+  window.arch.window = 9;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), window, nullptr), doctest::Contains("architecture"), UserError);
+  TrainOptions start = o;
+  start.dagger_start = 0;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), start, nullptr), doctest::Contains("start"), UserError);
+  // Without DAgger the same window trains (the refusal is DAgger's).
+  window.dagger_rounds = 0;
+  CHECK_NOTHROW(trainPolicy(smallData(), smallSim(), window, nullptr));
 }

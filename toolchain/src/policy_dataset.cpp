@@ -339,11 +339,38 @@ JointVector expertCommand(const SimModel& model, SimData& sim, const SimSnapshot
 
 namespace {
 
+// One tick of a rollout from the arm's present state (q measured, `a_prev` applied last tick):
+// the controller's per-tick command bounds [lo, hi], the expert's command toward the clamped
+// f(t+1) from a snapshot (sim is left in the tick's start state), and the tick's inputs and
+// label appended to `s`. Returns the expert's command; `miss` is its end-of-tick miss.
+JointVector labelTick(const PolicyDemo& demo, std::size_t t, const JointVector& q, const JointVector& a_prev,
+                      const SimModel& sim_model, SimData& sim, SimSnapshot& snap, const ExecutionOptions& o,
+                      PolicySequence& s, JointVector& lo, JointVector& hi, double& miss) {
+  const ArmModel& arm = sim_model.arm;
+  const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
+  for (int j = 0; j < kNumJoints; ++j) {
+    const double step = arm.v_max[j] * period;
+    lo[j] = std::max(arm.q_min[j], q[j] - step);
+    hi[j] = std::min(arm.q_max[j], q[j] + step);
+    if (lo[j] > hi[j]) std::swap(lo[j], hi[j]);
+  }
+  captureSim(sim, snap);
+  const JointVector target = clampToLimits(arm, demo.f[t + 1]);
+  const JointVector c = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
+  s.q.push_back(q);
+  s.a_prev.push_back(a_prev);
+  // The reference input: how far the tick's feature-extracted target f(t+1) (computed online
+  // by the controller from the snapped key poses: controller.hpp, kFeatureBlendPole) is from
+  // the measured q(t). As a difference, not as f(t+1) itself: in normalised units the label
+  // needs r − q to ~1e-3 of the angles' spread, which the net learnt only slowly (measured).
+  s.r.push_back(target - q);
+  s.a.push_back(c - q);
+  return c;
+}
+
 // Rollout k of demonstration d (see executeDemos), on `sim` (any state; reset here).
 PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimModel& sim_model, SimData& sim,
                               const ExecutionOptions& o, std::uint64_t seed) {
-  const ArmModel& arm = sim_model.arm;
-  const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
   const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
   PolicySequence s;
   s.demo = d;
@@ -364,25 +391,9 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
   const double innovation = sd * std::sqrt(1.0 - o.noise_corr * o.noise_corr);
   for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
     JointVector lo, hi;
-    for (int j = 0; j < kNumJoints; ++j) {
-      const double step = arm.v_max[j] * period;
-      lo[j] = std::max(arm.q_min[j], q[j] - step);
-      hi[j] = std::min(arm.q_max[j], q[j] + step);
-      if (lo[j] > hi[j]) std::swap(lo[j], hi[j]);
-    }
-    captureSim(sim, snap);
     double miss = 0.0;
-    const JointVector target = clampToLimits(arm, demo.f[t + 1]);
-    const JointVector c = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
+    const JointVector c = labelTick(demo, t, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
     if (k == 0) s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
-    s.q.push_back(q);
-    s.a_prev.push_back(a_prev);
-    // The reference input: how far the tick's feature-extracted target f(t+1) (computed online
-    // by the controller from the snapped key poses: controller.hpp, kFeatureBlendPole) is from
-    // the measured q(t). As a difference, not as f(t+1) itself: in normalised units the label
-    // needs r − q to ~1e-3 of the angles' spread, which the net learnt only slowly (measured).
-    s.r.push_back(target - q);
-    s.a.push_back(c - q);
     JointVector c_exec = c;
     if (k > 0) {
       for (int j = 0; j < kNumJoints; ++j) noise[j] = o.noise_corr * noise[j] + innovation * normal();
@@ -395,11 +406,41 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
   return s;
 }
 
+// The policy's rollout of demonstration d (see executePolicyRollouts), on `sim` (reset here).
+PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimModel& sim_model, SimData& sim,
+                                    const ExecutionOptions& o, const RolloutPolicy& policy, int round) {
+  const ArmModel& arm = sim_model.arm;
+  const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
+  PolicySequence s;
+  s.demo = d;
+  s.movement = demo.movement;
+  s.rollout = -round;
+  SimSnapshot snap;
+  resetSim(sim_model, sim, demo.f.front());
+  JointVector q = sim.q, a_prev = JointVector::Zero();
+  for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
+    s.drift_rad = std::max(s.drift_rad, (q - clampToLimits(arm, demo.f[t])).cwiseAbs().maxCoeff());
+    JointVector lo, hi;
+    double miss = 0.0;
+    labelTick(demo, t, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
+    s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
+    JointVector a = policy(demo.movement, static_cast<int>(t), q, a_prev, s.r.back());
+    if (!a.allFinite()) a.setZero();  // as the controller does (kFaultPolicyNonFinite)
+    // The controller's command: q + a inside the position limits and one period's reach.
+    JointVector c_exec = q + a;
+    for (int j = 0; j < kNumJoints; ++j) c_exec[j] = std::clamp(c_exec[j], lo[j], hi[j]);
+    a_prev = c_exec - q;
+    q = stepSim(sim_model, sim, c_exec);
+  }
+  s.drift_rad = std::max(s.drift_rad, (q - clampToLimits(arm, demo.f.back())).cwiseAbs().maxCoeff());
+  return s;
+}
+
 }  // namespace
 
-std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vector<int>& demos,
-                                         const SimModel& sim_model, const ExecutionOptions& o, std::uint64_t seed,
-                                         std::ostream* progress) {
+namespace {
+
+void checkExecution(const PolicyData& data, const std::vector<int>& demos, const ExecutionOptions& o) {
   if (o.noisy_rollouts < 0) throw UserError("execution: noisy_rollouts must not be negative");
   if (o.noisy_rollouts > 0 && o.noise_std_rad.empty()) throw UserError("execution: no noise standard deviation given");
   for (double sd : o.noise_std_rad)
@@ -410,6 +451,14 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
   for (int d : demos)
     if (d < 0 || static_cast<std::size_t>(d) >= data.demos.size())
       throw UserError("execution: demonstration index " + std::to_string(d) + " is out of range");
+}
+
+}  // namespace
+
+std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vector<int>& demos,
+                                         const SimModel& sim_model, const ExecutionOptions& o, std::uint64_t seed,
+                                         std::ostream* progress) {
+  checkExecution(data, demos, o);
   const std::size_t per_demo = static_cast<std::size_t>(1 + o.noisy_rollouts);
   const std::size_t total = demos.size() * per_demo;
   std::vector<PolicySequence> out(total);
@@ -444,6 +493,18 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
   work();
   for (std::thread& t : pool) t.join();
   if (failure) std::rethrow_exception(failure);
+  return out;
+}
+
+std::vector<PolicySequence> executePolicyRollouts(const PolicyData& data, const std::vector<int>& demos,
+                                                  const SimModel& sim_model, const ExecutionOptions& o,
+                                                  const RolloutPolicy& policy, int round) {
+  checkExecution(data, demos, o);
+  if (!policy) throw UserError("execution: no policy to roll out");
+  std::vector<PolicySequence> out;
+  out.reserve(demos.size());
+  SimData sim(sim_model, JointVector::Zero());
+  for (int d : demos) out.push_back(executePolicyRollout(data, d, sim_model, sim, o, policy, round));
   return out;
 }
 

@@ -24,6 +24,7 @@ struct TrainArgs {
   int noisy_rollouts = ExecutionOptions{}.noisy_rollouts;
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
   double residual_gain = -1.0;
+  int dagger_rounds = 0, dagger_start = TrainOptions{}.dagger_start;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
@@ -85,6 +86,8 @@ void run(const TrainArgs& a) {
   o.checkpoint = a.checkpoint;
   o.resume = a.resume;
   o.max_batches = a.max_batches;
+  o.dagger_rounds = a.dagger_rounds;
+  o.dagger_start = a.dagger_start;
   o.live_progress = isatty(fileno(stdout)) != 0;
   if (a.rank >= a.world_size)
     throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
@@ -232,6 +235,15 @@ void setup(CLI::App& app) {
   cmd->add_option("--max-batches", args->max_batches,
                   "Stop every epoch after this many global batches (timing runs; recorded in the model)")
       ->check(CLI::Range(0, 1 << 30))
+      ->capture_default_str();
+  cmd->add_option("--dagger-rounds", args->dagger_rounds,
+                  "DAgger: after each of this many epochs (from --dagger-start on) the current policy is rolled "
+                  "out on the simulated arm from every training demonstration's start, the states it reaches are "
+                  "labelled by the expert and added to the training set (0: off; world size 1, no --resume)")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
+  cmd->add_option("--dagger-start", args->dagger_start, "Epoch after which the first DAgger round runs")
+      ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
   cmd->callback([args] { run(*args); });
 }

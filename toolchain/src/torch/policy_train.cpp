@@ -1,5 +1,6 @@
 #include "policy_train.hpp"
 
+#include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 
 #include <nlohmann/json.hpp>
@@ -141,6 +142,41 @@ void check(const PolicyData& data, const TrainOptions& o) {
   if (o.patience < 1) throw UserError("patience must be at least 1");
   if (o.batch < 1) throw UserError("batch must be at least 1 sequence");
   if (!(o.lr > 0.0)) throw UserError("learning rate must be positive");
+  if (o.dagger_rounds < 0) throw UserError("DAgger rounds must not be negative");
+  if (o.dagger_rounds > 0) {
+    if (o.dagger_start < 1) throw UserError("the first DAgger round must follow an epoch (start at least 1)");
+    // Unsupported, not silently wrong: ranks would need to share the rollouts, a checkpoint would need them.
+    if (o.dist.world_size > 1) throw UserError("DAgger (--dagger-rounds) needs world size 1 (not data-parallel)");
+    if (!o.resume.empty()) throw UserError("DAgger (--dagger-rounds) cannot --resume a checkpoint");
+    // The rollouts run the runtime's streaming inference, compiled for these two only.
+    if (o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
+      throw UserError("DAgger (--dagger-rounds) needs the paper or small architecture as compiled (e.g. no --window)");
+  }
+}
+
+// One DAgger round: the net's current weights bound to the runtime's streaming inference (the
+// policy nao_rt runs), rolled out from every listed demonstration's start (executePolicyRollouts).
+template <class Dims>
+std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
+                                       const ExecutionOptions& execution, const PolicyNet& net, int round) {
+  const std::vector<std::vector<float>> floats = manifestFloats(net);
+  std::vector<const float*> pointers;
+  for (const std::vector<float>& f : floats) pointers.push_back(f.data());
+  PolicyWeights<Dims> weights = bindPolicyWeights<Dims>(pointers.data(), pointers.size(), net->conditioning());
+  weights.residual_gain = static_cast<float>(net->residual_gain);
+  const auto ws = makePolicyWorkspace<Dims>();
+  const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
+                                   const JointVector& r) -> JointVector {
+    if (t == 0) resetPolicyStream(*ws);
+    PolicyInput in;
+    in.q = q.cast<float>();
+    in.a_prev = a_prev.cast<float>();
+    in.r = r.cast<float>();  // ignored in autonomous mode
+    in.movement = movement;
+    in.step = std::min(t, Dims::kMaxSteps - 1);  // as the controller clamps it
+    return stepPolicy(weights, *ws, in).template cast<double>();
+  };
+  return executePolicyRollouts(data, demos, sim, execution, policy, round);
 }
 
 // Checkpoints (torch archives): the trainable parameters in manifest order, Adam's state, the
@@ -157,6 +193,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   for (double q : o.execution.noise_std_rad) k << " " << q;
   k << "; batches " << o.max_batches;
   if (o.conditioning == Conditioning::kReference && o.residual_gain != 0.0) k << "; residual " << o.residual_gain;
+  if (o.dagger_rounds > 0) k << "; dagger " << o.dagger_rounds << " " << o.dagger_start;
   return k.str();
 }
 
@@ -260,6 +297,14 @@ SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>
   return evaluate(net, toTensors(net, sequences));
 }
 
+std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
+                                           const ExecutionOptions& execution, const PolicyNet& net, int round) {
+  const PolicyArch& arch = net->arch();
+  if (arch == PaperPolicyDims::arch()) return rolloutsOf<PaperPolicyDims>(data, demos, sim, execution, net, round);
+  if (arch == SmallPolicyDims::arch()) return rolloutsOf<SmallPolicyDims>(data, demos, sim, execution, net, round);
+  throw UserError("DAgger rollouts need the paper or small architecture as compiled");
+}
+
 double residualGain(const TrainOptions& o, const SimModel& sim) {
   if (o.conditioning != Conditioning::kReference) return 0.0;
   if (o.residual_gain >= 0.0) return o.residual_gain;
@@ -314,7 +359,8 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   net->residual_gain = res.residual_gain = residualGain(o, sim);
   net->setNormalisation(res.stats);
   net->setCentroids(data.centroids);
-  const SequenceTensors train = toTensors(net, train_seqs);
+  SequenceTensors train = toTensors(net, train_seqs);
+  const SequenceTensors train_rollouts = train;  // the final train loss: without DAgger's sequences
   const SequenceTensors val = toTensors(net, val_seqs);
 
   std::vector<torch::Tensor> params = net->trainableParameters();
@@ -432,6 +478,35 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
                 << std::endl;
     }
     if (stop) break;
+    if (epoch >= o.dagger_start && epoch < o.dagger_start + o.dagger_rounds) {
+      // Aggregation: the policy's own states, labelled by the expert, join the training set;
+      // the norm.* buffers stay the initial rollouts' (toTensors uses the net's).
+      const Clock::time_point t_round = Clock::now();
+      DaggerRound dr;
+      dr.after_epoch = epoch;
+      const int round = static_cast<int>(res.dagger.size()) + 1;
+      const std::vector<PolicySequence> seqs = daggerRollouts(data, res.split.train, sim, o.execution, net, round);
+      const SequenceTensors added = toTensors(net, seqs);
+      for (std::size_t i = 0; i < added.size(); ++i) {
+        train.qn.push_back(added.qn[i]);
+        train.an.push_back(added.an[i]);
+        train.rn.push_back(added.rn[i]);
+        train.target.push_back(added.target[i]);
+        train.movement.push_back(added.movement[i]);
+      }
+      train.ticks += added.ticks;
+      dr.sequences = seqs.size();
+      dr.ticks = tickCount(seqs);
+      for (const PolicySequence& seq : seqs) dr.drift_rad = std::max(dr.drift_rad, seq.drift_rad);
+      dr.seconds = secondsSince(t_round);
+      res.dagger.push_back(dr);
+      if (progress) {
+        char line[200];
+        std::snprintf(line, sizeof line, "DAgger round %d after epoch %d: %zu policy rollouts (%zu ticks, drift up to %.3g rad) in %.1f s",
+                      round, epoch, dr.sequences, dr.ticks, dr.drift_rad, dr.seconds);
+        *progress << line << std::endl;
+      }
+    }
   }
 
   {
@@ -440,7 +515,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   }
   net->eval();
   res.net = net;
-  res.train = evaluate(net, train, group.get());
+  res.train = evaluate(net, train_rollouts, group.get());
   res.val = evaluate(net, val, group.get());
   res.seconds = secondsSince(t_start);
   double samples = 0.0, seconds = 0.0;
@@ -482,6 +557,16 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   // Only when they change the result: single-process files keep their bytes.
   if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;
   if (o.max_batches > 0) t["max_batches_per_epoch"] = o.max_batches;
+  if (o.dagger_rounds > 0) {
+    auto& dg = t["dagger"];
+    dg["rounds"] = o.dagger_rounds;
+    dg["start_epoch"] = o.dagger_start;
+    dg["policy"] = "pure (the current net executes every tick; expert labels)";
+    dg["run"] = nlohmann::ordered_json::array();
+    for (const DaggerRound& x : r.dagger)
+      dg["run"].push_back({{"after_epoch", x.after_epoch}, {"sequences", x.sequences}, {"ticks", x.ticks},
+                           {"drift_rad", x.drift_rad}});
+  }
   t["batch_unit"] = "sequences";
   auto& ex = t["execution"];
   ex["arm"] = "simulated ODE arm of nao_rt (sim_arm), servo-lagged";
@@ -578,6 +663,18 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
                 r.samples_per_s, r.samples_per_s / r.world_size);
   s << "| throughput | " << buf << " |\n";
   if (o.max_batches > 0) s << "| batches per epoch | capped at " << o.max_batches << " (timing run) |\n";
+  if (o.dagger_rounds > 0) {
+    s << "| DAgger | " << o.dagger_rounds << " round" << (o.dagger_rounds == 1 ? "" : "s") << " after epochs "
+      << o.dagger_start << ".." << o.dagger_start + o.dagger_rounds - 1
+      << " (pure policy rollouts, expert labels, aggregated); run:";
+    if (r.dagger.empty()) s << " none";
+    for (const DaggerRound& x : r.dagger) {
+      std::snprintf(buf, sizeof buf, " after epoch %d +%zu sequences (%zu ticks, drift %.3g rad, %.1f s);", x.after_epoch,
+                    x.sequences, x.ticks, x.drift_rad, x.seconds);
+      s << buf;
+    }
+    s << " |\n";
+  }
   s << "\n";
 
   s << "## Data\n\n";

@@ -36,6 +36,23 @@ struct TrainOptions {
   /// Reference mode: the net learns the residual of a = g·r (r = f(t+1) − q). < 0: g inverts the
   /// simulated first-order servo over one tick, 1 / (1 − exp(−K T)); 0: no residual. Autonomous: 0.
   double residual_gain = -1.0;
+  /// DAgger (docs/policy.md "Data"): after each of the epochs dagger_start .. dagger_start +
+  /// dagger_rounds − 1 the current net is rolled out on the simulated arm from every training
+  /// demonstration's start (pure policy, executePolicyRollouts through the runtime's stepPolicy),
+  /// the states it reaches are labelled by the expert, and the sequences join the training set
+  /// for the remaining epochs (normalisation statistics and validation set unchanged). 0: off.
+  /// Only the paper and small architectures (the runtime's compiled Dims), world size 1, no resume.
+  int dagger_rounds = 0;
+  int dagger_start = 2;  ///< 1-based epoch after which the first round runs
+};
+
+/// One DAgger round of a training run.
+struct DaggerRound {
+  int after_epoch = 0;         ///< 1-based
+  std::size_t sequences = 0;   ///< added to the training set
+  std::size_t ticks = 0;
+  double drift_rad = 0.0;      ///< largest |q(t) − f(t)| the policy's rollouts reached
+  double seconds = 0.0;        ///< wall time (card only, never model.bin)
 };
 
 /// The residual gain training uses for `o` on `sim` (see TrainOptions::residual_gain).
@@ -75,6 +92,7 @@ struct TrainResult {
   int threads_per_rank = 1;     ///< torch intra-op threads of each rank
   double samples_per_s = 0.0;   ///< training samples per second of epoch wall time, all ranks
   int resumed_after = 0;        ///< epoch of the checkpoint this run continued from (0: none)
+  std::vector<DaggerRound> dagger;  ///< the DAgger rounds run, in order (TrainOptions::dagger_rounds)
 };
 
 /// Trains a policy on `data`: executes the training split's demonstrations on the simulated arm
@@ -90,6 +108,13 @@ struct TrainResult {
 /// differ from the data's, no validation demonstration, bad batch/epochs/patience/lr), a
 /// checkpoint of other data or options, and a failed rendezvous or collective (a rank died).
 TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const TrainOptions& options, std::ostream* progress);
+
+/// One DAgger round's sequences (TrainOptions::dagger_rounds): `net`'s present weights bound to
+/// the runtime's streaming inference (nao/policy.hpp stepPolicy, the policy nao_rt runs; the
+/// paper or small architecture) and rolled out from each listed demonstration's start by
+/// executePolicyRollouts (rollout = −round). Throws UserError for another architecture.
+std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
+                                           const ExecutionOptions& execution, const PolicyNet& net, int round);
 
 /// Normalised and rad^2 MSE of `net` on `sequences` (evaluation mode, no gradients).
 SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>& sequences);

@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <iosfwd>
 #include <map>
 #include <string>
@@ -122,12 +123,13 @@ struct ExecutionOptions {
 struct PolicySequence {
   int demo = 0;      ///< index into PolicyData::demos
   int movement = 0;
-  int rollout = 0;   ///< 0: clean, k >= 1: noisy rollout k
+  int rollout = 0;   ///< 0: clean, k >= 1: noisy rollout k, -i: the policy's rollout of DAgger round i
   std::vector<JointVector> q;       ///< measured q(t) at the start of tick t (q(0) = f(0), at rest)
   std::vector<JointVector> a_prev;  ///< a(t−1) as applied (c(t−1) − q(t−1)), 0 at t = 0
   std::vector<JointVector> r;       ///< reference input: f(t+1) − q(t), f(t+1) the tick's feature-extracted target (clamped)
   std::vector<JointVector> a;       ///< label: the expert's c(t) − q(t)
   double worst_miss_rad = 0.0;      ///< largest |q(t+1) − f(t+1)| of the expert's command (clean rollout)
+  double drift_rad = 0.0;           ///< policy rollouts: largest |q(t) − f(t)| (clamped f) the policy reached
   std::size_t ticks() const { return a.size(); }
 };
 
@@ -140,6 +142,25 @@ struct PolicySequence {
 std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vector<int>& demos,
                                          const SimModel& sim_model, const ExecutionOptions& options,
                                          std::uint64_t seed, std::ostream* progress = nullptr);
+
+/// A policy for executePolicyRollouts: the action a(t), rad, before the controller's clamp, from
+/// the inputs the controller gives it (measured q(t), the applied a(t−1), r = f(t+1) − q(t) as
+/// for the expert's rollouts) at tick t of demonstration `demo`'s movement. t == 0 starts a new
+/// rollout (a streaming policy resets its window there).
+using RolloutPolicy = std::function<JointVector(int movement, int t, const JointVector& q, const JointVector& a_prev,
+                                                const JointVector& r)>;
+
+/// DAgger (Ross et al. 2011; docs/policy.md "Data"): each listed demonstration rolled out on the
+/// simulated arm from its start (at rest at f(0), as executeDemos) for its length, executing the
+/// *policy's* action as the controller applies it (q + a clamped to the position limits and
+/// v_max·period, a non-finite action replaced by 0; the applied action is the next a(t−1)), and
+/// labelled at every visited state by the expert toward the demonstration's f(t+1) exactly as
+/// executeDemos labels its rollouts. Pure policy (no expert mixing): deterministic for a
+/// deterministic policy. One thread, in list order (the policy may be stateful). Sequences get
+/// rollout = −round. Throws UserError for bad options or indices.
+std::vector<PolicySequence> executePolicyRollouts(const PolicyData& data, const std::vector<int>& demos,
+                                                  const SimModel& sim_model, const ExecutionOptions& options,
+                                                  const RolloutPolicy& policy, int round);
 
 /// Normalisation statistics over every tick of `sequences` (q, the labels a, r).
 NormStats normStats(const std::vector<PolicySequence>& sequences);
