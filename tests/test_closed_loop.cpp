@@ -38,31 +38,14 @@ fs::path runDir(const std::string& name) {
 
 // Largest amount by which any q_j of ticks.csv lies outside [q_min_j, q_max_j] (0: never).
 double worstLimitExcess(const fs::path& ticks_csv, const ArmModel& arm, std::size_t& rows) {
-  std::ifstream in(ticks_csv);
-  std::string line;
-  REQUIRE(std::getline(in, line));
-  std::vector<std::string> header;
-  {
-    std::stringstream s(line);
-    for (std::string cell; std::getline(s, cell, ',');) header.push_back(cell);
-  }
-  std::vector<std::size_t> col(kNumJoints);
-  for (int j = 0; j < kNumJoints; ++j) {
-    const auto it = std::find(header.begin(), header.end(), "q_" + std::to_string(j));
-    REQUIRE(it != header.end());
-    col[static_cast<std::size_t>(j)] = static_cast<std::size_t>(it - header.begin());
-  }
+  const auto columns = test::readCsvColumns(ticks_csv);
   double worst = 0.0;
   rows = 0;
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells;
-    std::stringstream s(line);
-    for (std::string cell; std::getline(s, cell, ',');) cells.push_back(cell);
-    for (int j = 0; j < kNumJoints; ++j) {
-      const double q = std::stod(cells.at(col[static_cast<std::size_t>(j)]));
-      worst = std::max({worst, arm.q_min[j] - q, q - arm.q_max[j]});
-    }
-    ++rows;
+  for (int j = 0; j < kNumJoints; ++j) {
+    const auto it = columns.find("q_" + std::to_string(j));
+    REQUIRE(it != columns.end());
+    rows = it->second.size();
+    for (double q : it->second) worst = std::max({worst, arm.q_min[j] - q, q - arm.q_max[j]});
   }
   return worst;
 }
@@ -70,9 +53,8 @@ double worstLimitExcess(const fs::path& ticks_csv, const ArmModel& arm, std::siz
 // Fault counters by bit (controller.hpp).
 constexpr std::size_t kNoHuman = 0, kLimited = 6, kBridged = 14;
 
-// The one-tick inverse of the simulated first-order servo, 1 / (1 - exp(-K T)) (sim_arm.hpp).
-const double kServoInversionGain =
-    1.0 / (1.0 - std::exp(-SimParams{}.servo_gain_per_s * SimParams{}.dt_s * SimParams{}.substeps_per_tick));
+// The one-tick inverse of the simulated first-order servo (sim_arm.hpp).
+const double kServoInversionGain = servoStepGain(SimParams{});
 static_assert(kNumControllerFaults == 15, "fault bits renumbered: update the indices above");
 
 }  // namespace

@@ -528,25 +528,6 @@ TEST_CASE("--blend-law-pole runs the blend-law baseline on a reference model, is
   CHECK(status == 2);
 }
 
-namespace {
-// The columns of ticks.csv by name: one vector of numbers per column.
-std::map<std::string, std::vector<double>> readTicks(const fs::path& file) {
-  std::ifstream csv(file);
-  std::string line;
-  REQUIRE(std::getline(csv, line));
-  std::vector<std::string> names;
-  std::stringstream header(line);
-  for (std::string name; std::getline(header, name, ',');) names.push_back(name);
-  std::map<std::string, std::vector<double>> columns;
-  while (std::getline(csv, line)) {
-    std::stringstream row(line);
-    std::string cell;
-    for (std::size_t i = 0; i < names.size() && std::getline(row, cell, ','); ++i)
-      columns[names[i]].push_back(std::strtod(cell.c_str(), nullptr));
-  }
-  return columns;
-}
-}  // namespace
 
 TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature target, recomputed here from the snapped key poses") {
   rt::CommandLine cl;
@@ -569,7 +550,7 @@ TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature targ
   // f: the online blend toward the snapped key pose r (pole 0.7), started at rest on r(0); the
   // action is G times its distance, clamped to the limits, from the angles the tick started at.
   const ArmModel arm = loadArmModel(test::kUrdfPath);
-  const auto t = readTicks(dir / "ticks.csv");
+  const auto t = test::readCsvColumns(dir / "ticks.csv");
   REQUIRE(t.at("tick").size() == 60u);
   const double pole = kFeatureBlendPole;
   JointVector f, v = JointVector::Zero(), q_start;
@@ -650,7 +631,7 @@ TEST_CASE("the online reference is the offline one: nao_rt retargets with the de
     const int m = static_cast<int>(std::find(names.begin(), names.end(), movement) - names.begin());
     const tools::ReferenceStream ref = tools::makeSyntheticReference(
         arm, tools::parseMovement(movement), 3, 0, modelKeyPoses(model, m), RetargetParams{});
-    const auto t = readTicks(dir / "ticks.csv");
+    const auto t = test::readCsvColumns(dir / "ticks.csv");
     const std::size_t n = t.at("tick").size();
     REQUIRE(n + 1 >= ref.target.size());
     // f recomputed from the snapped key poses the controller logged (r), as in the gain-law test.

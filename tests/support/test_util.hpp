@@ -4,10 +4,13 @@
 #include "nao/arm_model.hpp"
 
 #include <filesystem>
+#include <cstdlib>
 #include <fstream>
+#include <map>
 #include <random>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace nao::test {
 
@@ -34,6 +37,26 @@ inline JointVector randomPose(const ArmModel& model, std::mt19937_64& rng) {
   JointVector q;
   for (int j = 0; j < kNumJoints; ++j) q[j] = std::uniform_real_distribution<double>(model.q_min[j], model.q_max[j])(rng);
   return q;
+}
+
+/// The columns of a CSV file with a header row (e.g. nao_rt's ticks.csv) by name, one number
+/// per row (strtod: "nan" reads as NaN); empty if the file cannot be read.
+inline std::map<std::string, std::vector<double>> readCsvColumns(const std::filesystem::path& file) {
+  std::ifstream csv(file);
+  std::string line;
+  std::map<std::string, std::vector<double>> columns;
+  if (!std::getline(csv, line)) return columns;
+  std::vector<std::string> names;
+  std::stringstream header(line);
+  for (std::string name; std::getline(header, name, ',');) names.push_back(name);
+  for (const std::string& name : names) columns[name];
+  while (std::getline(csv, line)) {
+    std::stringstream row(line);
+    std::string cell;
+    for (std::size_t i = 0; i < names.size() && std::getline(row, cell, ','); ++i)
+      columns[names[i]].push_back(std::strtod(cell.c_str(), nullptr));
+  }
+  return columns;
 }
 
 inline constexpr double kDeg = 3.14159265358979323846 / 180.0;

@@ -308,9 +308,8 @@ JointVector expertCommand(const SimModel& model, SimData& sim, const SimSnapshot
   JointVector e_prev = target - endOf(c_prev);
   JointVector best = c_prev;
   double best_miss = e_prev.cwiseAbs().maxCoeff();
-  // First step: a first-order servo covers 1 − exp(−K T) of a step in one tick.
-  const double first_gain = 1.0 / (1.0 - std::exp(-model.params.servo_gain_per_s * model.params.dt_s *
-                                                   model.params.substeps_per_tick));
+  // First step: the first-order servo inversion.
+  const double first_gain = servoStepGain(model.params);
   JointVector c = clampTo(c_prev + first_gain * e_prev);
   for (int it = 0; it < o.expert_iterations && best_miss > o.expert_tol_rad; ++it) {
     const JointVector e = target - endOf(c);

@@ -24,6 +24,7 @@
 #include "nao/kinematics.hpp"
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 
 // Opaque ODE handles (ode/common.h), declared here so users of this header need not include ODE.
@@ -40,6 +41,14 @@ struct SimParams {
   double gravity_mps2 = 9.81;       ///< magnitude, along -z of the torso frame
   int warmup_substeps = 10;         ///< steps taken in configure so ODE sizes its arena there
 };
+
+/// The gain that inverts the servo law's first-order part over one control tick: a first-order
+/// servo covers 1 − exp(−K T) of a step in T, so a command g·e ahead, g = 1 / (1 − exp(−K T)),
+/// ends the tick on target (1.0894 for K 25 /s, T 0.1 s). The expert's first step and the
+/// reference policy's residual base; the slew and braking limits are what it leaves out.
+inline double servoStepGain(const SimParams& p) {
+  return 1.0 / (1.0 - std::exp(-p.servo_gain_per_s * (p.dt_s * p.substeps_per_tick)));
+}
 
 /// Immutable description of the simulation: the arm, the parameters, and per-joint servo
 /// braking limits derived from them.

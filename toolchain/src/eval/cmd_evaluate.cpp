@@ -253,8 +253,7 @@ void evaluate(const Args& a) {
   const SimModel sim = makeSimModel(arm, SimParams{});
   const double period_s = ControllerParams{}.period_s;
   // The gain that inverts the simulated first-order servo over one tick (the expert's first step).
-  const double gain = 1.0 / (1.0 - std::exp(-sim.params.servo_gain_per_s * sim.params.dt_s *
-                                            sim.params.substeps_per_tick));
+  const double gain = servoStepGain(sim.params);
 
   struct MovementWork {
     std::string name;
@@ -346,25 +345,20 @@ void evaluate(const Args& a) {
     std::snprintf(gain_text, sizeof gain_text, "%.17g", gain);
     for (std::uint64_t s : a.seeds) {
       const std::string seed = std::to_string(s);
-      const fs::path rdir = mdir / "reference" / ("seed_" + seed), ldir = mdir / "blend_law" / ("seed_" + seed);
-      w.ref_jobs.push_back(jobs.size());
-      jobs.push_back({name + " reference seed " + seed,
-                      {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf, "--reference",
-                       "synthetic:" + name, "--seed", seed, "--zero-timing", "--log", rdir.string()},
-                      rdir});
-      w.law_jobs.push_back(jobs.size());
-      jobs.push_back({name + " blend law seed " + seed,
-                      {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf, "--reference",
-                       "synthetic:" + name, "--seed", seed, "--blend-law-pole", pole_text, "--zero-timing", "--log",
-                       ldir.string()},
-                      ldir});
-      const fs::path gdir = mdir / "gain_law" / ("seed_" + seed);
-      w.gain_jobs.push_back(jobs.size());
-      jobs.push_back({name + " gain law seed " + seed,
-                      {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf, "--reference",
-                       "synthetic:" + name, "--seed", seed, "--gain-law", gain_text, "--zero-timing", "--log",
-                       gdir.string()},
-                      gdir});
+      // One reference-mode run of the model (no extra flags) or of a baseline replacing it.
+      const auto referenceRun = [&](const std::string& label, const char* sub, std::vector<std::string> extra) {
+        const fs::path dir = mdir / sub / ("seed_" + seed);
+        std::vector<std::string> argv = {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf,
+                                         "--reference", "synthetic:" + name, "--seed", seed};
+        argv.insert(argv.end(), extra.begin(), extra.end());
+        for (const char* x : {"--zero-timing", "--log"}) argv.push_back(x);
+        argv.push_back(dir.string());
+        jobs.push_back({name + " " + label + " seed " + seed, argv, dir});
+        return jobs.size() - 1;
+      };
+      w.ref_jobs.push_back(referenceRun("reference", "reference", {}));
+      w.law_jobs.push_back(referenceRun("blend law", "blend_law", {"--blend-law-pole", pole_text}));
+      w.gain_jobs.push_back(referenceRun("gain law", "gain_law", {"--gain-law", gain_text}));
     }
     work.push_back(std::move(w));
   }

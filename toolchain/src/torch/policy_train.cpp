@@ -308,8 +308,7 @@ std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::ve
 double residualGain(const TrainOptions& o, const SimModel& sim) {
   if (o.conditioning != Conditioning::kReference) return 0.0;
   if (o.residual_gain >= 0.0) return o.residual_gain;
-  const double period = sim.params.dt_s * sim.params.substeps_per_tick;
-  return 1.0 / (1.0 - std::exp(-sim.params.servo_gain_per_s * period));
+  return servoStepGain(sim.params);
 }
 
 TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const TrainOptions& o, std::ostream* progress) {
