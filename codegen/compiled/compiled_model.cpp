@@ -1,6 +1,5 @@
 #include "nao/compiled_model.hpp"
 
-#include "nao/model_file.hpp"
 #include "nao_model_config.hpp"
 
 // Defined by the generated nao_model_weights.S.
@@ -9,10 +8,37 @@ extern "C" const std::uint8_t nao_model_blob_end[];
 
 namespace nao::compiled {
 
+static_assert(kFormatVersion == kModelFormatVersion, "the generated config is of another model.bin format");
+static_assert(kNumTensors == detail::policyViewCount<Dims>(), "the generated tensor table is not the manifest's");
+static_assert(kJointNames.size() == static_cast<std::size_t>(kTokens), "one joint per token");
+
 ModelBytes modelBytes() {
   return {nao_model_blob, static_cast<std::size_t>(nao_model_blob_end - nao_model_blob)};
 }
 
-static_assert(kFormatVersion == kModelFormatVersion, "the generated config is of another model.bin format");
+namespace {
+
+ModelHeader makeHeader() {
+  ModelHeader h;
+  h.arch = Dims::arch();
+  h.conditioning = kConditioning;
+  for (std::size_t j = 0; j < kJointNames.size(); ++j)
+    h.joints.push_back({std::string(kJointNames[j]), kJointLower[j], kJointUpper[j], kJointVelocity[j]});
+  for (const std::string_view m : kMovementNames) h.movement_names.emplace_back(m);
+  h.metadata_json = std::string(kMetadataJson);
+  return h;
+}
+
+}  // namespace
+
+ModelImage modelImage() {
+  static const ModelHeader header = makeHeader();
+  const ModelBytes b = modelBytes();
+  return {b.data, b.size, kChecksum, &header, kTensorOffsets.data(), kTensorOffsets.size()};
+}
+
+PolicyWeights<Dims> policyWeights() noexcept {
+  return bindPolicyWeightsAt<Dims>(nao_model_blob, kTensorOffsets, kConditioning);
+}
 
 }  // namespace nao::compiled

@@ -47,9 +47,7 @@ int main(int argc, char** argv) {
   try {
     nao::rt::CommandLine cl;
 #if NAO_HAVE_COMPILED_MODEL
-    const nao::compiled::ModelBytes compiled = nao::compiled::modelBytes();
-    cl.run.compiled = compiled.data;
-    cl.run.compiled_size = compiled.size;
+    cl.run.compiled = nao::compiled::modelImage();
 #endif
     const int parsed = nao::rt::parseCommandLine(argc, argv, cl, std::cout, std::cerr);
     if (parsed >= 0) return parsed;
@@ -59,7 +57,6 @@ int main(int argc, char** argv) {
       info.weights_path = cl.run.weights_path;
       info.urdf_path = cl.run.urdf_path;
       info.compiled = cl.run.compiled;
-      info.compiled_size = cl.run.compiled_size;
       return nao::rt::runInfo(info, std::cout, std::cerr);
     }
 

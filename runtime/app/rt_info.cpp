@@ -43,7 +43,7 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source) {
   j["window"] = a.window;  // W, ticks of history the policy attends to
   j["parameters"] = parameterCount(a);
   j["tensors"] = model.tensors.size();
-  j["bytes"] = model.bytes.size();
+  j["bytes"] = model.size();
   j["checksum"] = checksum;
   // Issue 14's contract: where the weights come from and their precision (fp32 only so far).
   j["weights"] = source == "compiled-in" ? "compiled" : "file";
@@ -66,10 +66,9 @@ int runInfo(const InfoOptions& options, std::ostream& out, std::ostream& err) {
     if (!options.weights_path.empty()) {
       source = options.weights_path;
       model = readModelFile(source);
-    } else if (options.compiled != nullptr) {
+    } else if (options.compiled.bytes != nullptr) {
       source = "compiled-in";
-      model = decodeModel(std::vector<std::uint8_t>(options.compiled, options.compiled + options.compiled_size),
-                          "compiled-in model");
+      model = mappedModelFile(options.compiled, "compiled-in model");
     } else {
       err << "nao_rt: no model is compiled into this build; pass --weights FILE\n";
       return 1;

@@ -15,8 +15,7 @@ namespace nao::rt {
 struct InfoOptions {
   std::string weights_path;                 ///< model.bin to describe; empty: the compiled-in model
   std::string urdf_path;                    ///< the URDF the joints must match
-  const std::uint8_t* compiled = nullptr;   ///< compiled-in model bytes, nullptr if the build has none
-  std::size_t compiled_size = 0;
+  ModelImage compiled;                      ///< the compiled-in model (bytes nullptr if the build has none)
 };
 
 /// The JSON description of a checked model (pretty-printed, no trailing newline): format_version,

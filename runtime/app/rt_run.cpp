@@ -59,11 +59,14 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
     p.model_source = o.weights_path;
     origin = o.weights_path;
     p.model = readModelFile(o.weights_path);
-  } else if (o.compiled != nullptr) {
+  } else if (o.compiled.bytes != nullptr) {
+    // In place: the header and offsets are the generated constants, the checksum is verified
+    // once over the bytes in .rodata; nothing is decoded or copied (docs/policy.md, codegen).
     p.model_source = "compiled-in";
     origin = "compiled-in model";
-    p.model = decodeModel(std::vector<std::uint8_t>(o.compiled, o.compiled + o.compiled_size), origin);
-    p.model_bytes = o.compiled;
+    p.model = mappedModelFile(o.compiled, origin);
+    p.model_bytes = o.compiled.bytes;
+    p.model_offsets = o.compiled.offsets;
   } else {
     throw std::runtime_error(
         "no model is compiled into this build (models/default.bin did not exist when it was built); pass "

@@ -43,8 +43,7 @@ namespace nao::rt {
 /// Everything a run is told (the nao_rt command line, rt_cli.hpp).
 struct RunOptions {
   std::string weights_path;                ///< model.bin; empty: the compiled-in model
-  const std::uint8_t* compiled = nullptr;  ///< compiled-in model bytes, nullptr if the build has none
-  std::size_t compiled_size = 0;
+  ModelImage compiled;                     ///< the compiled-in model (bytes nullptr if the build has none)
   std::string urdf_path = NAO_DEFAULT_URDF;
   /// synthetic:whole_arm|elbow|wrist, file:PATH or none.
   std::string reference = "synthetic:whole_arm";
@@ -148,6 +147,7 @@ struct PreparedRun {
   ModelFile model;                     ///< validated, joints checked against `arm`
   std::string model_source;            ///< "compiled-in" or the --weights path
   const std::uint8_t* model_bytes = nullptr;  ///< compiled-in: the embedded bytes to bind to; else nullptr
+  const std::uint64_t* model_offsets = nullptr;  ///< compiled-in: the generated tensor offsets
   ReferenceSpec spec;
   int movement_index = 0;              ///< into model.header.movement_names
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
@@ -254,20 +254,14 @@ struct WeightStorage {
   std::size_t n_floats = 0;
 };
 
-/// Tensor pointers of the prepared model: into the compiled-in bytes, or (a --weights file) into
-/// `storage`, which this allocates (policyStorageFloats<Dims>, zero-filled: the 64-byte padding
-/// between tensors reads as zeros) and fills with each tensor. Configure time: allocates; throws
-/// std::bad_alloc, or std::logic_error if the storage is too small (a programming error in
-/// policyStorageFloats).
+/// The weights of a --weights model: allocates `storage` (policyStorageFloats<Dims>, 64-byte
+/// aligned, zero-filled: the padding between tensors reads as zeros), copies each tensor into it
+/// and binds the views by name. Configure time: allocates; throws std::bad_alloc, or
+/// std::logic_error if the storage is too small (a programming error in policyStorageFloats).
 template <class Dims>
-std::vector<const float*> policyTensorPointers(const PreparedRun& p, WeightStorage& storage) {
+PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
   std::vector<const float*> pointers;
   pointers.reserve(p.model.tensors.size());
-  if (p.model_bytes != nullptr) {
-    for (const TensorEntry& t : p.model.tensors)
-      pointers.push_back(reinterpret_cast<const float*>(p.model_bytes + t.offset));
-    return pointers;
-  }
   storage.n_floats = policyStorageFloats<Dims>();
   storage.floats.reset(static_cast<float*>(
       ::operator new[](storage.n_floats * sizeof(float), std::align_val_t{kModelAlignment})));
@@ -282,7 +276,7 @@ std::vector<const float*> policyTensorPointers(const PreparedRun& p, WeightStora
     pointers.push_back(floats + used);
     used += (n + 15) / 16 * 16;
   }
-  return pointers;
+  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.conditioning);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -344,8 +338,12 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       throw UsageError("--realtime paces the in-process arm; with --robot lola the robot's packets are the clock");
     PreparedRun p = prepareRun(options, Dims::arch());
     WeightStorage weight_storage;
-    const std::vector<const float*> tensors = policyTensorPointers<Dims>(p, weight_storage);
-    PolicyWeights<Dims> weights = bindPolicyWeights<Dims>(tensors.data(), tensors.size(), p.model.header.conditioning);
+    // The compiled-in model: views at the generated offsets into .rodata (no lookup, no copy);
+    // a --weights file: its tensors copied into aligned storage, bound by name.
+    PolicyWeights<Dims> weights =
+        p.model_bytes != nullptr
+            ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model.header.conditioning)
+            : bindWeightFile<Dims>(p, weight_storage);
     weights.residual_gain = p.residual_gain;
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
     // longer read, so its memory goes back before the loop (resident set, docs/embedded.md).

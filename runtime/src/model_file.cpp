@@ -403,7 +403,7 @@ std::string encodeProblem(const ModelHeader& h) {
 
 const float* ModelFile::data(std::size_t index) const {
   assert(index < tensors.size());
-  return reinterpret_cast<const float*>(bytes.data() + tensors[index].offset);
+  return reinterpret_cast<const float*>((mapped != nullptr ? mapped : bytes.data()) + tensors[index].offset);
 }
 
 std::size_t ModelFile::find(const std::string& name) const {
@@ -511,6 +511,40 @@ std::uint64_t writeModelFile(const std::string& path, const ModelHeader& header,
   const std::string problem = writeFileAtomically(path, bytes.data(), bytes.size());
   if (!problem.empty()) fail(path, problem);
   return loadU64(bytes.data() + bytes.size() - kChecksumBytes);
+}
+
+void checkModelImage(const std::uint8_t* data, std::size_t size, std::uint64_t expected, const std::string& origin) {
+  if (data == nullptr || size < 16 + kChecksumBytes) fail(origin, "truncated (" + std::to_string(size) + " bytes)");
+  if (std::memcmp(data, kModelMagic, sizeof kModelMagic) != 0) fail(origin, "not a nao-rt model (bad magic)");
+  const std::uint64_t stored = loadU64(data + size - kChecksumBytes);
+  const std::uint64_t computed = fnv1a64(data, size - kChecksumBytes);
+  if (stored != computed)
+    fail(origin, "checksum mismatch (stored " + hex64(stored) + ", computed " + hex64(computed) + ")");
+  if (computed != expected)
+    fail(origin, "checksum " + hex64(computed) + " is not the " + hex64(expected) + " its generated code describes");
+}
+
+ModelFile mappedModelFile(const ModelImage& image, const std::string& origin) {
+  if (image.header == nullptr || (image.tensors > 0 && image.offsets == nullptr))
+    fail(origin, "no header or tensor table");
+  checkModelImage(image.bytes, image.size, image.checksum, origin);
+  ModelFile model;
+  model.header = *image.header;
+  model.checksum = image.checksum;
+  model.mapped = image.bytes;
+  model.mapped_size = image.size;
+  const std::vector<TensorSpec> manifest = policyManifest(model.header.arch);
+  if (manifest.size() != image.tensors)
+    fail(origin, std::to_string(image.tensors) + " tensor offsets for a manifest of " + std::to_string(manifest.size()));
+  const std::size_t end = image.size - kChecksumBytes;
+  for (std::size_t i = 0; i < manifest.size(); ++i) {
+    const std::uint64_t offset = image.offsets[i];
+    const std::size_t bytes = manifest[i].count() * sizeof(float);
+    if (offset % kModelAlignment != 0 || offset > end || bytes > end - offset)
+      fail(origin, "tensor '" + manifest[i].name + "' at offset " + std::to_string(offset) + " is outside the image");
+    model.tensors.push_back({manifest[i], offset});
+  }
+  return model;
 }
 
 // ---- reading --------------------------------------------------------------------------------

@@ -50,8 +50,16 @@ struct ModelFile {
   std::vector<TensorEntry> tensors;  ///< manifest order
   std::vector<std::uint8_t> bytes;   ///< the whole file as read (tensor data at the offsets)
   std::uint64_t checksum = 0;        ///< FNV-1a 64 stored at the end (verified)
+  /// The file's bytes where they already are, not copied (the compiled-in model in .rodata);
+  /// when set, `bytes` is empty and data() reads from here.
+  const std::uint8_t* mapped = nullptr;
+  std::size_t mapped_size = 0;
 
-  /// Pointer to tensor `index`'s floats inside `bytes` (unaligned access is fine for Eigen::Map).
+  /// Bytes of the file (read or mapped).
+  std::size_t size() const { return mapped != nullptr ? mapped_size : bytes.size(); }
+
+  /// Pointer to tensor `index`'s floats inside `bytes` or `mapped` (unaligned access is fine
+  /// for Eigen::Map).
   const float* data(std::size_t index) const;
   /// Index of the tensor named `name`; throws ModelFileError if absent.
   std::size_t find(const std::string& name) const;
@@ -64,6 +72,29 @@ std::uint64_t fnv1a64(const std::uint8_t* data, std::size_t size, std::uint64_t 
 /// each of the manifest's element count. Throws ModelFileError on a size mismatch or an
 /// unusable architecture.
 std::vector<std::uint8_t> encodeModel(const ModelHeader& header, const std::vector<std::vector<float>>& tensors);
+
+/// Checks a model.bin image that is used in place (the compiled-in bytes): the magic, then the
+/// FNV-1a 64 over everything before the stored checksum, once over the mapped bytes, against the
+/// stored value and against `expected` (what the generated code says it was built from). Throws
+/// ModelFileError "<origin>: <problem>". No allocation unless it throws.
+void checkModelImage(const std::uint8_t* data, std::size_t size, std::uint64_t expected, const std::string& origin);
+
+/// A model.bin image used where it lies (the compiled-in model in .rodata, codegen/compiled),
+/// with what the generated code states about it as constants.
+struct ModelImage {
+  const std::uint8_t* bytes = nullptr;     ///< nullptr: there is none
+  std::size_t size = 0;
+  std::uint64_t checksum = 0;              ///< the generated kChecksum
+  const ModelHeader* header = nullptr;     ///< built from the generated constants
+  const std::uint64_t* offsets = nullptr;  ///< the generated kTensorOffsets, manifest order
+  std::size_t tensors = 0;                 ///< entries of `offsets`
+};
+
+/// `image` as a ModelFile that reads its tensors in place (`mapped`; `bytes` stays empty):
+/// checkModelImage, then the header and the tensor table from the image's constants (shapes from
+/// policyManifest(header->arch), the offsets, each range inside the image). Nothing is decoded
+/// and no tensor byte is copied. Throws ModelFileError "<origin>: <problem>".
+ModelFile mappedModelFile(const ModelImage& image, const std::string& origin);
 
 /// encodeModel + write to `path` (whole file, then rename, so a crash leaves no half file).
 /// Returns the checksum.

@@ -39,6 +39,7 @@
 #include <memory>
 #include <new>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace nao {
@@ -284,88 +285,117 @@ void rebindView(void* view, const float* data) {
   new (view) WeightView<R, C>(data);
 }
 
-template <int R, int C>
-void addSlot(std::vector<WeightSlot>& slots, std::string name, WeightView<R, C>& view) {
-  slots.push_back({std::move(name), R, C, &view, &rebindView<R, C>});
+/// The manifest name of one view, kept in parts so that walking the views costs no string:
+/// head[.layer][.mid][.tail], e.g. {"enc", 0, "attn", "wq"} is "enc.0.attn.wq".
+struct ViewName {
+  const char* head;
+  int layer = -1;           ///< -1: none
+  const char* mid = nullptr;
+  const char* tail = nullptr;
+  std::string str() const {
+    std::string s = head;
+    if (layer >= 0) s += "." + std::to_string(layer);
+    if (mid != nullptr) (s += ".") += mid;
+    if (tail != nullptr) (s += ".") += tail;
+    return s;
+  }
+};
+
+template <class Dims, class F>
+void visitNormViews(F& f, const char* head, int layer, const char* mid, LayerNormWeights<Dims>& n) {
+  f(ViewName{head, layer, mid, "gain"}, n.gain);
+  f(ViewName{head, layer, mid, "bias"}, n.bias);
 }
 
+template <class Dims, class F>
+void visitAttentionViews(F& f, const char* head, int layer, const char* mid, AttentionWeights<Dims>& a) {
+  f(ViewName{head, layer, mid, "wq"}, a.wq);
+  f(ViewName{head, layer, mid, "bq"}, a.bq);
+  f(ViewName{head, layer, mid, "wk"}, a.wk);
+  f(ViewName{head, layer, mid, "bk"}, a.bk);
+  f(ViewName{head, layer, mid, "wv"}, a.wv);
+  f(ViewName{head, layer, mid, "bv"}, a.bv);
+  f(ViewName{head, layer, mid, "wo"}, a.wo);
+  f(ViewName{head, layer, mid, "bo"}, a.bo);
+}
+
+template <class Dims, class F>
+void visitAttentionViews(F& f, const char* head, int layer, const char* mid, TemporalAttentionWeights<Dims>& a) {
+  visitAttentionViews(f, head, layer, mid, static_cast<AttentionWeights<Dims>&>(a));
+  f(ViewName{head, layer, mid, "age_bias"}, a.age_bias);
+}
+
+template <class Dims, class F>
+void visitFfnViews(F& f, const char* head, int layer, FfnWeights<Dims>& n) {
+  f(ViewName{head, layer, "ffn", "0.weight"}, n.w0);
+  f(ViewName{head, layer, "ffn", "0.bias"}, n.b0);
+  f(ViewName{head, layer, "ffn", "1.weight"}, n.w1);
+  f(ViewName{head, layer, "ffn", "1.bias"}, n.b1);
+  f(ViewName{head, layer, "ffn", "2.weight"}, n.w2);
+  f(ViewName{head, layer, "ffn", "2.bias"}, n.b2);
+  f(ViewName{head, layer, "ffn", "3.weight"}, n.w3);
+  f(ViewName{head, layer, "ffn", "3.bias"}, n.b3);
+}
+
+/// Calls f(ViewName, WeightView<R, C>&) for every view of `w`, in the order of
+/// policyManifest (tests/test_compiled_model_alloc.cpp checks the names entry by entry): the
+/// one place that order is written for the runtime. No allocation unless f allocates.
+template <class Dims, class F>
+void visitWeightViews(PolicyWeights<Dims>& w, F&& f) {
+  f(ViewName{"embed.in.weight"}, w.embed_in_weight);
+  f(ViewName{"embed.in.bias"}, w.embed_in_bias);
+  f(ViewName{"embed.joint_enc"}, w.embed_joint_enc);
+  f(ViewName{"embed.movement"}, w.embed_movement);
+  f(ViewName{"embed.step"}, w.embed_step);
+  f(ViewName{"embed.act.weight"}, w.embed_act_weight);
+  f(ViewName{"embed.act.bias"}, w.embed_act_bias);
+  f(ViewName{"embed.joint_dec"}, w.embed_joint_dec);
+  for (int l = 0; l < Dims::kEncoderLayers; ++l) {
+    EncoderLayerWeights<Dims>& e = w.enc[static_cast<std::size_t>(l)];
+    visitNormViews(f, "enc", l, "ln1", e.ln1);
+    visitAttentionViews(f, "enc", l, "attn", e.attn);
+    visitNormViews(f, "enc", l, "ln2", e.ln2);
+    visitFfnViews(f, "enc", l, e.ffn);
+  }
+  visitNormViews(f, "enc.norm", -1, nullptr, w.enc_norm);
+  for (int l = 0; l < Dims::kDecoderLayers; ++l) {
+    DecoderLayerWeights<Dims>& d = w.dec[static_cast<std::size_t>(l)];
+    visitNormViews(f, "dec", l, "ln1", d.ln1);
+    visitAttentionViews(f, "dec", l, "self", d.self);
+    visitNormViews(f, "dec", l, "ln2", d.ln2);
+    visitAttentionViews(f, "dec", l, "cross", d.cross);
+    visitNormViews(f, "dec", l, "ln3", d.ln3);
+    visitFfnViews(f, "dec", l, d.ffn);
+  }
+  visitNormViews(f, "dec.norm", -1, nullptr, w.dec_norm);
+  f(ViewName{"head.weight"}, w.head_weight);
+  f(ViewName{"head.bias"}, w.head_bias);
+  f(ViewName{"norm.q_mean"}, w.q_mean);
+  f(ViewName{"norm.q_std"}, w.q_std);
+  f(ViewName{"norm.a_mean"}, w.a_mean);
+  f(ViewName{"norm.a_std"}, w.a_std);
+  f(ViewName{"norm.r_mean"}, w.r_mean);
+  f(ViewName{"norm.r_std"}, w.r_std);
+  f(ViewName{"centroids"}, w.centroids);
+}
+
+/// Number of views of PolicyWeights<Dims> (= entries of policyManifest(Dims::arch())).
 template <class Dims>
-void addNormSlots(std::vector<WeightSlot>& s, const std::string& p, LayerNormWeights<Dims>& n) {
-  addSlot(s, p + ".gain", n.gain);
-  addSlot(s, p + ".bias", n.bias);
+constexpr std::size_t policyViewCount() {
+  constexpr std::size_t norm = 2, attention = 8, temporal = 9, ffn = 8;
+  return 8 + Dims::kEncoderLayers * (norm + temporal + norm + ffn) + norm +
+         Dims::kDecoderLayers * (norm + attention + norm + temporal + norm + ffn) + norm + 2 + 6 + 1;
 }
 
-template <class Dims>
-void addAttentionSlots(std::vector<WeightSlot>& s, const std::string& p, AttentionWeights<Dims>& a) {
-  addSlot(s, p + ".wq", a.wq);
-  addSlot(s, p + ".bq", a.bq);
-  addSlot(s, p + ".wk", a.wk);
-  addSlot(s, p + ".bk", a.bk);
-  addSlot(s, p + ".wv", a.wv);
-  addSlot(s, p + ".bv", a.bv);
-  addSlot(s, p + ".wo", a.wo);
-  addSlot(s, p + ".bo", a.bo);
-}
-
-template <class Dims>
-void addAttentionSlots(std::vector<WeightSlot>& s, const std::string& p, TemporalAttentionWeights<Dims>& a) {
-  addAttentionSlots(s, p, static_cast<AttentionWeights<Dims>&>(a));
-  addSlot(s, p + ".age_bias", a.age_bias);
-}
-
-template <class Dims>
-void addFfnSlots(std::vector<WeightSlot>& s, const std::string& p, FfnWeights<Dims>& f) {
-  addSlot(s, p + ".0.weight", f.w0);
-  addSlot(s, p + ".0.bias", f.b0);
-  addSlot(s, p + ".1.weight", f.w1);
-  addSlot(s, p + ".1.bias", f.b1);
-  addSlot(s, p + ".2.weight", f.w2);
-  addSlot(s, p + ".2.bias", f.b2);
-  addSlot(s, p + ".3.weight", f.w3);
-  addSlot(s, p + ".3.bias", f.b3);
-}
-
-/// Every view of `w` with its manifest name (any order: binding matches by name).
+/// Every view of `w` with its manifest name (binding matches by name).
 template <class Dims>
 std::vector<WeightSlot> weightSlots(PolicyWeights<Dims>& w) {
   std::vector<WeightSlot> s;
-  addSlot(s, "embed.in.weight", w.embed_in_weight);
-  addSlot(s, "embed.in.bias", w.embed_in_bias);
-  addSlot(s, "embed.joint_enc", w.embed_joint_enc);
-  addSlot(s, "embed.movement", w.embed_movement);
-  addSlot(s, "embed.step", w.embed_step);
-  addSlot(s, "embed.act.weight", w.embed_act_weight);
-  addSlot(s, "embed.act.bias", w.embed_act_bias);
-  addSlot(s, "embed.joint_dec", w.embed_joint_dec);
-  for (int l = 0; l < Dims::kEncoderLayers; ++l) {
-    EncoderLayerWeights<Dims>& e = w.enc[static_cast<std::size_t>(l)];
-    const std::string p = "enc." + std::to_string(l);
-    addNormSlots(s, p + ".ln1", e.ln1);
-    addAttentionSlots(s, p + ".attn", e.attn);
-    addNormSlots(s, p + ".ln2", e.ln2);
-    addFfnSlots(s, p + ".ffn", e.ffn);
-  }
-  addNormSlots(s, "enc.norm", w.enc_norm);
-  for (int l = 0; l < Dims::kDecoderLayers; ++l) {
-    DecoderLayerWeights<Dims>& d = w.dec[static_cast<std::size_t>(l)];
-    const std::string p = "dec." + std::to_string(l);
-    addNormSlots(s, p + ".ln1", d.ln1);
-    addAttentionSlots(s, p + ".self", d.self);
-    addNormSlots(s, p + ".ln2", d.ln2);
-    addAttentionSlots(s, p + ".cross", d.cross);
-    addNormSlots(s, p + ".ln3", d.ln3);
-    addFfnSlots(s, p + ".ffn", d.ffn);
-  }
-  addNormSlots(s, "dec.norm", w.dec_norm);
-  addSlot(s, "head.weight", w.head_weight);
-  addSlot(s, "head.bias", w.head_bias);
-  addSlot(s, "norm.q_mean", w.q_mean);
-  addSlot(s, "norm.q_std", w.q_std);
-  addSlot(s, "norm.a_mean", w.a_mean);
-  addSlot(s, "norm.a_std", w.a_std);
-  addSlot(s, "norm.r_mean", w.r_mean);
-  addSlot(s, "norm.r_std", w.r_std);
-  addSlot(s, "centroids", w.centroids);
+  visitWeightViews(w, [&s](const ViewName& name, auto& view) {
+    using View = std::remove_reference_t<decltype(view)>;
+    s.push_back({name.str(), View::RowsAtCompileTime, View::ColsAtCompileTime, &view,
+                 &rebindView<View::RowsAtCompileTime, View::ColsAtCompileTime>});
+  });
   return s;
 }
 
@@ -531,6 +561,33 @@ PolicyWeights<Dims> bindPolicyWeights(const float* const* tensors, std::size_t c
   detail::bindWeightSlots(detail::weightSlots(w), policyManifest(Dims::arch()), tensors, count);
   w.conditioning = c;
   return w;
+}
+
+/// Binds the views of a PolicyWeights to a model.bin image in memory (the compiled-in bytes in
+/// .rodata) at fixed byte offsets, entry i of policyManifest(Dims::arch()) at base + offsets[i]
+/// (policyViewCount<Dims>() entries): the compile-time binding of the compiled-in model
+/// (codegen's constexpr kTensorOffsets, checked against the manifest by name when the code was
+/// generated). No name lookup, no copy, no allocation; the image must outlive the weights.
+template <class Dims>
+PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::uint64_t* offsets,
+                                        Conditioning c) noexcept {
+  (void)activePolicyKernel();  // configure time: decide the kernel now, not in the loop
+  PolicyWeights<Dims> w;
+  std::size_t i = 0;
+  detail::visitWeightViews(w, [&](const detail::ViewName&, auto& view) {
+    using View = std::remove_reference_t<decltype(view)>;
+    new (&view) View(reinterpret_cast<const float*>(base + offsets[i++]));
+  });
+  w.conditioning = c;
+  return w;
+}
+
+/// The same with the offsets as a constexpr array: its length is checked at compile time.
+template <class Dims, std::size_t N>
+PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::array<std::uint64_t, N>& offsets,
+                                        Conditioning c) noexcept {
+  static_assert(N == detail::policyViewCount<Dims>(), "one offset per manifest tensor");
+  return bindPolicyWeightsAt<Dims>(base, offsets.data(), c);
 }
 
 /// Starts a new rollout: the window is empty (the next step is tick 0 and sees only itself).

@@ -1,0 +1,150 @@
+// The compiled-in model (codegen/compiled, issue 14 item 1): the generated code is assembled and
+// linked into this test (nao_compiled_model: models/default.bin through nao_codegen), its views
+// are bound at the generated offsets with no allocation, and it computes bit for bit what the
+// --weights path computes from the same file.
+#include "nao/compiled_model.hpp"
+#include "nao/model_file.hpp"
+#include "nao/policy.hpp"
+#include "nao_model_config.hpp"
+#include "support/alloc_counter.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+using namespace nao;
+using nao::test::CountAllocations;
+
+namespace {
+
+template <class Dims>
+std::vector<std::string> visitedNames() {
+  PolicyWeights<Dims> w;
+  std::vector<std::string> names;
+  detail::visitWeightViews(w, [&](const detail::ViewName& n, auto&) { names.push_back(n.str()); });
+  return names;
+}
+
+template <class Dims>
+void checkVisitOrder() {
+  const std::vector<TensorSpec> manifest = policyManifest(Dims::arch());
+  const std::vector<std::string> names = visitedNames<Dims>();
+  REQUIRE(names.size() == manifest.size());
+  CHECK(names.size() == detail::policyViewCount<Dims>());
+  for (std::size_t i = 0; i < names.size(); ++i) CHECK_MESSAGE(names[i] == manifest[i].name, "entry ", i);
+}
+
+// The tensor's first float lies in [lo, hi).
+bool inside(const float* p, const std::uint8_t* lo, const std::uint8_t* hi) {
+  const auto* b = reinterpret_cast<const std::uint8_t*>(p);
+  return b >= lo && b < hi;
+}
+
+}  // namespace
+
+TEST_CASE("the runtime visits the policy's views in manifest order, the order the offsets follow") {
+  checkVisitOrder<PaperPolicyDims>();
+  checkVisitOrder<SmallPolicyDims>();
+}
+
+TEST_CASE("the generated constants describe the file they were generated from") {
+  const ModelFile file = readModelFile(NAO_COMPILED_MODEL_SOURCE);
+  const compiled::ModelBytes blob = compiled::modelBytes();
+  REQUIRE(blob.size == file.bytes.size());
+  CHECK(std::memcmp(blob.data, file.bytes.data(), blob.size) == 0);
+  CHECK(reinterpret_cast<std::uintptr_t>(blob.data) % kModelAlignment == 0);
+
+  const ModelFile mapped = mappedModelFile(compiled::modelImage(), "compiled-in model");
+  CHECK(mapped.bytes.empty());
+  CHECK(mapped.mapped == blob.data);
+  CHECK(mapped.size() == file.size());
+  CHECK(mapped.checksum == file.checksum);
+  CHECK(mapped.header.arch == file.header.arch);
+  CHECK(mapped.header.conditioning == file.header.conditioning);
+  CHECK(mapped.header.metadata_json == file.header.metadata_json);
+  CHECK(mapped.header.movement_names == file.header.movement_names);
+  REQUIRE(mapped.header.joints.size() == file.header.joints.size());
+  for (std::size_t j = 0; j < file.header.joints.size(); ++j) {
+    CHECK(mapped.header.joints[j].name == file.header.joints[j].name);
+    CHECK(mapped.header.joints[j].lower == file.header.joints[j].lower);
+    CHECK(mapped.header.joints[j].upper == file.header.joints[j].upper);
+    CHECK(mapped.header.joints[j].velocity == file.header.joints[j].velocity);
+  }
+  REQUIRE(mapped.tensors.size() == file.tensors.size());
+  for (std::size_t i = 0; i < file.tensors.size(); ++i) {
+    CHECK(mapped.tensors[i].offset == file.tensors[i].offset);
+    CHECK(mapped.tensors[i].spec.name == file.tensors[i].spec.name);
+    CHECK(mapped.tensors[i].spec.shape == file.tensors[i].spec.shape);
+  }
+}
+
+TEST_CASE("binding the compiled-in model allocates nothing and points into .rodata") {
+  // Built before counting: the header's strings (once per process) and the origin's name.
+  const ModelImage image = compiled::modelImage();
+  const std::string origin = "compiled-in model";
+  CountAllocations counter;
+  checkModelImage(image.bytes, image.size, image.checksum, origin);
+  const std::int64_t after_check = counter.count();
+  const PolicyWeights<compiled::Dims> w = compiled::policyWeights();
+  const std::int64_t n_alloc = counter.count();
+  CHECK_MESSAGE(after_check == 0, "checking the image allocated ", after_check, " times");
+  CHECK_MESSAGE(n_alloc == 0, "binding allocated ", n_alloc, " times");
+  const std::uint8_t* lo = image.bytes;
+  const std::uint8_t* hi = image.bytes + image.size;
+  CHECK(inside(w.embed_in_weight.data(), lo, hi));
+  CHECK(inside(w.enc[0].attn.wq.data(), lo, hi));
+  CHECK(inside(w.dec.back().ffn.w3.data(), lo, hi));
+  CHECK(inside(w.centroids.data(), lo, hi));
+  CHECK(w.conditioning == compiled::kConditioning);
+}
+
+TEST_CASE("the compiled-in binding and the --weights path compute the same bits over a long rollout") {
+  using Dims = compiled::Dims;
+  const ModelFile file = readModelFile(NAO_COMPILED_MODEL_SOURCE);
+  std::vector<const float*> ptrs;
+  for (std::size_t i = 0; i < file.tensors.size(); ++i) ptrs.push_back(file.data(i));
+  const PolicyWeights<Dims> by_name = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), file.header.conditioning);
+  const PolicyWeights<Dims> at_offsets = compiled::policyWeights();
+  auto ws_a = makePolicyWorkspace<Dims>();
+  auto ws_b = makePolicyWorkspace<Dims>();
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<float> angle(-1.2f, 1.2f), delta(-0.05f, 0.05f);
+  const int ticks = 3 * Dims::kWindow + 7;  // the rings wrap
+  int differing = 0;
+  for (int t = 0; t < ticks; ++t) {
+    PolicyInput in;
+    for (int j = 0; j < 5; ++j) {
+      in.q[j] = angle(rng);
+      in.a_prev[j] = delta(rng);
+      in.r[j] = angle(rng);
+    }
+    in.movement = t % Dims::kMovements;
+    in.step = t;
+    const Eigen::Matrix<float, 5, 1> a = stepPolicy(by_name, *ws_a, in);
+    const Eigen::Matrix<float, 5, 1> b = stepPolicy(at_offsets, *ws_b, in);
+    REQUIRE(a.allFinite());
+    if (std::memcmp(a.data(), b.data(), sizeof(float) * 5) != 0) ++differing;
+    if (std::memcmp(&ws_a->score, &ws_b->score, sizeof ws_a->score) != 0) ++differing;
+    if (std::memcmp(&ws_a->cross, &ws_b->cross, sizeof ws_a->cross) != 0) ++differing;
+  }
+  CHECK(differing == 0);
+}
+
+TEST_CASE("a damaged or mismatched image is refused with the checksum") {
+  const ModelImage image = compiled::modelImage();
+  std::vector<std::uint8_t> copy(image.bytes, image.bytes + image.size);
+  ModelImage damaged = image;
+  damaged.bytes = copy.data();
+  copy[copy.size() / 2] ^= 0x10;
+  CHECK_THROWS_WITH_AS(mappedModelFile(damaged, "compiled-in model"),
+                       doctest::Contains("compiled-in model: checksum mismatch"), ModelFileError);
+  copy[copy.size() / 2] ^= 0x10;
+  ModelImage other = damaged;
+  other.checksum ^= 1;
+  CHECK_THROWS_WITH_AS(mappedModelFile(other, "compiled-in model"), doctest::Contains("its generated code describes"),
+                       ModelFileError);
+  CHECK_NOTHROW(mappedModelFile(damaged, "compiled-in model"));
+}
