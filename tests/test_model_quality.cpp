@@ -41,6 +41,8 @@ Scores score(const std::string& path) {
   PolicyWeights<PaperPolicyDims> w =
       bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
   w.residual_gain = rt::modelResidualGain(model.header.metadata_json, path);
+  w.linear_ar = rt::linearArBase<PaperPolicyDims::kMovements>(
+      rt::modelLinearAr(model.header.metadata_json, model.header.arch.movements, path));
   auto ws = makePolicyWorkspace<PaperPolicyDims>();
 
   const nlohmann::json meta = nlohmann::json::parse(model.header.metadata_json);

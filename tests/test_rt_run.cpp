@@ -663,3 +663,55 @@ TEST_CASE("the online reference is the offline one: nao_rt retargets with the de
     CHECK(worst_f < 1e-9);
   }
 }
+
+TEST_CASE("an autonomous model's linear AR base (metadata training.linear_ar) is read, checked, added and recorded") {
+  // 3 movements x 5 joints; joint j of movement m has order j + 1 and alpha_k = 0.1 m + 0.01 k.
+  const auto base = [](int movements, int bad_order) {
+    nlohmann::json ar = nlohmann::json::array();
+    for (int m = 0; m < movements; ++m) {
+      nlohmann::json joints = nlohmann::json::array();
+      for (int j = 0; j < 5; ++j) {
+        nlohmann::json alpha = nlohmann::json::array();
+        const int order = (m == 1 && j == 2 && bad_order > 0) ? bad_order : j + 1;
+        for (int k = 1; k <= order; ++k) alpha.push_back(0.1 * m + 0.01 * k);
+        joints.push_back({{"order", order}, {"c", 0.001 * j}, {"beta", -0.02 * (m + 1)}, {"alpha", alpha}});
+      }
+      ar.push_back(joints);
+    }
+    return nlohmann::json{{"training", {{"linear_ar", ar}}}}.dump();
+  };
+  CHECK(rt::modelLinearAr("{}", 3, "m").empty());
+  const rt::LinearArCoefficients k = rt::modelLinearAr(base(3, 0), 3, "m");
+  REQUIRE(k.c.size() == 3);
+  CHECK(k.beta[2][4] == -0.06);
+  CHECK(k.c[0][3] == 0.003);
+  CHECK(k.alpha[1][2][3] == 0.1 + 0.03);  // movement 1, k = 3, joint 3 (order 4)
+  CHECK(k.alpha[1][4][3] == 0.0);         // past joint 3's order
+  const LinearArBase<3> b = rt::linearArBase<3>(k);
+  CHECK(b.on);
+  CHECK(b.alpha[1][2][3] == static_cast<float>(0.13));
+  CHECK_FALSE(rt::linearArBase<3>(rt::LinearArCoefficients{}).on);
+  for (const std::string& bad : {base(2, 0), base(3, 13), std::string(R"({"training":{"linear_ar":[1,2,3]}})")})
+    CHECK_THROWS_WITH_AS(rt::modelLinearAr(bad, 3, "model.bin"), doctest::Contains("model.bin: the model's metadata has an unusable training.linear_ar"),
+                         std::runtime_error);
+
+  // nao_rt adds it under the net's output (stepPolicy; libtorch parity in test_torch_parity) and
+  // records it: the same random net with and without the base gives other commands.
+  const std::string split = R"("split":{"train":["elbow_000"],"val":["elbow_003","elbow_010"]})";
+  std::string with_meta = base(3, 0);
+  with_meta.insert(with_meta.size() - 1, "," + split);
+  const std::string with = writeModel("autonomous_ar.bin", Conditioning::kAutonomous, with_meta);
+  const std::string without = writeModel("autonomous_no_ar.bin", Conditioning::kAutonomous, "{" + split + "}");
+  std::vector<std::vector<double>> commands;
+  for (const std::string& model : {with, without}) {
+    const fs::path dir = tempDir(fs::path(model).stem().string());
+    rt::RunOptions o = options(model, "none", dir);
+    o.movement = "elbow";
+    o.ticks = 20;
+    const Outcome r = run(o);
+    REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+    CHECK(nlohmann::json::parse(bytes(dir / "summary.json"))["model"]["linear_ar_base"] == (model == with));
+    commands.push_back(test::readCsvColumns(dir / "ticks.csv").at("q_cmd_1"));
+  }
+  CHECK(commands[0] != commands[1]);
+}

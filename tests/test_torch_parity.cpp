@@ -177,6 +177,24 @@ void loadInto(tools::PolicyNet& net, const ModelFile& model) {
   }
 }
 
+// The metadata's linear AR base as the trainer holds it (per movement; empty: none).
+std::vector<tools::LinearArModel> linearArModels(const rt::LinearArCoefficients& k) {
+  std::vector<tools::LinearArModel> out;
+  for (std::size_t m = 0; m < k.c.size(); ++m) {
+    tools::LinearArModel model;
+    for (std::size_t j = 0; j < 5; ++j) {
+      tools::LinearArJoint& x = model.joints[j];
+      x.c = k.c[m][j];
+      x.beta = k.beta[m][j];
+      x.alpha.clear();
+      for (std::size_t i = 0; i < static_cast<std::size_t>(kPolicyArMaxOrder); ++i) x.alpha.push_back(k.alpha[m][i][j]);
+      x.order = kPolicyArMaxOrder;
+    }
+    out.push_back(model);
+  }
+  return out;
+}
+
 std::vector<const float*> pointers(const std::vector<std::vector<float>>& floats) {
   std::vector<const float*> p;
   for (const auto& f : floats) p.push_back(f.data());
@@ -230,6 +248,37 @@ TEST_CASE("small configuration: streaming runtime inference equals libtorch's wh
     // sides must add it in the same place and precision.
     net->residual_gain = 1.0894;
     weights.residual_gain = 1.0894f;
+    // A linear AR base (autonomous mode adds it; reference mode ignores it): per movement and
+    // joint, orders 1..12, a mean-reverting β, the past actions' weights decaying.
+    {
+      std::mt19937_64 rng(5);
+      std::vector<tools::LinearArModel> ar(3);
+      for (std::size_t m = 0; m < 3; ++m)
+        for (std::size_t j = 0; j < 5; ++j) {
+          tools::LinearArJoint& x = ar[m].joints[j];
+          x.order = static_cast<int>(1 + (3 * m + j) % 12);
+          x.c = uniform(rng, -0.02, 0.02);
+          x.beta = uniform(rng, -0.1, 0.0);
+          x.alpha.clear();
+          for (int k = 0; k < x.order; ++k) x.alpha.push_back(uniform(rng, -0.9, 0.9) / (1 + k));
+        }
+      net->setLinearAr(ar);
+      rt::LinearArCoefficients k;
+      for (const tools::LinearArModel& model : ar) {
+        std::array<double, 5> cc{}, bb{};
+        std::array<std::array<double, 5>, kPolicyArMaxOrder> aa{};
+        for (std::size_t j = 0; j < 5; ++j) {
+          cc[j] = model.joints[j].c;
+          bb[j] = model.joints[j].beta;
+          for (std::size_t i = 0; i < model.joints[j].alpha.size(); ++i) aa[i][j] = model.joints[j].alpha[i];
+        }
+        k.c.push_back(cc);
+        k.beta.push_back(bb);
+        k.alpha.push_back(aa);
+      }
+      weights.linear_ar = rt::linearArBase<SmallPolicyDims::kMovements>(k);
+      REQUIRE(weights.linear_ar.on);
+    }
     const std::string mode = conditioningName(c);
     checkParity(net, weights, random, "small/" + mode + "/random");
     checkParity(net, weights, recorded, "small/" + mode + "/recorded");
@@ -256,6 +305,9 @@ TEST_CASE("paper configuration: the committed models agree with libtorch within 
         bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
     weights.residual_gain = rt::modelResidualGain(model.header.metadata_json, path.string());
     net->residual_gain = weights.residual_gain;
+    const rt::LinearArCoefficients ar = rt::modelLinearAr(model.header.metadata_json, 3, path.string());
+    weights.linear_ar = rt::linearArBase<PaperPolicyDims::kMovements>(ar);
+    net->setLinearAr(linearArModels(ar));
     std::vector<std::vector<JointVector>> centroids(3);
     for (int m = 0; m < 3; ++m)
       for (int k = 0; k < PaperPolicyDims::kClusters; ++k)

@@ -354,3 +354,86 @@ TEST_CASE("DAgger is refused with world size > 1, with --resume and for an archi
   window.dagger_rounds = 0;
   CHECK_NOTHROW(trainPolicy(smallData(), smallSim(), window, nullptr));
 }
+
+TEST_CASE("over the linear AR base the untrained net is the baseline; rollout selection exports the epoch with the lowest rollout DTW") {
+  TrainOptions o = smallOptions(43, 3);
+  o.conditioning = Conditioning::kAutonomous;
+  o.ar_residual = true;
+  o.select_by_rollout = true;
+  TrainResult r;
+  const std::vector<std::uint8_t> a = trainBytes(o, &r);
+  REQUIRE(r.net->linearAr().size() == 3);
+
+  // The base is the baseline evaluate fits: the training split's f, order on the validation split's.
+  const PolicyData& data = smallData();
+  for (int m = 0; m < 3; ++m) {
+    std::vector<std::vector<JointVector>> tr, va;
+    for (int d : r.split.train)
+      if (data.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(data.demos[static_cast<std::size_t>(d)].f);
+    for (int d : r.split.val)
+      if (data.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(data.demos[static_cast<std::size_t>(d)].f);
+    const LinearArModel expect = fitLinearAr(tr, va, kMaxLinearArOrder);
+    for (int j = 0; j < kNumJoints; ++j) {
+      const LinearArJoint& got = r.net->linearAr()[static_cast<std::size_t>(m)].joints[static_cast<std::size_t>(j)];
+      CHECK(got.order == expect.joints[static_cast<std::size_t>(j)].order);
+      CHECK(got.c == expect.joints[static_cast<std::size_t>(j)].c);
+      CHECK(got.beta == expect.joints[static_cast<std::size_t>(j)].beta);
+      CHECK(got.alpha == expect.joints[static_cast<std::size_t>(j)].alpha);
+    }
+  }
+
+  // The base in libtorch is linearArAction (double, toolchain) in float: on a demonstration's f.
+  {
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(r.split.val.front())];
+    const std::int64_t n = static_cast<std::int64_t>(demo.f.size()) - 1;
+    torch::Tensor q = torch::empty({1, n, kNumJoints}), a_prev = torch::zeros({1, n, kNumJoints});
+    for (std::int64_t t = 0; t < n; ++t)
+      for (int j = 0; j < kNumJoints; ++j) {
+        q[0][t][j] = static_cast<float>(demo.f[static_cast<std::size_t>(t)][j]);
+        if (t > 0) a_prev[0][t][j] = static_cast<float>(demo.f[static_cast<std::size_t>(t)][j] - demo.f[static_cast<std::size_t>(t - 1)][j]);
+      }
+    const torch::Tensor base =
+        r.net->linearArBase(q, a_prev, torch::tensor({static_cast<std::int64_t>(demo.movement)}, torch::kInt64));
+    double worst = 0.0, largest = 0.0;
+    std::vector<JointVector> past;
+    for (std::int64_t t = 0; t < n; ++t) {
+      const JointVector expect = linearArAction(r.net->linearAr()[static_cast<std::size_t>(demo.movement)],
+                                                demo.f[static_cast<std::size_t>(t)], past);
+      for (int j = 0; j < kNumJoints; ++j) {
+        worst = std::max(worst, std::abs(static_cast<double>(base[0][t][j].item<float>()) - expect[j]));
+        largest = std::max(largest, std::abs(expect[j]));
+      }
+      past.insert(past.begin(), JointVector(demo.f[static_cast<std::size_t>(t + 1)] - demo.f[static_cast<std::size_t>(t)]));
+    }
+    CHECK(worst < 1e-5);
+    CHECK(largest > 1e-3);
+  }
+
+  // Epoch 0 is scored (the untrained net: the baseline), and the kept epoch is the argmin.
+  REQUIRE(r.epoch0.epoch == 0);
+  REQUIRE(std::isfinite(r.epoch0.rollout_dtw_m));
+  int argmin = 0;
+  double best = r.epoch0.rollout_dtw_m;
+  for (const EpochStats& e : r.history) {
+    REQUIRE(e.rollout_dtw_per_movement_m.size() == 3);
+    if (e.rollout_dtw_m < best) {
+      best = e.rollout_dtw_m;
+      argmin = e.epoch;
+    }
+  }
+  CHECK(r.best_epoch == argmin);
+  // Epochs differ in their rollouts (the score can tell them apart).
+  CHECK(r.history.front().rollout_dtw_m != r.epoch0.rollout_dtw_m);
+
+  // The metadata carries the base nao_rt adds back, and the selection.
+  const nlohmann::json meta = nlohmann::json::parse(modelMetadata(data, o, r));
+  CHECK(meta["training"]["select"] == "rollout_dtw");
+  REQUIRE(meta["training"]["linear_ar"].size() == 3);
+  CHECK(meta["training"]["linear_ar"][1][2]["beta"].get<double>() == r.net->linearAr()[1].joints[2].beta);
+  CHECK(meta["result"]["val_nn_dtw_m"].size() == 3);
+  const std::string card = modelCard(data, o, r, "test", "m.bin");
+  CHECK(card.find("| linear AR base |") != std::string::npos);
+  CHECK(card.find("| model selection | rollout DTW") != std::string::npos);
+
+  CHECK_MESSAGE(a == trainBytes(o), "two runs with seed 43 gave different bytes");
+}

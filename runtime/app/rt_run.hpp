@@ -141,6 +141,14 @@ struct ValidationSet {
 /// demonstrations of `movement`. Throws std::runtime_error naming `origin` when there are none.
 ValidationSet validationDemos(const std::string& metadata_json, const std::string& movement, const std::string& origin);
 
+/// The linear AR base an autonomous model was trained over (metadata training.linear_ar: per
+/// movement, per joint {"order", "c", "beta", "alpha"}; PolicyWeights::linear_ar), as doubles.
+struct LinearArCoefficients {
+  std::vector<std::array<double, 5>> c, beta;                                    ///< [movement][joint]
+  std::vector<std::array<std::array<double, 5>, kPolicyArMaxOrder>> alpha;       ///< [movement][k − 1][joint]
+  bool empty() const { return c.empty(); }
+};
+
 /// Everything configured before the policy is bound.
 struct PreparedRun {
   ArmModel arm;
@@ -148,6 +156,7 @@ struct PreparedRun {
   std::string model_source;            ///< "compiled-in" or the --weights path
   const std::uint8_t* model_bytes = nullptr;  ///< compiled-in: the embedded bytes to bind to; else nullptr
   const std::uint64_t* model_offsets = nullptr;  ///< compiled-in: the generated tensor offsets
+  LinearArCoefficients linear_ar;       ///< autonomous models over the linear AR base (metadata)
   ReferenceSpec spec;
   int movement_index = 0;              ///< into model.header.movement_names
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
@@ -171,6 +180,27 @@ RetargetParams modelRetargetSetting(const std::string& metadata_json, const Reta
 /// PolicyWeights::residual_gain); 0 when the metadata has none. Throws std::runtime_error naming
 /// `origin` for a value that is present but not a finite number >= 0.
 float modelResidualGain(const std::string& metadata_json, const std::string& origin);
+
+/// Empty when the metadata has none. Throws std::runtime_error naming `origin` for one that is
+/// present but unusable (not `movements` movements of 5 joints, an order outside 1..12, a
+/// coefficient that is not a finite number).
+LinearArCoefficients modelLinearAr(const std::string& metadata_json, int movements, const std::string& origin);
+
+/// `k` as the runtime's float base (on = !k.empty()).
+template <int M>
+LinearArBase<M> linearArBase(const LinearArCoefficients& k) {
+  LinearArBase<M> b;
+  b.on = !k.empty() && k.c.size() == static_cast<std::size_t>(M);
+  if (!b.on) return b;
+  for (std::size_t m = 0; m < static_cast<std::size_t>(M); ++m)
+    for (std::size_t j = 0; j < 5; ++j) {
+      b.c[m][j] = static_cast<float>(k.c[m][j]);
+      b.beta[m][j] = static_cast<float>(k.beta[m][j]);
+      for (std::size_t i = 0; i < static_cast<std::size_t>(kPolicyArMaxOrder); ++i)
+        b.alpha[m][i][j] = static_cast<float>(k.alpha[m][i][j]);
+    }
+  return b;
+}
 
 /// Configure-time checks and preparation, in the order that fails fastest: reference syntax,
 /// URDF, model (file checks, joints against the URDF, architecture against `compiled_arch`),
@@ -345,6 +375,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
             ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model.header.conditioning)
             : bindWeightFile<Dims>(p, weight_storage);
     weights.residual_gain = p.residual_gain;
+    weights.linear_ar = linearArBase<Dims::kMovements>(p.linear_ar);
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
     // longer read, so its memory goes back before the loop (resident set, docs/embedded.md).
     std::vector<std::uint8_t>().swap(p.model.bytes);

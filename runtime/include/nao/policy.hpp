@@ -159,6 +159,20 @@ struct DecoderLayerWeights {
 };
 
 /// The immutable model: views of every manifest tensor (the bytes stay where they were bound)
+/// Most past actions the linear AR base reads (the toolchain's kMaxLinearArOrder).
+inline constexpr int kPolicyArMaxOrder = 12;
+
+/// Autonomous mode's linear autoregressive base (docs/policy.md): per movement m and joint j,
+/// base_j = c + β q_j(t) + Σ_{k=1..12} α_k a_j(t−k) (α zero past the fitted order), the fitted
+/// baseline (toolchain linear_ar.hpp) the network's output is a residual over. From the model's
+/// metadata (training.linear_ar); off in older files and in reference mode.
+template <int M>
+struct LinearArBase {
+  bool on = false;
+  std::array<std::array<float, 5>, M> c{}, beta{};
+  std::array<std::array<std::array<float, 5>, kPolicyArMaxOrder>, M> alpha{};  ///< [m][k − 1][j]
+};
+
 /// plus the conditioning mode. Built by bindPolicyWeights.
 template <class Dims>
 struct PolicyWeights {
@@ -188,6 +202,9 @@ struct PolicyWeights {
   /// net learning only what a first-order servo inversion of the target r = f(t+1) − q misses
   /// (docs/policy.md). From the model's metadata (training.residual_gain); 0: none.
   float residual_gain = 0.0f;
+  /// Autonomous models trained as a residual over the linear AR baseline: the action is that
+  /// baseline plus the network's output (docs/policy.md). Off: none.
+  LinearArBase<Dims::kMovements> linear_ar;
 };
 
 /// Everything stepPolicy writes: intermediates, the key/value rings of the last W ticks and the
@@ -251,6 +268,9 @@ struct PolicyWorkspace {
 
   JointVec action_n = JointVec::Zero();  ///< normalised actions an'
   JointVec action = JointVec::Zero();    ///< actions a(t), rad per step
+  /// The linear AR base's past actions, newest first: a_hist[k − 1] = a(t − k) (the inputs
+  /// a_prev of this and the previous steps; 0 before the stream started).
+  std::array<JointVec, kPolicyArMaxOrder> a_hist{};
 };
 
 /// A heap-allocated workspace (configure time).
@@ -595,6 +615,7 @@ PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::arr
 template <class Dims>
 void resetPolicyStream(PolicyWorkspace<Dims>& ws) {
   ws.ticks = 0;
+  for (auto& a : ws.a_hist) a.setZero();
 }
 
 /// One policy step (docs/policy.md) at the stream's next tick: normalise the inputs, make the
@@ -700,6 +721,20 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
   for (int j = 0; j < J; ++j) ws.action_n[j] = w.head_weight.row(0).dot(ws.h.col(j).transpose()) + w.head_bias(0, 0);
   ws.action = (ws.action_n.array() * w.a_std.array() + w.a_mean.array()).matrix();
   if (w.conditioning == Conditioning::kReference && w.residual_gain != 0.0f) ws.action += w.residual_gain * in.r;
+  // The linear AR base: a(t−1) is this step's input, older actions the previous steps'.
+  for (int k = kPolicyArMaxOrder - 1; k > 0; --k) ws.a_hist[static_cast<std::size_t>(k)] = ws.a_hist[static_cast<std::size_t>(k - 1)];
+  ws.a_hist[0] = in.a_prev;
+  if (w.conditioning == Conditioning::kAutonomous && w.linear_ar.on) {
+    const auto m = static_cast<std::size_t>(ws.movement);
+    for (int j = 0; j < J; ++j) {
+      const auto jj = static_cast<std::size_t>(j);
+      // The order of the float operations of PolicyNet::linearArBase (libtorch).
+      float b = w.linear_ar.c[m][jj] + w.linear_ar.beta[m][jj] * in.q[j];
+      for (int k = 0; k < kPolicyArMaxOrder; ++k)
+        b = b + w.linear_ar.alpha[m][static_cast<std::size_t>(k)][jj] * ws.a_hist[static_cast<std::size_t>(k)][j];
+      ws.action[j] += b;
+    }
+  }
   ++ws.ticks;
   return ws.action;
 }

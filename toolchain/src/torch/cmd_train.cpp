@@ -25,6 +25,8 @@ struct TrainArgs {
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
   double residual_gain = -1.0;
   int dagger_rounds = 0, dagger_start = TrainOptions{}.dagger_start;
+  std::string select = "val-loss";
+  bool ar_residual = false;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
@@ -88,6 +90,8 @@ void run(const TrainArgs& a) {
   o.max_batches = a.max_batches;
   o.dagger_rounds = a.dagger_rounds;
   o.dagger_start = a.dagger_start;
+  o.select_by_rollout = a.select == "rollout-dtw";
+  o.ar_residual = a.ar_residual;
   o.live_progress = isatty(fileno(stdout)) != 0;
   if (a.rank >= a.world_size)
     throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
@@ -245,6 +249,18 @@ void setup(CLI::App& app) {
   cmd->add_option("--dagger-start", args->dagger_start, "Epoch after which the first DAgger round runs")
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();
+  cmd->add_option("--select", args->select,
+                  "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "
+                  "or rollout-dtw (after every epoch the net is rolled out on the simulated arm from each "
+                  "validation demonstration's start, as nao_rt's autonomous runs; the lowest mean over movements "
+                  "of the median hand-path DTW to the nearest validation demonstration wins; paper or small "
+                  "architecture)")
+      ->check(CLI::IsMember({"val-loss", "rollout-dtw"}))
+      ->capture_default_str();
+  cmd->add_flag("--ar-residual", args->ar_residual,
+               "Autonomous mode: the network learns the residual over the linear AR baseline (per movement and "
+               "joint, fitted on the training split's feature trajectories as nao_toolchain evaluate fits it; "
+               "stored in the metadata, added back by nao_rt); its head starts at zero");
   cmd->callback([args] { run(*args); });
 }
 

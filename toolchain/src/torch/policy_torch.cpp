@@ -278,7 +278,44 @@ torch::Tensor PolicyNetImpl::act(const torch::Tensor& q, const torch::Tensor& a_
   torch::Tensor a = forward(batch, attention) * a_std + a_mean;
   if (conditioning_ == Conditioning::kReference && residual_gain != 0.0)
     a = a + static_cast<float>(residual_gain) * r;  // float, as the runtime computes it
+  if (conditioning_ == Conditioning::kAutonomous && !linear_ar_.empty()) a = a + linearArBase(q, a_prev, movement);
   return a;
+}
+
+void PolicyNetImpl::setLinearAr(const std::vector<LinearArModel>& per_movement) {
+  if (!per_movement.empty() && per_movement.size() != static_cast<std::size_t>(arch_.movements))
+    throw std::invalid_argument("linear AR base: " + std::to_string(per_movement.size()) + " movements, the net has " +
+                                std::to_string(arch_.movements));
+  linear_ar_ = per_movement;
+  const auto m = static_cast<std::int64_t>(per_movement.size());
+  ar_c_ = torch::zeros({m, kNumJoints});
+  ar_beta_ = torch::zeros({m, kNumJoints});
+  ar_alpha_ = torch::zeros({m, kMaxLinearArOrder, kNumJoints});
+  for (std::int64_t i = 0; i < m; ++i)
+    for (int j = 0; j < kNumJoints; ++j) {
+      const LinearArJoint& x = per_movement[static_cast<std::size_t>(i)].joints[static_cast<std::size_t>(j)];
+      ar_c_[i][j] = static_cast<float>(x.c);
+      ar_beta_[i][j] = static_cast<float>(x.beta);
+      for (std::size_t k = 0; k < x.alpha.size() && k < static_cast<std::size_t>(kMaxLinearArOrder); ++k)
+        ar_alpha_[i][static_cast<std::int64_t>(k)][j] = static_cast<float>(x.alpha[k]);
+    }
+}
+
+torch::Tensor PolicyNetImpl::linearArBase(const torch::Tensor& q, const torch::Tensor& a_prev,
+                                          const torch::Tensor& movement) const {
+  if (linear_ar_.empty()) return torch::zeros_like(q);
+  const std::int64_t n_ticks = q.size(1);
+  const torch::Tensor c = ar_c_.index_select(0, movement).unsqueeze(1);        // [B,1,J]
+  const torch::Tensor beta = ar_beta_.index_select(0, movement).unsqueeze(1);  // [B,1,J]
+  const torch::Tensor alpha = ar_alpha_.index_select(0, movement);            // [B,12,J]
+  torch::Tensor b = c + beta * q;
+  for (std::int64_t k = 1; k <= kMaxLinearArOrder; ++k) {
+    // a(t−k) = a_prev at tick t−k+1: shifted k−1 ticks later, zeros in front.
+    torch::Tensor past = torch::zeros_like(a_prev);
+    if (k - 1 < n_ticks) past.slice(1, k - 1, n_ticks).copy_(a_prev.slice(1, 0, n_ticks - (k - 1)));
+    b = b + alpha.select(1, k - 1).unsqueeze(1) * past;
+  }
+  return b;
 }
 
 void PolicyNetImpl::setNormalisation(const NormStats& s) {

@@ -14,6 +14,7 @@
 #pragma once
 
 #include "nao/policy_config.hpp"
+#include "nao/tools/linear_ar.hpp"
 #include "nao/tools/policy_dataset.hpp"
 
 #include <torch/torch.h>
@@ -157,7 +158,20 @@ class PolicyNetImpl : public torch::nn::Module {
   /// learns the residual of the first-order servo inversion (runtime PolicyWeights::residual_gain).
   double residual_gain = 0.0;
 
+  /// Autonomous mode over the linear AR baseline (docs/policy.md): act() adds linearArBase, so
+  /// forward() learns the residual over the fitted per-movement, per-joint AR model. One model
+  /// per movement (index order); empty: off. Not a manifest tensor (model.bin metadata
+  /// training.linear_ar; runtime PolicyWeights::linear_ar).
+  void setLinearAr(const std::vector<LinearArModel>& per_movement);
+  const std::vector<LinearArModel>& linearAr() const { return linear_ar_; }
+  /// The base [B,T,J] from raw q and a(t−1) [B,T,J] and movement [B]: c + β q(t) + Σ_k α_k a(t−k),
+  /// k = 1..12 (a(t−k) = a_prev at tick t−k+1, 0 before the start), in float, in the runtime's
+  /// order of operations. Zeros when off.
+  torch::Tensor linearArBase(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& movement) const;
+
  private:
+  std::vector<LinearArModel> linear_ar_;
+  torch::Tensor ar_c_, ar_beta_, ar_alpha_;  ///< [M,J], [M,J], [M,12,J] float
   PolicyArch arch_;
   Conditioning conditioning_;
 

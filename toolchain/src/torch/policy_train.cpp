@@ -2,6 +2,8 @@
 
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
+#include "nao/tools/evaluate.hpp"
+#include "rt_run.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -44,7 +46,13 @@ SequenceTensors toTensors(const PolicyNet& net, const std::vector<PolicySequence
     t.rn.push_back((put(s.r) - net->r_mean) / net->r_std);
     // Reference mode learns the residual of the servo inversion g·r (act() adds it back).
     const float g = net->conditioning() == Conditioning::kReference ? static_cast<float>(net->residual_gain) : 0.0f;
-    t.target.push_back((put(s.a) - g * put(s.r) - net->a_mean) / net->a_std);
+    torch::Tensor a = put(s.a) - g * put(s.r);
+    // Autonomous mode over the linear AR base: the net learns what it misses (act() adds it back).
+    if (net->conditioning() == Conditioning::kAutonomous && !net->linearAr().empty())
+      a = a - net->linearArBase(put(s.q).unsqueeze(0), put(s.a_prev).unsqueeze(0),
+                                torch::tensor({static_cast<std::int64_t>(s.movement)}, torch::kInt64))
+                  .squeeze(0);
+    t.target.push_back((a - net->a_mean) / net->a_std);
     t.movement.push_back(s.movement);
     t.ticks += static_cast<std::int64_t>(s.ticks());
   }
@@ -152,6 +160,29 @@ void check(const PolicyData& data, const TrainOptions& o) {
     if (o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
       throw UserError("DAgger (--dagger-rounds) needs the paper or small architecture as compiled (e.g. no --window)");
   }
+  if (o.select_by_rollout && o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
+    throw UserError("model selection on rollouts (--select rollout-dtw) needs the paper or small architecture as "
+                    "compiled (e.g. no --window)");
+}
+
+static_assert(kMaxLinearArOrder == kPolicyArMaxOrder, "the runtime's AR base reads as many past actions as are fitted");
+
+// The per-movement AR models as the runtime reads them from the metadata (doubles).
+rt::LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models) {
+  rt::LinearArCoefficients k;
+  for (const LinearArModel& m : models) {
+    std::array<double, 5> c{}, beta{};
+    std::array<std::array<double, 5>, kPolicyArMaxOrder> alpha{};
+    for (std::size_t j = 0; j < 5; ++j) {
+      c[j] = m.joints[j].c;
+      beta[j] = m.joints[j].beta;
+      for (std::size_t i = 0; i < m.joints[j].alpha.size(); ++i) alpha[i][j] = m.joints[j].alpha[i];
+    }
+    k.c.push_back(c);
+    k.beta.push_back(beta);
+    k.alpha.push_back(alpha);
+  }
+  return k;
 }
 
 // One DAgger round: the net's current weights bound to the runtime's streaming inference (the
@@ -164,6 +195,7 @@ std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector
   for (const std::vector<float>& f : floats) pointers.push_back(f.data());
   PolicyWeights<Dims> weights = bindPolicyWeights<Dims>(pointers.data(), pointers.size(), net->conditioning());
   weights.residual_gain = static_cast<float>(net->residual_gain);
+  weights.linear_ar = rt::linearArBase<Dims::kMovements>(linearArCoefficients(net->linearAr()));
   const auto ws = makePolicyWorkspace<Dims>();
   const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
                                    const JointVector& r) -> JointVector {
@@ -194,6 +226,8 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   k << "; batches " << o.max_batches;
   if (o.conditioning == Conditioning::kReference && o.residual_gain != 0.0) k << "; residual " << o.residual_gain;
   if (o.dagger_rounds > 0) k << "; dagger " << o.dagger_rounds << " " << o.dagger_start;
+  if (o.select_by_rollout) k << "; select rollout";
+  if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) k << "; ar residual";
   return k.str();
 }
 
@@ -221,12 +255,12 @@ void writeCheckpoint(const std::string& path, const std::string& key, const std:
   archive.write("adam", adam);
   archive.write("best_val", c10::IValue(best_val));
   archive.write("best_epoch", c10::IValue(static_cast<std::int64_t>(best_epoch)));
-  torch::Tensor h = torch::empty({static_cast<std::int64_t>(history.size()), 6}, torch::kFloat64);
+  torch::Tensor h = torch::empty({static_cast<std::int64_t>(history.size()), 7}, torch::kFloat64);
   for (std::size_t i = 0; i < history.size(); ++i) {
     const EpochStats& e = history[i];
-    const double row[6] = {static_cast<double>(e.epoch), e.train_loss, e.val_loss, e.val_mse_rad2, e.seconds,
-                           static_cast<double>(e.samples)};
-    for (std::int64_t c = 0; c < 6; ++c) h[static_cast<std::int64_t>(i)][c] = row[c];
+    const double row[7] = {static_cast<double>(e.epoch), e.train_loss, e.val_loss, e.val_mse_rad2, e.seconds,
+                           static_cast<double>(e.samples), e.rollout_dtw_m};
+    for (std::int64_t c = 0; c < 7; ++c) h[static_cast<std::int64_t>(i)][c] = row[c];
   }
   archive.write("history", h);
   // Written aside and renamed: a run killed while saving leaves the previous checkpoint whole.
@@ -277,6 +311,7 @@ Checkpoint readCheckpoint(const std::string& path, const std::string& key, std::
       e.val_mse_rad2 = h[i][3].item<double>();
       e.seconds = h[i][4].item<double>();
       e.samples = static_cast<std::size_t>(h[i][5].item<double>());
+      if (h.size(1) > 6) e.rollout_dtw_m = h[i][6].item<double>();  // checkpoints before it: 6 columns
       ck.history.push_back(e);
     }
   } catch (const UserError&) {
@@ -304,6 +339,66 @@ std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::ve
   if (arch == SmallPolicyDims::arch()) return rolloutsOf<SmallPolicyDims>(data, demos, sim, execution, net, round);
   throw UserError("DAgger rollouts need the paper or small architecture as compiled");
 }
+
+namespace {
+
+// Validation demonstrations' hand paths (f through the arm's forward kinematics), by movement.
+struct ValPaths {
+  std::vector<std::vector<HandPath>> by_movement;
+};
+
+ValPaths valHandPaths(const PolicyData& data, const std::vector<int>& val, const ArmModel& arm) {
+  ValPaths v;
+  v.by_movement.resize(static_cast<std::size_t>(data.movements()));
+  for (int d : val) {
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
+    v.by_movement[static_cast<std::size_t>(demo.movement)].push_back(handPath(arm, demo.f));
+  }
+  return v;
+}
+
+// Per movement: the median over its validation demonstrations of the DTW to the nearest other one.
+std::vector<double> nearestNeighbourDtw(const ValPaths& v) {
+  std::vector<double> out;
+  for (const std::vector<HandPath>& paths : v.by_movement) {
+    std::vector<double> d;
+    for (std::size_t i = 0; i < paths.size(); ++i) {
+      const NearestDemo n = nearestDemo(paths[i], paths, static_cast<int>(i));
+      if (n.index >= 0) d.push_back(n.dtw_m);
+    }
+    out.push_back(median(d));
+  }
+  return out;
+}
+
+// The net rolled out from every validation demonstration's start (executePolicyRollouts through
+// the runtime's streaming inference, as nao_rt's autonomous runs), each hand path scored by its
+// DTW to the nearest validation demonstration of its movement: per movement the median, and
+// their mean (NaN if any is NaN: a non-finite rollout never wins).
+void scoreRollouts(const PolicyData& data, const std::vector<int>& val, const SimModel& sim,
+                   const ExecutionOptions& execution, const PolicyNet& net, const ValPaths& paths, EpochStats& st) {
+  const std::vector<PolicySequence> seqs = daggerRollouts(data, val, sim, execution, net, 0);
+  std::vector<std::vector<double>> dtw(paths.by_movement.size());
+  for (const PolicySequence& s : seqs) {
+    const NearestDemo n = nearestDemo(handPath(sim.arm, s.q), paths.by_movement[static_cast<std::size_t>(s.movement)], -1);
+    dtw[static_cast<std::size_t>(s.movement)].push_back(n.index >= 0 ? n.dtw_m : std::numeric_limits<double>::quiet_NaN());
+  }
+  st.rollout_dtw_per_movement_m.clear();
+  double sum = 0.0;
+  int n = 0;
+  for (const std::vector<double>& d : dtw) {
+    if (d.empty()) continue;
+    double m = median(d);
+    for (double x : d)
+      if (!std::isfinite(x)) m = std::numeric_limits<double>::quiet_NaN();
+    st.rollout_dtw_per_movement_m.push_back(m);
+    sum += m;
+    ++n;
+  }
+  st.rollout_dtw_m = n > 0 ? sum / n : std::numeric_limits<double>::quiet_NaN();
+}
+
+}  // namespace
 
 double residualGain(const TrainOptions& o, const SimModel& sim) {
   if (o.conditioning != Conditioning::kReference) return 0.0;
@@ -358,6 +453,26 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   net->residual_gain = res.residual_gain = residualGain(o, sim);
   net->setNormalisation(res.stats);
   net->setCentroids(data.centroids);
+  if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) {
+    // The baseline evaluate fits (training split's f, order per joint on the validation split's).
+    std::vector<LinearArModel> ar;
+    for (int m = 0; m < data.movements(); ++m) {
+      std::vector<std::vector<JointVector>> tr, va;
+      for (int d : res.split.train)
+        if (data.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(data.demos[static_cast<std::size_t>(d)].f);
+      for (int d : res.split.val)
+        if (data.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(data.demos[static_cast<std::size_t>(d)].f);
+      if (tr.empty() || va.empty())
+        throw UserError("--ar-residual: movement " + data.movement_names[static_cast<std::size_t>(m)] +
+                        " needs training and validation demonstrations");
+      ar.push_back(fitLinearAr(tr, va, kMaxLinearArOrder));
+    }
+    net->setLinearAr(ar);
+    // The residual starts at zero: the untrained net is the baseline.
+    torch::NoGradGuard no_grad;
+    net->head->weight.zero_();
+    net->head->bias.zero_();
+  }
   SequenceTensors train = toTensors(net, train_seqs);
   const SequenceTensors train_rollouts = train;  // the final train loss: without DAgger's sequences
   const SequenceTensors val = toTensors(net, val_seqs);
@@ -393,6 +508,34 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   }
   const int rank = o.dist.rank;
   const bool live = progress && o.live_progress;
+  ValPaths val_paths;
+  if (o.select_by_rollout) {
+    val_paths = valHandPaths(data, res.split.val, sim.arm);
+    res.val_nn_dtw_m = nearestNeighbourDtw(val_paths);
+    if (first_epoch == 1) {
+      // Epoch 0: the untrained net (with --ar-residual, exactly the linear AR baseline) competes.
+      net->eval();
+      EpochStats& st = res.epoch0;
+      st.epoch = 0;
+      st.train_loss = std::numeric_limits<double>::quiet_NaN();  // no training pass
+      const SplitLoss v0 = evaluate(net, val, group.get());
+      st.val_loss = v0.normalised;
+      st.val_mse_rad2 = v0.mse_rad2;
+      scoreRollouts(data, res.split.val, sim, o.execution, net, val_paths, st);
+      if (st.rollout_dtw_m < best_val) {
+        best_val = st.rollout_dtw_m;
+        res.best_epoch = 0;
+        best.clear();
+        for (const torch::Tensor& p : params) best.push_back(p.detach().clone());
+      }
+      if (progress) {
+        char line[200];
+        std::snprintf(line, sizeof line, "epoch 0 (before training%s)  val %.4g  rollout DTW %.1f mm", 
+                      net->linearAr().empty() ? "" : ": the linear AR baseline", st.val_loss, 1e3 * st.rollout_dtw_m);
+        *progress << line << std::endl;
+      }
+    }
+  }
 
   const bool done_before = !res.history.empty() && (res.history.back().epoch - res.best_epoch >= o.patience ||
                                                      res.history.back().epoch >= o.max_epochs);
@@ -452,8 +595,11 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     const SplitLoss v = evaluate(net, val, group.get());
     st.val_loss = v.normalised;
     st.val_mse_rad2 = v.mse_rad2;
-    if (st.val_loss < best_val) {
-      best_val = st.val_loss;
+    // Every rank computes the same rollouts (deterministic): no exchange needed.
+    if (o.select_by_rollout) scoreRollouts(data, res.split.val, sim, o.execution, net, val_paths, st);
+    const double criterion = o.select_by_rollout ? st.rollout_dtw_m : st.val_loss;
+    if (criterion < best_val) {
+      best_val = criterion;
       res.best_epoch = epoch;
       best.clear();
       for (const torch::Tensor& p : params) best.push_back(p.detach().clone());
@@ -468,9 +614,15 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       writeCheckpoint(o.checkpoint, key, params, optimiser, best, best_val, res.best_epoch, res.history);
     if (progress) {
       char line[240];
-      std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  %.0f samples/s  ",
-                    live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, best_val, res.best_epoch,
-                    st.seconds, static_cast<double>(st.samples) / st.seconds);
+      if (o.select_by_rollout)
+        std::snprintf(line, sizeof line,
+                      "%sepoch %d/%d  train %.4g  val %.4g  rollout DTW %.1f mm (best %.1f @ %d)  %.1f s  %.0f samples/s  ",
+                      live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, 1e3 * st.rollout_dtw_m,
+                      1e3 * best_val, res.best_epoch, st.seconds, static_cast<double>(st.samples) / st.seconds);
+      else
+        std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  %.0f samples/s  ",
+                      live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, best_val, res.best_epoch,
+                      st.seconds, static_cast<double>(st.samples) / st.seconds);
       *progress << line
                 << (stop ? std::string(epoch == o.max_epochs ? "epoch cap reached" : "early stop")
                          : "~" + duration(epoch_seconds_sum / epoch * (o.max_epochs - epoch)) + " left")
@@ -566,6 +718,18 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
       dg["run"].push_back({{"after_epoch", x.after_epoch}, {"sequences", x.sequences}, {"ticks", x.ticks},
                            {"drift_rad", x.drift_rad}});
   }
+  if (o.select_by_rollout) t["select"] = "rollout_dtw";
+  if (!r.net.is_empty() && !r.net->linearAr().empty()) {
+    // Per movement (index order), per joint: what nao_rt adds under the net's output.
+    auto& ar = t["linear_ar"];
+    ar = nlohmann::ordered_json::array();
+    for (const LinearArModel& m : r.net->linearAr()) {
+      nlohmann::ordered_json joints = nlohmann::ordered_json::array();
+      for (const LinearArJoint& jm : m.joints)
+        joints.push_back({{"order", jm.order}, {"c", jm.c}, {"beta", jm.beta}, {"alpha", jm.alpha}});
+      ar.push_back(joints);
+    }
+  }
   t["batch_unit"] = "sequences";
   auto& ex = t["execution"];
   ex["arm"] = "simulated ODE arm of nao_rt (sim_arm), servo-lagged";
@@ -592,6 +756,15 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   res["val_loss"] = r.val.normalised;
   res["train_mse_rad2"] = r.train.mse_rad2;
   res["val_mse_rad2"] = r.val.mse_rad2;
+  if (o.select_by_rollout) {
+    // Medians per movement (index order), m: the kept epoch's rollouts and the demonstrations'.
+    const EpochStats* kept = r.best_epoch == 0 && r.epoch0.epoch == 0 ? &r.epoch0 : nullptr;
+    for (const EpochStats& e : r.history)
+      if (e.epoch == r.best_epoch) kept = &e;
+    if (kept != nullptr && !kept->rollout_dtw_per_movement_m.empty())
+      res["rollout_dtw_m"] = kept->rollout_dtw_per_movement_m;
+    res["val_nn_dtw_m"] = r.val_nn_dtw_m;
+  }
   auto& b = j["baselines_rad2"];
   b["train"]["zero_action"] = r.train_baselines.zero_action;
   b["train"]["repeat_last"] = r.train_baselines.repeat_last;
@@ -646,6 +819,27 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs << ", patience " << o.patience
     << "), best " << r.best_epoch << " (exported) |\n";
+  if (!r.net.is_empty() && !r.net->linearAr().empty()) {
+    s << "| linear AR base | the net learns the residual over the per-movement, per-joint linear AR baseline "
+         "(fitted on the training split's f, order on the validation split's; head initialised to zero); orders";
+    for (std::size_t m = 0; m < r.net->linearAr().size(); ++m) {
+      s << (m ? "; " : " ") << (m < data.movement_names.size() ? data.movement_names[m] : "?");
+      for (const LinearArJoint& jm : r.net->linearAr()[m].joints) s << " " << jm.order;
+    }
+    s << " |\n";
+  }
+  if (o.select_by_rollout) {
+    s << "| model selection | rollout DTW: after every epoch the net (runtime streaming inference) is rolled out on "
+         "the simulated arm from each validation demonstration's start; score = mean over movements of the median "
+         "hand-path DTW to the nearest validation demonstration. Validation demonstrations' own nearest-neighbour DTW "
+         "(median):";
+    for (std::size_t m = 0; m < r.val_nn_dtw_m.size(); ++m) {
+      std::snprintf(buf, sizeof buf, " %s %.1f mm", m < data.movement_names.size() ? data.movement_names[m].c_str() : "?",
+                    1e3 * r.val_nn_dtw_m[m]);
+      s << buf << (m + 1 < r.val_nn_dtw_m.size() ? "," : "");
+    }
+    s << " |\n";
+  }
   if (r.resumed_after == 0) {
     std::snprintf(buf, sizeof buf, "%.1f s (%.2f s per epoch)", r.seconds,
                   r.history.empty() ? 0.0 : r.seconds / static_cast<double>(r.history.size()));
@@ -699,10 +893,25 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << buf << "\n";
 
   s << "## Per-epoch loss (normalised MSE)\n\n";
-  s << "| epoch | train | val | val (rad^2) | s | samples/s |\n|---|---|---|---|---|---|\n";
-  for (const EpochStats& e : r.history) {
-    std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e | %.1f | %.0f |\n", e.epoch,
-                  e.epoch == r.best_epoch ? " *" : "", e.train_loss, e.val_loss, e.val_mse_rad2, e.seconds,
+  const bool rollouts = o.select_by_rollout;
+  s << "| epoch | train | val | val (rad^2) |" << (rollouts ? " rollout DTW (mm; per movement) |" : "")
+    << " s | samples/s |\n|---|---|---|---|" << (rollouts ? "---|" : "") << "---|---|\n";
+  std::vector<EpochStats> rows = r.history;
+  if (r.epoch0.epoch == 0) rows.insert(rows.begin(), r.epoch0);
+  for (const EpochStats& e : rows) {
+    std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e |", e.epoch, e.epoch == r.best_epoch ? " *" : "",
+                  e.train_loss, e.val_loss, e.val_mse_rad2);
+    s << buf;
+    if (rollouts) {
+      std::snprintf(buf, sizeof buf, " %.1f", 1e3 * e.rollout_dtw_m);
+      s << buf;
+      for (std::size_t m = 0; m < e.rollout_dtw_per_movement_m.size(); ++m) {
+        std::snprintf(buf, sizeof buf, "%s%.1f", m == 0 ? " (" : " / ", 1e3 * e.rollout_dtw_per_movement_m[m]);
+        s << buf;
+      }
+      s << (e.rollout_dtw_per_movement_m.empty() ? " |" : ") |");
+    }
+    std::snprintf(buf, sizeof buf, " %.1f | %.0f |\n", e.seconds,
                   e.seconds > 0.0 ? static_cast<double>(e.samples) / e.seconds : 0.0);
     s << buf;
   }

@@ -12,6 +12,7 @@
 
 #include <cstdint>
 #include <iosfwd>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -44,6 +45,19 @@ struct TrainOptions {
   /// Only the paper and small architectures (the runtime's compiled Dims), world size 1, no resume.
   int dagger_rounds = 0;
   int dagger_start = 2;  ///< 1-based epoch after which the first round runs
+  /// Model selection on rollouts (autonomous mode, paper §4.1; docs/policy.md): after every epoch
+  /// the net is rolled out on the simulated arm from each validation demonstration's start (as
+  /// nao_rt's autonomous runs: its streaming inference, no human input), and the exported epoch is
+  /// the one with the lowest rollout DTW (per movement the median over its validation
+  /// demonstrations of the hand-path DTW to the nearest validation demonstration; the mean over
+  /// movements), not the lowest one-step validation loss. Patience counts on it too. Only the
+  /// paper and small architectures (the runtime's compiled Dims).
+  bool select_by_rollout = false;
+  /// Autonomous mode: the net learns the residual over the linear AR baseline (linear_ar.hpp),
+  /// fitted per movement on the training split's feature trajectories (order per joint chosen on
+  /// the validation split's, up to 12), as nao_toolchain evaluate fits it; the head starts at
+  /// zero, so the untrained net is that baseline (with select_by_rollout, "epoch 0" competes).
+  bool ar_residual = false;
 };
 
 /// One DAgger round of a training run.
@@ -65,6 +79,10 @@ struct EpochStats {
   double val_mse_rad2 = 0.0; ///< the same in rad^2
   double seconds = 0.0;      ///< wall time of the epoch (never written to model.bin)
   std::size_t samples = 0;   ///< training samples of the epoch, all ranks together
+  /// TrainOptions::select_by_rollout: the selection score (m) and its per-movement medians
+  /// (the latter not kept by checkpoints); NaN / empty when off.
+  double rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> rollout_dtw_per_movement_m;
 };
 
 /// Loss of a model on a split, normalised (what is optimised) and in rad^2.
@@ -93,6 +111,16 @@ struct TrainResult {
   double samples_per_s = 0.0;   ///< training samples per second of epoch wall time, all ranks
   int resumed_after = 0;        ///< epoch of the checkpoint this run continued from (0: none)
   std::vector<DaggerRound> dagger;  ///< the DAgger rounds run, in order (TrainOptions::dagger_rounds)
+  /// TrainOptions::select_by_rollout: per movement, the median over its validation
+  /// demonstrations of the DTW to the nearest other one (what a rollout is compared with), m.
+  std::vector<double> val_nn_dtw_m;
+  /// select_by_rollout: the net before the first epoch, scored the same way (epoch 0; with
+  /// ar_residual that is the linear AR baseline itself). Epoch −1: not scored (off, or resumed).
+  EpochStats epoch0 = [] {
+    EpochStats e;
+    e.epoch = -1;
+    return e;
+  }();
 };
 
 /// Trains a policy on `data`: executes the training split's demonstrations on the simulated arm
