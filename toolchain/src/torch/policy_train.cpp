@@ -513,7 +513,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     val_paths = valHandPaths(data, res.split.val, sim.arm);
     res.val_nn_dtw_m = nearestNeighbourDtw(val_paths);
     if (first_epoch == 1) {
-      // Epoch 0: the untrained net (with --ar-residual, exactly the linear AR baseline) competes.
+      // Epoch 0: the untrained net (with --ar-residual, exactly the linear AR baseline), scored
+      // as the bar a trained epoch is measured against, not exported: the exported net is one
+      // that learnt something (docs/policy.md).
       net->eval();
       EpochStats& st = res.epoch0;
       st.epoch = 0;
@@ -522,12 +524,6 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       st.val_loss = v0.normalised;
       st.val_mse_rad2 = v0.mse_rad2;
       scoreRollouts(data, res.split.val, sim, o.execution, net, val_paths, st);
-      if (st.rollout_dtw_m < best_val) {
-        best_val = st.rollout_dtw_m;
-        res.best_epoch = 0;
-        best.clear();
-        for (const torch::Tensor& p : params) best.push_back(p.detach().clone());
-      }
       if (progress) {
         char line[200];
         std::snprintf(line, sizeof line, "epoch 0 (before training%s)  val %.4g  rollout DTW %.1f mm", 
@@ -758,11 +754,12 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   res["val_mse_rad2"] = r.val.mse_rad2;
   if (o.select_by_rollout) {
     // Medians per movement (index order), m: the kept epoch's rollouts and the demonstrations'.
-    const EpochStats* kept = r.best_epoch == 0 && r.epoch0.epoch == 0 ? &r.epoch0 : nullptr;
+    const EpochStats* kept = nullptr;
     for (const EpochStats& e : r.history)
       if (e.epoch == r.best_epoch) kept = &e;
     if (kept != nullptr && !kept->rollout_dtw_per_movement_m.empty())
       res["rollout_dtw_m"] = kept->rollout_dtw_per_movement_m;
+    if (r.epoch0.epoch == 0) res["epoch0_rollout_dtw_m"] = r.epoch0.rollout_dtw_per_movement_m;
     res["val_nn_dtw_m"] = r.val_nn_dtw_m;
   }
   auto& b = j["baselines_rad2"];
@@ -831,8 +828,9 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   if (o.select_by_rollout) {
     s << "| model selection | rollout DTW: after every epoch the net (runtime streaming inference) is rolled out on "
          "the simulated arm from each validation demonstration's start; score = mean over movements of the median "
-         "hand-path DTW to the nearest validation demonstration. Validation demonstrations' own nearest-neighbour DTW "
-         "(median):";
+         "hand-path DTW to the nearest validation demonstration; epoch 0 (the untrained net: with the linear AR base, "
+         "the baseline itself) is scored as the bar, not exported. Validation demonstrations' own nearest-neighbour "
+         "DTW (median):";
     for (std::size_t m = 0; m < r.val_nn_dtw_m.size(); ++m) {
       std::snprintf(buf, sizeof buf, " %s %.1f mm", m < data.movement_names.size() ? data.movement_names[m].c_str() : "?",
                     1e3 * r.val_nn_dtw_m[m]);

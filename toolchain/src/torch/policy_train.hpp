@@ -56,7 +56,7 @@ struct TrainOptions {
   /// Autonomous mode: the net learns the residual over the linear AR baseline (linear_ar.hpp),
   /// fitted per movement on the training split's feature trajectories (order per joint chosen on
   /// the validation split's, up to 12), as nao_toolchain evaluate fits it; the head starts at
-  /// zero, so the untrained net is that baseline (with select_by_rollout, "epoch 0" competes).
+  /// zero, so the untrained net is that baseline (with select_by_rollout, scored as "epoch 0").
   bool ar_residual = false;
 };
 
@@ -115,7 +115,8 @@ struct TrainResult {
   /// demonstrations of the DTW to the nearest other one (what a rollout is compared with), m.
   std::vector<double> val_nn_dtw_m;
   /// select_by_rollout: the net before the first epoch, scored the same way (epoch 0; with
-  /// ar_residual that is the linear AR baseline itself). Epoch −1: not scored (off, or resumed).
+  /// ar_residual that is the linear AR baseline itself): reported as the bar, never exported.
+  /// Epoch −1: not scored (off, or resumed).
   EpochStats epoch0 = [] {
     EpochStats e;
     e.epoch = -1;
