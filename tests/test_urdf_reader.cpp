@@ -127,3 +127,26 @@ TEST_CASE("the TinyXML reader gives urdfdom's numbers bit for bit for a rotated 
   REQUIRE(child != nullptr);
   CHECK(child->parent_joint == jb);  // the tree is linked
 }
+
+TEST_CASE("the TinyXML reader refuses joints that do not form one tree (a loop beside the root), with a reason") {
+  // Found by fuzz_urdf_tinyxml (LeakSanitizer): A→B and B→A beside a root passed initTree and
+  // initRoot; the loop's shared pointers were never freed once the arm check refused the model.
+  const std::string limit = "<limit lower='-1' upper='1' effort='1' velocity='1'/>";
+  const auto joint = [&](const std::string& name, const std::string& parent, const std::string& child) {
+    return "<joint name='" + name + "' type='revolute'><parent link='" + parent + "'/><child link='" + child + "'/>" +
+           limit + "</joint>";
+  };
+  const std::string loop = "<robot name='r'><link name='torso'/><link name='a'/><link name='b'/>" +
+                           joint("j1", "a", "b") + joint("j2", "b", "a") + "</robot>";
+  const std::string self = "<robot name='r'><link name='torso'/><link name='a'/>" + joint("j1", "torso", "a") +
+                           joint("j2", "a", "a") + "</robot>";
+  const std::string tree = "<robot name='r'><link name='torso'/><link name='a'/><link name='b'/>" +
+                           joint("j1", "torso", "a") + joint("j2", "a", "b") + "</robot>";
+  std::string reason;
+  CHECK(nao::parseUrdfTinyXml(tree, reason) != nullptr);  // the same shape as a tree passes
+  CHECK(nao::parseUrdfTinyXml(loop, reason) == nullptr);
+  CHECK_MESSAGE(reason.find("tree") != std::string::npos, reason);
+  reason.clear();
+  CHECK(nao::parseUrdfTinyXml(self, reason) == nullptr);
+  CHECK_MESSAGE(!reason.empty(), "no reason for a link that is its own child");
+}

@@ -16,7 +16,9 @@
 #include <urdf_exception/exception.h>
 
 #include <map>
+#include <set>
 #include <string>
+#include <vector>
 
 namespace nao {
 namespace {
@@ -151,6 +153,20 @@ std::shared_ptr<urdf::ModelInterface> parseUrdfTinyXml(const std::string& urdf_x
     std::map<std::string, std::string> parent_link_tree;
     model->initTree(parent_link_tree);
     model->initRoot(parent_link_tree);
+    // initTree links any graph of joints, loops included (A→B→A beside a root C passes initRoot):
+    // a tree reaches every link from the root exactly once. Anything else is refused here, and
+    // the catch below cuts the cycle's shared pointers (found by fuzz_urdf_tinyxml: a leak).
+    std::vector<urdf::LinkSharedPtr> pending{model->root_link_};
+    std::set<const urdf::Link*> seen;
+    while (!pending.empty()) {
+      const urdf::LinkSharedPtr link = pending.back();
+      pending.pop_back();
+      if (!seen.insert(link.get()).second) throw urdf::ParseError("link [" + link->name + "] is reached twice: not a tree");
+      for (const urdf::LinkSharedPtr& child : link->child_links) pending.push_back(child);
+    }
+    if (seen.size() != model->links_.size())
+      throw urdf::ParseError("the joints do not form one tree from the root link [" + model->root_link_->name +
+                             "]: a loop of links without a path from it");
     return model;
   } catch (const std::exception& e) {
     reason = e.what();
