@@ -11,6 +11,7 @@
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "policy_torch.hpp"
+#include "policy_train.hpp"
 #include "rt_run.hpp"
 #include "support/test_util.hpp"
 
@@ -260,23 +261,10 @@ TEST_CASE("small configuration: streaming runtime inference equals libtorch's wh
           x.c = uniform(rng, -0.02, 0.02);
           x.beta = uniform(rng, -0.1, 0.0);
           x.alpha.clear();
-          for (int k = 0; k < x.order; ++k) x.alpha.push_back(uniform(rng, -0.9, 0.9) / (1 + k));
+          for (int k = 0; k < x.order; ++k) x.alpha.push_back(uniform(rng, -0.9, 0.9) / static_cast<float>(1 + k));
         }
       net->setLinearAr(ar);
-      rt::LinearArCoefficients k;
-      for (const tools::LinearArModel& model : ar) {
-        std::array<double, 5> cc{}, bb{};
-        std::array<std::array<double, 5>, kPolicyArMaxOrder> aa{};
-        for (std::size_t j = 0; j < 5; ++j) {
-          cc[j] = model.joints[j].c;
-          bb[j] = model.joints[j].beta;
-          for (std::size_t i = 0; i < model.joints[j].alpha.size(); ++i) aa[i][j] = model.joints[j].alpha[i];
-        }
-        k.c.push_back(cc);
-        k.beta.push_back(bb);
-        k.alpha.push_back(aa);
-      }
-      weights.linear_ar = rt::linearArBase<SmallPolicyDims::kMovements>(k);
+      weights.linear_ar = rt::linearArBase<SmallPolicyDims::kMovements>(tools::linearArCoefficients(ar));
       REQUIRE(weights.linear_ar.on);
     }
     const std::string mode = conditioningName(c);

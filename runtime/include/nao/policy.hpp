@@ -721,10 +721,12 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
   for (int j = 0; j < J; ++j) ws.action_n[j] = w.head_weight.row(0).dot(ws.h.col(j).transpose()) + w.head_bias(0, 0);
   ws.action = (ws.action_n.array() * w.a_std.array() + w.a_mean.array()).matrix();
   if (w.conditioning == Conditioning::kReference && w.residual_gain != 0.0f) ws.action += w.residual_gain * in.r;
-  // The linear AR base: a(t−1) is this step's input, older actions the previous steps'.
-  for (int k = kPolicyArMaxOrder - 1; k > 0; --k) ws.a_hist[static_cast<std::size_t>(k)] = ws.a_hist[static_cast<std::size_t>(k - 1)];
-  ws.a_hist[0] = in.a_prev;
+  // The linear AR base: a(t−1) is this step's input, older actions the previous steps'. The
+  // history is kept only by models that use it (fixed for a stream), so no other tick pays.
   if (w.conditioning == Conditioning::kAutonomous && w.linear_ar.on) {
+    for (int k = kPolicyArMaxOrder - 1; k > 0; --k)
+      ws.a_hist[static_cast<std::size_t>(k)] = ws.a_hist[static_cast<std::size_t>(k - 1)];
+    ws.a_hist[0] = in.a_prev;
     const auto m = static_cast<std::size_t>(ws.movement);
     for (int j = 0; j < J; ++j) {
       const auto jj = static_cast<std::size_t>(j);

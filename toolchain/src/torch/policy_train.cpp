@@ -16,6 +16,24 @@
 #include <sstream>
 
 namespace nao::tools {
+
+rt::LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models) {
+  rt::LinearArCoefficients k;
+  for (const LinearArModel& m : models) {
+    std::array<double, 5> c{}, beta{};
+    std::array<std::array<double, 5>, kPolicyArMaxOrder> alpha{};
+    for (std::size_t j = 0; j < 5; ++j) {
+      c[j] = m.joints[j].c;
+      beta[j] = m.joints[j].beta;
+      for (std::size_t i = 0; i < m.joints[j].alpha.size(); ++i) alpha[i][j] = m.joints[j].alpha[i];
+    }
+    k.c.push_back(c);
+    k.beta.push_back(beta);
+    k.alpha.push_back(alpha);
+  }
+  return k;
+}
+
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -167,23 +185,6 @@ void check(const PolicyData& data, const TrainOptions& o) {
 
 static_assert(kMaxLinearArOrder == kPolicyArMaxOrder, "the runtime's AR base reads as many past actions as are fitted");
 
-// The per-movement AR models as the runtime reads them from the metadata (doubles).
-rt::LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models) {
-  rt::LinearArCoefficients k;
-  for (const LinearArModel& m : models) {
-    std::array<double, 5> c{}, beta{};
-    std::array<std::array<double, 5>, kPolicyArMaxOrder> alpha{};
-    for (std::size_t j = 0; j < 5; ++j) {
-      c[j] = m.joints[j].c;
-      beta[j] = m.joints[j].beta;
-      for (std::size_t i = 0; i < m.joints[j].alpha.size(); ++i) alpha[i][j] = m.joints[j].alpha[i];
-    }
-    k.c.push_back(c);
-    k.beta.push_back(beta);
-    k.alpha.push_back(alpha);
-  }
-  return k;
-}
 
 // One DAgger round: the net's current weights bound to the runtime's streaming inference (the
 // policy nao_rt runs), rolled out from every listed demonstration's start (executePolicyRollouts).

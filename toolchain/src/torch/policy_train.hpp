@@ -16,6 +16,10 @@
 #include <string>
 #include <vector>
 
+namespace nao::rt {
+struct LinearArCoefficients;  // runtime/app/rt_run.hpp
+}
+
 namespace nao::tools {
 
 struct TrainOptions {
@@ -144,6 +148,10 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
 /// executePolicyRollouts (rollout = −round). Throws UserError for another architecture.
 std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
                                            const ExecutionOptions& execution, const PolicyNet& net, int round);
+
+/// Per-movement linear AR models as nao_rt reads them from the metadata (training.linear_ar,
+/// doubles; rt::linearArBase makes the runtime's float base of them).
+rt::LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models);
 
 /// Normalised and rad^2 MSE of `net` on `sequences` (evaluation mode, no gradients).
 SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>& sequences);
