@@ -1,6 +1,7 @@
 // nao_codegen: the generated sources describe exactly the model they embed, and an
 // unchanged model rewrites nothing (cheap rebuilds).
 #include "nao/codegen.hpp"
+#include "nao/quantize.hpp"
 
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
@@ -8,6 +9,7 @@
 #include <doctest/doctest.h>
 
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 
 namespace {
@@ -61,13 +63,14 @@ TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S 
   const fs::path out = dir / "gen";
 
   const nao::codegen::Result r = nao::codegen::generate(model_path, out.string());
-  CHECK(r.written.size() == 4);
+  CHECK(r.written.size() == 5);  // model.int8 too: empty for fp32
   CHECK(r.unchanged.empty());
   const nao::ModelFile& m = r.model;
 
   // The copy is the model, byte for byte.
   const std::string copy = nao::test::readFile((out / "model.bin").string());
   CHECK(copy == std::string(m.bytes.begin(), m.bytes.end()));
+  CHECK(nao::test::readFile((out / "model.int8").string()).empty());
 
   const std::string config = nao::test::readFile((out / "nao_model_config.hpp").string());
   for (const std::string line : {"namespace nao::compiled {", "inline constexpr int kDModel = 32;",
@@ -83,6 +86,7 @@ TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S 
   std::snprintf(checksum, sizeof checksum, "kChecksum = 0x%016llxull;", static_cast<unsigned long long>(m.checksum));
   CHECK(config.find(checksum) != std::string::npos);
   CHECK(config.find("kParameterCount = " + std::to_string(nao::parameterCount(arch)) + ";") != std::string::npos);
+  CHECK(config.find("inline constexpr bool kInt8Weights = false;") != std::string::npos);
 
   // Tensor names, offsets and counts: the file's table, in manifest order.
   const auto names = arrayItems(config, "kTensorNames");
@@ -132,7 +136,7 @@ TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new mo
 
   const nao::codegen::Result again = nao::codegen::generate(model_path, out.string());
   CHECK(again.written.empty());
-  CHECK(again.unchanged.size() == 4);
+  CHECK(again.unchanged.size() == 5);
   CHECK(fs::last_write_time(out / "nao_model_config.hpp") == stamp);
 
   // Other weights, same architecture: the model copy, the checksum in the config and the .S
@@ -140,8 +144,45 @@ TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new mo
   nao::writeModelFile(model_path, makeHeader(arch), nao::test::randomManifestTensors(arch, 6));
   const nao::codegen::Result changed = nao::codegen::generate(model_path, out.string());
   CHECK(changed.written.size() == 3);
-  REQUIRE(changed.unchanged.size() == 1);
+  REQUIRE(changed.unchanged.size() == 2);
   CHECK(fs::path(changed.unchanged[0]).filename() == "nao_model_dims.hpp");
+  CHECK(fs::path(changed.unchanged[1]).filename() == "model.int8");  // still empty: fp32
+}
+
+TEST_CASE("nao_codegen --precision int8 compiles in the int8 blob beside the model, described by the config") {
+  const fs::path dir = freshDir("codegen_int8");
+  const std::string model_path = (dir / "in.bin").string();
+  const nao::PolicyArch arch = nao::smallArch();
+  nao::writeModelFile(model_path, makeHeader(arch), nao::test::randomManifestTensors(arch, 9));
+  const fs::path out = dir / "gen";
+  nao::codegen::generate(model_path, out.string());
+  // fp32 -> int8 over the same directory: the config, the .S and the blob change, nothing else.
+  const nao::codegen::Result r = nao::codegen::generate(model_path, out.string(), nao::WeightPrecision::kInt8);
+  CHECK(r.written.size() == 3);
+  CHECK(r.unchanged.size() == 2);
+  const nao::AlignedBytes want = nao::quantizeModelInt8(r.model);
+  const std::string blob = nao::test::readFile((out / "model.int8").string());
+  REQUIRE(blob.size() == want.size);
+  CHECK(std::memcmp(blob.data(), want.data.get(), want.size) == 0);
+  CHECK(blob.size() == nao::quantizedModelBytes(arch));
+
+  const std::string config = nao::test::readFile((out / "nao_model_config.hpp").string());
+  CHECK(config.find("inline constexpr bool kInt8Weights = true;") != std::string::npos);
+  CHECK(config.find("inline constexpr std::size_t kInt8Bytes = " + std::to_string(want.size) + ";") !=
+        std::string::npos);
+  char checksum[64];
+  std::snprintf(checksum, sizeof checksum, "kInt8Checksum = 0x%016llxull;",
+                static_cast<unsigned long long>(nao::quantizedChecksum(want.data.get(), want.size)));
+  CHECK(config.find(checksum) != std::string::npos);
+
+  const std::string s = nao::test::readFile((out / "nao_model_weights.S").string());
+  const std::string abs_blob = fs::absolute(out / "model.int8").lexically_normal().string();
+  const std::size_t start = s.find("nao_model_int8:\n"), incbin = s.find(".incbin \"" + abs_blob + "\"\n"),
+                    end = s.find("nao_model_int8_end:\n");
+  CHECK(start != std::string::npos);
+  CHECK(incbin != std::string::npos);
+  CHECK(end != std::string::npos);
+  CHECK((start < incbin && incbin < end));
 }
 
 TEST_CASE("nao_codegen refuses a bad model and writes nothing") {

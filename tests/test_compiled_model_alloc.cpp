@@ -1,10 +1,13 @@
 // The compiled-in model (codegen/compiled, issue 14 item 1): the generated code is assembled and
 // linked into this test (nao_compiled_model: models/default.bin through nao_codegen), its views
 // are bound at the generated offsets with no allocation, and it computes bit for bit what the
-// --weights path computes from the same file.
+// --weights path computes from the same file. Built twice: test_compiled_model_alloc over the
+// build's NAO_MODEL_PRECISION, test_compiled_model_alloc_int8 over nao_codegen --precision int8
+// (the int8 blob in .rodata, bound in place, the same bytes and bits as nao_rt --precision int8).
 #include "nao/compiled_model.hpp"
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
+#include "nao/quantize.hpp"
 #include "nao_model_config.hpp"
 #include "support/alloc_counter.hpp"
 
@@ -38,7 +41,7 @@ void checkVisitOrder() {
 }
 
 // The tensor's first float lies in [lo, hi).
-bool inside(const float* p, const std::uint8_t* lo, const std::uint8_t* hi) {
+bool inside(const void* p, const std::uint8_t* lo, const std::uint8_t* hi) {
   const auto* b = reinterpret_cast<const std::uint8_t*>(p);
   return b >= lo && b < hi;
 }
@@ -99,6 +102,19 @@ TEST_CASE("binding the compiled-in model allocates nothing and points into .roda
   CHECK(inside(w.dec.back().ffn.w3.data(), lo, hi));
   CHECK(inside(w.centroids.data(), lo, hi));
   CHECK(w.conditioning == compiled::kConditioning);
+  // nao_codegen --precision int8: the int8 views point into the compiled-in int8 blob.
+  CHECK(usesInt8(w) == compiled::kInt8Weights);
+  if constexpr (compiled::kInt8Weights) {
+    CountAllocations check_counter;
+    checkInt8Image(image, image.header->arch, origin);
+    CHECK(check_counter.count() == 0);
+    const std::uint8_t* lo8 = image.int8_bytes;
+    const std::uint8_t* hi8 = image.int8_bytes + image.int8_size;
+    CHECK(inside(w.enc[0].attn.wq8.w, lo8, hi8));
+    CHECK(inside(w.dec.back().ffn.w3q.scale, lo8, hi8));
+  } else {
+    CHECK(image.int8_bytes == nullptr);
+  }
 }
 
 TEST_CASE("the compiled-in binding and the --weights path compute the same bits over a long rollout") {
@@ -106,7 +122,17 @@ TEST_CASE("the compiled-in binding and the --weights path compute the same bits 
   const ModelFile file = readModelFile(NAO_COMPILED_MODEL_SOURCE);
   std::vector<const float*> ptrs;
   for (std::size_t i = 0; i < file.tensors.size(); ++i) ptrs.push_back(file.data(i));
-  const PolicyWeights<Dims> by_name = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), file.header.conditioning);
+  PolicyWeights<Dims> by_name = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), file.header.conditioning);
+  // int8 generated code: the --weights path quantises the same file at start-up (nao_rt
+  // --precision int8); both must be the same bytes and compute the same bits.
+  AlignedBytes blob;
+  if constexpr (compiled::kInt8Weights) {
+    blob = quantizeModelInt8(file);
+    const ModelImage image = compiled::modelImage();
+    REQUIRE(blob.size == image.int8_size);
+    CHECK(std::memcmp(blob.data.get(), image.int8_bytes, blob.size) == 0);
+    bindQuantizedWeights<Dims>(by_name, blob.data.get());
+  }
   const PolicyWeights<Dims> at_offsets = compiled::policyWeights();
   auto ws_a = makePolicyWorkspace<Dims>();
   auto ws_b = makePolicyWorkspace<Dims>();
@@ -147,4 +173,16 @@ TEST_CASE("a damaged or mismatched image is refused with the checksum") {
   CHECK_THROWS_WITH_AS(mappedModelFile(other, "compiled-in model"), doctest::Contains("its generated code describes"),
                        ModelFileError);
   CHECK_NOTHROW(mappedModelFile(damaged, "compiled-in model"));
+  if constexpr (compiled::kInt8Weights) {
+    std::vector<std::uint8_t> q(image.int8_bytes, image.int8_bytes + image.int8_size);
+    ModelImage bad = image;
+    bad.int8_bytes = q.data();
+    CHECK_NOTHROW(checkInt8Image(bad, image.header->arch, "compiled-in model"));
+    q[q.size() / 3] ^= 0x01;
+    CHECK_THROWS_WITH_AS(checkInt8Image(bad, image.header->arch, "compiled-in model"),
+                         doctest::Contains("int8 weights checksum mismatch"), ModelFileError);
+    bad.int8_size -= 64;
+    CHECK_THROWS_WITH_AS(checkInt8Image(bad, image.header->arch, "compiled-in model"),
+                         doctest::Contains("the architecture needs"), ModelFileError);
+  }
 }

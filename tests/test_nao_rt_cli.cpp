@@ -2,6 +2,7 @@
 // status 1 for anything else.
 #include "rt_info.hpp"
 
+#include "nao/quantize.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -98,6 +99,9 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(j["source"] == path);
   CHECK(j["weights"] == "file");
   CHECK(j["precision"] == "fp32");
+  nao::rt::InfoOptions o8 = withWeights(path);
+  o8.precision = "int8";
+  CHECK(nlohmann::json::parse(info(o8).out)["precision"] == "int8");
 }
 
 TEST_CASE("nao_rt --info describes the compiled-in model, and says when there is none") {
@@ -118,6 +122,15 @@ TEST_CASE("nao_rt --info describes the compiled-in model, and says when there is
   CHECK(r.status == 0);
   CHECK(nlohmann::json::parse(r.out)["source"] == "compiled-in");
   CHECK(nlohmann::json::parse(r.out)["weights"] == "compiled");
+  CHECK(nlohmann::json::parse(r.out)["precision"] == "fp32");
+  // Generated with nao_codegen --precision int8: a run defaults to int8, and --info says so.
+  const nao::AlignedBytes blob = nao::quantizeModelInt8(decoded);
+  o.compiled.int8_bytes = blob.data.get();
+  o.compiled.int8_size = blob.size;
+  o.compiled.int8_checksum = nao::quantizedChecksum(blob.data.get(), blob.size);
+  CHECK(nlohmann::json::parse(info(o).out)["precision"] == "int8");
+  o.precision = "fp32";
+  CHECK(nlohmann::json::parse(info(o).out)["precision"] == "fp32");
 }
 
 TEST_CASE("nao_rt --info fails with exactly one stderr line on a bad model, joints or URDF") {

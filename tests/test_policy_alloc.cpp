@@ -1,5 +1,6 @@
 // Real-time property: policy inference (stepPolicy) allocates nothing.
 #include "nao/policy.hpp"
+#include "nao/quantize.hpp"
 #include "support/alloc_counter.hpp"
 
 #include <doctest/doctest.h>
@@ -22,7 +23,7 @@ float uniform(std::mt19937_64& rng, double lo, double hi) {
 // stream is reset between them, the rings wrap inside them; movement and step indices include
 // out-of-range values, the last input of every rollout is NaN) and returns the allocations counted.
 template <class Dims>
-std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink) {
+std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink, bool int8 = false) {
   const std::vector<TensorSpec> manifest = policyManifest(Dims::arch());
   std::mt19937_64 rng(7);
   std::vector<std::vector<float>> tensors;
@@ -34,7 +35,12 @@ std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink) {
   }
   std::vector<const float*> ptrs;
   for (const std::vector<float>& t : tensors) ptrs.push_back(t.data());
-  const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c);
+  PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c);
+  AlignedBytes blob;  // int8: the matrices through the int8 kernels (stack scratch only)
+  if (int8) {
+    blob = quantizePolicyInt8(w);
+    bindQuantizedWeights<Dims>(w, blob.data.get());
+  }
   const auto ws = makePolicyWorkspace<Dims>();
 
   std::vector<PolicyInput> inputs(static_cast<std::size_t>(n_steps));
@@ -76,6 +82,16 @@ TEST_CASE("10,000 policy steps with the paper dimensions allocate nothing") {
   double sink = 0.0;
   const std::int64_t n_alloc = allocationsOverSteps<PaperPolicyDims>(Conditioning::kReference, kSteps, sink);
   CHECK_MESSAGE(n_alloc == 0, "expected no heap allocation in ", kSteps, " steps, got ", n_alloc);
+  CHECK(std::isfinite(sink));
+}
+
+TEST_CASE("10,000 policy steps with int8 weights allocate nothing, paper and small dimensions") {
+  constexpr int kSteps = 10000;
+  double sink = 0.0;
+  std::int64_t n_alloc = allocationsOverSteps<PaperPolicyDims>(Conditioning::kReference, kSteps, sink, true);
+  CHECK_MESSAGE(n_alloc == 0, "paper, int8: expected no heap allocation in ", kSteps, " steps, got ", n_alloc);
+  n_alloc = allocationsOverSteps<SmallPolicyDims>(Conditioning::kAutonomous, kSteps, sink, true);
+  CHECK_MESSAGE(n_alloc == 0, "small, int8: expected no heap allocation in ", kSteps, " steps, got ", n_alloc);
   CHECK(std::isfinite(sink));
 }
 

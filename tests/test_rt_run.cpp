@@ -216,6 +216,34 @@ TEST_CASE("two runs with the same arguments give byte-identical ticks.csv (--zer
   for (std::size_t k = cells.size() - 9; k < cells.size() - 5; ++k) CHECK(cells[k] == "0");
 }
 
+TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 and is deterministic") {
+  // (Dims: the small test model; the committed paper model's closed-loop figures are in
+  // bench/results/int8.txt.)
+  std::string ticks[3];
+  double rmse[3] = {0, 0, 0};
+  int i = 0;
+  for (const char* precision : {"fp32", "int8", "int8"}) {
+    const fs::path dir = tempDir(std::string("precision_") + std::to_string(i));
+    rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
+    o.precision = precision;
+    o.zero_timing = true;
+    const Outcome r = run(o);
+    REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+    const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
+    CHECK(s["model"]["precision"] == precision);
+    ticks[i] = bytes(dir / "ticks.csv");
+    rmse[i] = r.report.ee_rmse_m;
+    ++i;
+  }
+  CHECK(ticks[1] == ticks[2]);  // int8 is as deterministic as fp32
+  CHECK(ticks[0] != ticks[1]);  // and really ran (other bits)
+  CHECK(std::fabs(rmse[1] - rmse[0]) < 0.5e-3);
+  // Default for --weights: fp32.
+  const fs::path dir = tempDir("precision_default");
+  REQUIRE(run(options(referenceModel(), "synthetic:elbow", dir)).report.status == 0);
+  CHECK(nlohmann::json::parse(bytes(dir / "summary.json"))["model"]["precision"] == "fp32");
+}
+
 TEST_CASE("without --zero-timing the timing columns hold the measured stage times") {
   const fs::path dir = tempDir("timing");
   rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
@@ -316,11 +344,11 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   std::string out, err;
   CHECK(parse({"--help"}, cl, out, err) == 0);
   for (const char* flag : {"--weights", "--urdf", "--reference", "--movement", "--seed", "--ticks", "--seconds",
-                           "--realtime", "--log", "--attention-shm", "--info", "--zero-timing"})
+                           "--realtime", "--log", "--attention-shm", "--info", "--zero-timing", "--precision"})
     CHECK_MESSAGE(out.find(flag) != std::string::npos, flag);
 
   for (std::vector<const char*> bad : {std::vector<const char*>{"--bogus"}, {"--ticks", "-3"}, {"--ticks", "ten"},
-                                       {"--ticks", "5", "--seconds", "2"}, {"--seed"}}) {
+                                       {"--ticks", "5", "--seconds", "2"}, {"--seed"}, {"--precision", "fp16"}}) {
     rt::CommandLine c;
     CAPTURE(bad[0]);
     CHECK(parse(bad, c, out, err) == 2);
@@ -330,7 +358,7 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
 
   rt::CommandLine c;
   REQUIRE(parse({"--weights", "m.bin", "--reference", "file:x.csv", "--movement", "elbow", "--seed", "4", "--ticks",
-                 "20", "--realtime", "--log", "out", "--attention-shm", "nao_x", "--zero-timing"},
+                 "20", "--realtime", "--log", "out", "--attention-shm", "nao_x", "--zero-timing", "--precision", "int8"},
                 c, out, err) == -1);
   CHECK(c.run.weights_path == "m.bin");
   CHECK(c.run.reference == "file:x.csv");
@@ -341,6 +369,7 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   CHECK(c.run.log_dir == "out");
   CHECK(c.run.attention_shm == "nao_x");
   CHECK(c.run.zero_timing);
+  CHECK(c.run.precision == "int8");
   CHECK_FALSE(c.info);
 }
 

@@ -14,7 +14,7 @@
 namespace {
 
 constexpr const char* kUsage =
-    "Usage: nao_codegen MODEL --out DIR [--quiet]\n"
+    "Usage: nao_codegen MODEL --out DIR [--precision fp32|int8] [--quiet]\n"
     "\n"
     "Checks MODEL (a model.bin: magic, version, checksum, architecture, tensor table, finite weights)\n"
     "and writes into DIR (created if missing):\n"
@@ -22,10 +22,14 @@ constexpr const char* kUsage =
     "  nao_model_dims.hpp    using Dims = nao::PolicyDims<...>\n"
     "  nao_model_weights.S   .incbin of DIR/model.bin into .rodata, 64-byte aligned\n"
     "  model.bin             a copy of MODEL\n"
+    "  model.int8            --precision int8: the int8 weights (attention and FFN matrices, one\n"
+    "                        scale per row, docs/policy.md), compiled in beside model.bin; nao_rt then\n"
+    "                        runs int8 by default. Empty for fp32\n"
     "Files whose content would not change are left untouched, so rebuilds stay cheap.\n"
     "\n"
     "Options:\n"
     "  --out DIR    output directory (required)\n"
+    "  --precision P  fp32 (default, the reference) or int8\n"
     "  -q, --quiet  print nothing on success\n"
     "  -h, --help   print this help and exit\n";
 
@@ -39,6 +43,7 @@ int usageError(const std::string& what) {
 int main(int argc, char** argv) {
   std::string model_path, out_dir;
   bool quiet = false;
+  nao::WeightPrecision precision = nao::WeightPrecision::kFp32;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "-h" || arg == "--help") {
@@ -50,6 +55,14 @@ int main(int argc, char** argv) {
       if (arg == "--out" && i + 1 >= argc) return usageError("--out needs a directory");
       out_dir = arg == "--out" ? argv[++i] : arg.substr(6);
       if (out_dir.empty()) return usageError("--out needs a directory");
+    } else if (arg == "--precision" || arg.rfind("--precision=", 0) == 0) {
+      if (arg == "--precision" && i + 1 >= argc) return usageError("--precision needs fp32 or int8");
+      const std::string value = arg == "--precision" ? argv[++i] : arg.substr(12);
+      try {
+        precision = nao::parseWeightPrecision(value);
+      } catch (const std::invalid_argument& e) {
+        return usageError(e.what());
+      }
     } else if (arg.size() > 1 && arg[0] == '-') {
       return usageError("unknown option " + arg);
     } else if (model_path.empty()) {
@@ -62,11 +75,11 @@ int main(int argc, char** argv) {
   if (out_dir.empty()) return usageError("--out DIR is required");
 
   try {
-    const nao::codegen::Result r = nao::codegen::generate(model_path, out_dir);
+    const nao::codegen::Result r = nao::codegen::generate(model_path, out_dir, precision);
     if (!quiet)
-      std::printf("nao_codegen: %s (%zu parameters, checksum 0x%016llx) -> %s: %zu written, %zu unchanged\n",
+      std::printf("nao_codegen: %s (%zu parameters, checksum 0x%016llx, %s) -> %s: %zu written, %zu unchanged\n",
                   model_path.c_str(), nao::parameterCount(r.model.header.arch),
-                  static_cast<unsigned long long>(r.model.checksum), out_dir.c_str(), r.written.size(),
+                  static_cast<unsigned long long>(r.model.checksum), nao::weightPrecisionName(precision), out_dir.c_str(), r.written.size(),
                   r.unchanged.size());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "nao_codegen: %s\n", e.what());

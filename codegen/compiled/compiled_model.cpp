@@ -5,6 +5,8 @@
 // Defined by the generated nao_model_weights.S.
 extern "C" const std::uint8_t nao_model_blob[];
 extern "C" const std::uint8_t nao_model_blob_end[];
+extern "C" const std::uint8_t nao_model_int8[];
+extern "C" const std::uint8_t nao_model_int8_end[];
 
 namespace nao::compiled {
 
@@ -34,11 +36,21 @@ ModelHeader makeHeader() {
 ModelImage modelImage() {
   static const ModelHeader header = makeHeader();
   const ModelBytes b = modelBytes();
-  return {b.data, b.size, kChecksum, &header, kTensorOffsets.data(), kTensorOffsets.size()};
+  ModelImage image{b.data, b.size, kChecksum, &header, kTensorOffsets.data(), kTensorOffsets.size()};
+  if constexpr (kInt8Weights) {
+    image.int8_bytes = nao_model_int8;
+    image.int8_size = static_cast<std::size_t>(nao_model_int8_end - nao_model_int8);
+    image.int8_checksum = kInt8Checksum;
+  }
+  return image;
 }
 
+static_assert(!kInt8Weights || kInt8Bytes == quantizedPolicyBytes<Dims>(), "the generated int8 blob is not the layout's");
+
 PolicyWeights<Dims> policyWeights() noexcept {
-  return bindPolicyWeightsAt<Dims>(nao_model_blob, kTensorOffsets, kConditioning);
+  PolicyWeights<Dims> w = bindPolicyWeightsAt<Dims>(nao_model_blob, kTensorOffsets, kConditioning);
+  if constexpr (kInt8Weights) bindQuantizedWeights<Dims>(w, nao_model_int8);
+  return w;
 }
 
 }  // namespace nao::compiled

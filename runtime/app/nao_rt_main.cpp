@@ -57,6 +57,7 @@ int main(int argc, char** argv) {
       info.weights_path = cl.run.weights_path;
       info.urdf_path = cl.run.urdf_path;
       info.compiled = cl.run.compiled;
+      info.precision = cl.run.precision;
       return nao::rt::runInfo(info, std::cout, std::cerr);
     }
 

@@ -21,6 +21,13 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                  "architecture must be the compiled one), then copied into aligned memory\n"
                  "allocated at start-up (none without --weights)")
       ->type_name("FILE");
+  app.add_option("--precision", o.precision,
+                 "Weight precision: fp32 (the reference) or int8 (attention and FFN matrices as int8\n"
+                 "with one scale per row, tokens quantised to int16 per step: docs/policy.md). Default:\n"
+                 "int8 if the compiled-in model was generated with nao_codegen --precision int8 and no\n"
+                 "--weights is given, else fp32. With --weights the int8 copy is made at start-up")
+      ->check(CLI::IsMember({"fp32", "int8"}))
+      ->type_name("P");
   app.add_option("--urdf", o.urdf_path, "Robot description (torso + right arm); the model's joints must match it")
       ->type_name("FILE")
       ->capture_default_str();

@@ -1,6 +1,7 @@
 #include "rt_info.hpp"
 
 #include "nao/arm_model.hpp"
+#include "nao/quantize.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -20,7 +21,7 @@ std::string oneLine(std::string s) {
 
 }  // namespace
 
-std::string modelInfoJson(const ModelFile& model, const std::string& source) {
+std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision) {
   using nlohmann::ordered_json;
   const ModelHeader& h = model.header;
   const PolicyArch& a = h.arch;
@@ -45,9 +46,9 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source) {
   j["tensors"] = model.tensors.size();
   j["bytes"] = model.size();
   j["checksum"] = checksum;
-  // Issue 14's contract: where the weights come from and their precision (fp32 only so far).
+  // Issue 14's contract: where the weights come from and their precision.
   j["weights"] = source == "compiled-in" ? "compiled" : "file";
-  j["precision"] = "fp32";
+  j["precision"] = precision;
   ordered_json joints = ordered_json::array();
   for (const TrainedJoint& t : h.joints)
     joints.push_back({{"name", t.name}, {"lower", t.lower}, {"upper", t.upper}, {"velocity", t.velocity}});
@@ -79,7 +80,13 @@ int runInfo(const InfoOptions& options, std::ostream& out, std::ostream& err) {
     } catch (const ModelFileError& e) {
       throw ModelFileError(std::string(e.what()) + " (" + options.urdf_path + ")");
     }
-    out << modelInfoJson(model, source) << "\n";
+    // As a run decides it (rt_run.cpp loadModel): asked for, else int8 only for a compiled-in
+    // model generated with nao_codegen --precision int8.
+    const bool compiled = source == "compiled-in";
+    const WeightPrecision precision = !options.precision.empty() ? parseWeightPrecision(options.precision)
+                                      : compiled && options.compiled.int8_bytes != nullptr ? WeightPrecision::kInt8
+                                                                                           : WeightPrecision::kFp32;
+    out << modelInfoJson(model, source, weightPrecisionName(precision)) << "\n";
     return 0;
   } catch (const std::exception& e) {
     err << "nao_rt: " << oneLine(e.what()) << "\n";

@@ -16,13 +16,14 @@ struct InfoOptions {
   std::string weights_path;                 ///< model.bin to describe; empty: the compiled-in model
   std::string urdf_path;                    ///< the URDF the joints must match
   ModelImage compiled;                      ///< the compiled-in model (bytes nullptr if the build has none)
+  std::string precision;                    ///< --precision; empty: what a run would default to
 };
 
 /// The JSON description of a checked model (pretty-printed, no trailing newline): format_version,
 /// dimensions, conditioning, movements, parameters, checksum ("0x%016x"), weights ("compiled" or
-/// "file"), precision ("fp32"), tensors, joints, metadata (parsed JSON if it parses, else the
-/// string), source.
-std::string modelInfoJson(const ModelFile& model, const std::string& source);
+/// "file"), precision ("fp32" or "int8": what a run with the same options uses), tensors,
+/// joints, metadata (parsed JSON if it parses, else the string), source.
+std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision = "fp32");
 
 /// Checks the model and prints modelInfoJson + newline on `out`: returns 0. On any problem
 /// (no model, a bad file, joints that differ from the URDF, an unusable URDF) prints exactly

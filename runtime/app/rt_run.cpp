@@ -72,6 +72,15 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
         "no model is compiled into this build (models/default.bin did not exist when it was built); pass "
         "--weights FILE, or train one with toolchain/nao train and rebuild");
   }
+  // Precision: asked for, or what the compiled-in model was generated with (fp32 for --weights).
+  p.precision = !o.precision.empty() ? parseWeightPrecision(o.precision)
+                : p.model_bytes != nullptr && o.compiled.int8_bytes != nullptr ? WeightPrecision::kInt8
+                                                                              : WeightPrecision::kFp32;
+  if (p.precision == WeightPrecision::kInt8 && p.model_bytes != nullptr && o.compiled.int8_bytes != nullptr) {
+    // The compiled-in int8 blob: checked once, like the model's bytes.
+    checkInt8Image(o.compiled, p.model.header.arch, origin);
+    p.int8_bytes = o.compiled.int8_bytes;
+  }
   try {
     checkJointsMatch(p.model, p.arm, origin);
   } catch (const ModelFileError& e) {
@@ -603,7 +612,8 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
                 {"checksum", hex64(p.model.checksum)},
                 {"conditioning", conditioningName(p.model.header.conditioning)},
                 {"residual_gain", p.residual_gain},
-                {"linear_ar_base", !p.linear_ar.empty()}};
+                {"linear_ar_base", !p.linear_ar.empty()},
+                {"precision", weightPrecisionName(p.precision)}};
   j["reference"] = p.reference.description;
   j["retarget"] = {{"priority", retargetPriorityName(p.retarget.priority)},
                    {"lambda_q", p.retarget.lambda_q},

@@ -21,6 +21,7 @@
 #include "nao/lola_backend.hpp"
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
+#include "nao/quantize.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "rt_metrics.hpp"
 
@@ -44,6 +45,9 @@ namespace nao::rt {
 struct RunOptions {
   std::string weights_path;                ///< model.bin; empty: the compiled-in model
   ModelImage compiled;                     ///< the compiled-in model (bytes nullptr if the build has none)
+  /// fp32 or int8 (nao/quantize.hpp); empty: int8 if the compiled-in model was generated so and
+  /// no --weights is given, else fp32.
+  std::string precision;
   std::string urdf_path = NAO_DEFAULT_URDF;
   /// synthetic:whole_arm|elbow|wrist, file:PATH or none.
   std::string reference = "synthetic:whole_arm";
@@ -156,6 +160,9 @@ struct PreparedRun {
   std::string model_source;            ///< "compiled-in" or the --weights path
   const std::uint8_t* model_bytes = nullptr;  ///< compiled-in: the embedded bytes to bind to; else nullptr
   const std::uint64_t* model_offsets = nullptr;  ///< compiled-in: the generated tensor offsets
+  WeightPrecision precision = WeightPrecision::kFp32;
+  /// int8: the compiled-in blob (checked) to bind to; nullptr: quantise the model at start-up.
+  const std::uint8_t* int8_bytes = nullptr;
   LinearArCoefficients linear_ar;       ///< autonomous models over the linear AR base (metadata)
   ReferenceSpec spec;
   int movement_index = 0;              ///< into model.header.movement_names
@@ -376,6 +383,18 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
             : bindWeightFile<Dims>(p, weight_storage);
     weights.residual_gain = p.residual_gain;
     weights.linear_ar = linearArBase<Dims::kMovements>(p.linear_ar);
+    // int8: the compiled-in blob where it lies, or the same bytes made from the fp32 tensors.
+    AlignedBytes int8_storage;
+    if (p.precision == WeightPrecision::kInt8) {
+      const std::uint8_t* blob = p.int8_bytes;
+      if (blob == nullptr) {
+        int8_storage = quantizeModelInt8(p.model);
+        blob = int8_storage.data.get();
+      }
+      if (quantizedModelBytes(p.model.header.arch) != quantizedPolicyBytes<Dims>())
+        throw std::logic_error("nao_rt: the int8 blob of the model is not the compiled layout's size");
+      bindQuantizedWeights<Dims>(weights, blob);
+    }
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
     // longer read, so its memory goes back before the loop (resident set, docs/embedded.md).
     std::vector<std::uint8_t>().swap(p.model.bytes);

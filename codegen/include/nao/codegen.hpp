@@ -5,6 +5,7 @@
 #pragma once
 
 #include "nao/model_file.hpp"
+#include "nao/quantize.hpp"
 
 #include <string>
 #include <vector>
@@ -18,19 +19,25 @@ inline constexpr const char* kModelCopy = "model.bin";
 /// Symbols of the embedded bytes (first byte, one past the last), 64-byte aligned.
 inline constexpr const char* kBlobSymbol = "nao_model_blob";
 inline constexpr const char* kBlobEndSymbol = "nao_model_blob_end";
+inline constexpr const char* kInt8Copy = "model.int8";  ///< --precision int8: the int8 blob
+inline constexpr const char* kInt8Symbol = "nao_model_int8";
+inline constexpr const char* kInt8EndSymbol = "nao_model_int8_end";
 
 /// nao_model_config.hpp for `model`: namespace nao::compiled, every dimension, the
 /// conditioning, checksum, parameter count, tensor names/offsets/counts in manifest order,
 /// joint names and limits, movement names. `source` is named in the banner comment only.
-std::string configHeader(const ModelFile& model, const std::string& source);
+/// `int8` (nullptr: fp32) is the model's int8 blob (quantizeModelInt8): kInt8Weights, its size
+/// and checksum.
+std::string configHeader(const ModelFile& model, const std::string& source, const AlignedBytes* int8 = nullptr);
 
 /// nao_model_dims.hpp: `using Dims = nao::PolicyDims<...>` (needs nao/policy.hpp and
 /// exactly three FFN widths; otherwise a header that fails with #error when included).
 std::string dimsHeader(const ModelFile& model);
 
 /// nao_model_weights.S: `.incbin` of `blob_path` (absolute) into .rodata, 64-byte aligned,
-/// between kBlobSymbol and kBlobEndSymbol.
-std::string weightsAsm(const ModelFile& model, const std::string& blob_path);
+/// between kBlobSymbol and kBlobEndSymbol; `int8_path` (empty: fp32, nothing) likewise between
+/// kInt8Symbol and kInt8EndSymbol (both symbols exist either way).
+std::string weightsAsm(const ModelFile& model, const std::string& blob_path, const std::string& int8_path = {});
 
 /// Writes `content` to `path` unless the file already holds exactly that (temporary file +
 /// rename). Returns whether it wrote. Throws std::runtime_error naming the path.
@@ -44,6 +51,7 @@ struct Result {
 
 /// readModelFile(model_path) (throws ModelFileError), then writes the three sources and the
 /// model copy into `out_dir` (created if missing), each only if its content changed.
-Result generate(const std::string& model_path, const std::string& out_dir);
+Result generate(const std::string& model_path, const std::string& out_dir,
+                WeightPrecision precision = WeightPrecision::kFp32);
 
 }  // namespace nao::codegen

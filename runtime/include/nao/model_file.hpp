@@ -88,6 +88,11 @@ struct ModelImage {
   const ModelHeader* header = nullptr;     ///< built from the generated constants
   const std::uint64_t* offsets = nullptr;  ///< the generated kTensorOffsets, manifest order
   std::size_t tensors = 0;                 ///< entries of `offsets`
+  /// nao_codegen --precision int8: the int8 blob (nao/quantize.hpp) compiled in beside the
+  /// model, and its generated FNV-1a 64; nullptr: the model was generated in fp32.
+  const std::uint8_t* int8_bytes = nullptr;
+  std::size_t int8_size = 0;
+  std::uint64_t int8_checksum = 0;
 };
 
 /// `image` as a ModelFile that reads its tensors in place (`mapped`; `bytes` stays empty):

@@ -105,6 +105,16 @@ using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 3, 10, 256, 8>;
 template <int R, int C>
 using WeightView = Eigen::Map<const Eigen::Matrix<float, R, C>>;
 
+/// The int8 copy of one [Out, In] weight matrix (policy_kernels.hpp "Reduced precision"): the
+/// pair-interleaved bytes and the per-row scales, bound by bindQuantizedWeights. Null: the
+/// matrix runs in fp32 (the reference).
+template <int Out, int In>
+struct QuantView {
+  static constexpr int kOut = Out, kIn = In;
+  const std::int8_t* w = nullptr;  ///< Out·In bytes
+  const float* scale = nullptr;    ///< Out floats
+};
+
 template <class Dims>
 struct LayerNormWeights {
   WeightView<Dims::kDModel, 1> gain{nullptr};
@@ -117,6 +127,7 @@ struct AttentionWeights {
   static constexpr int D = Dims::kDModel;
   WeightView<D, D> wq{nullptr}, wk{nullptr}, wv{nullptr}, wo{nullptr};
   WeightView<D, 1> bq{nullptr}, bk{nullptr}, bv{nullptr}, bo{nullptr};
+  QuantView<D, D> wq8, wk8, wv8, wo8;  ///< int8 models only
 };
 
 /// Attention over the window: plus age_bias(age, h), added to head h's score of a key `age`
@@ -138,6 +149,10 @@ struct FfnWeights {
   WeightView<F2, 1> b2{nullptr};
   WeightView<D, F2> w3{nullptr};
   WeightView<D, 1> b3{nullptr};
+  QuantView<F0, D> w0q;  ///< int8 models only
+  QuantView<F1, F0> w1q;
+  QuantView<F2, F1> w2q;
+  QuantView<D, F2> w3q;
 };
 
 template <class Dims>
@@ -428,10 +443,54 @@ void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<Ten
 /// Throws std::invalid_argument describing both architectures if they differ.
 void requireArch(const PolicyArch& compiled, const PolicyArch& given);
 
+/// Y = W X + b (ReLU if kRelu) with the matrix's int8 copy if it has one, else in fp32.
 template <bool kRelu, int Out, int In, int J>
-inline void affine(const WeightView<Out, In>& W, const WeightView<Out, 1>& b, const Eigen::Matrix<float, In, J>& X,
-                   Eigen::Matrix<float, Out, J>& Y) {
+inline void affine(const WeightView<Out, In>& W, const QuantView<Out, In>& Wq, const WeightView<Out, 1>& b,
+                   const Eigen::Matrix<float, In, J>& X, Eigen::Matrix<float, Out, J>& Y) {
+  if constexpr (In % 2 == 0 && In <= kInt8MaxIn) {  // else no int8 copy can exist (bindQuantizedWeights)
+    if (Wq.w != nullptr) {
+      affineTokensInt8<Out, In, J, kRelu>(Wq.w, Wq.scale, b.data(), X.data(), Y.data());
+      return;
+    }
+  }
   affineTokens<Out, In, J, kRelu>(W.data(), b.data(), X.data(), Y.data());
+}
+
+/// Calls f(const WeightView<Out, In>&, QuantView<Out, In>&) for every matrix that has an int8
+/// copy in an int8 model, in manifest order (the order of quantizeModelInt8's blob,
+/// runtime/src/quantize.cpp): the attention projections wq, wk, wv, wo and the FFN weights of
+/// every layer.
+template <class Dims, class F>
+void visitQuantViews(PolicyWeights<Dims>& w, F&& f) {
+  auto attention = [&f](AttentionWeights<Dims>& a) {
+    f(a.wq, a.wq8);
+    f(a.wk, a.wk8);
+    f(a.wv, a.wv8);
+    f(a.wo, a.wo8);
+  };
+  auto ffn = [&f](FfnWeights<Dims>& n) {
+    f(n.w0, n.w0q);
+    f(n.w1, n.w1q);
+    f(n.w2, n.w2q);
+    f(n.w3, n.w3q);
+  };
+  for (auto& e : w.enc) {
+    attention(e.attn);
+    ffn(e.ffn);
+  }
+  for (auto& d : w.dec) {
+    attention(d.self);
+    attention(d.cross);
+    ffn(d.ffn);
+  }
+}
+
+/// Bytes of a matrix's section in the int8 blob: Out·In weight bytes, then Out scales, each
+/// padded to kQuantAlignment.
+inline constexpr std::size_t kQuantAlignment = 64;
+constexpr std::size_t quantPad(std::size_t n) { return (n + kQuantAlignment - 1) / kQuantAlignment * kQuantAlignment; }
+constexpr std::size_t quantSectionBytes(std::size_t out, std::size_t in) {
+  return quantPad(out * in) + quantPad(out * sizeof(float));
 }
 
 /// out(:, j) = LN(x(:, j)): biased variance over d, eps 1e-5.
@@ -452,9 +511,9 @@ inline void layerNorm(const typename PolicyWorkspace<Dims>::Tokens& x, const Lay
 template <class Dims>
 inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<Dims>& ws) {
   constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim;
-  affine<false>(A.wq, A.bq, ws.h, ws.q);
-  affine<false>(A.wk, A.bk, ws.h, ws.k);
-  affine<false>(A.wv, A.bv, ws.h, ws.v);
+  affine<false>(A.wq, A.wq8, A.bq, ws.h, ws.q);
+  affine<false>(A.wk, A.wk8, A.bk, ws.h, ws.k);
+  affine<false>(A.wv, A.wv8, A.bv, ws.h, ws.v);
   const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
   for (int hd = 0; hd < Dims::kHeads; ++hd) {
     const int c0 = hd * Dh;
@@ -475,7 +534,7 @@ inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<
       for (int j = 0; j <= i; ++j) ws.o.col(i).template segment<Dh>(c0) += (s[j] / sum) * ws.v.col(j).template segment<Dh>(c0);
     }
   }
-  affine<false>(A.wo, A.bo, ws.o, ws.out);
+  affine<false>(A.wo, A.wo8, A.bo, ws.o, ws.out);
 }
 
 /// Attention of the J queries in ws.q over the tokens of the last `n` ticks in the rings K, V
@@ -552,10 +611,10 @@ inline void crossAttentionRecord(int slot, int n, PolicyWorkspace<Dims>& ws) {
 
 template <class Dims>
 inline void feedForward(const FfnWeights<Dims>& F, PolicyWorkspace<Dims>& ws) {
-  affine<true>(F.w0, F.b0, ws.h, ws.f0);
-  affine<true>(F.w1, F.b1, ws.f0, ws.f1);
-  affine<true>(F.w2, F.b2, ws.f1, ws.f2);
-  affine<false>(F.w3, F.b3, ws.f2, ws.out);
+  affine<true>(F.w0, F.w0q, F.b0, ws.h, ws.f0);
+  affine<true>(F.w1, F.w1q, F.b1, ws.f0, ws.f1);
+  affine<true>(F.w2, F.w2q, F.b2, ws.f1, ws.f2);
+  affine<false>(F.w3, F.w3q, F.b3, ws.f2, ws.out);
 }
 
 }  // namespace detail
@@ -610,6 +669,53 @@ PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::arr
   return bindPolicyWeightsAt<Dims>(base, offsets.data(), c);
 }
 
+/// True if every int8 matrix of a Dims model has an even input size of at most kInt8MaxIn
+/// (d_model, the FFN widths and the head size; quantizeModelInt8 refuses other models).
+template <class Dims>
+constexpr bool int8Supported() {
+  constexpr auto ok = [](int in) { return in % 2 == 0 && in <= detail::kInt8MaxIn; };
+  return ok(Dims::kDModel) && ok(Dims::kFfn0) && ok(Dims::kFfn1) && ok(Dims::kFfn2) && ok(Dims::kHeadDim);
+}
+
+/// Bytes of the int8 blob of a Dims model (quantizeModelInt8's output for its architecture).
+template <class Dims>
+constexpr std::size_t quantizedPolicyBytes() {
+  constexpr std::size_t D = Dims::kDModel, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
+  constexpr std::size_t attention = 4 * detail::quantSectionBytes(D, D);
+  constexpr std::size_t ffn = detail::quantSectionBytes(F0, D) + detail::quantSectionBytes(F1, F0) +
+                              detail::quantSectionBytes(F2, F1) + detail::quantSectionBytes(D, F2);
+  return Dims::kEncoderLayers * (attention + ffn) + Dims::kDecoderLayers * (2 * attention + ffn);
+}
+
+/// Points the int8 views of `w` into `blob` (quantizeModelInt8's layout, 64-byte aligned, at
+/// least quantizedPolicyBytes<Dims>() bytes): from now on stepPolicy runs those matrices in int8.
+/// The fp32 views stay bound (biases, norms, embeddings and the head are fp32 in both). No
+/// allocation; the blob must outlive the weights.
+template <class Dims>
+void bindQuantizedWeights(PolicyWeights<Dims>& w, const std::uint8_t* blob) noexcept {
+  static_assert(int8Supported<Dims>(), "int8 weights need even input sizes of at most 512");
+  std::size_t off = 0;
+  detail::visitQuantViews(w, [&](const auto&, auto& q) {
+    using Q = std::remove_reference_t<decltype(q)>;
+    const std::size_t out = Q::kOut, in = Q::kIn;
+    q.w = reinterpret_cast<const std::int8_t*>(blob + off);
+    q.scale = reinterpret_cast<const float*>(blob + off + detail::quantPad(out * in));
+    off += detail::quantSectionBytes(out, in);
+  });
+}
+
+/// Drops the int8 views: every matrix runs in fp32 again.
+template <class Dims>
+void unbindQuantizedWeights(PolicyWeights<Dims>& w) noexcept {
+  detail::visitQuantViews(w, [](const auto&, auto& q) { q = {}; });
+}
+
+/// True if `w` runs its matrices in int8 (bindQuantizedWeights).
+template <class Dims>
+bool usesInt8(const PolicyWeights<Dims>& w) noexcept {
+  return w.enc[0].attn.wq8.w != nullptr;
+}
+
 /// Starts a new rollout: the window is empty (the next step is tick 0 and sees only itself).
 /// Real-time safe. Ring contents are not cleared: a slot is read only after this stream wrote it.
 template <class Dims>
@@ -655,14 +761,14 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
   for (int l = 0; l < Dims::kEncoderLayers; ++l) {
     const EncoderLayerWeights<Dims>& L = w.enc[static_cast<std::size_t>(l)];
     detail::layerNorm<Dims>(ws.x, L.ln1, ws.h);
-    detail::affine<false>(L.attn.wq, L.attn.bq, ws.h, ws.q);
-    detail::affine<false>(L.attn.wk, L.attn.bk, ws.h, ws.k);
-    detail::affine<false>(L.attn.wv, L.attn.bv, ws.h, ws.v);
+    detail::affine<false>(L.attn.wq, L.attn.wq8, L.attn.bq, ws.h, ws.q);
+    detail::affine<false>(L.attn.wk, L.attn.wk8, L.attn.bk, ws.h, ws.k);
+    detail::affine<false>(L.attn.wv, L.attn.wv8, L.attn.bv, ws.h, ws.v);
     ws.enc_k[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.k;
     ws.enc_v[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.v;
     detail::windowAttention<Dims>(L.attn, ws.enc_k[static_cast<std::size_t>(l)], ws.enc_v[static_cast<std::size_t>(l)],
                                   slot, n, ws);
-    detail::affine<false>(L.attn.wo, L.attn.bo, ws.o, ws.out);
+    detail::affine<false>(L.attn.wo, L.attn.wo8, L.attn.bo, ws.o, ws.out);
     ws.x += ws.out;
     detail::layerNorm<Dims>(ws.x, L.ln2, ws.h);
     detail::feedForward<Dims>(L.ffn, ws);
@@ -672,8 +778,8 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
   // The new tick's memory tokens enter every decoder layer's cross-attention ring.
   for (int l = 0; l < Dims::kDecoderLayers; ++l) {
     const TemporalAttentionWeights<Dims>& C = w.dec[static_cast<std::size_t>(l)].cross;
-    detail::affine<false>(C.wk, C.bk, ws.memory, ws.k);
-    detail::affine<false>(C.wv, C.bv, ws.memory, ws.v);
+    detail::affine<false>(C.wk, C.wk8, C.bk, ws.memory, ws.k);
+    detail::affine<false>(C.wv, C.wv8, C.bv, ws.memory, ws.v);
     ws.cross_k[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.k;
     ws.cross_v[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.v;
   }
@@ -683,8 +789,18 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
     for (int hd = 0; hd < H; ++hd) {
       ws.v_head = ws.v.template middleRows<Dh>(hd * Dh);
       Eigen::Matrix<float, D, J>& f = ws.out;  // scratch
-      detail::affineTokens<D, Dh, J, false>(C.wo.data() + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr, ws.v_head.data(),
-                                    f.data());
+      // Columns hd·Dh .. of Wo: the same offset in the int8 copy (pairs of columns, Dh even).
+      bool done = false;
+      if constexpr (int8Supported<Dims>()) {
+        if (C.wo8.w != nullptr) {
+          detail::affineTokensInt8<D, Dh, J, false>(C.wo8.w + static_cast<std::ptrdiff_t>(hd) * Dh * D, C.wo8.scale,
+                                                    nullptr, ws.v_head.data(), f.data());
+          done = true;
+        }
+      }
+      if (!done)
+        detail::affineTokens<D, Dh, J, false>(C.wo.data() + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr,
+                                              ws.v_head.data(), f.data());
       ws.f_ring[static_cast<std::size_t>(hd)].template middleCols<J>(slot * J) = f;
     }
   }
@@ -695,10 +811,10 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
     detail::jointSelfAttention<Dims>(L.self, ws);
     ws.y += ws.out;
     detail::layerNorm<Dims>(ws.y, L.ln2, ws.h);
-    detail::affine<false>(L.cross.wq, L.cross.bq, ws.h, ws.q);
+    detail::affine<false>(L.cross.wq, L.cross.wq8, L.cross.bq, ws.h, ws.q);
     detail::windowAttention<Dims>(L.cross, ws.cross_k[static_cast<std::size_t>(l)],
                                   ws.cross_v[static_cast<std::size_t>(l)], slot, n, ws);
-    detail::affine<false>(L.cross.wo, L.cross.bo, ws.o, ws.out);
+    detail::affine<false>(L.cross.wo, L.cross.wo8, L.cross.bo, ws.o, ws.out);
     // Per body part: α summed over the window's ticks.
     for (int hd = 0; hd < H; ++hd)
       for (int i = 0; i < J; ++i)

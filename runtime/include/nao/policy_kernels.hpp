@@ -22,7 +22,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstddef>
+#include <cstdint>
+#include <limits>
 
 // The AVX2 kernel exists in x86-64 GCC/Clang builds (target attribute, __builtin_cpu_supports).
 // -DNAO_POLICY_HAVE_AVX2=0 (the whole build) leaves it out, as on any other platform.
@@ -35,6 +38,9 @@
 #endif
 #if NAO_POLICY_HAVE_AVX2
 #include <immintrin.h>
+#endif
+#if defined(__SSE2__)
+#include <emmintrin.h>
 #endif
 
 namespace nao {
@@ -238,6 +244,255 @@ __attribute__((target("avx2"), noinline)) void affineTokensAvx2(const float* W, 
     for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
 }
 #endif  // NAO_POLICY_HAVE_AVX2
+
+// ---------------------------------------------------------------------------------------------
+// Reduced precision (docs/policy.md "int8 weights"): W as int8 with one scale per output row,
+// the tokens quantised per column to int16 on the fly, products summed exactly in int32.
+//
+//   Wq  int8, pairs of input columns interleaved: byte (p·Out + r)·2 + e holds
+//       round(W(r, 2p + e) / sw(r)), |·| <= 127 (quantizeMatrixInt8, runtime/src/quantize.cpp)
+//   sw  float [Out], max_k |W(r, k)| / 127
+//   X   each column t quantised to int16: xq = round(X(:, t) · 32767 / max|X(:, t)|),
+//       sx(t) = max|X(:, t)| / 32767 (quantizeTokensInt16)
+//   Y(r, t) = b(r) + float(Σ_k Wq(r, k) xq(k, t)) · (sw(r) · sx(t))
+//
+// One pmaddwd multiplies a row's pair of int8 weights (sign-extended to int16) by the token's
+// pair of int16 values and adds the two products into an int32 lane. Integer sums are exact
+// (|Σ| <= 512 · 127 · 32767 < 2^31 for In <= 512), so the SSE2 and AVX2 kernels give the same
+// bits in any order; only the final conversion and two multiplies round (in one fixed order).
+
+/// Largest In the int32 accumulators of the int8 kernels cannot overflow for.
+inline constexpr int kInt8MaxIn = 512;
+
+/// Quantises the J columns of X [In, J] (column-major) to int16 pairs packed as int32 (lane
+/// p of column t: xq(2p, t) in the low half, xq(2p + 1, t) in the high half) and their scales
+/// sx[t]. A column with a non-finite entry gets xq = 0 and sx = NaN, so its outputs are NaN as
+/// in the fp32 path; an all-zero column gets sx = 0.
+template <int In, int J>
+inline void quantizeTokensInt16(const float* X, std::int32_t* xp, float* sx) {
+  static_assert(In % 2 == 0, "the int8 kernels take input columns in pairs");
+  for (int t = 0; t < J; ++t) {
+    const float* x = X + t * In;
+    std::int32_t* out = xp + t * (In / 2);
+    // max |x| and whether every x is finite (x·0 is NaN exactly for ±inf and NaN).
+    float m = 0.0f, poison = 0.0f;
+    int k = 0;
+#if defined(__SSE2__)
+    {
+      const __m128 sign = _mm_set1_ps(-0.0f), zero = _mm_setzero_ps();
+      __m128 vm = zero, vp = zero;
+      for (; k + 4 <= In; k += 4) {
+        const __m128 v = _mm_loadu_ps(x + k);
+        vm = _mm_max_ps(vm, _mm_andnot_ps(sign, v));
+        vp = _mm_add_ps(vp, _mm_mul_ps(v, zero));
+      }
+      alignas(16) float lm[4], lp[4];
+      _mm_store_ps(lm, vm);
+      _mm_store_ps(lp, vp);
+      for (int i = 0; i < 4; ++i) {
+        m = std::max(m, lm[i]);
+        poison += lp[i];
+      }
+    }
+#endif
+    for (; k < In; ++k) {
+      m = std::max(m, std::fabs(x[k]));
+      poison += x[k] * 0.0f;
+    }
+    if (poison != 0.0f || m == 0.0f) {  // NaN != 0: a non-finite entry
+      for (int p = 0; p < In / 2; ++p) out[p] = 0;
+      sx[t] = m == 0.0f && poison == 0.0f ? 0.0f : std::numeric_limits<float>::quiet_NaN();
+      continue;
+    }
+    // q = round-to-nearest-even(x · 32767 / m), |q| <= 32767 (the product may round up to
+    // 32767.0004: clamped). cvtps2dq rounds like nearbyint in the default rounding mode.
+    const float inv = 32767.0f / m;
+    k = 0;
+#if defined(__SSE2__)
+    {
+      const __m128 vinv = _mm_set1_ps(inv);
+      const __m128i lim = _mm_set1_epi32(32767), nlim = _mm_set1_epi32(-32767);
+      for (; k + 8 <= In; k += 8) {
+        __m128i a = _mm_cvtps_epi32(_mm_mul_ps(_mm_loadu_ps(x + k), vinv));
+        __m128i b = _mm_cvtps_epi32(_mm_mul_ps(_mm_loadu_ps(x + k + 4), vinv));
+        // Clamp (SSE2 has no pminsd: compare and blend).
+        a = _mm_or_si128(_mm_and_si128(_mm_cmpgt_epi32(a, lim), lim), _mm_andnot_si128(_mm_cmpgt_epi32(a, lim), a));
+        a = _mm_or_si128(_mm_and_si128(_mm_cmplt_epi32(a, nlim), nlim), _mm_andnot_si128(_mm_cmplt_epi32(a, nlim), a));
+        b = _mm_or_si128(_mm_and_si128(_mm_cmpgt_epi32(b, lim), lim), _mm_andnot_si128(_mm_cmpgt_epi32(b, lim), b));
+        b = _mm_or_si128(_mm_and_si128(_mm_cmplt_epi32(b, nlim), nlim), _mm_andnot_si128(_mm_cmplt_epi32(b, nlim), b));
+        // Eight int16 in order x[k] .. x[k+7]: as int32 lanes, the pairs (2p, 2p+1).
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(out + k / 2), _mm_packs_epi32(a, b));
+      }
+    }
+#endif
+    for (; k < In; k += 2) {
+      const auto q0 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k] * inv), -32767.0f, 32767.0f));
+      const auto q1 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k + 1] * inv), -32767.0f, 32767.0f));
+      out[k / 2] = static_cast<std::int32_t>(static_cast<std::uint32_t>(q0 & 0xffff) | (static_cast<std::uint32_t>(q1) << 16));
+    }
+    sx[t] = m / 32767.0f;
+  }
+}
+
+/// Y = b + (acc · (sw · sx)), then ReLU: the int8 kernels' shared epilogue (one order of
+/// rounding whatever kernel filled acc [J][Out]; the SSE2 lanes do the same operations).
+template <int Out, int J, bool kRelu>
+inline void dequantizeTokens(const std::int32_t* acc, const float* sw, const float* sx, const float* b, float* Y) {
+  for (int t = 0; t < J; ++t) {
+    int r = 0;
+#if defined(__SSE2__)
+    const __m128 s = _mm_set1_ps(sx[t]), zero = _mm_setzero_ps();
+    for (; r + 4 <= Out; r += 4) {
+      __m128 y = _mm_mul_ps(_mm_cvtepi32_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(acc + t * Out + r))),
+                            _mm_mul_ps(_mm_loadu_ps(sw + r), s));
+      if (b != nullptr) y = _mm_add_ps(_mm_loadu_ps(b + r), y);
+      if constexpr (kRelu) y = _mm_max_ps(y, zero);
+      _mm_storeu_ps(Y + t * Out + r, y);
+    }
+#endif
+    for (; r < Out; ++r) {
+      float y = static_cast<float>(acc[t * Out + r]) * (sw[r] * sx[t]);
+      if (b != nullptr) y = b[r] + y;
+      Y[t * Out + r] = kRelu ? std::max(y, 0.0f) : y;
+    }
+  }
+}
+
+/// Rows left over by the vector blocks (Out not a multiple of the block): exact int32 sums.
+template <int Out, int In, int J>
+inline void accumulateRowsInt8Scalar(const std::int8_t* Wq, const std::int32_t* xp, std::int32_t* acc, int r0) {
+  for (int r = r0; r < Out; ++r)
+    for (int t = 0; t < J; ++t) {
+      std::int32_t s = 0;
+      for (int p = 0; p < In / 2; ++p) {
+        const std::int32_t x = xp[t * (In / 2) + p];
+        const auto x0 = static_cast<std::int16_t>(x & 0xffff), x1 = static_cast<std::int16_t>(x >> 16);
+        const std::ptrdiff_t i = (static_cast<std::ptrdiff_t>(p) * Out + r) * 2;
+        s += Wq[i] * x0 + Wq[i + 1] * x1;
+      }
+      acc[t * Out + r] = s;
+    }
+}
+
+/// Pairs of input columns per strip of the int8 kernels: the row blocks of one strip reuse
+/// its cache lines (a 16-row block reads 32 bytes of each 64-byte line) while the next strip
+/// is prefetched, each block fetching its share (the fp32 kernel's scheme, kAvx2Strip).
+inline constexpr int kInt8Strip = 16;
+
+#if defined(__SSE2__)
+/// The int8 product with SSE2 (the NAO's Atom and every x86-64): strips of kInt8Strip pairs;
+/// in each, blocks of 8 rows with 2·J int32 accumulators in xmm registers.
+template <int Out, int In, int J>
+inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std::int32_t* acc) {
+  static_assert(In % 2 == 0 && In <= kInt8MaxIn, "int8 kernel: In even and at most kInt8MaxIn");
+  constexpr int P = In / 2;
+  constexpr int kRows = Out / 8 * 8;
+  for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
+    const int pc = std::min(kInt8Strip, P - p0);
+    // The next strip (or, after the last, what follows in the blob): 16 bytes of it per pair
+    // and block of this strip, so the block's share is pc·16 bytes.
+    const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
+    for (int r = 0; r < kRows; r += 8) {
+      __m128i a0[J], a1[J];
+      for (int t = 0; t < J; ++t) {
+        a0[t] = p0 == 0 ? _mm_setzero_si128() : _mm_loadu_si128(reinterpret_cast<const __m128i*>(acc + t * Out + r));
+        a1[t] = p0 == 0 ? _mm_setzero_si128() : _mm_loadu_si128(reinterpret_cast<const __m128i*>(acc + t * Out + r + 4));
+      }
+      const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
+      const std::int8_t* share = next + static_cast<std::ptrdiff_t>(r) * 2 * pc;
+#pragma GCC unroll 2
+      for (int i = 0; i < pc; ++i) {
+#if defined(__GNUC__)
+        if ((i & 3) == 0) __builtin_prefetch(share + 16 * i, 0, 2);
+#endif
+        const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(w + static_cast<std::ptrdiff_t>(i) * Out * 2));
+        // Sign-extend bytes to int16 (SSE2: duplicate each byte into a word, shift right).
+        const __m128i lo = _mm_srai_epi16(_mm_unpacklo_epi8(v, v), 8);  // rows r..r+3, both columns
+        const __m128i hi = _mm_srai_epi16(_mm_unpackhi_epi8(v, v), 8);  // rows r+4..r+7
+#pragma GCC unroll 8
+        for (int t = 0; t < J; ++t) {
+          const __m128i x = _mm_set1_epi32(xp[t * P + p0 + i]);
+          a0[t] = _mm_add_epi32(a0[t], _mm_madd_epi16(lo, x));
+          a1[t] = _mm_add_epi32(a1[t], _mm_madd_epi16(hi, x));
+        }
+      }
+      for (int t = 0; t < J; ++t) {
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(acc + t * Out + r), a0[t]);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(acc + t * Out + r + 4), a1[t]);
+      }
+    }
+  }
+  if constexpr (Out % 8 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, kRows);
+}
+#endif  // __SSE2__
+
+#if NAO_POLICY_HAVE_AVX2
+/// The int8 product with AVX2: strips of kInt8Strip pairs; in each, blocks of 16 rows (32
+/// weight bytes per pair, sign-extended by two vpmovsxbw loads), 2·J int32 accumulators in ymm
+/// registers.
+template <int Out, int In, int J>
+__attribute__((target("avx2"), noinline)) void accumulateInt8Avx2(const std::int8_t* Wq, const std::int32_t* xp,
+                                                                    std::int32_t* acc) {
+  static_assert(In % 2 == 0 && In <= kInt8MaxIn, "int8 kernel: In even and at most kInt8MaxIn");
+  constexpr int P = In / 2;
+  constexpr int kRows = Out / 16 * 16;
+  for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
+    const int pc = std::min(kInt8Strip, P - p0);
+    const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
+    for (int r = 0; r < kRows; r += 16) {
+      __m256i a0[J], a1[J];
+      for (int t = 0; t < J; ++t) {
+        a0[t] = p0 == 0 ? _mm256_setzero_si256()
+                        : _mm256_loadu_si256(reinterpret_cast<const __m256i*>(acc + t * Out + r));
+        a1[t] = p0 == 0 ? _mm256_setzero_si256()
+                        : _mm256_loadu_si256(reinterpret_cast<const __m256i*>(acc + t * Out + r + 8));
+      }
+      const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
+      const std::int8_t* share = next + static_cast<std::ptrdiff_t>(r) * 2 * pc;  // pc·32 bytes
+#pragma GCC unroll 2
+      for (int i = 0; i < pc; ++i) {
+        if ((i & 1) == 0) __builtin_prefetch(share + 32 * i, 0, 2);
+        const std::int8_t* wi = w + static_cast<std::ptrdiff_t>(i) * Out * 2;
+        const __m256i lo = _mm256_cvtepi8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(wi)));       // rows r..r+7
+        const __m256i hi = _mm256_cvtepi8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(wi + 16)));  // r+8..r+15
+#pragma GCC unroll 8
+        for (int t = 0; t < J; ++t) {
+          const __m256i x = _mm256_set1_epi32(xp[t * P + p0 + i]);
+          a0[t] = _mm256_add_epi32(a0[t], _mm256_madd_epi16(lo, x));
+          a1[t] = _mm256_add_epi32(a1[t], _mm256_madd_epi16(hi, x));
+        }
+      }
+      for (int t = 0; t < J; ++t) {
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(acc + t * Out + r), a0[t]);
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(acc + t * Out + r + 8), a1[t]);
+      }
+    }
+  }
+  if constexpr (Out % 16 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, kRows);
+}
+#endif  // NAO_POLICY_HAVE_AVX2
+
+/// Y = dequant(Wq) X + b (b may be null), then ReLU if kRelu, with int8 weights (see above).
+/// The kernel (SSE2 or AVX2) is the one affineTokens uses; both give the same bits. Real-time
+/// safe: the quantised tokens and accumulators live on the stack (at most 5 KB + 10 KB).
+template <int Out, int In, int J, bool kRelu>
+inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float* b, const float* X, float* Y) {
+  alignas(64) std::int32_t xp[J * (In / 2)];
+  alignas(64) std::int32_t acc[J * Out];
+  float sx[J];
+  quantizeTokensInt16<In, J>(X, xp, sx);
+#if NAO_POLICY_HAVE_AVX2
+  if (activePolicyKernel() == PolicyKernel::kAvx2)
+    accumulateInt8Avx2<Out, In, J>(Wq, xp, acc);
+  else
+#endif
+#if defined(__SSE2__)
+    accumulateInt8Sse<Out, In, J>(Wq, xp, acc);
+#else
+    accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, 0);
+#endif
+  dequantizeTokens<Out, J, kRelu>(acc, sw, sx, b, Y);
+}
 
 /// Y = W X + b (b may be null: zero), then ReLU if kRelu; every column an independent token.
 /// Each Y(r, t) is b(r) + W(r,0) X(0,t) + W(r,1) X(1,t) + ... summed in that order, whatever

@@ -1,0 +1,101 @@
+// The int8 blob of a model (nao/quantize.hpp).
+#include "nao/quantize.hpp"
+
+#include "nao/policy.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+
+namespace nao {
+
+const char* weightPrecisionName(WeightPrecision p) noexcept { return p == WeightPrecision::kInt8 ? "int8" : "fp32"; }
+
+WeightPrecision parseWeightPrecision(const std::string& s) {
+  if (s == "fp32") return WeightPrecision::kFp32;
+  if (s == "int8") return WeightPrecision::kInt8;
+  throw std::invalid_argument("precision must be fp32 or int8, got '" + s + "'");
+}
+
+namespace {
+
+bool endsWith(std::string_view s, std::string_view tail) {
+  return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+}
+
+}  // namespace
+
+bool isInt8Tensor(std::string_view name) noexcept {
+  if (endsWith(name, ".wq") || endsWith(name, ".wk") || endsWith(name, ".wv") || endsWith(name, ".wo")) return true;
+  // The FFN's four matrices: "<enc|dec>.<l>.ffn.<i>.weight".
+  const std::size_t f = name.find(".ffn.");
+  return f != std::string_view::npos && endsWith(name, ".weight");
+}
+
+void quantizeMatrixInt8(const float* W, int out, int in, std::uint8_t* section) {
+  auto* q = reinterpret_cast<std::int8_t*>(section);
+  float* scale = reinterpret_cast<float*>(section + detail::quantPad(static_cast<std::size_t>(out) * in));
+  for (int r = 0; r < out; ++r) {
+    float m = 0.0f;
+    for (int k = 0; k < in; ++k) m = std::max(m, std::fabs(W[static_cast<std::size_t>(k) * out + r]));
+    const float s = m / 127.0f;
+    for (int k = 0; k < in; ++k) {
+      const float v = s > 0.0f ? std::nearbyint(W[static_cast<std::size_t>(k) * out + r] / s) : 0.0f;
+      q[(static_cast<std::size_t>(k / 2) * out + r) * 2 + k % 2] = static_cast<std::int8_t>(std::clamp(v, -127.0f, 127.0f));
+    }
+    std::memcpy(scale + r, &s, sizeof(float));
+  }
+}
+
+std::size_t quantizedModelBytes(const PolicyArch& arch) {
+  // From the dimensions, without the manifest (no allocation: checkInt8Image runs at start-up);
+  // quantizeModelInt8 walks the manifest and checks that it comes to the same size.
+  const auto d = static_cast<std::size_t>(arch.d_model);
+  std::size_t ffn = 0, in = d;
+  for (const int h : arch.ffn_hidden) {
+    ffn += detail::quantSectionBytes(static_cast<std::size_t>(h), in);
+    in = static_cast<std::size_t>(h);
+  }
+  ffn += detail::quantSectionBytes(d, in);
+  const std::size_t attention = 4 * detail::quantSectionBytes(d, d);
+  return static_cast<std::size_t>(arch.encoder_layers) * (attention + ffn) +
+         static_cast<std::size_t>(arch.decoder_layers) * (2 * attention + ffn);
+}
+
+AlignedBytes quantizeModelInt8(const ModelFile& model) {
+  AlignedBytes blob;
+  blob.size = quantizedModelBytes(model.header.arch);
+  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
+  std::fill(blob.data.get(), blob.data.get() + blob.size, std::uint8_t{0});
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
+    const TensorSpec& t = model.tensors[i].spec;
+    if (!isInt8Tensor(t.name) || t.shape.size() != 2) continue;
+    const int in = t.shape[0], out = t.shape[1];  // model.bin matrices are [in, out] row-major
+    if (in % 2 != 0 || in > detail::kInt8MaxIn)
+      throw ModelFileError("int8 weights: " + t.name + " has " + std::to_string(in) +
+                           " inputs (the int8 kernels take an even number up to " +
+                           std::to_string(detail::kInt8MaxIn) + ")");
+    const std::size_t bytes = detail::quantSectionBytes(static_cast<std::size_t>(out), static_cast<std::size_t>(in));
+    if (off + bytes > blob.size) throw std::logic_error("quantizeModelInt8: the manifest's matrices exceed the layout");
+    quantizeMatrixInt8(model.data(i), out, in, blob.data.get() + off);
+    off += bytes;
+  }
+  if (off != blob.size) throw std::logic_error("quantizeModelInt8: the manifest's matrices do not fill the layout");
+  return blob;
+}
+
+std::uint64_t quantizedChecksum(const std::uint8_t* data, std::size_t size) noexcept { return fnv1a64(data, size); }
+
+void checkInt8Image(const ModelImage& image, const PolicyArch& arch, const std::string& origin) {
+  if (image.int8_bytes == nullptr) throw ModelFileError(origin + ": no int8 weights were compiled in");
+  const std::size_t want = quantizedModelBytes(arch);
+  if (image.int8_size != want)
+    throw ModelFileError(origin + ": the compiled-in int8 weights are " + std::to_string(image.int8_size) +
+                         " bytes, the architecture needs " + std::to_string(want));
+  if (quantizedChecksum(image.int8_bytes, image.int8_size) != image.int8_checksum)
+    throw ModelFileError(origin + ": int8 weights checksum mismatch (not the bytes its generated code describes)");
+}
+
+}  // namespace nao

@@ -1,0 +1,358 @@
+// Reduced-precision weights (nao/quantize.hpp, policy_kernels.hpp "Reduced precision"):
+// - quantizeMatrixInt8 keeps every weight within half a step of its row's scale, in the pair
+//   layout the kernels read;
+// - the SSE2 and AVX2 int8 kernels give the same bits, equal to exact int64 sums through the
+//   same epilogue, up to the largest accumulator the layout allows (In = 512, all ±127 · ±32767);
+// - the int8 product stays within the bound that quantising W and X allows of the fp32 product;
+// - the blob made from the file (manifest order) and from the bound views (visitQuantViews
+//   order) are the same bytes, so the binder points every view at its own matrix;
+// - stepPolicy with int8 views: the same bits under both kernels, close to fp32, and back to
+//   fp32 bit for bit when the views are dropped.
+#include "nao/model_file.hpp"
+#include "nao/policy.hpp"
+#include "nao/quantize.hpp"
+#include "nao/arm_model.hpp"
+#include "support/random_policy.hpp"
+#include "support/test_util.hpp"
+
+#include <doctest/doctest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <vector>
+
+using namespace nao;
+
+namespace {
+
+bool haveAvx2() { return policyKernelSupported(PolicyKernel::kAvx2); }
+
+struct KernelGuard {
+  PolicyKernel saved = activePolicyKernel();
+  ~KernelGuard() { selectPolicyKernel(saved); }
+};
+
+std::vector<float> randomVector(std::mt19937_64& rng, std::size_t n, double lo, double hi) {
+  std::vector<float> v(n);
+  for (float& x : v) x = test::uniformFloat(rng, lo, hi);
+  return v;
+}
+
+/// The blob section of one random [Out, In] matrix.
+struct QuantMatrix {
+  std::vector<float> w;           ///< column-major [Out, In]
+  std::vector<std::uint8_t> sec;  ///< quantSectionBytes(Out, In)
+  const std::int8_t* q() const { return reinterpret_cast<const std::int8_t*>(sec.data()); }
+  const float* scale(int out, int in) const {
+    return reinterpret_cast<const float*>(sec.data() + detail::quantPad(static_cast<std::size_t>(out) * in));
+  }
+};
+
+QuantMatrix makeQuantMatrix(std::mt19937_64& rng, int out, int in) {
+  QuantMatrix m;
+  m.w = randomVector(rng, static_cast<std::size_t>(out) * in, -0.3, 0.3);
+  m.sec.assign(detail::quantSectionBytes(out, in), 0);
+  quantizeMatrixInt8(m.w.data(), out, in, m.sec.data());
+  return m;
+}
+
+/// The int8 product by definition: exact int64 sums of the quantised values, then the kernels'
+/// own epilogue.
+template <int Out, int In, int J, bool kRelu>
+std::vector<float> int8Reference(const QuantMatrix& m, const float* b, const float* X) {
+  std::vector<std::int32_t> xp(static_cast<std::size_t>(J) * (In / 2));
+  float sx[J];
+  detail::quantizeTokensInt16<In, J>(X, xp.data(), sx);
+  std::vector<std::int32_t> acc(static_cast<std::size_t>(Out) * J);
+  for (int t = 0; t < J; ++t)
+    for (int r = 0; r < Out; ++r) {
+      std::int64_t s = 0;
+      for (int k = 0; k < In; ++k) {
+        const std::int32_t pair = xp[static_cast<std::size_t>(t * (In / 2) + k / 2)];
+        const std::int64_t x = static_cast<std::int16_t>(k % 2 == 0 ? (pair & 0xffff) : (pair >> 16));
+        s += static_cast<std::int64_t>(m.q()[(static_cast<std::size_t>(k / 2) * Out + r) * 2 + k % 2]) * x;
+      }
+      REQUIRE(s <= std::numeric_limits<std::int32_t>::max());
+      REQUIRE(s >= std::numeric_limits<std::int32_t>::min());
+      acc[static_cast<std::size_t>(t * Out + r)] = static_cast<std::int32_t>(s);
+    }
+  std::vector<float> y(static_cast<std::size_t>(Out) * J);
+  detail::dequantizeTokens<Out, J, kRelu>(acc.data(), m.scale(Out, In), sx, b, y.data());
+  return y;
+}
+
+template <int Out, int In, int J>
+void checkInt8Shape(std::uint64_t seed) {
+  CAPTURE(Out);
+  CAPTURE(In);
+  KernelGuard guard;
+  std::mt19937_64 rng(seed);
+  const QuantMatrix m = makeQuantMatrix(rng, Out, In);
+  const std::vector<float> b = randomVector(rng, Out, -0.5, 0.5);
+  const std::vector<float> X = randomVector(rng, static_cast<std::size_t>(In) * J, -2.0, 2.0);
+  const std::vector<float> want = int8Reference<Out, In, J, true>(m, b.data(), X.data());
+  std::vector<float> sse(want.size()), avx(want.size());
+  REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
+  detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), sse.data());
+  CHECK(std::memcmp(sse.data(), want.data(), want.size() * sizeof(float)) == 0);
+  if (haveAvx2()) {
+    REQUIRE(selectPolicyKernel(PolicyKernel::kAvx2));
+    detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), avx.data());
+    CHECK(std::memcmp(avx.data(), want.data(), want.size() * sizeof(float)) == 0);
+  }
+
+  // Within what quantisation allows of fp32: |ΔW| <= sw/2 per weight and |Δx| <= sx/2 per input,
+  // so |Δy| <= Σ_k (sw/2 |x_k| + |W_k| sx/2 + sw sx/4), plus float rounding (1e-5 relative).
+  std::vector<float> fp(want.size());
+  detail::affineTokens<Out, In, J, false>(m.w.data(), b.data(), X.data(), fp.data());
+  const float* sw = m.scale(Out, In);
+  for (int t = 0; t < J; ++t) {
+    float mx = 0.0f;
+    for (int k = 0; k < In; ++k) mx = std::max(mx, std::fabs(X[static_cast<std::size_t>(t * In + k)]));
+    const double sx = mx / 32767.0;
+    for (int r = 0; r < Out; ++r) {
+      double bound = 0.0, mag = 0.0;
+      for (int k = 0; k < In; ++k) {
+        const double x = std::fabs(X[static_cast<std::size_t>(t * In + k)]);
+        const double w = std::fabs(m.w[static_cast<std::size_t>(k) * Out + r]);
+        bound += sw[r] / 2.0 * x + w * sx / 2.0 + sw[r] * sx / 4.0;
+        mag += w * x;
+      }
+      bound += 1e-5 * (mag + std::fabs(b[static_cast<std::size_t>(r)]));
+      const double y8 = sse[static_cast<std::size_t>(t * Out + r)];
+      const double y32 = std::max(0.0f, fp[static_cast<std::size_t>(t * Out + r)]);
+      CHECK(std::fabs(y8 - y32) <= bound);
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("quantizeMatrixInt8: one scale per row, every weight within half a step, pairs interleaved") {
+  constexpr int Out = 24, In = 10;
+  std::mt19937_64 rng(5);
+  QuantMatrix m = makeQuantMatrix(rng, Out, In);
+  const float* s = m.scale(Out, In);
+  for (int r = 0; r < Out; ++r) {
+    float mx = 0.0f;
+    for (int k = 0; k < In; ++k) mx = std::max(mx, std::fabs(m.w[static_cast<std::size_t>(k) * Out + r]));
+    CHECK(s[r] == mx / 127.0f);
+    bool hit_max = false;
+    for (int k = 0; k < In; ++k) {
+      const int q = m.q()[(static_cast<std::size_t>(k / 2) * Out + r) * 2 + k % 2];
+      CHECK(std::abs(q) <= 127);
+      CHECK(std::fabs(static_cast<float>(q) * s[r] - m.w[static_cast<std::size_t>(k) * Out + r]) <= 0.5f * s[r] * (1.0f + 1e-5f));
+      hit_max = hit_max || std::abs(q) == 127;
+    }
+    CHECK(hit_max);  // the largest weight of the row uses the whole range
+  }
+  // An all-zero row: scale 0, zero bytes (the kernel then gives the bias).
+  std::vector<float> zero(static_cast<std::size_t>(Out) * In, 0.0f);
+  quantizeMatrixInt8(zero.data(), Out, In, m.sec.data());
+  CHECK(m.scale(Out, In)[3] == 0.0f);
+  CHECK(m.q()[6] == 0);
+}
+
+TEST_CASE("int8 kernels: SSE2 and AVX2 equal exact integer sums bit for bit, and stay within the quantisation bound of fp32") {
+  checkInt8Shape<32, 64, 5>(1);
+  checkInt8Shape<64, 32, 5>(2);
+  checkInt8Shape<24, 10, 3>(3);  // leftover rows: 8 for AVX2's 16-row blocks
+  checkInt8Shape<20, 6, 5>(4);   // leftover rows for both (scalar path)
+  checkInt8Shape<128, 128, 5>(5);
+  checkInt8Shape<512, 128, 5>(6);
+  checkInt8Shape<128, 512, 5>(7);
+  checkInt8Shape<512, 512, 5>(8);
+  checkInt8Shape<128, 32, 5>(9);
+  if (!haveAvx2()) MESSAGE("AVX2 is not available on this CPU (or build): only the SSE2 int8 kernel was checked");
+}
+
+namespace {
+
+/// quantizeTokensInt16 against its definition with scalar nearbyint (In = 64: the SSE2 path;
+/// In = 10: its scalar tail).
+template <int In>
+void checkTokenQuantisation(std::uint64_t seed) {
+  constexpr int J = 4;
+  std::mt19937_64 rng(seed);
+  std::vector<float> X = randomVector(rng, static_cast<std::size_t>(In) * J, -3.0, 3.0);
+  X[static_cast<std::size_t>(2 * In + 5)] = 7.5f;  // the column's max maps to 32767
+  std::vector<std::int32_t> xp(static_cast<std::size_t>(J) * (In / 2));
+  float sx[J];
+  detail::quantizeTokensInt16<In, J>(X.data(), xp.data(), sx);
+  for (int t = 0; t < J; ++t) {
+    float m = 0.0f;
+    for (int k = 0; k < In; ++k) m = std::max(m, std::fabs(X[static_cast<std::size_t>(t * In + k)]));
+    CHECK(sx[t] == m / 32767.0f);
+    const float inv = 32767.0f / m;
+    for (int k = 0; k < In; ++k) {
+      const std::int32_t pair = xp[static_cast<std::size_t>(t * (In / 2) + k / 2)];
+      const int q = static_cast<std::int16_t>(k % 2 == 0 ? (pair & 0xffff) : (pair >> 16));
+      CHECK(q == static_cast<int>(std::nearbyint(X[static_cast<std::size_t>(t * In + k)] * inv)));
+    }
+  }
+  const std::int32_t top = xp[static_cast<std::size_t>(2 * (In / 2) + 2)];
+  CHECK(static_cast<std::int16_t>(top >> 16) == 32767);
+}
+
+}  // namespace
+
+TEST_CASE("quantizeTokensInt16: per-column scale, round to nearest even, the column's max at 32767") {
+  checkTokenQuantisation<64>(31);
+  checkTokenQuantisation<10>(32);
+}
+
+TEST_CASE("int8 kernels: the largest accumulator the layout allows does not overflow") {
+  // In = 512 with every weight and every input at full scale: Σ = 512 · 127 · 32767 < 2^31.
+  constexpr int Out = 16, In = detail::kInt8MaxIn, J = 2;
+  KernelGuard guard;
+  QuantMatrix m;
+  m.w.assign(static_cast<std::size_t>(Out) * In, 1.0f);
+  for (int r = 0; r < Out; r += 2)
+    for (int k = 0; k < In; ++k) m.w[static_cast<std::size_t>(k) * Out + r] = -1.0f;
+  m.sec.assign(detail::quantSectionBytes(Out, In), 0);
+  quantizeMatrixInt8(m.w.data(), Out, In, m.sec.data());
+  std::vector<float> X(static_cast<std::size_t>(In) * J, 3.0f);
+  for (int k = 0; k < In; ++k) X[static_cast<std::size_t>(In + k)] = -3.0f;
+  const std::vector<float> want = int8Reference<Out, In, J, false>(m, nullptr, X.data());
+  for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2}) {
+    if (!selectPolicyKernel(k)) continue;
+    std::vector<float> y(want.size());
+    detail::affineTokensInt8<Out, In, J, false>(m.q(), m.scale(Out, In), nullptr, X.data(), y.data());
+    CHECK(std::memcmp(y.data(), want.data(), want.size() * sizeof(float)) == 0);
+    // 512 · (±1) · (±3) exactly, up to the scales' float rounding.
+    CHECK(y[0] == doctest::Approx(-1536.0).epsilon(1e-6));
+    CHECK(y[1] == doctest::Approx(1536.0).epsilon(1e-6));
+    CHECK(y[Out] == doctest::Approx(1536.0).epsilon(1e-6));
+  }
+}
+
+TEST_CASE("int8 kernels: a non-finite token gives NaN outputs, an all-zero token the bias") {
+  constexpr int Out = 32, In = 16, J = 3;
+  std::mt19937_64 rng(8);
+  const QuantMatrix m = makeQuantMatrix(rng, Out, In);
+  const std::vector<float> b = randomVector(rng, Out, -0.5, 0.5);
+  std::vector<float> X = randomVector(rng, static_cast<std::size_t>(In) * J, -1.0, 1.0);
+  X[3] = std::numeric_limits<float>::infinity();          // token 0
+  for (int k = 0; k < In; ++k) X[static_cast<std::size_t>(In + k)] = 0.0f;  // token 1
+  std::vector<float> y(static_cast<std::size_t>(Out) * J);
+  detail::affineTokensInt8<Out, In, J, false>(m.q(), m.scale(Out, In), b.data(), X.data(), y.data());
+  for (int r = 0; r < Out; ++r) {
+    CHECK(std::isnan(y[static_cast<std::size_t>(r)]));
+    CHECK(y[static_cast<std::size_t>(Out + r)] == b[static_cast<std::size_t>(r)]);
+    CHECK(std::isfinite(y[static_cast<std::size_t>(2 * Out + r)]));
+  }
+}
+
+namespace {
+
+/// quantizeModelInt8 of a file with random tensors equals quantizePolicyInt8 of the views
+/// bound to the same tensors, and has the layout's size.
+template <class Dims>
+void checkBlobOrder(std::uint64_t seed) {
+  ModelHeader h;
+  h.arch = Dims::arch();
+  for (int j = 0; j < h.arch.tokens; ++j) h.joints.push_back({"j" + std::to_string(j), -1.0, 1.0, 2.0});
+  for (int mv = 0; mv < h.arch.movements; ++mv) h.movement_names.push_back("m" + std::to_string(mv));
+  h.metadata_json = "{}";
+  const std::vector<std::vector<float>> tensors = test::randomManifestTensors(h.arch, seed);
+  const ModelFile file = decodeModel(encodeModel(h, tensors), "random model");
+  const AlignedBytes from_file = quantizeModelInt8(file);
+  CHECK(from_file.size == quantizedPolicyBytes<Dims>());
+  CHECK(quantizedModelBytes(h.arch) == quantizedPolicyBytes<Dims>());
+  std::vector<const float*> ptrs;
+  for (const auto& t : tensors) ptrs.push_back(t.data());
+  const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), Conditioning::kReference);
+  const AlignedBytes from_views = quantizePolicyInt8(w);
+  REQUIRE(from_views.size == from_file.size);
+  CHECK(std::memcmp(from_views.data.get(), from_file.data.get(), from_file.size) == 0);
+  // And the binder's pointers land on the sections of their own matrices.
+  PolicyWeights<Dims> bound = w;
+  bindQuantizedWeights<Dims>(bound, from_file.data.get());
+  CHECK(usesInt8(bound));
+  int checked = 0;
+  detail::visitQuantViews(bound, [&](const auto& view, const auto& q) {
+    using V = std::remove_reference_t<decltype(view)>;
+    constexpr int out = V::RowsAtCompileTime, in = V::ColsAtCompileTime;
+    std::vector<std::uint8_t> sec(detail::quantSectionBytes(out, in));
+    quantizeMatrixInt8(view.data(), out, in, sec.data());
+    CHECK(std::memcmp(q.w, sec.data(), static_cast<std::size_t>(out) * in) == 0);
+    CHECK(std::memcmp(q.scale, sec.data() + detail::quantPad(static_cast<std::size_t>(out) * in), out * sizeof(float)) == 0);
+    ++checked;
+  });
+  CHECK(checked == 8 * Dims::kEncoderLayers + 12 * Dims::kDecoderLayers);
+  unbindQuantizedWeights<Dims>(bound);
+  CHECK_FALSE(usesInt8(bound));
+}
+
+/// Runs `ticks` steps of one stream with weights `w`; returns every action.
+template <class Dims>
+std::vector<float> rollActions(const PolicyWeights<Dims>& w, std::uint64_t seed, int ticks) {
+  auto ws = makePolicyWorkspace<Dims>();
+  resetPolicyStream(*ws);
+  std::mt19937_64 rng(seed);
+  std::vector<float> out;
+  for (int t = 0; t < ticks; ++t) {
+    const PolicyInput in = test::randomPolicyInput(rng, t % Dims::kMovements, t, 1.2);
+    const auto& a = stepPolicy(w, *ws, in);
+    out.insert(out.end(), a.data(), a.data() + 5);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("the int8 blob from the file equals the one from the bound views (manifest order = view order)") {
+  checkBlobOrder<SmallPolicyDims>(11);
+  checkBlobOrder<PaperPolicyDims>(12);
+}
+
+TEST_CASE("quantizeModelInt8 refuses a matrix with an odd number of inputs") {
+  using OddDims = PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>;
+  ModelHeader h;
+  h.arch = OddDims::arch();
+  for (int j = 0; j < h.arch.tokens; ++j) h.joints.push_back({"j" + std::to_string(j), -1.0, 1.0, 2.0});
+  for (int mv = 0; mv < h.arch.movements; ++mv) h.movement_names.push_back("m" + std::to_string(mv));
+  h.metadata_json = "{}";
+  const ModelFile file = decodeModel(encodeModel(h, test::randomManifestTensors(h.arch, 3)), "odd model");
+  CHECK_THROWS_WITH_AS(quantizeModelInt8(file), doctest::Contains("13 inputs"), ModelFileError);
+}
+
+TEST_CASE("stepPolicy with int8 weights: same bits under SSE2 and AVX2, near fp32, fp32 again when unbound") {
+  KernelGuard guard;
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const test::RandomPolicy p = test::makeRandomPolicy(SmallPolicyDims::arch(), arm, 21);
+  PolicyWeights<SmallPolicyDims> w =
+      bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), Conditioning::kReference);
+  constexpr int kTicks = 40;  // window 8: the rings wrap
+  REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
+  const std::vector<float> fp32 = rollActions(w, 4, kTicks);
+  const AlignedBytes blob = quantizePolicyInt8(w);
+  bindQuantizedWeights<SmallPolicyDims>(w, blob.data.get());
+  const std::vector<float> q_sse = rollActions(w, 4, kTicks);
+  CHECK(rollActions(w, 4, kTicks) == q_sse);  // deterministic
+  if (haveAvx2()) {
+    REQUIRE(selectPolicyKernel(PolicyKernel::kAvx2));
+    const std::vector<float> q_avx = rollActions(w, 4, kTicks);
+    CHECK(std::memcmp(q_avx.data(), q_sse.data(), q_sse.size() * sizeof(float)) == 0);
+  } else {
+    MESSAGE("AVX2 is not available on this CPU (or build): only the SSE2 int8 kernel was checked");
+  }
+  // Near fp32 and not equal to it (the int8 path really ran).
+  double max_diff = 0.0, max_abs = 0.0;
+  for (std::size_t i = 0; i < fp32.size(); ++i) {
+    max_diff = std::max(max_diff, std::fabs(static_cast<double>(q_sse[i]) - fp32[i]));
+    max_abs = std::max(max_abs, std::fabs(static_cast<double>(fp32[i])));
+  }
+  MESSAGE("small random policy, 40 ticks: max |a_int8 - a_fp32| = " << max_diff << " of max |a| = " << max_abs);
+  // A coarse sanity bound for random weights (measured 1.6 %); the trained models' action
+  // differences and closed-loop hand errors are measured in bench/int8_accuracy.py.
+  CHECK(max_diff > 0.0);
+  CHECK(max_diff <= 0.02 * max_abs);
+  unbindQuantizedWeights<SmallPolicyDims>(w);
+  REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
+  CHECK(rollActions(w, 4, kTicks) == fp32);
+}
