@@ -11,9 +11,10 @@
 #      and --weights models/default.bin;
 #   3. per tick of the robot build (valgrind callgrind, collecting inside updateController only,
 #      caches simulated with the Atom E3845's geometry): instructions, data reads/writes, L1
-#      and last-level (the Atom's L2) misses, and the executed instruction mix;
-#   4. the tick time estimated on the NAO V6's Atom E3845 from those counts (the arithmetic is
-#      printed and explained in docs/embedded.md).
+#      and last-level (the Atom's L2) misses, and the executed instruction mix; once with the
+#      fp32 weights and once with --precision int8 (docs/policy.md "int8 weights");
+#   4. the tick time estimated on the NAO V6's Atom E3845 from those counts, for both (the
+#      arithmetic is printed and explained in docs/embedded.md).
 # Needs valgrind (apt-get install valgrind; not in toolchain/nao's package list: only this
 # measurement uses it). Takes about a minute. Exit status 0, or 1 with a message.
 set -euo pipefail
@@ -42,12 +43,14 @@ load_before="$(cut -d' ' -f1-3 /proc/loadavg)"
 # One tick under callgrind: only updateController (the whole tick: retarget, snap, policy,
 # command, 100 physics steps) is collected. Atom E3845 caches (docs/embedded.md): L1i 32 KiB
 # 8-way, L1d 24 KiB 6-way, L2 1 MiB 16-way per two-core module; 64-byte lines.
-nice -n 19 valgrind --tool=callgrind --callgrind-out-file="$work/callgrind.out" --dump-instr=yes \
-  --compress-pos=no --compress-strings=no --cache-sim=yes \
-  --I1=32768,8,64 --D1=24576,6,64 --LL=1048576,16,64 \
-  --collect-atstart=no '--toggle-collect=*updateController*' \
-  "$ROBOT" --reference synthetic:whole_arm --ticks "$TICKS" --zero-timing >"$work/callgrind.log" 2>&1 ||
-  { cat "$work/callgrind.log" >&2; die "valgrind failed"; }
+for precision in fp32 int8; do
+  nice -n 19 valgrind --tool=callgrind --callgrind-out-file="$work/callgrind_$precision.out" --dump-instr=yes \
+    --compress-pos=no --compress-strings=no --cache-sim=yes \
+    --I1=32768,8,64 --D1=24576,6,64 --LL=1048576,16,64 \
+    --collect-atstart=no '--toggle-collect=*updateController*' \
+    "$ROBOT" --reference synthetic:whole_arm --ticks "$TICKS" --zero-timing --precision "$precision" \
+    >"$work/callgrind.log" 2>&1 || { cat "$work/callgrind.log" >&2; die "valgrind failed ($precision)"; }
+done
 objdump -d --no-show-raw-insn "$ROBOT" >"$work/robot.dis"
 load_after="$(cut -d' ' -f1-3 /proc/loadavg)"
 
@@ -130,76 +133,88 @@ for name, exe, extra in (("robot, compiled-in model", robot, []),
     say("%-40s %7.1f MiB  (target <= 64 MB)" % (name, kib / 1024.0))
 say()
 
-# 3. Counts per tick (callgrind).
-events, cost_by_addr, summary = None, collections.Counter(), None
-skip_next = False
-with open(os.path.join(work, "callgrind.out")) as f:
-    for l in f:
-        if l.startswith("events:"):
-            events = l.split()[1:]
-        elif l.startswith("summary:"):
-            summary = [int(x) for x in l.split()[1:]]
-        elif l.startswith("calls="):
-            skip_next = True          # the next line is the call's inclusive cost
-        elif l.startswith("0x"):
-            if skip_next:
-                skip_next = False
-                continue
-            f_ = l.split()
-            cost_by_addr[int(f_[0], 16)] += int(f_[2]) if len(f_) > 2 else 0   # Ir (fields: addr line Ir ...)
-        else:
-            skip_next = False
-if not summary or sum(summary) == 0:
-    raise SystemExit("embedded_budget.sh: callgrind collected nothing (did updateController get inlined?)")
-per = {e: v / ticks for e, v in zip(events, summary)}
-say("## 3. One tick of the robot build, measured by valgrind callgrind (mean of %d ticks, policy on)" % ticks)
-say("caches simulated as the Atom E3845's: L1i 32 KiB 8-way, L1d 24 KiB 6-way, L2 (last level) 1 MiB 16-way, 64 B lines")
-say("instructions (Ir)            %12.0f" % per["Ir"])
-say("data reads / writes          %12.0f / %.0f" % (per["Dr"], per["Dw"]))
-say("L1i misses                   %12.0f" % per["I1mr"])
-say("L1d read / write misses      %12.0f / %.0f" % (per["D1mr"], per["D1mw"]))
-say("L2 misses (instr/read/write) %12.0f / %.0f / %.0f  = %.2f MB from DRAM per tick" % (
-    per["ILmr"], per["DLmr"], per["DLmw"], (per["ILmr"] + per["DLmr"] + per["DLmw"]) * 64 / 1e6))
-
-# Executed instruction mix: address -> mnemonic from the disassembly.
+# 3. and 4.: counts per tick (callgrind) and the Atom estimate, for each precision.
 mnemonic = {}
 for l in open(os.path.join(work, "robot.dis")):
     m = re.match(r"^\s+([0-9a-f]+):\t(\S+)", l)
     if m:
         mnemonic[int(m.group(1), 16)] = m.group(2)
-mix = collections.Counter()
-for a, ir in cost_by_addr.items():
-    mix[mnemonic.get(a, "?")] += ir
-total = sum(mix.values())
-say("executed mix (top 10 of %d mnemonics, %% of Ir): %s" % (len(mix), ", ".join(
-    "%s %.1f" % (k, 100.0 * v / total) for k, v in mix.most_common(10))))
-mulps = (mix["mulps"]) / ticks
-fp_other_mul = sum(v for k, v in mix.items() if k.startswith("mul") and k[3:] in ("ss", "sd", "pd")) / ticks
-say("packed-single multiplies per tick (mulps): %.0f; other FP multiplies: %.0f" % (mulps, fp_other_mul))
-say()
 
-# 4. The Atom estimate (docs/embedded.md, "Tick time on the Atom").
-f_hz = 1.91e9
-bw = 1333e6 * 8            # DDR3L-1333, one 64-bit channel: 10.66 GB/s theoretical
-dram_bytes = (per["ILmr"] + per["DLmr"] + per["DLmw"]) * 64
-t_issue = per["Ir"] / 2 / f_hz               # 2 instructions per cycle, Silvermont's width
-t_load = per["Dr"] / f_hz                    # one load per cycle
-t_mul = (2 * mulps + 1 * fp_other_mul) / f_hz  # MULPS: one per 2 cycles on Silvermont
-t_mem = dram_bytes / bw
-t_low = max(t_issue, t_load, t_mul, t_mem)
-t_ipc1 = per["Ir"] / 1 / f_hz
-t_high = t_ipc1 + dram_bytes / (0.5 * bw)
-say("## 4. Estimated tick on the NAO V6's Atom E3845 (1.91 GHz, DDR3L-1333 single channel)")
-say("issue bound   Ir / (2 per cycle x 1.91 GHz)          = %.0f / 3.82e9   = %6.2f ms" % (per["Ir"], t_issue * 1e3))
-say("load bound    Dr / (1 per cycle x 1.91 GHz)          = %.0f / 1.91e9   = %6.2f ms" % (per["Dr"], t_load * 1e3))
-say("FP-mul bound  (2 x mulps + other muls) / 1.91 GHz    = %.0f / 1.91e9   = %6.2f ms" % (2 * mulps + fp_other_mul, t_mul * 1e3))
-say("DRAM bound    %.2f MB / 10.66 GB/s                       = %6.2f ms" % (dram_bytes / 1e6, t_mem * 1e3))
-say("optimistic    max of the four (all overlapped)                 = %6.2f ms" % (t_low * 1e3))
-say("pessimistic   Ir at 1 per cycle + DRAM at half bandwidth, serial = %.2f + %.2f = %6.2f ms" % (
-    t_ipc1 * 1e3, dram_bytes / (0.5 * bw) * 1e3, t_high * 1e3))
-say("budget        20 ms per tick (DESIGN section 12): %s" % (
-    "met even pessimistically" if t_high <= 0.020 else
-    "met optimistically, NOT pessimistically: measure on the robot" if t_low <= 0.020 else "NOT met"))
+def tick_budget(precision):
+    events, cost_by_addr, summary = None, collections.Counter(), None
+    skip_next = False
+    with open(os.path.join(work, "callgrind_%s.out" % precision)) as f:
+        for l in f:
+            if l.startswith("events:"):
+                events = l.split()[1:]
+            elif l.startswith("summary:"):
+                summary = [int(x) for x in l.split()[1:]]
+            elif l.startswith("calls="):
+                skip_next = True          # the next line is the call's inclusive cost
+            elif l.startswith("0x"):
+                if skip_next:
+                    skip_next = False
+                    continue
+                f_ = l.split()
+                cost_by_addr[int(f_[0], 16)] += int(f_[2]) if len(f_) > 2 else 0   # Ir (fields: addr line Ir ...)
+            else:
+                skip_next = False
+    if not summary or sum(summary) == 0:
+        raise SystemExit("embedded_budget.sh: callgrind collected nothing (did updateController get inlined?)")
+    per = {e: v / ticks for e, v in zip(events, summary)}
+    say("## 3%s. One tick of the robot build, %s weights, measured by valgrind callgrind (mean of %d ticks, policy on)" % (
+        "a" if precision == "fp32" else "b", precision, ticks))
+    say("caches simulated as the Atom E3845's: L1i 32 KiB 8-way, L1d 24 KiB 6-way, L2 (last level) 1 MiB 16-way, 64 B lines")
+    say("instructions (Ir)            %12.0f" % per["Ir"])
+    say("data reads / writes          %12.0f / %.0f" % (per["Dr"], per["Dw"]))
+    say("L1i misses                   %12.0f" % per["I1mr"])
+    say("L1d read / write misses      %12.0f / %.0f" % (per["D1mr"], per["D1mw"]))
+    say("L2 misses (instr/read/write) %12.0f / %.0f / %.0f  = %.2f MB from DRAM per tick" % (
+        per["ILmr"], per["DLmr"], per["DLmw"], (per["ILmr"] + per["DLmr"] + per["DLmw"]) * 64 / 1e6))
+    # Executed instruction mix: address -> mnemonic from the disassembly.
+    mix = collections.Counter()
+    for a, ir in cost_by_addr.items():
+        mix[mnemonic.get(a, "?")] += ir
+    total = sum(mix.values())
+    say("executed mix (top 10 of %d mnemonics, %% of Ir): %s" % (len(mix), ", ".join(
+        "%s %.1f" % (k, 100.0 * v / total) for k, v in mix.most_common(10))))
+    mulps = (mix["mulps"]) / ticks
+    pmaddwd = mix["pmaddwd"] / ticks
+    fp_other_mul = sum(v for k, v in mix.items() if k.startswith("mul") and k[3:] in ("ss", "sd", "pd")) / ticks
+    say("packed-single multiplies per tick (mulps): %.0f; pmaddwd: %.0f; other FP multiplies: %.0f" % (
+        mulps, pmaddwd, fp_other_mul))
+    say()
+
+    # 4. The Atom estimate (docs/embedded.md, "Tick time on the Atom").
+    f_hz = 1.91e9
+    bw = 1333e6 * 8            # DDR3L-1333, one 64-bit channel: 10.66 GB/s theoretical
+    dram_bytes = (per["ILmr"] + per["DLmr"] + per["DLmw"]) * 64
+    t_issue = per["Ir"] / 2 / f_hz               # 2 instructions per cycle, Silvermont's width
+    t_load = per["Dr"] / f_hz                    # one load per cycle
+    # MULPS: one per 2 cycles on Silvermont; PMADDWD counted the same way (its Silvermont
+    # throughput is not in our reference facts: docs/embedded.md).
+    t_mul = (2 * mulps + 2 * pmaddwd + 1 * fp_other_mul) / f_hz
+    t_mem = dram_bytes / bw
+    t_low = max(t_issue, t_load, t_mul, t_mem)
+    t_ipc1 = per["Ir"] / 1 / f_hz
+    t_high = t_ipc1 + dram_bytes / (0.5 * bw)
+    say("## 4%s. Estimated tick on the NAO V6's Atom E3845 (1.91 GHz, DDR3L-1333 single channel), %s weights" % (
+        "a" if precision == "fp32" else "b", precision))
+    say("issue bound   Ir / (2 per cycle x 1.91 GHz)          = %.0f / 3.82e9   = %6.2f ms" % (per["Ir"], t_issue * 1e3))
+    say("load bound    Dr / (1 per cycle x 1.91 GHz)          = %.0f / 1.91e9   = %6.2f ms" % (per["Dr"], t_load * 1e3))
+    say("mul bound     (2 x (mulps + pmaddwd) + other muls) / 1.91 GHz = %.0f / 1.91e9 = %6.2f ms" % (
+        2 * mulps + 2 * pmaddwd + fp_other_mul, t_mul * 1e3))
+    say("DRAM bound    %.2f MB / 10.66 GB/s                       = %6.2f ms" % (dram_bytes / 1e6, t_mem * 1e3))
+    say("optimistic    max of the four (all overlapped)                 = %6.2f ms" % (t_low * 1e3))
+    say("pessimistic   Ir at 1 per cycle + DRAM at half bandwidth, serial = %.2f + %.2f = %6.2f ms" % (
+        t_ipc1 * 1e3, dram_bytes / (0.5 * bw) * 1e3, t_high * 1e3))
+    say("budget        20 ms per tick (DESIGN section 12): %s" % (
+        "met even pessimistically" if t_high <= 0.020 else
+        "met optimistically, NOT pessimistically: measure on the robot" if t_low <= 0.020 else "NOT met"))
+    say()
+
+tick_budget("fp32")
+tick_budget("int8")
 os.makedirs(os.path.dirname(out_path), exist_ok=True)
 with open(out_path, "w") as f:
     f.write("\n".join(lines) + "\n")

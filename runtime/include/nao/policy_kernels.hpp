@@ -393,11 +393,9 @@ inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std
     // and block of this strip, so the block's share is pc·16 bytes.
     const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
     for (int r = 0; r < kRows; r += 8) {
+      // Fresh sums per strip, added to acc after it (fewer live registers than carrying acc).
       __m128i a0[J], a1[J];
-      for (int t = 0; t < J; ++t) {
-        a0[t] = p0 == 0 ? _mm_setzero_si128() : _mm_loadu_si128(reinterpret_cast<const __m128i*>(acc + t * Out + r));
-        a1[t] = p0 == 0 ? _mm_setzero_si128() : _mm_loadu_si128(reinterpret_cast<const __m128i*>(acc + t * Out + r + 4));
-      }
+      for (int t = 0; t < J; ++t) a0[t] = a1[t] = _mm_setzero_si128();
       const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
       const std::int8_t* share = next + static_cast<std::ptrdiff_t>(r) * 2 * pc;
 #pragma GCC unroll 2
@@ -417,8 +415,10 @@ inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std
         }
       }
       for (int t = 0; t < J; ++t) {
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(acc + t * Out + r), a0[t]);
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(acc + t * Out + r + 4), a1[t]);
+        auto* y0 = reinterpret_cast<__m128i*>(acc + t * Out + r);
+        auto* y1 = reinterpret_cast<__m128i*>(acc + t * Out + r + 4);
+        _mm_storeu_si128(y0, p0 == 0 ? a0[t] : _mm_add_epi32(_mm_loadu_si128(y0), a0[t]));
+        _mm_storeu_si128(y1, p0 == 0 ? a1[t] : _mm_add_epi32(_mm_loadu_si128(y1), a1[t]));
       }
     }
   }
@@ -427,48 +427,39 @@ inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std
 #endif  // __SSE2__
 
 #if NAO_POLICY_HAVE_AVX2
-/// The int8 product with AVX2: strips of kInt8Strip pairs; in each, blocks of 16 rows (32
-/// weight bytes per pair, sign-extended by two vpmovsxbw loads), 2·J int32 accumulators in ymm
-/// registers.
+/// The int8 product with AVX2: strips of kInt8Strip pairs; in each, blocks of 8 rows (16
+/// weight bytes per pair, sign-extended by one vpmovsxbw load), J int32 accumulators in ymm
+/// registers (with 16 rows and 2·J accumulators GCC spilled them: measured slower).
 template <int Out, int In, int J>
 __attribute__((target("avx2"), noinline)) void accumulateInt8Avx2(const std::int8_t* Wq, const std::int32_t* xp,
                                                                     std::int32_t* acc) {
   static_assert(In % 2 == 0 && In <= kInt8MaxIn, "int8 kernel: In even and at most kInt8MaxIn");
   constexpr int P = In / 2;
-  constexpr int kRows = Out / 16 * 16;
+  constexpr int kRows = Out / 8 * 8;
   for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
     const int pc = std::min(kInt8Strip, P - p0);
     const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
-    for (int r = 0; r < kRows; r += 16) {
-      __m256i a0[J], a1[J];
-      for (int t = 0; t < J; ++t) {
-        a0[t] = p0 == 0 ? _mm256_setzero_si256()
-                        : _mm256_loadu_si256(reinterpret_cast<const __m256i*>(acc + t * Out + r));
-        a1[t] = p0 == 0 ? _mm256_setzero_si256()
-                        : _mm256_loadu_si256(reinterpret_cast<const __m256i*>(acc + t * Out + r + 8));
-      }
+    for (int r = 0; r < kRows; r += 8) {
+      __m256i a[J];
+      for (int t = 0; t < J; ++t) a[t] = _mm256_setzero_si256();
       const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
-      const std::int8_t* share = next + static_cast<std::ptrdiff_t>(r) * 2 * pc;  // pc·32 bytes
-#pragma GCC unroll 2
+      const std::int8_t* share = next + static_cast<std::ptrdiff_t>(r) * 2 * pc;  // pc·16 bytes
+#pragma GCC unroll 4
       for (int i = 0; i < pc; ++i) {
-        if ((i & 1) == 0) __builtin_prefetch(share + 32 * i, 0, 2);
-        const std::int8_t* wi = w + static_cast<std::ptrdiff_t>(i) * Out * 2;
-        const __m256i lo = _mm256_cvtepi8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(wi)));       // rows r..r+7
-        const __m256i hi = _mm256_cvtepi8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(wi + 16)));  // r+8..r+15
+        if ((i & 3) == 0) __builtin_prefetch(share + 16 * i, 0, 2);
+        const __m256i v = _mm256_cvtepi8_epi16(
+            _mm_loadu_si128(reinterpret_cast<const __m128i*>(w + static_cast<std::ptrdiff_t>(i) * Out * 2)));
 #pragma GCC unroll 8
-        for (int t = 0; t < J; ++t) {
-          const __m256i x = _mm256_set1_epi32(xp[t * P + p0 + i]);
-          a0[t] = _mm256_add_epi32(a0[t], _mm256_madd_epi16(lo, x));
-          a1[t] = _mm256_add_epi32(a1[t], _mm256_madd_epi16(hi, x));
-        }
+        for (int t = 0; t < J; ++t)
+          a[t] = _mm256_add_epi32(a[t], _mm256_madd_epi16(v, _mm256_set1_epi32(xp[t * P + p0 + i])));
       }
       for (int t = 0; t < J; ++t) {
-        _mm256_storeu_si256(reinterpret_cast<__m256i*>(acc + t * Out + r), a0[t]);
-        _mm256_storeu_si256(reinterpret_cast<__m256i*>(acc + t * Out + r + 8), a1[t]);
+        auto* y = reinterpret_cast<__m256i*>(acc + t * Out + r);
+        _mm256_storeu_si256(y, p0 == 0 ? a[t] : _mm256_add_epi32(_mm256_loadu_si256(y), a[t]));
       }
     }
   }
-  if constexpr (Out % 16 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, kRows);
+  if constexpr (Out % 8 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, kRows);
 }
 #endif  // NAO_POLICY_HAVE_AVX2
 
