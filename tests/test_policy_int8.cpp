@@ -23,6 +23,7 @@
 #include <cstring>
 #include <limits>
 #include <random>
+#include <stdexcept>
 #include <vector>
 
 using namespace nao;
@@ -160,8 +161,8 @@ TEST_CASE("quantizeMatrixInt8: one scale per row, every weight within half a ste
 TEST_CASE("int8 kernels: SSE2 and AVX2 equal exact integer sums bit for bit, and stay within the quantisation bound of fp32") {
   checkInt8Shape<32, 64, 5>(1);
   checkInt8Shape<64, 32, 5>(2);
-  checkInt8Shape<24, 10, 3>(3);  // leftover rows: 8 for AVX2's 16-row blocks
-  checkInt8Shape<20, 6, 5>(4);   // leftover rows for both (scalar path)
+  checkInt8Shape<24, 10, 3>(3);  // 3 blocks of 8 rows, a strip of 5 pairs
+  checkInt8Shape<20, 6, 5>(4);   // 4 leftover rows (the scalar path)
   checkInt8Shape<128, 128, 5>(5);
   checkInt8Shape<512, 128, 5>(6);
   checkInt8Shape<128, 512, 5>(7);
@@ -228,6 +229,31 @@ TEST_CASE("int8 kernels: the largest accumulator the layout allows does not over
     CHECK(y[1] == doctest::Approx(1536.0).epsilon(1e-6));
     CHECK(y[Out] == doctest::Approx(1536.0).epsilon(1e-6));
   }
+}
+
+TEST_CASE("int8 kernels: NaN stays NaN through the ReLU, and a column too small to scale is zero") {
+  constexpr int Out = 36, In = 8, J = 2;  // 36 rows: the SSE2 lanes and the scalar tail
+  KernelGuard guard;
+  std::mt19937_64 rng(12);
+  const QuantMatrix m = makeQuantMatrix(rng, Out, In);
+  const std::vector<float> b = randomVector(rng, Out, -0.5, 0.5);
+  std::vector<float> X(static_cast<std::size_t>(In) * J, 0.0f);
+  X[2] = std::numeric_limits<float>::quiet_NaN();             // token 0
+  for (int k = 0; k < In; ++k) X[static_cast<std::size_t>(In + k)] = k % 2 == 0 ? 1e-36f : -1e-36f;  // token 1
+  for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2}) {
+    if (!selectPolicyKernel(k)) continue;
+    std::vector<float> y(static_cast<std::size_t>(Out) * J);
+    detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), y.data());
+    for (int r = 0; r < Out; ++r) {
+      CHECK(std::isnan(y[static_cast<std::size_t>(r)]));  // as std::max(NaN, 0) in the fp32 path
+      // 32767 / 1e-36 overflows: the column counts as zero, the output is the bias (ReLU'd).
+      CHECK(y[static_cast<std::size_t>(Out + r)] == std::max(b[static_cast<std::size_t>(r)], 0.0f));
+    }
+  }
+  // quantizeMatrixInt8 refuses what the layout cannot hold.
+  std::vector<std::uint8_t> sec(detail::quantSectionBytes(4, 3));
+  std::vector<float> w(12, 0.5f);
+  CHECK_THROWS_AS(quantizeMatrixInt8(w.data(), 4, 3, sec.data()), std::invalid_argument);
 }
 
 TEST_CASE("int8 kernels: a non-finite token gives NaN outputs, an all-zero token the bias") {
@@ -310,15 +336,26 @@ TEST_CASE("the int8 blob from the file equals the one from the bound views (mani
   checkBlobOrder<PaperPolicyDims>(12);
 }
 
-TEST_CASE("quantizeModelInt8 refuses a matrix with an odd number of inputs") {
-  using OddDims = PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>;
+namespace {
+
+ModelFile modelOf(const PolicyArch& arch) {
   ModelHeader h;
-  h.arch = OddDims::arch();
+  h.arch = arch;
   for (int j = 0; j < h.arch.tokens; ++j) h.joints.push_back({"j" + std::to_string(j), -1.0, 1.0, 2.0});
   for (int mv = 0; mv < h.arch.movements; ++mv) h.movement_names.push_back("m" + std::to_string(mv));
   h.metadata_json = "{}";
-  const ModelFile file = decodeModel(encodeModel(h, test::randomManifestTensors(h.arch, 3)), "odd model");
-  CHECK_THROWS_WITH_AS(quantizeModelInt8(file), doctest::Contains("13 inputs"), ModelFileError);
+  return decodeModel(encodeModel(h, test::randomManifestTensors(h.arch, 3)), "odd model");
+}
+
+}  // namespace
+
+TEST_CASE("quantizeModelInt8 refuses an odd head size or a matrix with an odd number of inputs") {
+  static_assert(!int8Supported<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>>());
+  static_assert(int8Supported<SmallPolicyDims>() && int8Supported<PaperPolicyDims>());
+  CHECK_THROWS_WITH_AS(quantizeModelInt8(modelOf(PolicyDims<36, 4, 1, 2, 20, 14, 8, 2, 4, 16>::arch())),
+                       doctest::Contains("head size 9 is odd"), ModelFileError);
+  CHECK_THROWS_WITH_AS(quantizeModelInt8(modelOf(PolicyDims<32, 4, 1, 2, 20, 13, 8, 2, 4, 16>::arch())),
+                       doctest::Contains("13 inputs"), ModelFileError);
 }
 
 TEST_CASE("stepPolicy with int8 weights: same bits under SSE2 and AVX2, near fp32, fp32 again when unbound") {

@@ -1,7 +1,7 @@
 // Real-time property of a whole nao_rt run: from activate through 6,000 ticks (10 simulated
 // minutes: the reference ends after its demonstration, so the no-human hold and the return home
 // run too), with the ring push and the per-tick records, nothing is allocated; summary.json
-// reports the count.
+// reports the count. The same for a shorter run with --precision int8.
 #include "rt_run.hpp"
 
 #include "nao/model_file.hpp"
@@ -72,5 +72,14 @@ TEST_CASE("a 6,000-tick nao_rt run allocates nothing after activate, and summary
   CHECK(s["attention"]["records_written"] == 6000);
   CHECK(s["attention"]["record_count"] == kDefaultAttentionCapacity);
   CHECK(s["attention"]["first_record"] == 6000 - kDefaultAttentionCapacity);
+
+  // --precision int8: the quantised tokens and sums live on the stack; 1,000 ticks.
+  o.precision = "int8";
+  o.ticks = 1000;
+  o.log_dir = (dir / "run_int8").string();
+  const rt::RunReport r8 = rt::runController<SmallPolicyDims>(o, out, err, &probe);
+  REQUIRE_MESSAGE(r8.status == 0, r8.error);
+  CHECK(r8.allocations_after_activate == 0);
+  CHECK(nlohmann::json::parse(r8.summary_json)["model"]["precision"] == "int8");
   fs::remove_all(dir);
 }

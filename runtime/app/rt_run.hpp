@@ -391,9 +391,14 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
         int8_storage = quantizeModelInt8(p.model);
         blob = int8_storage.data.get();
       }
-      if (quantizedModelBytes(p.model.header.arch) != quantizedPolicyBytes<Dims>())
-        throw std::logic_error("nao_rt: the int8 blob of the model is not the compiled layout's size");
-      bindQuantizedWeights<Dims>(weights, blob);
+      if constexpr (int8Supported<Dims>()) {
+        if (quantizedModelBytes(p.model.header.arch) != quantizedPolicyBytes<Dims>())
+          throw std::logic_error("nao_rt: the int8 blob of the model is not the compiled layout's size");
+        bindQuantizedWeights<Dims>(weights, blob);
+      } else {
+        throw std::runtime_error("--precision int8: this architecture has an odd or over-512 input size; int8 "
+                                 "needs even input sizes up to 512");
+      }
     }
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
     // longer read, so its memory goes back before the loop (resident set, docs/embedded.md).

@@ -34,6 +34,9 @@ bool isInt8Tensor(std::string_view name) noexcept {
 }
 
 void quantizeMatrixInt8(const float* W, int out, int in, std::uint8_t* section) {
+  if (in % 2 != 0 || in > detail::kInt8MaxIn || out <= 0 || in <= 0)
+    throw std::invalid_argument("quantizeMatrixInt8: " + std::to_string(out) + " x " + std::to_string(in) +
+                                " (the int8 layout takes an even number of inputs up to 512)");
   auto* q = reinterpret_cast<std::int8_t*>(section);
   float* scale = reinterpret_cast<float*>(section + detail::quantPad(static_cast<std::size_t>(out) * in));
   for (int r = 0; r < out; ++r) {
@@ -64,6 +67,11 @@ std::size_t quantizedModelBytes(const PolicyArch& arch) {
 }
 
 AlignedBytes quantizeModelInt8(const ModelFile& model) {
+  // The per-head slices of Wo start at pairs of columns: the head size must be even too.
+  const PolicyArch& arch = model.header.arch;
+  if (arch.heads <= 0 || (arch.d_model / arch.heads) % 2 != 0)
+    throw ModelFileError("int8 weights: head size " + std::to_string(arch.heads > 0 ? arch.d_model / arch.heads : 0) +
+                         " is odd (the int8 kernels take input columns in pairs)");
   AlignedBytes blob;
   blob.size = quantizedModelBytes(model.header.arch);
   blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));

@@ -307,6 +307,13 @@ inline void quantizeTokensInt16(const float* X, std::int32_t* xp, float* sx) {
     // q = round-to-nearest-even(x · 32767 / m), |q| <= 32767 (the product may round up to
     // 32767.0004: clamped). cvtps2dq rounds like nearbyint in the default rounding mode.
     const float inv = 32767.0f / m;
+    if (!(inv <= std::numeric_limits<float>::max())) {
+      // m below ~1e-34: 32767 / m overflows. The column is zero to within 1e-34 of every input
+      // (its products are below what any output can resolve): quantise it as zero.
+      for (int p = 0; p < In / 2; ++p) out[p] = 0;
+      sx[t] = 0.0f;
+      continue;
+    }
     k = 0;
 #if defined(__SSE2__)
     {
@@ -346,7 +353,9 @@ inline void dequantizeTokens(const std::int32_t* acc, const float* sw, const flo
       __m128 y = _mm_mul_ps(_mm_cvtepi32_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(acc + t * Out + r))),
                             _mm_mul_ps(_mm_loadu_ps(sw + r), s));
       if (b != nullptr) y = _mm_add_ps(_mm_loadu_ps(b + r), y);
-      if constexpr (kRelu) y = _mm_max_ps(y, zero);
+      // max(0, y): MAXPS returns its second operand when one is NaN, so NaN stays NaN and
+      // -0 stays -0, exactly as std::max(y, 0.0f) below and in the fp32 path.
+      if constexpr (kRelu) y = _mm_max_ps(zero, y);
       _mm_storeu_ps(Y + t * Out + r, y);
     }
 #endif
@@ -389,19 +398,20 @@ inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std
   constexpr int kRows = Out / 8 * 8;
   for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
     const int pc = std::min(kInt8Strip, P - p0);
-    // The next strip (or, after the last, what follows in the blob): 16 bytes of it per pair
-    // and block of this strip, so the block's share is pc·16 bytes.
+    // The next strip of this matrix (none after the last: no address outside it is formed):
+    // 16 bytes of it per pair and block of this strip, so the block's share is pc·16 bytes.
+    const bool more = p0 + pc < P;
     const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
     for (int r = 0; r < kRows; r += 8) {
       // Fresh sums per strip, added to acc after it (fewer live registers than carrying acc).
       __m128i a0[J], a1[J];
       for (int t = 0; t < J; ++t) a0[t] = a1[t] = _mm_setzero_si128();
       const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
-      const std::int8_t* share = next + static_cast<std::ptrdiff_t>(r) * 2 * pc;
+      const std::int8_t* share = more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr;
 #pragma GCC unroll 2
       for (int i = 0; i < pc; ++i) {
 #if defined(__GNUC__)
-        if ((i & 3) == 0) __builtin_prefetch(share + 16 * i, 0, 2);
+        if (more && (i & 3) == 0) __builtin_prefetch(share + 16 * i, 0, 2);
 #endif
         const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(w + static_cast<std::ptrdiff_t>(i) * Out * 2));
         // Sign-extend bytes to int16 (SSE2: duplicate each byte into a word, shift right).
@@ -438,15 +448,16 @@ __attribute__((target("avx2"), noinline)) void accumulateInt8Avx2(const std::int
   constexpr int kRows = Out / 8 * 8;
   for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
     const int pc = std::min(kInt8Strip, P - p0);
+    const bool more = p0 + pc < P;  // the next strip of this matrix, as in the SSE2 kernel
     const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
     for (int r = 0; r < kRows; r += 8) {
       __m256i a[J];
       for (int t = 0; t < J; ++t) a[t] = _mm256_setzero_si256();
       const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
-      const std::int8_t* share = next + static_cast<std::ptrdiff_t>(r) * 2 * pc;  // pc·16 bytes
+      const std::int8_t* share = more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr;  // pc·16 bytes
 #pragma GCC unroll 4
       for (int i = 0; i < pc; ++i) {
-        if ((i & 3) == 0) __builtin_prefetch(share + 16 * i, 0, 2);
+        if (more && (i & 3) == 0) __builtin_prefetch(share + 16 * i, 0, 2);
         const __m256i v = _mm256_cvtepi8_epi16(
             _mm_loadu_si128(reinterpret_cast<const __m128i*>(w + static_cast<std::ptrdiff_t>(i) * Out * 2)));
 #pragma GCC unroll 8
