@@ -53,6 +53,20 @@ std::vector<std::string> arrayItems(const std::string& text, const std::string& 
   return items;
 }
 
+/// A fresh directory with a random small-architecture model at `path` and `out` for the
+/// generated sources.
+struct SmallModel {
+  std::string path;
+  fs::path out;
+};
+SmallModel smallModel(const std::string& name, std::uint64_t seed) {
+  const fs::path dir = freshDir(name);
+  const nao::PolicyArch arch = nao::smallArch();
+  SmallModel m{(dir / "in.bin").string(), dir / "gen"};
+  nao::writeModelFile(m.path, makeHeader(arch), nao::test::randomManifestTensors(arch, seed));
+  return m;
+}
+
 }  // namespace
 
 TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S and a copy of the model") {
@@ -126,11 +140,10 @@ TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S 
 }
 
 TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new model changes") {
-  const fs::path dir = freshDir("codegen_rerun");
-  const std::string model_path = (dir / "in.bin").string();
   const nao::PolicyArch arch = nao::smallArch();
-  nao::writeModelFile(model_path, makeHeader(arch), nao::test::randomManifestTensors(arch, 5));
-  const fs::path out = dir / "gen";
+  const SmallModel m = smallModel("codegen_rerun", 5);
+  const std::string& model_path = m.path;
+  const fs::path& out = m.out;
   nao::codegen::generate(model_path, out.string());
   const auto stamp = fs::last_write_time(out / "nao_model_config.hpp");
 
@@ -150,11 +163,10 @@ TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new mo
 }
 
 TEST_CASE("nao_codegen --precision int8 compiles in the int8 blob beside the model, described by the config") {
-  const fs::path dir = freshDir("codegen_int8");
-  const std::string model_path = (dir / "in.bin").string();
   const nao::PolicyArch arch = nao::smallArch();
-  nao::writeModelFile(model_path, makeHeader(arch), nao::test::randomManifestTensors(arch, 9));
-  const fs::path out = dir / "gen";
+  const SmallModel m = smallModel("codegen_int8", 9);
+  const std::string& model_path = m.path;
+  const fs::path& out = m.out;
   nao::codegen::generate(model_path, out.string());
   // fp32 -> int8 over the same directory: the config, the .S and the blob change, nothing else.
   const nao::codegen::Result r = nao::codegen::generate(model_path, out.string(), nao::WeightPrecision::kInt8);

@@ -80,12 +80,7 @@ int runInfo(const InfoOptions& options, std::ostream& out, std::ostream& err) {
     } catch (const ModelFileError& e) {
       throw ModelFileError(std::string(e.what()) + " (" + options.urdf_path + ")");
     }
-    // As a run decides it (rt_run.cpp loadModel): asked for, else int8 only for a compiled-in
-    // model generated with nao_codegen --precision int8.
-    const bool compiled = source == "compiled-in";
-    const WeightPrecision precision = !options.precision.empty() ? parseWeightPrecision(options.precision)
-                                      : compiled && options.compiled.int8_bytes != nullptr ? WeightPrecision::kInt8
-                                                                                           : WeightPrecision::kFp32;
+    const WeightPrecision precision = runPrecision(options.precision, source == "compiled-in", options.compiled);
     out << modelInfoJson(model, source, weightPrecisionName(precision)) << "\n";
     return 0;
   } catch (const std::exception& e) {

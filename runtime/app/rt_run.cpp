@@ -73,9 +73,7 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
         "--weights FILE, or train one with toolchain/nao train and rebuild");
   }
   // Precision: asked for, or what the compiled-in model was generated with (fp32 for --weights).
-  p.precision = !o.precision.empty() ? parseWeightPrecision(o.precision)
-                : p.model_bytes != nullptr && o.compiled.int8_bytes != nullptr ? WeightPrecision::kInt8
-                                                                              : WeightPrecision::kFp32;
+  p.precision = runPrecision(o.precision, p.model_bytes != nullptr, o.compiled);
   if (p.precision == WeightPrecision::kInt8 && p.model_bytes != nullptr && o.compiled.int8_bytes != nullptr) {
     // The compiled-in int8 blob: checked once, like the model's bytes.
     checkInt8Image(o.compiled, p.model.header.arch, origin);

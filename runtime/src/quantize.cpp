@@ -18,6 +18,11 @@ WeightPrecision parseWeightPrecision(const std::string& s) {
   throw std::invalid_argument("precision must be fp32 or int8, got '" + s + "'");
 }
 
+WeightPrecision runPrecision(const std::string& asked, bool compiled_in, const ModelImage& image) {
+  if (!asked.empty()) return parseWeightPrecision(asked);
+  return compiled_in && image.int8_bytes != nullptr ? WeightPrecision::kInt8 : WeightPrecision::kFp32;
+}
+
 namespace {
 
 bool endsWith(std::string_view s, std::string_view tail) {

@@ -31,6 +31,11 @@ const char* weightPrecisionName(WeightPrecision p) noexcept;
 /// Parses "fp32" / "int8"; throws std::invalid_argument naming the accepted values otherwise.
 WeightPrecision parseWeightPrecision(const std::string& s);
 
+/// The precision a run uses: `asked` ("fp32"/"int8") if given, else int8 only for the
+/// compiled-in model (`compiled_in`) when `image` carries an int8 blob (nao_codegen --precision
+/// int8), else fp32. nao_rt's run and --info both decide it here. Throws as parseWeightPrecision.
+WeightPrecision runPrecision(const std::string& asked, bool compiled_in, const ModelImage& image);
+
 /// True for the manifest tensors that have an int8 copy (the order of the blob is manifest
 /// order, the same as detail::visitQuantViews).
 bool isInt8Tensor(std::string_view name) noexcept;
