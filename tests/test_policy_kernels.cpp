@@ -69,6 +69,13 @@ void fillWide(std::mt19937_64& rng, std::vector<float>& v) {
   }
 }
 
+template <class Derived>
+void fillWide(std::mt19937_64& rng, Eigen::MatrixBase<Derived>& m) {
+  std::vector<float> v(static_cast<std::size_t>(m.size()));
+  fillWide(rng, v);
+  for (Eigen::Index i = 0; i < m.size(); ++i) m.derived().data()[i] = v[static_cast<std::size_t>(i)];
+}
+
 /// affineTokens of one shape: kSse and kAvx2 (if available) against the scalar definition,
 /// bit for bit, with and without bias and ReLU, over several random draws.
 template <int Out, int In, int J>
@@ -288,6 +295,78 @@ TEST_CASE("the bit-for-bit comparison can fail: another summation order or a fus
     }
   CHECK_FALSE(sameBits(reversed.data(), want.data(), want.size()));
   CHECK_FALSE(sameBits(fused.data(), want.data(), want.size()));
+}
+
+/// The window-attention kernels against the Eigen code they replaced (policy.hpp before the
+/// transposed key ring): per key, q.segment<Dh>(c0).dot(K.col(key).segment<Dh>(c0)) · scale, and
+/// o.segment<Dh>(c0) += α · V.col(key).segment<Dh>(c0) newest tick first. Bit for bit, both kernels.
+template <int D, int H, int J, int W>
+void checkWindowKernels(std::uint64_t seed) {
+  constexpr int Dh = D / H, N = W * J;
+  constexpr int NP = (N + detail::kKeyRowBlock - 1) / detail::kKeyRowBlock * detail::kKeyRowBlock;
+  static_assert(detail::kWindowKernelExact<Dh>);
+  std::mt19937_64 rng(seed);
+  Eigen::Matrix<float, D, J> q;
+  Eigen::Matrix<float, D, N> K, V;
+  fillWide(rng, q);
+  fillWide(rng, K);
+  fillWide(rng, V);
+  Eigen::Matrix<float, NP, D> KT = Eigen::Matrix<float, NP, D>::Zero();
+  KT.template topRows<N>() = K.transpose();
+  const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
+  float alpha[N];
+  for (float& a : alpha) a = uniform(rng, 0.0, 1.0);
+  KernelGuard guard;
+  for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2}) {
+    if (!selectPolicyKernel(k)) continue;
+    for (int n : {1, W / 2, W})
+      for (int slot : {0, n - 1, W - 1}) {
+        if (n < W && slot != n - 1) continue;  // before the ring wraps, the newest tick is slot n − 1
+        const int rows = (n * J + detail::kKeyRowBlock - 1) / detail::kKeyRowBlock * detail::kKeyRowBlock;
+        for (int hd = 0; hd < H; ++hd)
+          for (int i = 0; i < J; ++i) {
+            const int c0 = hd * Dh;
+            alignas(32) float got[NP];
+            detail::windowScores<Dh, NP>(q.col(i).data() + c0, KT.data() + c0 * NP, rows, scale, got);
+            for (int key = 0; key < n * J; ++key) {
+              const float want = q.col(i).template segment<Dh>(c0).dot(K.col(key).template segment<Dh>(c0)) * scale;
+              REQUIRE_MESSAGE(std::memcmp(&want, &got[key], sizeof(float)) == 0,
+                              policyKernelName(k) << " Dh " << Dh << " key " << key << ": " << got[key] << " vs " << want);
+            }
+            Eigen::Matrix<float, Dh, 1> want_o = Eigen::Matrix<float, Dh, 1>::Zero();
+            for (int age = 0; age < n; ++age)
+              for (int j = 0; j < J; ++j)
+                want_o += alpha[age * J + j] * V.col(((slot - age + W) % W) * J + j).template segment<Dh>(c0);
+            float got_o[Dh];
+            detail::windowValues<Dh, J, W>(alpha, V.data() + c0, D, slot, n, got_o);
+            REQUIRE_MESSAGE(sameBits(want_o.data(), got_o, Dh), policyKernelName(k) << " values, Dh " << Dh);
+          }
+      }
+  }
+}
+
+TEST_CASE("window attention kernels: scores and value sums equal the per-key Eigen code bit for bit (SSE, AVX2)") {
+  checkWindowKernels<128, 4, 5, 20>(31);  // paper: head dim 32, 100 keys in 104 rows
+  checkWindowKernels<32, 4, 5, 8>(32);    // small: head dim 8, 40 keys
+  checkWindowKernels<64, 4, 5, 3>(33);    // head dim 16, 15 keys in 16 rows
+  noteAvx2Absent();
+}
+
+TEST_CASE("the window score comparison can fail: a plain k-order dot differs from Eigen's on these inputs") {
+  constexpr int Dh = 32, N = 100;
+  std::mt19937_64 rng(31);
+  Eigen::Matrix<float, Dh, N> K;
+  Eigen::Matrix<float, Dh, 1> q;
+  fillWide(rng, q);
+  fillWide(rng, K);
+  int differ = 0;
+  for (int key = 0; key < N; ++key) {
+    float plain = 0.0f;
+    for (int d = 0; d < Dh; ++d) plain = plain + q[d] * K(d, key);
+    const float eigen = q.dot(K.col(key));
+    differ += std::memcmp(&plain, &eigen, sizeof(float)) != 0;
+  }
+  CHECK(differ > N / 4);
 }
 
 TEST_CASE("stepPolicy records the same bits under SSE and AVX2: small dims, many weights and inputs") {

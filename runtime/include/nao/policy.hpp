@@ -233,6 +233,12 @@ struct PolicyWorkspace {
   static constexpr int N = Dims::kMemory;
   using Tokens = Eigen::Matrix<float, D, J>;  ///< one column per token of the new tick
   using Ring = Eigen::Matrix<float, D, N>;    ///< column slot*J + j: token j of the tick in `slot`
+  /// Rows of a key ring: N padded to whole passes of the score kernels (the extra rows are
+  /// scored and ignored).
+  static constexpr int kKeyRows = (N + detail::kKeyRowBlock - 1) / detail::kKeyRowBlock * detail::kKeyRowBlock;
+  /// A key ring, transposed: row slot*J + j is token j of the tick in `slot`, so column d holds
+  /// dimension d of every key (the lanes of detail::windowScores).
+  using KeyRing = Eigen::Matrix<float, kKeyRows, D>;
   using JointVec = Eigen::Matrix<float, J, 1>;
 
   // Stream position: ticks since resetPolicyStream; the new tick goes to slot ticks % W.
@@ -257,8 +263,10 @@ struct PolicyWorkspace {
 
   // Key/value rings: keys and values of every encoder layer's self-attention and every decoder
   // layer's cross-attention, for the tokens of the last W ticks.
-  std::array<Ring, LE> enc_k{}, enc_v{};
-  std::array<Ring, LD> cross_k{}, cross_v{};
+  std::array<KeyRing, LE> enc_k{};
+  std::array<Ring, LE> enc_v{};
+  std::array<KeyRing, LD> cross_k{};
+  std::array<Ring, LD> cross_v{};
   /// f_h(M) = Wo_h V_h of the last decoder layer's cross-attention per memory token (norm score).
   std::array<Ring, H> f_ring{};
   Eigen::Matrix<float, D, 1> contribution = Eigen::Matrix<float, D, 1>::Zero();
@@ -537,25 +545,40 @@ inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<
   affine<false>(A.wo, A.wo8, A.bo, ws.o, ws.out);
 }
 
-/// Attention of the J queries in ws.q over the tokens of the last `n` ticks in the rings K, V
-/// (n = min(ticks, W), the newest tick in `slot`), with the age bias: ws.o (before Wo) and α in
-/// ws.alpha[h][i][age * J + j]. Keys are visited newest first, so the sums do not depend on
-/// where the ring happens to start.
+/// Attention of the J queries in ws.q over the tokens of the last `n` ticks in the rings K
+/// (keys, transposed) and V (n = min(ticks, W), the newest tick in `slot`), with the age bias:
+/// ws.o (before Wo) and α in ws.alpha[h][i][age * J + j]. The softmax and the value sum visit
+/// the keys newest first, so the sums do not depend on where the ring happens to start. The
+/// scores are those of Eigen's per-key dot, bit for bit (detail::windowScores).
 template <class Dims>
-inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typename PolicyWorkspace<Dims>::Ring& K,
+inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typename PolicyWorkspace<Dims>::KeyRing& K,
                             const typename PolicyWorkspace<Dims>::Ring& V, int slot, int n, PolicyWorkspace<Dims>& ws) {
-  constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim, W = Dims::kWindow, N = Dims::kMemory;
+  constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim, W = Dims::kWindow, N = Dims::kMemory, D = Dims::kDModel;
+  constexpr int NP = PolicyWorkspace<Dims>::kKeyRows;
   const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
+  // Slots 0 .. n−1 hold the window (n < W only before the ring first wraps): keys 0 .. n·J−1.
+  const int rows = (n * J + kKeyRowBlock - 1) / kKeyRowBlock * kKeyRowBlock;
+  alignas(32) float raw[NP];  // scores by ring row
   for (int hd = 0; hd < Dims::kHeads; ++hd) {
     const int c0 = hd * Dh;
     for (int i = 0; i < J; ++i) {
+      const float* q = ws.q.col(i).data() + c0;
+      if constexpr (kWindowKernelExact<Dh>) {
+        windowScores<Dh, NP>(q, K.data() + static_cast<std::ptrdiff_t>(c0) * NP, rows, scale, raw);
+      } else {
+        for (int r = 0; r < n * J; ++r) {
+          float dot = 0.0f;
+          for (int d = 0; d < Dh; ++d) dot += q[d] * K(r, c0 + d);
+          raw[r] = dot * scale;
+        }
+      }
       float* s = ws.alpha[hd][i];
       float s_max = -std::numeric_limits<float>::infinity();
       for (int age = 0; age < n; ++age) {
         const int base = ((slot - age + W) % W) * J;
         const float bias = A.age_bias(age, hd);
         for (int j = 0; j < J; ++j) {
-          const float v = ws.q.col(i).template segment<Dh>(c0).dot(K.col(base + j).template segment<Dh>(c0)) * scale + bias;
+          const float v = raw[base + j] + bias;
           s[age * J + j] = v;
           s_max = std::max(s_max, v);
         }
@@ -566,15 +589,8 @@ inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typen
         sum += s[m];
       }
       const float inv = 1.0f / sum;
-      ws.o.col(i).template segment<Dh>(c0).setZero();
-      for (int age = 0; age < n; ++age) {
-        const int base = ((slot - age + W) % W) * J;
-        for (int j = 0; j < J; ++j) {
-          float& a = s[age * J + j];
-          a *= inv;
-          ws.o.col(i).template segment<Dh>(c0) += a * V.col(base + j).template segment<Dh>(c0);
-        }
-      }
+      for (int m = 0; m < n * J; ++m) s[m] *= inv;
+      windowValues<Dh, J, W>(s, V.data() + c0, D, slot, n, ws.o.col(i).data() + c0);
       for (int m = n * J; m < N; ++m) s[m] = 0.0f;
     }
   }
@@ -764,7 +780,7 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
     detail::affine<false>(L.attn.wq, L.attn.wq8, L.attn.bq, ws.h, ws.q);
     detail::affine<false>(L.attn.wk, L.attn.wk8, L.attn.bk, ws.h, ws.k);
     detail::affine<false>(L.attn.wv, L.attn.wv8, L.attn.bv, ws.h, ws.v);
-    ws.enc_k[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.k;
+    ws.enc_k[static_cast<std::size_t>(l)].template middleRows<J>(slot * J) = ws.k.transpose();
     ws.enc_v[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.v;
     detail::windowAttention<Dims>(L.attn, ws.enc_k[static_cast<std::size_t>(l)], ws.enc_v[static_cast<std::size_t>(l)],
                                   slot, n, ws);
@@ -780,7 +796,7 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
     const TemporalAttentionWeights<Dims>& C = w.dec[static_cast<std::size_t>(l)].cross;
     detail::affine<false>(C.wk, C.wk8, C.bk, ws.memory, ws.k);
     detail::affine<false>(C.wv, C.wv8, C.bv, ws.memory, ws.v);
-    ws.cross_k[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.k;
+    ws.cross_k[static_cast<std::size_t>(l)].template middleRows<J>(slot * J) = ws.k.transpose();
     ws.cross_v[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.v;
   }
   {

@@ -496,6 +496,159 @@ inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float
   dequantizeTokens<Out, J, kRelu>(acc, sw, sx, b, Y);
 }
 
+// ---------------------------------------------------------------------------------------------
+// Window attention (policy.hpp windowAttention): one query's scores against every key of a
+// ring, and the α-weighted sum of the values. Before these kernels the scores were Eigen's
+// fixed-size dot of two Dh-vectors, one key at a time (about 12 % of a paper-model step); here
+// the keys are the lanes, so 4 (SSE) or 8 (AVX2) scores come out of each pass over the query.
+// The keys are stored transposed for that (PolicyWorkspace::KeyRing: column d holds dimension d
+// of every key, rows padded to kKeyRowBlock).
+//
+// Bits: each lane computes one key's dot in exactly the order Eigen's fixed-size dot uses with
+// 4-float packets (Eigen 3.4 redux_vec_unroller and predux<Packet4f>): the packet products
+// q[4m..4m+3]·k[4m..4m+3] for m = 0..Dh/4−1 summed as a pairwise tree over m (for Dh/4 a power of
+// two, halving is the same tree as bottom-up pairs), then the 4 lanes as (x0 + x2) + (x1 + x3).
+// So the scores, and every bit after them, are those of the Eigen code they replace, with
+// either kernel (tests/test_policy_kernels.cpp checks this against Eigen's dot on random data).
+// The value sum is elementwise (o[d] += α·v[d], keys in the caller's order), the same at any
+// width.
+
+/// Rows of a key ring are padded to a multiple of this (the AVX2 kernel's 8 lanes).
+inline constexpr int kKeyRowBlock = 8;
+
+/// True if the score kernels reproduce Eigen's dot of Dh floats bit for bit at this build's
+/// packet width (else windowAttention keeps a plain loop over the transposed keys).
+template <int Dh>
+inline constexpr bool kWindowKernelExact =
+    kPacketSize == 4 && Dh % 4 == 0 && Dh <= 64 && ((Dh / 4) & (Dh / 4 - 1)) == 0;
+
+/// s[k] = dot(q, key k) · scale for keys k = 0 .. rows−1 (rows a multiple of kKeyRowBlock),
+/// key k's dimension d at KT[d·NP + k]. Requires kWindowKernelExact<Dh>.
+template <int Dh, int NP>
+inline void windowScoresSse(const float* q, const float* KT, int rows, float scale, float* s) {
+  using Eigen::internal::padd;
+  using Eigen::internal::pmul;
+  using Eigen::internal::ploadu;
+  using Eigen::internal::pset1;
+  static_assert(kWindowKernelExact<Dh>, "Eigen's dot order is reproduced for packets of 4 only");
+  constexpr int P = 4, M = Dh / P;
+  const Packet sc = pset1<Packet>(scale);
+  for (int k0 = 0; k0 < rows; k0 += P) {
+    Packet lane[P];
+#pragma GCC unroll 4
+    for (int l = 0; l < P; ++l) {
+      Packet t[M];
+#pragma GCC unroll 16
+      for (int m = 0; m < M; ++m) t[m] = pmul(pset1<Packet>(q[m * P + l]), ploadu<Packet>(KT + (m * P + l) * NP + k0));
+#pragma GCC unroll 4
+      for (int w = 1; w < M; w *= 2)
+#pragma GCC unroll 8
+        for (int m = 0; m + w < M; m += 2 * w) t[m] = padd(t[m], t[m + w]);
+      lane[l] = t[0];
+    }
+    Eigen::internal::pstoreu(s + k0, pmul(padd(padd(lane[0], lane[2]), padd(lane[1], lane[3])), sc));
+  }
+}
+
+/// o[0 .. Dh) = Σ_m a[m] · v_m in m = 0 .. n·J−1 order (o starts at 0), v_m the value column of
+/// age m / J, joint m % J: ring column ((slot − age + W) mod W)·J + j, at V + column·ld.
+template <int Dh, int J, int W>
+inline void windowValuesSse(const float* a, const float* V, int ld, int slot, int n, float* o) {
+  using Eigen::internal::padd;
+  using Eigen::internal::pmul;
+  using Eigen::internal::ploadu;
+  using Eigen::internal::pset1;
+  constexpr int P = kPacketSize, NPk = Dh / P, Tail = Dh % P;
+  Packet acc[NPk > 0 ? NPk : 1];
+  float tail[Tail > 0 ? Tail : 1] = {};
+  for (auto& x : acc) x = pset1<Packet>(0.0f);
+  for (int age = 0; age < n; ++age) {
+    const int base = ((slot - age + W) % W) * J;
+    for (int j = 0; j < J; ++j) {
+      const float aj = a[age * J + j];
+      const Packet w = pset1<Packet>(aj);
+      const float* v = V + static_cast<std::ptrdiff_t>(base + j) * ld;
+#pragma GCC unroll 16
+      for (int p = 0; p < NPk; ++p) acc[p] = padd(acc[p], pmul(w, ploadu<Packet>(v + p * P)));
+      for (int d = 0; d < Tail; ++d) tail[d] += aj * v[NPk * P + d];
+    }
+  }
+  for (int p = 0; p < NPk; ++p) Eigen::internal::pstoreu(o + p * P, acc[p]);
+  for (int d = 0; d < Tail; ++d) o[NPk * P + d] = tail[d];
+}
+
+#if NAO_POLICY_HAVE_AVX2
+/// windowScoresSse with 8 keys per pass (the same bits: the lanes are independent keys).
+template <int Dh, int NP>
+__attribute__((target("avx2"), noinline)) void windowScoresAvx2(const float* q, const float* KT, int rows, float scale,
+                                                                 float* s) {
+  static_assert(kWindowKernelExact<Dh>, "Eigen's dot order is reproduced for packets of 4 only");
+  constexpr int P = 4, M = Dh / P;
+  const __m256 sc = _mm256_set1_ps(scale);
+  for (int k0 = 0; k0 < rows; k0 += 8) {
+    __m256 lane[P];
+#pragma GCC unroll 4
+    for (int l = 0; l < P; ++l) {
+      __m256 t[M];
+#pragma GCC unroll 16
+      for (int m = 0; m < M; ++m)
+        t[m] = _mm256_mul_ps(_mm256_broadcast_ss(q + m * P + l), _mm256_loadu_ps(KT + (m * P + l) * NP + k0));
+#pragma GCC unroll 4
+      for (int w = 1; w < M; w *= 2)
+#pragma GCC unroll 8
+        for (int m = 0; m + w < M; m += 2 * w) t[m] = _mm256_add_ps(t[m], t[m + w]);
+      lane[l] = t[0];
+    }
+    _mm256_storeu_ps(s + k0, _mm256_mul_ps(_mm256_add_ps(_mm256_add_ps(lane[0], lane[2]), _mm256_add_ps(lane[1], lane[3])), sc));
+  }
+}
+
+/// windowValuesSse 8 dimensions at a time (Dh a multiple of 8; the same bits).
+template <int Dh, int J, int W>
+__attribute__((target("avx2"), noinline)) void windowValuesAvx2(const float* a, const float* V, int ld, int slot, int n,
+                                                                 float* o) {
+  static_assert(Dh % 8 == 0, "whole ymm registers of a head");
+  __m256 acc[Dh / 8];
+  for (auto& x : acc) x = _mm256_setzero_ps();
+  for (int age = 0; age < n; ++age) {
+    const int base = ((slot - age + W) % W) * J;
+    for (int j = 0; j < J; ++j) {
+      const __m256 w = _mm256_broadcast_ss(a + age * J + j);
+      const float* v = V + static_cast<std::ptrdiff_t>(base + j) * ld;
+#pragma GCC unroll 8
+      for (int p = 0; p < Dh / 8; ++p) acc[p] = _mm256_add_ps(acc[p], _mm256_mul_ps(w, _mm256_loadu_ps(v + p * 8)));
+    }
+  }
+  for (int p = 0; p < Dh / 8; ++p) _mm256_storeu_ps(o + p * 8, acc[p]);
+}
+#endif  // NAO_POLICY_HAVE_AVX2
+
+/// The scores of windowScoresSse with the active kernel (the same bits with either).
+template <int Dh, int NP>
+inline void windowScores(const float* q, const float* KT, int rows, float scale, float* s) {
+#if NAO_POLICY_HAVE_AVX2
+  if (activePolicyKernel() == PolicyKernel::kAvx2) {
+    windowScoresAvx2<Dh, NP>(q, KT, rows, scale, s);
+    return;
+  }
+#endif
+  windowScoresSse<Dh, NP>(q, KT, rows, scale, s);
+}
+
+/// The value sum of windowValuesSse with the active kernel (the same bits with either).
+template <int Dh, int J, int W>
+inline void windowValues(const float* a, const float* V, int ld, int slot, int n, float* o) {
+#if NAO_POLICY_HAVE_AVX2
+  if constexpr (Dh % 8 == 0) {
+    if (activePolicyKernel() == PolicyKernel::kAvx2) {
+      windowValuesAvx2<Dh, J, W>(a, V, ld, slot, n, o);
+      return;
+    }
+  }
+#endif
+  windowValuesSse<Dh, J, W>(a, V, ld, slot, n, o);
+}
+
 /// Y = W X + b (b may be null: zero), then ReLU if kRelu; every column an independent token.
 /// Each Y(r, t) is b(r) + W(r,0) X(0,t) + W(r,1) X(1,t) + ... summed in that order, whatever
 /// the kernel and packet width (bit-identical across kernels). W is read once. Real-time safe:
