@@ -344,11 +344,13 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   std::string out, err;
   CHECK(parse({"--help"}, cl, out, err) == 0);
   for (const char* flag : {"--weights", "--urdf", "--reference", "--movement", "--seed", "--ticks", "--seconds",
-                           "--realtime", "--log", "--attention-shm", "--info", "--zero-timing", "--precision"})
+                           "--realtime", "--log", "--attention-shm", "--info", "--zero-timing", "--precision",
+                           "--lola-io-thread", "--lola-io-wait-ms", "--emulate-tick-ms"})
     CHECK_MESSAGE(out.find(flag) != std::string::npos, flag);
 
   for (std::vector<const char*> bad : {std::vector<const char*>{"--bogus"}, {"--ticks", "-3"}, {"--ticks", "ten"},
-                                       {"--ticks", "5", "--seconds", "2"}, {"--seed"}, {"--precision", "fp16"}}) {
+                                       {"--ticks", "5", "--seconds", "2"}, {"--seed"}, {"--precision", "fp16"},
+                                       {"--emulate-tick-ms", "-1"}, {"--lola-io-wait-ms", "12"}}) {
     rt::CommandLine c;
     CAPTURE(bad[0]);
     CHECK(parse(bad, c, out, err) == 2);
@@ -371,6 +373,16 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   CHECK(c.run.zero_timing);
   CHECK(c.run.precision == "int8");
   CHECK_FALSE(c.info);
+  CHECK_FALSE(c.run.lola.io_thread);
+  CHECK(c.run.emulate_tick_ns == 0);
+
+  rt::CommandLine l;
+  REQUIRE(parse({"--robot", "lola:/tmp/x.sock", "--lola-io-thread", "--lola-io-wait-ms", "2.5", "--emulate-tick-ms",
+                 "30"},
+                l, out, err) == -1);
+  CHECK(l.run.lola.io_thread);
+  CHECK(l.run.lola.io_wait_ms == doctest::Approx(2.5));
+  CHECK(l.run.emulate_tick_ns == 30'000'000);
 }
 
 TEST_CASE("--realtime paces the ticks on 100 ms deadlines and gives the same records as back to back") {

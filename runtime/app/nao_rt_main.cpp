@@ -29,8 +29,9 @@ using RtDims = nao::PaperPolicyDims;
 #endif
 
 #if NAO_RT_COUNT_ALLOCATIONS
-// Counts the control thread's allocations from activate to deactivate.
-struct CountingProbe final : nao::rt::AllocationProbe {
+// Counts one thread's allocations from activate to deactivate (the counter is per thread:
+// start and stop run on the thread counted).
+struct ThreadProbe : nao::rt::AllocationProbe {
   std::optional<nao::CountAllocations> counter;
   void start() override { counter.emplace(); }
   std::int64_t stop() override {
@@ -38,6 +39,12 @@ struct CountingProbe final : nao::rt::AllocationProbe {
     counter.reset();
     return n;
   }
+};
+
+// The control thread's, and the LoLA I/O thread's as its companion.
+struct CountingProbe final : ThreadProbe {
+  ThreadProbe io;
+  nao::rt::AllocationProbe* companion() override { return &io; }
 };
 #endif
 

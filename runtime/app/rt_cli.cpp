@@ -8,6 +8,7 @@ namespace nao::rt {
 
 int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::ostream& out, std::ostream& err) {
   RunOptions& o = cl.run;
+  double emulate_tick_ms = 0.0;
   CLI::App app{
       "nao_rt: the NAO V6 right-arm imitation controller (DESIGN section 9) on the ODE-simulated arm\n"
       "(default) or on a NAO V6 through LoLA (--robot lola, docs/lola.md).\n"
@@ -87,6 +88,21 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
   app.add_flag("--lola-answer-first{false}", o.lola.answer_after_tick,
                "LoLA: answer the packet that ends a tick at once (the new command then goes out one\n"
                "cycle later) instead of after the tick's work (docs/lola.md, timing)");
+  app.add_flag("--lola-io-thread", o.lola.io_thread,
+               "LoLA: answer the packets on a thread of their own, so a tick longer than the 12 ms\n"
+               "cycle (a slower CPU: the NAO's Atom) delays no answer (docs/lola.md)");
+  app.add_option("--lola-io-wait-ms", o.lola.io_wait_ms,
+                 "With --lola-io-thread: how long the packet that ends a tick waits for the tick's\n"
+                 "command before it is answered toward the old one (default 4; 0 with\n"
+                 "--lola-answer-first)")
+      ->type_name("MS")
+      ->check(CLI::Range(0.0, 11.0))
+      ->capture_default_str();
+  app.add_option("--emulate-tick-ms", emulate_tick_ms,
+                 "Busy-wait this long before every tick's work, as a slower CPU would take (tests of\n"
+                 "the LoLA timing; not counted in tick_us)")
+      ->type_name("MS")
+      ->check(CLI::Range(0.0, 1000.0));
   app.add_option("--log", o.log_dir, "Run directory (created if missing): ticks.csv, attention.bin, summary.json")
       ->type_name("DIR");
   app.add_option("--attention-shm", o.attention_shm,
@@ -109,6 +125,7 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
     err << "nao_rt: " << oneLine(e.what()) << " (nao_rt --help lists the flags)\n";
     return 2;
   }
+  o.emulate_tick_ns = static_cast<std::int64_t>(emulate_tick_ms * 1e6 + 0.5);
   return -1;
 }
 

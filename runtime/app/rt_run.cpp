@@ -448,6 +448,12 @@ std::string ticksCsvRow(const TickRecord& r, bool zero_timing) {
   return s;
 }
 
+void spinForNs(std::int64_t ns) {
+  const std::int64_t end = monotonicNs() + ns;
+  while (monotonicNs() < end) {
+  }
+}
+
 void sleepUntilNs(std::int64_t t_ns) {
   timespec ts{};
   ts.tv_sec = static_cast<time_t>(t_ns / 1000000000);
@@ -638,6 +644,9 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
                  {"gaps", c.gaps},
                  {"hot_cycles", c.hot_cycles},
                  {"tracking_cycles", c.tracking_cycles},
+                 {"io_thread", o.lola.io_thread},
+                 {"overrun_ticks", c.overrun_ticks},
+                 {"io_allocations", c.io_allocations >= 0 ? ordered_json(c.io_allocations) : ordered_json(nullptr)},
                  {"round_trip_us", statsJson(latencyStats(rtt_us))},
                  {"stop", totals.stop == RobotStop::kLinkLost ? "link_lost"
                           : totals.stop == RobotStop::kSignal ? "signal"

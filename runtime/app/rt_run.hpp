@@ -68,6 +68,9 @@ struct RunOptions {
   /// ode (the in-process arm, default) or lola[:SOCKET] (LoLA, default socket /tmp/robocup).
   std::string robot = "ode";
   LolaParams lola;             ///< LoLA safety parameters (socket_path from `robot`)
+  /// > 0: busy-wait this long before every tick's work, as a slower CPU would take (tests and
+  /// benchmarks of the LoLA timing; not in tick_us).
+  std::int64_t emulate_tick_ns = 0;
   ControllerClock* clock = nullptr;  ///< stage timings; nullptr: CLOCK_MONOTONIC (tests inject)
 };
 
@@ -78,12 +81,10 @@ class UsageError : public std::runtime_error {
 };
 
 /// Counts heap allocations on the calling thread between start and stop (nao_rt and the
-/// *_alloc tests back it with CountAllocations; without one the summary says null).
-struct AllocationProbe {
-  virtual ~AllocationProbe() = default;
-  virtual void start() = 0;
-  virtual std::int64_t stop() = 0;
-};
+/// *_alloc tests back it with CountAllocations; without one the summary says null). The LoLA
+/// backend's I/O thread (--lola-io-thread) is counted by the probe's companion(), started and
+/// stopped on that thread.
+using nao::AllocationProbe;
 
 /// What a run produced (also in summary.json).
 /// Exit statuses of a run that the robot backend ended early (after its safe stop; the run
@@ -236,6 +237,8 @@ void leaveRealtime(const RealtimeScheduling& s);
 /// Sleeps until the absolute CLOCK_MONOTONIC time t_ns (clock_nanosleep TIMER_ABSTIME; resumes
 /// after signals). Real-time safe.
 void sleepUntilNs(std::int64_t t_ns);
+/// Busy-waits ns nanoseconds (RunOptions::emulate_tick_ns): no syscall but the clock read.
+void spinForNs(std::int64_t ns);
 
 /// What the loop measured beyond the records.
 struct LoopTotals {
@@ -419,6 +422,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       // The socket is opened here, before activate.
       LolaParams lola_params = options.lola;
       lola_params.socket_path = robot.socket_path;
+      lola_params.io_probe = probe != nullptr ? probe->companion() : nullptr;
       installLolaStopSignals();
       lola = std::make_unique<LolaBackend>(p.arm, lola_params);
       data->robot = lola.get();
@@ -458,6 +462,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     std::int64_t ticks_done = 0;
     for (std::int64_t t = 0; t < p.ticks && data->robot->stopReason() == RobotStop::kNone; ++t) {
       if (options.realtime) sleepUntilNs(next_ns);
+      if (options.emulate_tick_ns > 0) spinForNs(options.emulate_tick_ns);
       const std::size_t i = static_cast<std::size_t>(t);
       const SkeletonFrame* frame = i < n_frames && p.reference.present[i] ? &p.reference.frames[i] : nullptr;
       TickRecord& rec = records[i];
@@ -494,6 +499,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     closeFromRT(ring);
     totals.wall_s = static_cast<double>(monotonicNs() - wall0) * 1e-9;
     if (probe != nullptr) totals.allocations = probe->stop();
+    // The LoLA I/O thread's own count (it stopped its probe before deactivate joined it).
+    if (lola && lola->counters().io_allocations > 0 && totals.allocations >= 0)
+      totals.allocations += lola->counters().io_allocations;
     if (options.realtime) leaveRealtime(rt);
     records.resize(static_cast<std::size_t>(ticks_done));
     totals.stop = stop;

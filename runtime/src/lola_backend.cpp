@@ -3,6 +3,7 @@
 #include "nao/controller.hpp"
 
 #include <poll.h>
+#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <time.h>
@@ -22,6 +23,18 @@ volatile std::sig_atomic_t g_stop_signal = 0;
 
 extern "C" void onStopSignal(int) { g_stop_signal = 1; }
 
+
+void signalFd(int fd) {
+  const std::uint64_t one = 1;
+  while (::write(fd, &one, sizeof one) < 0 && errno == EINTR) {
+  }
+}
+
+void waitFd(int fd) {
+  std::uint64_t n = 0;
+  while (::read(fd, &n, sizeof n) < 0 && errno == EINTR) {
+  }
+}
 
 int cyclesFor(double seconds) {
   return std::max(1, static_cast<int>(std::ceil(seconds * 1e9 / static_cast<double>(lola::kCycleNs) - 1e-9)));
@@ -62,10 +75,28 @@ LolaBackend::LolaBackend(const ArmModel& arm, const LolaParams& params) : arm_(a
   }
   latency_ns_.reserve(params_.latency_capacity);
   out_.sonar = {1.0f, 1.0f};
+  if (params_.io_thread) {
+    go_fd_ = ::eventfd(0, EFD_CLOEXEC);
+    tick_fd_ = ::eventfd(0, EFD_CLOEXEC);
+    cmd_fd_ = ::eventfd(0, EFD_CLOEXEC);
+    if (go_fd_ < 0 || tick_fd_ < 0 || cmd_fd_ < 0) {
+      const int e = errno;
+      for (int f : {go_fd_, tick_fd_, cmd_fd_, fd_})
+        if (f >= 0) ::close(f);
+      throw std::runtime_error(std::string("lola: eventfd(): ") + std::strerror(e));
+    }
+    io_ = std::thread(&LolaBackend::ioMain, this);  // parked until activate hands over
+  }
 }
 
 LolaBackend::~LolaBackend() {
-  if (fd_ >= 0) ::close(fd_);
+  if (io_.joinable()) {
+    io_quit_.store(true, std::memory_order_release);
+    signalFd(go_fd_);
+    io_.join();
+  }
+  for (int f : {go_fd_, tick_fd_, cmd_fd_, fd_})
+    if (f >= 0) ::close(f);
 }
 
 void LolaBackend::failLink() {
@@ -293,15 +324,118 @@ const JointVector& LolaBackend::activate(const JointVector& q0) {
   target_ = q_start_;
   // The last settle packet is answered by the first command, with the first tick's target.
   while (phase_cycles_ < settle_cycles)
-    if (!cycle(phase_cycles_ + 1 == settle_cycles && params_.answer_after_tick)) return q_meas_;
+    if (!cycle(phase_cycles_ + 1 == settle_cycles && params_.answer_after_tick && !params_.io_thread)) return q_meas_;
   phase_ = Phase::kRun;
   phase_cycles_ = 0;
   run_cycles_ = 0;
   ticks_ = 0;
-  return q_meas_;
+  if (!params_.io_thread) return q_meas_;
+  // Hand the socket to the I/O thread: from here on it owns every LoLA member.
+  ctl_ = TickView{q_meas_, 0, 0, RobotStop::kNone};
+  ctl_ticks_seen_ = 0;
+  threaded_ = true;
+  std::atomic_thread_fence(std::memory_order_seq_cst);
+  signalFd(go_fd_);
+  return ctl_.q;
+}
+
+void LolaBackend::ioMain() {
+  waitFd(go_fd_);
+  std::atomic_thread_fence(std::memory_order_seq_cst);
+  if (io_quit_.load(std::memory_order_acquire)) return;
+  if (params_.io_probe != nullptr) params_.io_probe->start();
+  std::uint64_t cmd_seen = 0;
+  const std::int64_t wait_ns = static_cast<std::int64_t>(params_.io_wait_ms * 1e6);
+  while (!io_quit_.load(std::memory_order_acquire)) {
+    if (!cycle(true)) break;  // received and measured; answered below
+    ++run_cycles_;
+    if (run_cycles_ * lola::kCycleNs >= (ticks_ + 1) * 100'000'000) {
+      // The packet that ends a tick: its measurement goes to the control thread, and (as on one
+      // thread) its answer waits for the tick's new command, but never past io_wait_ms: a
+      // slower tick's command goes out with the next answer instead.
+      ++ticks_;
+      const std::uint64_t before = cmd_seq_.load(std::memory_order_acquire);
+      publishTick();
+      if (params_.answer_after_tick) {
+        const std::int64_t until = pending_t_in_ns_ + wait_ns;
+        for (;;) {
+          const std::uint64_t now_seq = cmd_seq_.load(std::memory_order_acquire);
+          if (now_seq != before && now_seq % 2 == 0) break;
+          const std::int64_t left = until - monotonicNs();
+          if (left <= 0 || io_quit_.load(std::memory_order_acquire)) break;
+          pollfd pfd{cmd_fd_, POLLIN, 0};
+          timespec ts{0, static_cast<long>(std::min<std::int64_t>(left, 999'999'999))};
+          if (::ppoll(&pfd, 1, &ts, nullptr) > 0) waitFd(cmd_fd_);
+        }
+      }
+    }
+    // The latest command, taken after the packet came (a command published while we waited
+    // for it goes out now, not a cycle later). Seqlock read; a torn one is retried next cycle.
+    const std::uint64_t s1 = cmd_seq_.load(std::memory_order_acquire);
+    if (s1 != cmd_seen && s1 % 2 == 0) {
+      JointVector c;
+      for (int j = 0; j < kNumJoints; ++j) c[j] = cmd_q_[static_cast<std::size_t>(j)].load(std::memory_order_relaxed);
+      std::atomic_thread_fence(std::memory_order_acquire);
+      if (cmd_seq_.load(std::memory_order_relaxed) == s1) {
+        target_ = c;
+        cmd_seen = s1;
+      }
+    }
+    respond(pending_t_in_ns_, pending_waited_);  // toward target_
+    if (stop_ != RobotStop::kNone) break;
+  }
+  publishTick();  // the stop (or the quit) wakes a waiting command()
+  if (params_.io_probe != nullptr) counters_.io_allocations = params_.io_probe->stop();
+}
+
+void LolaBackend::publishTick() {
+  const std::uint64_t s = tick_seq_.load(std::memory_order_relaxed);
+  tick_seq_.store(s + 1, std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_release);
+  for (int j = 0; j < kNumJoints; ++j) tick_q_[static_cast<std::size_t>(j)].store(q_meas_[j], std::memory_order_relaxed);
+  tick_seq_.store(s + 2, std::memory_order_release);
+  tick_faults_.fetch_or(faults_, std::memory_order_acq_rel);  // kept until the control thread takes them
+  faults_ = 0;
+  tick_stop_.store(static_cast<int>(stop_), std::memory_order_release);
+  tick_index_.fetch_add(1, std::memory_order_acq_rel);
+  signalFd(tick_fd_);
+}
+
+const JointVector& LolaBackend::commandThreaded(const JointVector& q_cmd) {
+  const std::int64_t t0 = monotonicNs();
+  if (ctl_.stop != RobotStop::kNone) {
+    ctl_.faults = kFaultSafeStop;
+    ctl_.wait_ns = 0;
+    return ctl_.q;
+  }
+  // A boundary passed while this tick was computed: its command is late (the tick ends at the
+  // next boundary after the command went out).
+  const std::int64_t at_publish = tick_index_.load(std::memory_order_acquire);
+  if (at_publish > ctl_ticks_seen_) ++ctl_overruns_;
+  const std::uint64_t s = cmd_seq_.load(std::memory_order_relaxed);
+  cmd_seq_.store(s + 1, std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_release);
+  for (int j = 0; j < kNumJoints; ++j) cmd_q_[static_cast<std::size_t>(j)].store(q_cmd[j], std::memory_order_relaxed);
+  cmd_seq_.store(s + 2, std::memory_order_release);
+  signalFd(cmd_fd_);
+  while (tick_index_.load(std::memory_order_acquire) <= at_publish && tick_stop_.load(std::memory_order_acquire) == 0)
+    waitFd(tick_fd_);
+  ctl_ticks_seen_ = tick_index_.load(std::memory_order_acquire);
+  for (;;) {  // seqlock read of the boundary's measurement
+    const std::uint64_t s1 = tick_seq_.load(std::memory_order_acquire);
+    if (s1 % 2 != 0) continue;
+    for (int j = 0; j < kNumJoints; ++j) ctl_.q[j] = tick_q_[static_cast<std::size_t>(j)].load(std::memory_order_relaxed);
+    std::atomic_thread_fence(std::memory_order_acquire);
+    if (tick_seq_.load(std::memory_order_relaxed) == s1) break;
+  }
+  ctl_.faults = tick_faults_.exchange(0, std::memory_order_acq_rel);
+  ctl_.stop = static_cast<RobotStop>(tick_stop_.load(std::memory_order_acquire));
+  ctl_.wait_ns = monotonicNs() - t0;
+  return ctl_.q;
 }
 
 const JointVector& LolaBackend::command(const JointVector& q_cmd) {
+  if (threaded_) return commandThreaded(q_cmd);
   if (ticks_ > 0) faults_ = 0;  // what happened during activate goes onto the first tick
   wait_ns_ = 0;
   if (stop_ != RobotStop::kNone) {
@@ -324,6 +458,15 @@ const JointVector& LolaBackend::command(const JointVector& q_cmd) {
 }
 
 void LolaBackend::deactivate() {
+  if (threaded_) {
+    // Take the socket back: the I/O thread leaves its loop within a cycle (or has already
+    // stopped), and the stop ramp runs here as without it.
+    io_quit_.store(true, std::memory_order_release);
+    io_.join();
+    threaded_ = false;
+    counters_.overrun_ticks = ctl_overruns_;
+    faults_ = ctl_.faults;
+  }
   if (stop_ == RobotStop::kLinkLost || fd_ < 0) return;
   // Hold where the arm is commanded now, ramp the stiffness to 0, then one more packet at 0.
   // A signal during the ramp does not interrupt it.

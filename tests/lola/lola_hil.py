@@ -13,6 +13,10 @@ CASE:
                of nao_lola_sim: keys, lengths, joint order.
   peer:client  python3-msgpack as the LoLA robot that nao_rt talks to: keys, lengths, joint
                order, and a malformed packet counted and skipped.
+  io:M         movement:M with --lola-io-thread (the I/O on a thread of its own).
+  iofault:F    fault:F with --lola-io-thread.
+  slow:io_thread  30 ms ticks (--emulate-tick-ms): late answers on one thread, none with
+               --lola-io-thread.
 
 Every process runs under a timeout; a hang fails the test.
 """
@@ -142,7 +146,7 @@ def check_start_and_stop(rows, label, expect_stop_ramp=True):
         check(hold, f"{label}: the arm holds its position while the stiffness ramps down")
 
 
-def case_movement(a, movement, tmp):
+def case_movement(a, movement, tmp, flags=()):
     ode_dir, hil_dir = os.path.join(tmp, "ode"), os.path.join(tmp, "hil")
     rc, _ = run_rt(a.nao_rt, ["--reference", "synthetic:" + movement, "--log", ode_dir], 300)
     check(rc == 0, f"in-process run exits 0 (got {rc})")
@@ -150,7 +154,7 @@ def case_movement(a, movement, tmp):
     ticks = ode["ticks"]
     sim = Sim(a.sim, tmp)
     rc, wall = run_rt(a.nao_rt, ["--robot", "lola:" + sim.path, "--reference", "synthetic:" + movement,
-                                 "--ticks", str(ticks), "--log", hil_dir], ticks * 0.1 + 60)
+                                 "--ticks", str(ticks), "--log", hil_dir, *flags], ticks * 0.1 + 60)
     ss, rows = sim.stop()
     check(rc == 0, f"LoLA run exits 0 (got {rc})")
     hil = summary_of(hil_dir)
@@ -168,6 +172,9 @@ def case_movement(a, movement, tmp):
     check(hil["allocations_after_activate"] == 0,
           f"0 allocations after activate (got {hil['allocations_after_activate']})")
     lola = hil["lola"]
+    if "--lola-io-thread" in flags:
+        check(lola["io_thread"] and lola["io_allocations"] == 0 and lola["overrun_ticks"] == 0,
+              f"the I/O thread ran, counted 0 allocations of its own and no tick overran: {lola}")
     check(lola["malformed"] == 0 and lola["gaps"] == 0 and lola["tracking_cycles"] == 0 and lola["hot_cycles"] == 0
           and lola["cycles"] > ticks * 8, f"no robot fault counted without an injected one: {lola}")
     check(lola["late"] <= 0.01 * lola["cycles"], f"nao_rt counts <= 1 % late answers ({lola['late']} of {lola['cycles']})")
@@ -207,9 +214,9 @@ FAULTS = {
 }
 
 
-def case_fault(a, name, tmp):
+def case_fault(a, name, tmp, extra=()):
     log = os.path.join(tmp, "run")
-    base = ["--reference", "synthetic:elbow", "--ticks", "70", "--log", log]
+    base = ["--reference", "synthetic:elbow", "--ticks", "70", "--log", log, *extra]
     if name == "no_robot":
         rc, wall = run_rt(a.nao_rt, ["--robot", "lola:" + os.path.join(tmp, "nobody.sock"), *base], 60)
         check(rc == 1 and wall < 30, f"no LoLA socket: configure error, exit 1 (got {rc} after {wall:.1f} s)")
@@ -374,6 +381,46 @@ def case_peer_client(a, tmp):
     check(s["lola"]["cycles"] == len(answers), f"nao_rt counts {s['lola']['cycles']} cycles, the robot got {len(answers)} answers")
 
 
+SLOW_TICK_MS = 30  # the Atom's tick is estimated at 10-27 ms (docs/embedded.md): longer than a cycle
+
+
+def case_slow(a, tmp):
+    """A tick of 30 ms (--emulate-tick-ms): on one thread the packets that come during it wait
+    (late answers); with --lola-io-thread every packet is still answered within its cycle."""
+    results = {}
+    for mode, flags in (("one thread", ["--lola-answer-first"]), ("io thread", ["--lola-io-thread"])):
+        d = os.path.join(tmp, mode.replace(" ", "_"))
+        os.makedirs(d)
+        sim = Sim(a.sim, d)
+        rc, _ = run_rt(a.nao_rt, ["--robot", "lola:" + sim.path, "--reference", "synthetic:elbow", "--ticks", "60",
+                                  "--emulate-tick-ms", str(SLOW_TICK_MS), "--log", os.path.join(d, "run"), *flags], 80)
+        ss, rows = sim.stop()
+        check(rc == 0, f"{mode}: exits 0 (got {rc})")
+        s = summary_of(os.path.join(d, "run"))
+        cycles = [int(r["cycle"]) for r in rows]
+        total = max(cycles) - min(cycles) + 1
+        in_cycle = sum(int(r["in_cycle"]) for r in rows)
+        results[mode] = (s, rows, in_cycle, total)
+        print(f"info  {mode}, {SLOW_TICK_MS} ms ticks: {in_cycle} of {total} answered within the cycle, "
+              f"hand RMSE {s['ee_rmse_m'] * 1e3:.2f} mm, lola {s['lola']}")
+    s, rows, in_cycle, total = results["one thread"]
+    # The premise: without the thread a tick this long makes answers late (this check failing
+    # would mean the emulated tick no longer emulates anything).
+    check(s["lola"]["late"] >= 0.05 * s["lola"]["cycles"] and in_cycle < 0.97 * total,
+          f"one thread: a {SLOW_TICK_MS} ms tick makes answers late ({s['lola']['late']} late, "
+          f"{in_cycle} of {total} within the cycle)")
+    s, rows, in_cycle, total = results["io thread"]
+    check(in_cycle >= 0.99 * total, f"io thread: {in_cycle} of {total} answered within their 12 ms cycle (>= 99 %)")
+    check(s["lola"]["late"] <= 0.01 * s["lola"]["cycles"], f"io thread: <= 1 % late answers ({s['lola']['late']})")
+    check(s["lola"]["io_thread"] and s["allocations_after_activate"] == 0 and s["lola"]["io_allocations"] == 0,
+          f"io thread: 0 allocations after activate on either thread ({s['allocations_after_activate']}, "
+          f"{s['lola']['io_allocations']})")
+    check(s["lola"]["overrun_ticks"] == 0, f"io thread: every command before its boundary ({s['lola']['overrun_ticks']})")
+    check(s["ticks"] == 60 and s["ee_rmse_m"] < 0.01,
+          f"io thread: 60 ticks, hand RMSE < 1 cm ({s['ee_rmse_m'] * 1e3:.2f} mm)")
+    check_start_and_stop(rows, "io thread")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--nao-rt", required=True)
@@ -384,6 +431,12 @@ def main():
     with tempfile.TemporaryDirectory(prefix="nao_lola_") as tmp:
         if kind == "movement":
             case_movement(a, arg, tmp)
+        elif kind == "io":
+            case_movement(a, arg, tmp, ["--lola-io-thread"])
+        elif kind == "iofault":
+            case_fault(a, arg, tmp, ["--lola-io-thread"])
+        elif kind == "slow" and arg == "io_thread":
+            case_slow(a, tmp)
         elif kind == "fault":
             case_fault(a, arg, tmp)
         elif kind == "peer" and arg == "sim":

@@ -8,9 +8,20 @@
 // the new command (LoLA applies an answer from the next cycle, so this is the least lag from
 // measurement to effect: 12 ms); the other packets are answered at once. With
 // answer_after_tick = false every packet is answered at once and the new command goes out one
-// cycle later. A separate I/O thread would not get a command to the joints any sooner, and the
-// tick fits in a cycle, so one thread: no hand-off, no lock, nothing to race; a tick longer
-// than a cycle shows up as late answers (counted).
+// cycle later. On this machine the tick fits in a cycle, so by default one thread: no hand-off,
+// no lock, nothing to race; a tick longer than a cycle shows up as late answers (counted).
+//
+// A tick longer than a cycle (the NAO's Atom: 10-27 ms estimated, docs/embedded.md) would hold
+// every packet that arrives during it. With io_thread the backend answers on a thread of its own
+// (started at construction, parked until activate ends): from the first tick on it receives,
+// measures and answers every packet toward the latest command; at each tick boundary it
+// publishes the measurement and waits for the tick's command at most io_wait_ms before
+// answering (a fast tick's command still goes out with that answer, as on one thread; a slow
+// one's with the next). The control thread's command() publishes its command and waits for
+// the next boundary. The hand-off is two seqlocks of relaxed atomics (command one way,
+// measurement the other) and eventfds to wake the waiting side: no lock, no allocation.
+// The I/O thread owns every other member until deactivate joins it; the stop ramp runs on the
+// control thread again.
 //
 // Per cycle: parse the sensor packet (LolaReader, fixed buffers), move the right arm's setpoint
 // (LoLA 18-22) toward the tick's command by at most the URDF velocity limit x 12 ms, hold every
@@ -24,8 +35,10 @@
 #include "nao/robot_backend.hpp"
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace nao {
@@ -45,6 +58,14 @@ struct LolaParams {
   /// (one cycle less lag; that answer waits for the tick's work). false: every packet is
   /// answered at once and the new command goes out with the next packet's answer.
   bool answer_after_tick = true;
+  /// Answer on a thread of the backend's own (see the top of this file). With
+  /// answer_after_tick the packet that ends a tick waits for the tick's command at most
+  /// io_wait_ms after it came (then it is answered toward the old one); every other packet is
+  /// answered at once.
+  bool io_thread = false;
+  double io_wait_ms = 4.0;
+  /// Counts the I/O thread's allocations from the first tick to deactivate (io_thread only).
+  AllocationProbe* io_probe = nullptr;
   int gap_cycles = 2;                ///< no packet for more than this many cycles: packet-gap fault
   int link_lost_cycles = 84;         ///< no packet for this many cycles (~1 s): link lost, stop
   std::size_t latency_capacity = 1 << 16;  ///< per-cycle round-trip samples kept (summary, bench)
@@ -58,6 +79,8 @@ struct LolaCounters {
   std::int64_t gaps = 0;       ///< times no packet came for more than gap_cycles
   std::int64_t hot_cycles = 0; ///< cycles with a joint above hot_c
   std::int64_t tracking_cycles = 0;  ///< cycles with a tracking error
+  std::int64_t io_allocations = -1;  ///< the I/O thread's allocations after activate (-1: not counted)
+  std::int64_t overrun_ticks = 0;    ///< io_thread: ticks whose command came after the next boundary
 };
 
 /// Installs SIGINT/SIGTERM handlers that ask a running LolaBackend for a safe stop (and make
@@ -74,11 +97,11 @@ class LolaBackend final : public RobotBackend {
   LolaBackend& operator=(const LolaBackend&) = delete;
 
   const JointVector& activate(const JointVector& q0) override;
-  const JointVector& measured() const override { return q_meas_; }
+  const JointVector& measured() const override { return threaded_ ? ctl_.q : q_meas_; }
   const JointVector& command(const JointVector& q_cmd) override;
-  std::uint32_t faults() const override { return faults_; }
-  std::int64_t waitNs() const override { return wait_ns_; }
-  RobotStop stopReason() const override { return stop_; }
+  std::uint32_t faults() const override { return threaded_ ? ctl_.faults : faults_; }
+  std::int64_t waitNs() const override { return threaded_ ? ctl_.wait_ns : wait_ns_; }
+  RobotStop stopReason() const override { return threaded_ ? ctl_.stop : stop_; }
   void deactivate() override;
 
   const LolaCounters& counters() const { return counters_; }
@@ -92,6 +115,17 @@ class LolaBackend final : public RobotBackend {
   void measure();               // the packet's measurement: q_meas_, tracking
   void respond(std::int64_t t_in_ns, bool waited);  // this cycle's setpoint and stiffness, sent
   void failLink();
+  void ioMain();                // the I/O thread (io_thread)
+  void publishTick();           // I/O thread: the tick boundary's measurement to the control thread
+  const JointVector& commandThreaded(const JointVector& q_cmd);
+
+  // The control thread's view while the I/O thread runs (io_thread).
+  struct TickView {
+    JointVector q = JointVector::Zero();
+    std::uint32_t faults = 0;
+    std::int64_t wait_ns = 0;
+    RobotStop stop = RobotStop::kNone;
+  };
 
   const ArmModel& arm_;
   LolaParams params_;
@@ -125,6 +159,25 @@ class LolaBackend final : public RobotBackend {
   RobotStop stop_ = RobotStop::kNone;
   LolaCounters counters_;
   std::vector<std::int64_t> latency_ns_;
+
+  // io_thread: the hand-off. Command: control -> I/O; tick: I/O -> control (seqlocks: odd while
+  // written; a reader retries until it saw the same even number before and after).
+  std::thread io_;
+  int go_fd_ = -1;    // eventfd: control -> I/O, run (1) or quit (2)
+  int tick_fd_ = -1;  // eventfd: I/O -> control, one count per tick boundary (or the stop)
+  int cmd_fd_ = -1;   // eventfd: control -> I/O, a new command
+  bool threaded_ = false;  // control thread only: the I/O thread owns the LoLA state
+  TickView ctl_;
+  std::atomic<bool> io_quit_{false};
+  std::atomic<std::uint64_t> cmd_seq_{0};
+  std::array<std::atomic<double>, kNumJoints> cmd_q_{};
+  std::atomic<std::uint64_t> tick_seq_{0};
+  std::array<std::atomic<double>, kNumJoints> tick_q_{};
+  std::atomic<std::uint32_t> tick_faults_{0};
+  std::atomic<int> tick_stop_{0};
+  std::atomic<std::int64_t> tick_index_{0};  // tick boundaries published
+  std::int64_t ctl_ticks_seen_ = 0;          // control thread: boundaries consumed
+  std::int64_t ctl_overruns_ = 0;            // control thread: commands published after their boundary
 };
 
 }  // namespace nao

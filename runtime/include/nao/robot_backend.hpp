@@ -15,6 +15,18 @@
 
 namespace nao {
 
+/// Counts the heap allocations of the thread that calls start() until stop() (nao_rt backs it
+/// with its counting allocator; the allocation tests with theirs). A backend with a thread of
+/// its own is given one for that thread.
+struct AllocationProbe {
+  virtual ~AllocationProbe() = default;
+  virtual void start() = 0;
+  virtual std::int64_t stop() = 0;
+  /// A probe for one more thread (a backend's own), or nullptr if allocations are counted on
+  /// the calling thread only.
+  virtual AllocationProbe* companion() { return nullptr; }
+};
+
 /// Why a backend stopped the run early (RobotBackend::stopReason).
 enum class RobotStop : int {
   kNone = 0,     ///< running
