@@ -10,8 +10,9 @@
 // Threads and time: configure and the file output run before and after the loop; between
 // activate and deactivate the control thread only calls updateController, forward kinematics,
 // and pushFromRT into preallocated memory — no allocation (counted through AllocationProbe),
-// no file I/O, no lock. With --robot lola the robot backend's socket I/O is on this thread:
-// the robot's packets are the clock (lola_backend.hpp says why).
+// no file I/O, no lock. With --robot lola the robot backend's socket I/O is on this thread
+// (the robot's packets are the clock), or with --lola-io-thread on the backend's own thread
+// (lola_backend.hpp says why and when).
 #pragma once
 
 #include "nao/arm_model.hpp"

@@ -1,7 +1,8 @@
 // The LoLA robot backend (DESIGN §9, docs/lola.md): nao_rt --robot lola[:SOCKET] drives a NAO V6
 // (or nao_lola_sim) through LoLA's Unix stream socket.
 //
-// Threads and time: everything runs on the control thread. LoLA is the clock: the robot sends a
+// Threads and time: by default everything runs on the control thread (io_thread: see below).
+// LoLA is the clock: the robot sends a
 // sensor packet every 12 ms and each is answered from the interpolation state; the 10 Hz tick
 // runs on the packet that completes 100 ms of LoLA time (cycle counting: 9, 8, 8, ... cycles,
 // never the wall clock). By default that one packet is answered after the tick, already toward
