@@ -12,11 +12,12 @@
 #   3. per tick of the robot build (valgrind callgrind, collecting inside updateController only,
 #      caches simulated with the Atom E3845's geometry): instructions, data reads/writes, L1
 #      and last-level (the Atom's L2) misses, and the executed instruction mix; once with the
-#      fp32 weights and once with --precision int8 (docs/policy.md "int8 weights");
+#      fp32 weights and once with --precision int8 (docs/policy.md "int8 weights"), each with the
+#      in-process simulated arm and without it (as on the robot, where LoLA replaces it);
 #   4. the tick time estimated on the NAO V6's Atom E3845 from those counts, for both (the
 #      arithmetic is printed and explained in docs/embedded.md).
 # Needs valgrind (apt-get install valgrind; not in toolchain/nao's package list: only this
-# measurement uses it). Takes about a minute. Exit status 0, or 1 with a message.
+# measurement uses it). Takes about two minutes. Exit status 0, or 1 with a message.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 TICKS=20
@@ -43,13 +44,20 @@ load_before="$(cut -d' ' -f1-3 /proc/loadavg)"
 # One tick under callgrind: only updateController (the whole tick: retarget, snap, policy,
 # command, 100 physics steps) is collected. Atom E3845 caches (docs/embedded.md): L1i 32 KiB
 # 8-way, L1d 24 KiB 6-way, L2 1 MiB 16-way per two-core module; 64-byte lines.
+# Each precision twice: the whole tick here (the in-process ODE arm included), and the tick as
+# the robot runs it, where LoLA replaces the simulated arm: stepSim toggles collection off
+# while it runs (nested toggles: on entering updateController, off inside stepSim).
 for precision in fp32 int8; do
-  nice -n 19 valgrind --tool=callgrind --callgrind-out-file="$work/callgrind_$precision.out" --dump-instr=yes \
-    --compress-pos=no --compress-strings=no --cache-sim=yes \
-    --I1=32768,8,64 --D1=24576,6,64 --LL=1048576,16,64 \
-    --collect-atstart=no '--toggle-collect=*updateController*' \
-    "$ROBOT" --reference synthetic:whole_arm --ticks "$TICKS" --zero-timing --precision "$precision" \
-    >"$work/callgrind.log" 2>&1 || { cat "$work/callgrind.log" >&2; die "valgrind failed ($precision)"; }
+  for variant in sim robot; do
+    toggles=('--toggle-collect=*updateController*')
+    [[ "$variant" == robot ]] && toggles+=('--toggle-collect=*stepSim*')
+    nice -n 19 valgrind --tool=callgrind --callgrind-out-file="$work/callgrind_${precision}_$variant.out" --dump-instr=yes \
+      --compress-pos=no --compress-strings=no --cache-sim=yes \
+      --I1=32768,8,64 --D1=24576,6,64 --LL=1048576,16,64 \
+      --collect-atstart=no "${toggles[@]}" \
+      "$ROBOT" --reference synthetic:whole_arm --ticks "$TICKS" --zero-timing --precision "$precision" \
+      >"$work/callgrind.log" 2>&1 || { cat "$work/callgrind.log" >&2; die "valgrind failed ($precision, $variant)"; }
+  done
 done
 objdump -d --no-show-raw-insn "$ROBOT" >"$work/robot.dis"
 load_after="$(cut -d' ' -f1-3 /proc/loadavg)"
@@ -140,10 +148,10 @@ for l in open(os.path.join(work, "robot.dis")):
     if m:
         mnemonic[int(m.group(1), 16)] = m.group(2)
 
-def tick_budget(precision):
+def tick_budget(precision, variant, tag):
     events, cost_by_addr, summary = None, collections.Counter(), None
     skip_next = False
-    with open(os.path.join(work, "callgrind_%s.out" % precision)) as f:
+    with open(os.path.join(work, "callgrind_%s_%s.out" % (precision, variant))) as f:
         for l in f:
             if l.startswith("events:"):
                 events = l.split()[1:]
@@ -162,8 +170,10 @@ def tick_budget(precision):
     if not summary or sum(summary) == 0:
         raise SystemExit("embedded_budget.sh: callgrind collected nothing (did updateController get inlined?)")
     per = {e: v / ticks for e, v in zip(events, summary)}
-    say("## 3%s. One tick of the robot build, %s weights, measured by valgrind callgrind (mean of %d ticks, policy on)" % (
-        "a" if precision == "fp32" else "b", precision, ticks))
+    what = ("the whole tick, the in-process ODE arm (100 physics steps) included" if variant == "sim" else
+            "the tick as on the robot: without the simulated arm (stepSim not collected), which LoLA replaces")
+    say("## 3%s. One tick of the robot build, %s weights, %s; valgrind callgrind (mean of %d ticks, policy on)" % (
+        tag, precision, what, ticks))
     say("caches simulated as the Atom E3845's: L1i 32 KiB 8-way, L1d 24 KiB 6-way, L2 (last level) 1 MiB 16-way, 64 B lines")
     say("instructions (Ir)            %12.0f" % per["Ir"])
     say("data reads / writes          %12.0f / %.0f" % (per["Dr"], per["Dw"]))
@@ -198,8 +208,8 @@ def tick_budget(precision):
     t_low = max(t_issue, t_load, t_mul, t_mem)
     t_ipc1 = per["Ir"] / 1 / f_hz
     t_high = t_ipc1 + dram_bytes / (0.5 * bw)
-    say("## 4%s. Estimated tick on the NAO V6's Atom E3845 (1.91 GHz, DDR3L-1333 single channel), %s weights" % (
-        "a" if precision == "fp32" else "b", precision))
+    say("## 4%s. Estimated tick on the NAO V6's Atom E3845 (1.91 GHz, DDR3L-1333 single channel), %s weights, %s" % (
+        tag, precision, "with the simulated arm" if variant == "sim" else "as on the robot (no simulated arm)"))
     say("issue bound   Ir / (2 per cycle x 1.91 GHz)          = %.0f / 3.82e9   = %6.2f ms" % (per["Ir"], t_issue * 1e3))
     say("load bound    Dr / (1 per cycle x 1.91 GHz)          = %.0f / 1.91e9   = %6.2f ms" % (per["Dr"], t_load * 1e3))
     say("mul bound     (2 x (mulps + pmaddwd) + other muls) / 1.91 GHz = %.0f / 1.91e9 = %6.2f ms" % (
@@ -213,8 +223,10 @@ def tick_budget(precision):
         "met optimistically, NOT pessimistically: measure on the robot" if t_low <= 0.020 else "NOT met"))
     say()
 
-tick_budget("fp32")
-tick_budget("int8")
+tick_budget("fp32", "sim", "a")
+tick_budget("int8", "sim", "b")
+tick_budget("fp32", "robot", "c")
+tick_budget("int8", "robot", "d")
 os.makedirs(os.path.dirname(out_path), exist_ok=True)
 with open(out_path, "w") as f:
     f.write("\n".join(lines) + "\n")
