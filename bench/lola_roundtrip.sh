@@ -8,14 +8,23 @@
 # with the load average before and after. Usage: bench/lola_roundtrip.sh [BUILD_DIR] > result.txt
 # The autonomous-mode model runs its policy on every tick (a synthetic reference ends after
 # ~13 s, after which the controller bypasses the policy and the ticks get cheap).
+# Environment: PRECISION=fp32|int8 (nao_rt --precision, default fp32); MODES="default
+# answer-first io-thread" (any subset, in that order; default: the first two).
 set -euo pipefail
 build="${1:-build}"
+precision="${PRECISION:-fp32}"
+modes="${MODES:-default answer-first}"
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
-echo "date: $(date -u '+%Y-%m-%d %H:%M UTC'); host: $(nproc) cores"
-for mode in default answer-first; do
-  flags=()
-  [[ "$mode" == answer-first ]] && flags=(--lola-answer-first)
+echo "date: $(date -u '+%Y-%m-%d %H:%M UTC'); host: $(nproc) cores; precision $precision"
+for mode in $modes; do
+  flags=(--precision "$precision")
+  case "$mode" in
+    default) ;;
+    answer-first) flags+=(--lola-answer-first) ;;
+    io-thread) flags+=(--lola-io-thread) ;;
+    *) echo "lola_roundtrip.sh: unknown mode '$mode'" >&2; exit 2 ;;
+  esac
   echo
   echo "## mode: $mode"
   echo "uptime before: $(uptime)"
