@@ -19,9 +19,11 @@
 namespace nao {
 namespace {
 
-volatile std::sig_atomic_t g_stop_signal = 0;
+// Lock-free, so async-signal-safe, and read by the I/O thread too (--lola-io-thread).
+std::atomic<int> g_stop_signal{0};
+static_assert(std::atomic<int>::is_always_lock_free);
 
-extern "C" void onStopSignal(int) { g_stop_signal = 1; }
+extern "C" void onStopSignal(int) { g_stop_signal.store(1, std::memory_order_relaxed); }
 
 
 void signalFd(int fd) {
@@ -85,7 +87,12 @@ LolaBackend::LolaBackend(const ArmModel& arm, const LolaParams& params) : arm_(a
         if (f >= 0) ::close(f);
       throw std::runtime_error(std::string("lola: eventfd(): ") + std::strerror(e));
     }
-    io_ = std::thread(&LolaBackend::ioMain, this);  // parked until activate hands over
+    try {
+      io_ = std::thread(&LolaBackend::ioMain, this);  // parked until activate hands over
+    } catch (...) {
+      for (int f : {go_fd_, tick_fd_, cmd_fd_, fd_}) ::close(f);
+      throw;
+    }
   }
 }
 
@@ -130,7 +137,9 @@ bool LolaBackend::receive() {
         faults_ |= kFaultRobotMalformedPacket;
       }
     }
-    if (g_stop_signal != 0) {
+    // deactivate asked the I/O thread to hand the socket back: do not wait for more packets.
+    if (in_io_thread_ && io_quit_.load(std::memory_order_acquire)) return false;
+    if (g_stop_signal.load(std::memory_order_relaxed) != 0) {
       stop_ = RobotStop::kSignal;
       faults_ |= kFaultSafeStop;
       return false;
@@ -329,21 +338,22 @@ const JointVector& LolaBackend::activate(const JointVector& q0) {
   phase_cycles_ = 0;
   run_cycles_ = 0;
   ticks_ = 0;
-  if (!params_.io_thread) return q_meas_;
+  // (A second activate after a threaded run has no I/O thread left: it stays on this one.)
+  if (!params_.io_thread || !io_.joinable()) return q_meas_;
   // Hand the socket to the I/O thread: from here on it owns every LoLA member.
   ctl_ = TickView{q_meas_, 0, 0, RobotStop::kNone};
   ctl_ticks_seen_ = 0;
   threaded_ = true;
-  std::atomic_thread_fence(std::memory_order_seq_cst);
+  io_go_.store(true, std::memory_order_release);  // everything written above happens before the I/O thread's reads
   signalFd(go_fd_);
   return ctl_.q;
 }
 
 void LolaBackend::ioMain() {
-  waitFd(go_fd_);
-  std::atomic_thread_fence(std::memory_order_seq_cst);
+  while (!io_go_.load(std::memory_order_acquire) && !io_quit_.load(std::memory_order_acquire)) waitFd(go_fd_);
   if (io_quit_.load(std::memory_order_acquire)) return;
   if (params_.io_probe != nullptr) params_.io_probe->start();
+  in_io_thread_ = true;
   std::uint64_t cmd_seen = 0;
   const std::int64_t wait_ns = static_cast<std::int64_t>(params_.io_wait_ms * 1e6);
   while (!io_quit_.load(std::memory_order_acquire)) {
@@ -384,6 +394,7 @@ void LolaBackend::ioMain() {
     respond(pending_t_in_ns_, pending_waited_);  // toward target_
     if (stop_ != RobotStop::kNone) break;
   }
+  in_io_thread_ = false;
   publishTick();  // the stop (or the quit) wakes a waiting command()
   if (params_.io_probe != nullptr) counters_.io_allocations = params_.io_probe->stop();
 }
@@ -411,7 +422,7 @@ const JointVector& LolaBackend::commandThreaded(const JointVector& q_cmd) {
   // A boundary passed while this tick was computed: its command is late (the tick ends at the
   // next boundary after the command went out).
   const std::int64_t at_publish = tick_index_.load(std::memory_order_acquire);
-  if (at_publish > ctl_ticks_seen_) ++ctl_overruns_;
+  if (at_publish > ctl_ticks_seen_ && tick_stop_.load(std::memory_order_acquire) == 0) ++ctl_overruns_;
   const std::uint64_t s = cmd_seq_.load(std::memory_order_relaxed);
   cmd_seq_.store(s + 1, std::memory_order_relaxed);
   std::atomic_thread_fence(std::memory_order_release);
@@ -465,7 +476,7 @@ void LolaBackend::deactivate() {
     io_.join();
     threaded_ = false;
     counters_.overrun_ticks = ctl_overruns_;
-    faults_ = ctl_.faults;
+    faults_ = tick_faults_.exchange(0, std::memory_order_acq_rel);  // what the last publish left
   }
   if (stop_ == RobotStop::kLinkLost || fd_ < 0) return;
   // Hold where the arm is commanded now, ramp the stiffness to 0, then one more packet at 0.
@@ -473,7 +484,7 @@ void LolaBackend::deactivate() {
   // A second SIGINT/SIGTERM during the ramp ends it early (the stiffness stays where it got).
   const RobotStop reason = stop_;
   stop_ = RobotStop::kNone;
-  g_stop_signal = 0;
+  g_stop_signal.store(0, std::memory_order_relaxed);
   phase_ = Phase::kStop;
   phase_cycles_ = 0;
   target_ = setpoint_;

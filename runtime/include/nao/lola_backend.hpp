@@ -170,6 +170,8 @@ class LolaBackend final : public RobotBackend {
   bool threaded_ = false;  // control thread only: the I/O thread owns the LoLA state
   TickView ctl_;
   std::atomic<bool> io_quit_{false};
+  std::atomic<bool> io_go_{false};  // activate handed over (release; the I/O thread acquires)
+  bool in_io_thread_ = false;       // I/O thread only: inside its run loop
   std::atomic<std::uint64_t> cmd_seq_{0};
   std::array<std::atomic<double>, kNumJoints> cmd_q_{};
   std::atomic<std::uint64_t> tick_seq_{0};
