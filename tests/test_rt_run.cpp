@@ -373,7 +373,7 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   CHECK(c.run.zero_timing);
   CHECK(c.run.precision == "int8");
   CHECK_FALSE(c.info);
-  CHECK_FALSE(c.run.lola.io_thread);
+  CHECK(c.run.lola.io_thread == (NAO_LOLA_IO_THREAD_DEFAULT != 0));
   CHECK(c.run.emulate_tick_ns == 0);
 
   rt::CommandLine l;
@@ -383,6 +383,9 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   CHECK(l.run.lola.io_thread);
   CHECK(l.run.lola.io_wait_ms == doctest::Approx(2.5));
   CHECK(l.run.emulate_tick_ns == 30'000'000);
+  rt::CommandLine one;
+  REQUIRE(parse({"--robot", "lola", "--lola-one-thread"}, one, out, err) == -1);
+  CHECK_FALSE(one.run.lola.io_thread);
 }
 
 TEST_CASE("--realtime paces the ticks on 100 ms deadlines and gives the same records as back to back") {

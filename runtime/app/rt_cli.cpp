@@ -88,9 +88,11 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
   app.add_flag("--lola-answer-first{false}", o.lola.answer_after_tick,
                "LoLA: answer the packet that ends a tick at once (the new command then goes out one\n"
                "cycle later) instead of after the tick's work (docs/lola.md, timing)");
-  app.add_flag("--lola-io-thread", o.lola.io_thread,
+  app.add_flag("--lola-io-thread,!--lola-one-thread", o.lola.io_thread,
                "LoLA: answer the packets on a thread of their own, so a tick longer than the 12 ms\n"
-               "cycle (a slower CPU: the NAO's Atom) delays no answer (docs/lola.md)");
+               "cycle (a slower CPU: the NAO's Atom) delays no answer (docs/lola.md); or all on the\n"
+               "control thread. Default in this build: " +
+                   std::string(NAO_LOLA_IO_THREAD_DEFAULT ? "--lola-io-thread (the robot build)" : "--lola-one-thread"));
   app.add_option("--lola-io-wait-ms", o.lola.io_wait_ms,
                  "With --lola-io-thread: how long the packet that ends a tick waits for the tick's\n"
                  "command before it is answered toward the old one (default 4; 0 with\n"

@@ -12,6 +12,8 @@
 #   NAO_POLICY_HAVE_AVX2=0               leaves out the policy's AVX2 kernel (target("avx2")
 #                                        functions would put ymm instructions into the binary):
 #                                        the SSE kernel only, bit-identical to it
+#   NAO_LOLA_IO_THREAD_DEFAULT=1         nao_rt --robot lola answers on its I/O thread unless
+#                                        --lola-one-thread (the Atom's tick may exceed LoLA's 12 ms)
 #   -ffp-contract=off                    stays (cmake/NaoFlags.cmake, every build): no fused
 #                                        multiply-add, results do not depend on the target
 #   NAO_STATIC, NAO_URDF_READER=tinyxml  one static executable (libraries found as lib*.a:
@@ -19,7 +21,7 @@
 #                                        Debian, so the URDF is read by TinyXML (urdf_reader.hpp)
 #   NAO_RUNTIME_ONLY                     nao_rt, nao_lola_sim, nao_attn_tail (+ nao_codegen for the
 #                                        compiled-in model): no toolchain, libtorch, tests, bench
-set(NAO_TARGET_CPU_FLAGS "-march=silvermont -mtune=silvermont -DNAO_POLICY_HAVE_AVX2=0")
+set(NAO_TARGET_CPU_FLAGS "-march=silvermont -mtune=silvermont -DNAO_POLICY_HAVE_AVX2=0 -DNAO_LOLA_IO_THREAD_DEFAULT=1")
 set(CMAKE_C_FLAGS_INIT "${NAO_TARGET_CPU_FLAGS}")
 set(CMAKE_CXX_FLAGS_INIT "${NAO_TARGET_CPU_FLAGS}")
 set(CMAKE_ASM_FLAGS_INIT "-march=silvermont")

@@ -42,6 +42,12 @@
 #include <thread>
 #include <vector>
 
+// The robot build (toolchain/cmake/nao-v6.cmake) answers LoLA on the I/O thread by default: the
+// Atom's tick is estimated at 10-27 ms, longer than a cycle (docs/embedded.md).
+#ifndef NAO_LOLA_IO_THREAD_DEFAULT
+#define NAO_LOLA_IO_THREAD_DEFAULT 0
+#endif
+
 namespace nao {
 
 struct LolaParams {
@@ -63,7 +69,7 @@ struct LolaParams {
   /// answer_after_tick the packet that ends a tick waits for the tick's command at most
   /// io_wait_ms after it came (then it is answered toward the old one); every other packet is
   /// answered at once.
-  bool io_thread = false;
+  bool io_thread = NAO_LOLA_IO_THREAD_DEFAULT != 0;
   double io_wait_ms = 4.0;
   /// Counts the I/O thread's allocations from the first tick to deactivate (io_thread only).
   AllocationProbe* io_probe = nullptr;
