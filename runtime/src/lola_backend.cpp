@@ -81,16 +81,20 @@ LolaBackend::LolaBackend(const ArmModel& arm, const LolaParams& params) : arm_(a
     go_fd_ = ::eventfd(0, EFD_CLOEXEC);
     tick_fd_ = ::eventfd(0, EFD_CLOEXEC);
     cmd_fd_ = ::eventfd(0, EFD_CLOEXEC);
-    if (go_fd_ < 0 || tick_fd_ < 0 || cmd_fd_ < 0) {
-      const int e = errno;
+    // The destructor does not run for a constructor that throws: close what is open here.
+    auto closeAll = [this] {
       for (int f : {go_fd_, tick_fd_, cmd_fd_, fd_})
         if (f >= 0) ::close(f);
+    };
+    if (go_fd_ < 0 || tick_fd_ < 0 || cmd_fd_ < 0) {
+      const int e = errno;
+      closeAll();
       throw std::runtime_error(std::string("lola: eventfd(): ") + std::strerror(e));
     }
     try {
       io_ = std::thread(&LolaBackend::ioMain, this);  // parked until activate hands over
     } catch (...) {
-      for (int f : {go_fd_, tick_fd_, cmd_fd_, fd_}) ::close(f);
+      closeAll();
       throw;
     }
   }
@@ -349,6 +353,24 @@ const JointVector& LolaBackend::activate(const JointVector& q0) {
   return ctl_.q;
 }
 
+void LolaBackend::JointSeqlock::store(const JointVector& q) noexcept {
+  const std::uint64_t s = seq_.load(std::memory_order_relaxed);
+  seq_.store(s + 1, std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_release);
+  for (int j = 0; j < kNumJoints; ++j) q_[static_cast<std::size_t>(j)].store(q[j], std::memory_order_relaxed);
+  seq_.store(s + 2, std::memory_order_release);
+}
+
+bool LolaBackend::JointSeqlock::tryLoad(JointVector& q, std::uint64_t& version) const noexcept {
+  const std::uint64_t s1 = seq_.load(std::memory_order_acquire);
+  if (s1 % 2 != 0) return false;
+  for (int j = 0; j < kNumJoints; ++j) q[j] = q_[static_cast<std::size_t>(j)].load(std::memory_order_relaxed);
+  std::atomic_thread_fence(std::memory_order_acquire);
+  if (seq_.load(std::memory_order_relaxed) != s1) return false;
+  version = s1;
+  return true;
+}
+
 void LolaBackend::ioMain() {
   while (!io_go_.load(std::memory_order_acquire) && !io_quit_.load(std::memory_order_acquire)) waitFd(go_fd_);
   if (io_quit_.load(std::memory_order_acquire)) return;
@@ -364,13 +386,13 @@ void LolaBackend::ioMain() {
       // thread) its answer waits for the tick's new command, but never past io_wait_ms: a
       // slower tick's command goes out with the next answer instead.
       ++ticks_;
-      const std::uint64_t before = cmd_seq_.load(std::memory_order_acquire);
+      const std::uint64_t before = cmd_.version();
       publishTick();
       if (params_.answer_after_tick) {
         const std::int64_t until = pending_t_in_ns_ + wait_ns;
         for (;;) {
-          const std::uint64_t now_seq = cmd_seq_.load(std::memory_order_acquire);
-          if (now_seq != before && now_seq % 2 == 0) break;
+          const std::uint64_t now = cmd_.version();
+          if (now != before && now % 2 == 0) break;
           const std::int64_t left = until - monotonicNs();
           if (left <= 0 || io_quit_.load(std::memory_order_acquire)) break;
           pollfd pfd{cmd_fd_, POLLIN, 0};
@@ -380,16 +402,12 @@ void LolaBackend::ioMain() {
       }
     }
     // The latest command, taken after the packet came (a command published while we waited
-    // for it goes out now, not a cycle later). Seqlock read; a torn one is retried next cycle.
-    const std::uint64_t s1 = cmd_seq_.load(std::memory_order_acquire);
-    if (s1 != cmd_seen && s1 % 2 == 0) {
-      JointVector c;
-      for (int j = 0; j < kNumJoints; ++j) c[j] = cmd_q_[static_cast<std::size_t>(j)].load(std::memory_order_relaxed);
-      std::atomic_thread_fence(std::memory_order_acquire);
-      if (cmd_seq_.load(std::memory_order_relaxed) == s1) {
-        target_ = c;
-        cmd_seen = s1;
-      }
+    // for it goes out now, not a cycle later). A torn read is retried next cycle.
+    JointVector c;
+    std::uint64_t v = 0;
+    if (cmd_.tryLoad(c, v) && v != cmd_seen) {
+      target_ = c;
+      cmd_seen = v;
     }
     respond(pending_t_in_ns_, pending_waited_);  // toward target_
     if (stop_ != RobotStop::kNone) break;
@@ -400,11 +418,7 @@ void LolaBackend::ioMain() {
 }
 
 void LolaBackend::publishTick() {
-  const std::uint64_t s = tick_seq_.load(std::memory_order_relaxed);
-  tick_seq_.store(s + 1, std::memory_order_relaxed);
-  std::atomic_thread_fence(std::memory_order_release);
-  for (int j = 0; j < kNumJoints; ++j) tick_q_[static_cast<std::size_t>(j)].store(q_meas_[j], std::memory_order_relaxed);
-  tick_seq_.store(s + 2, std::memory_order_release);
+  tick_.store(q_meas_);
   tick_faults_.fetch_or(faults_, std::memory_order_acq_rel);  // kept until the control thread takes them
   faults_ = 0;
   tick_stop_.store(static_cast<int>(stop_), std::memory_order_release);
@@ -423,21 +437,12 @@ const JointVector& LolaBackend::commandThreaded(const JointVector& q_cmd) {
   // next boundary after the command went out).
   const std::int64_t at_publish = tick_index_.load(std::memory_order_acquire);
   if (at_publish > ctl_ticks_seen_ && tick_stop_.load(std::memory_order_acquire) == 0) ++ctl_overruns_;
-  const std::uint64_t s = cmd_seq_.load(std::memory_order_relaxed);
-  cmd_seq_.store(s + 1, std::memory_order_relaxed);
-  std::atomic_thread_fence(std::memory_order_release);
-  for (int j = 0; j < kNumJoints; ++j) cmd_q_[static_cast<std::size_t>(j)].store(q_cmd[j], std::memory_order_relaxed);
-  cmd_seq_.store(s + 2, std::memory_order_release);
+  cmd_.store(q_cmd);
   signalFd(cmd_fd_);
   while (tick_index_.load(std::memory_order_acquire) <= at_publish && tick_stop_.load(std::memory_order_acquire) == 0)
     waitFd(tick_fd_);
   ctl_ticks_seen_ = tick_index_.load(std::memory_order_acquire);
-  for (;;) {  // seqlock read of the boundary's measurement
-    const std::uint64_t s1 = tick_seq_.load(std::memory_order_acquire);
-    if (s1 % 2 != 0) continue;
-    for (int j = 0; j < kNumJoints; ++j) ctl_.q[j] = tick_q_[static_cast<std::size_t>(j)].load(std::memory_order_relaxed);
-    std::atomic_thread_fence(std::memory_order_acquire);
-    if (tick_seq_.load(std::memory_order_relaxed) == s1) break;
+  for (std::uint64_t v = 0; !tick_.tryLoad(ctl_.q, v);) {
   }
   ctl_.faults = tick_faults_.exchange(0, std::memory_order_acq_rel);
   ctl_.stop = static_cast<RobotStop>(tick_stop_.load(std::memory_order_acquire));

@@ -12,7 +12,7 @@
 // cycle later. On this machine the tick fits in a cycle, so by default one thread: no hand-off,
 // no lock, nothing to race; a tick longer than a cycle shows up as late answers (counted).
 //
-// A tick longer than a cycle (the NAO's Atom: 10-27 ms estimated, docs/embedded.md) would hold
+// A tick longer than a cycle (the NAO's Atom: 7-22 ms estimated, docs/embedded.md) would hold
 // every packet that arrives during it. With io_thread the backend answers on a thread of its own
 // (started at construction, parked until activate ends): from the first tick on it receives,
 // measures and answers every packet toward the latest command; at each tick boundary it
@@ -43,7 +43,7 @@
 #include <vector>
 
 // The robot build (toolchain/cmake/nao-v6.cmake) answers LoLA on the I/O thread by default: the
-// Atom's tick is estimated at 10-27 ms, longer than a cycle (docs/embedded.md).
+// Atom's tick is estimated at 7-22 ms, possibly longer than a cycle (docs/embedded.md).
 #ifndef NAO_LOLA_IO_THREAD_DEFAULT
 #define NAO_LOLA_IO_THREAD_DEFAULT 0
 #endif
@@ -126,6 +126,20 @@ class LolaBackend final : public RobotBackend {
   void publishTick();           // I/O thread: the tick boundary's measurement to the control thread
   const JointVector& commandThreaded(const JointVector& q_cmd);
 
+  // A joint vector handed between the two threads without a lock: one writer, readers retry
+  // (seqlock of relaxed atomics; the version is odd while a write is in progress).
+  class JointSeqlock {
+   public:
+    void store(const JointVector& q) noexcept;
+    /// A complete value into q and its version; false if a write was in progress (q partly set).
+    bool tryLoad(JointVector& q, std::uint64_t& version) const noexcept;
+    std::uint64_t version() const noexcept { return seq_.load(std::memory_order_acquire); }
+
+   private:
+    std::atomic<std::uint64_t> seq_{0};
+    std::array<std::atomic<double>, kNumJoints> q_{};
+  };
+
   // The control thread's view while the I/O thread runs (io_thread).
   struct TickView {
     JointVector q = JointVector::Zero();
@@ -167,10 +181,9 @@ class LolaBackend final : public RobotBackend {
   LolaCounters counters_;
   std::vector<std::int64_t> latency_ns_;
 
-  // io_thread: the hand-off. Command: control -> I/O; tick: I/O -> control (seqlocks: odd while
-  // written; a reader retries until it saw the same even number before and after).
+  // io_thread: the hand-off. Command: control -> I/O; tick: I/O -> control.
   std::thread io_;
-  int go_fd_ = -1;    // eventfd: control -> I/O, run (1) or quit (2)
+  int go_fd_ = -1;    // eventfd: control -> I/O, wakes the parked thread (io_go_ or io_quit_ says why)
   int tick_fd_ = -1;  // eventfd: I/O -> control, one count per tick boundary (or the stop)
   int cmd_fd_ = -1;   // eventfd: control -> I/O, a new command
   bool threaded_ = false;  // control thread only: the I/O thread owns the LoLA state
@@ -178,10 +191,8 @@ class LolaBackend final : public RobotBackend {
   std::atomic<bool> io_quit_{false};
   std::atomic<bool> io_go_{false};  // activate handed over (release; the I/O thread acquires)
   bool in_io_thread_ = false;       // I/O thread only: inside its run loop
-  std::atomic<std::uint64_t> cmd_seq_{0};
-  std::array<std::atomic<double>, kNumJoints> cmd_q_{};
-  std::atomic<std::uint64_t> tick_seq_{0};
-  std::array<std::atomic<double>, kNumJoints> tick_q_{};
+  JointSeqlock cmd_;   // the latest command
+  JointSeqlock tick_;  // the measurement of the latest tick boundary
   std::atomic<std::uint32_t> tick_faults_{0};
   std::atomic<int> tick_stop_{0};
   std::atomic<std::int64_t> tick_index_{0};  // tick boundaries published
