@@ -24,6 +24,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <sstream>
 #include <thread>
 
 using namespace nao;
@@ -277,6 +278,91 @@ TEST_CASE("world size 2 twice gives byte-identical model.bin bytes on every rank
   const double val1 = single.val.mse_rad2, val2 = meta["result"]["val_mse_rad2"].get<double>();
   MESSAGE("validation MSE world 1 " << val1 << ", world 2 " << val2);
   CHECK(std::abs(val2 - val1) <= 0.02 * val1);
+}
+
+namespace {
+
+// Every field of every sequence, in order, as text with all digits (equal text = equal doubles).
+std::string sequencesText(const std::vector<PolicySequence>& seqs) {
+  std::ostringstream s;
+  s.precision(17);
+  for (const PolicySequence& q : seqs) {
+    s << q.demo << ' ' << q.movement << ' ' << q.rollout << ' ' << q.worst_miss_rad << ' ' << q.drift_rad << '\n';
+    for (const std::vector<JointVector>* v : {&q.q, &q.a_prev, &q.r, &q.a}) {
+      s << v->size() << ':';
+      for (const JointVector& x : *v) s << ' ' << x.transpose();
+      s << '\n';
+    }
+  }
+  return s.str();
+}
+
+}  // namespace
+
+TEST_CASE("gatherSequences: each rank executes a share of the demonstrations, every rank gets all, in order, to the last bit") {
+  torch::set_num_threads(1);
+  const PolicyData& data = smallData();
+  ExecutionOptions exec;
+  exec.noisy_rollouts = 1;
+  std::vector<int> demos;
+  for (int d = 0; d < static_cast<int>(data.demos.size()); ++d) demos.push_back(d);
+  const std::string one = sequencesText(executeDemos(data, demos, smallSim(), exec, 3));
+  for (int world : {2, 3}) {
+    const TempDir tmp;
+    const std::vector<RankExit> exits = runRanks(world, tmp.path, [&](int r) {
+      ProcessGroup g(dist(world, r, tmp.path));
+      const auto [b, e] = shardRange(static_cast<std::int64_t>(demos.size()), world, r);
+      const std::vector<int> mine(demos.begin() + b, demos.begin() + e);
+      std::ofstream(tmp.path + "/rank" + std::to_string(r) + ".txt")
+          << sequencesText(gatherSequences(g, executeDemos(data, mine, smallSim(), exec, 3)));
+    });
+    for (int r = 0; r < world; ++r) {
+      const RankExit& x = exits[static_cast<std::size_t>(r)];
+      REQUIRE_MESSAGE((x.exited && x.code == 0), "rank " << r << " of " << world << " failed: " << x.error);
+      CHECK_MESSAGE(nao::test::readFile(tmp.path + "/rank" + std::to_string(r) + ".txt") == one,
+                    "rank " << r << " of " << world << " holds other sequences than one process makes");
+    }
+  }
+  // The comparison can fail: another seed gives other noisy rollouts.
+  CHECK(sequencesText(executeDemos(data, demos, smallSim(), exec, 4)) != one);
+}
+
+TEST_CASE("world size 2 shares the expert's rollouts, the rollout scores and DAgger's rollouts: each rank makes its share, every rank gets what one process makes") {
+  torch::set_num_threads(1);
+  TrainOptions o = smallOptions(47, 2);
+  o.conditioning = Conditioning::kAutonomous;
+  o.ar_residual = true;
+  o.select_by_rollout = true;
+  o.dagger_rounds = 1;
+  o.dagger_start = 1;
+  o.execution.noisy_rollouts = 1;  // two sequences per demonstration: the shares are whole demonstrations
+  const std::vector<std::vector<std::uint8_t>> a = trainRanks(o, 2, TempDir().path);
+  REQUIRE(a[0] == a[1]);
+  const TrainResult single = trainPolicy(smallData(), smallSim(), o, nullptr);
+  const ModelFile f1 = decodeModel(modelBytes(o, single), "world 1"), f2 = decodeModel(a[0], "world 2");
+  // The normalisation is the statistics of all executed training sequences in order: equal
+  // bits only if rank 0 got rank 1's sequences exactly, and in place.
+  int norms = 0;
+  REQUIRE(f1.tensors.size() == f2.tensors.size());
+  for (std::size_t i = 0; i < f1.tensors.size(); ++i) {
+    const std::string& name = f1.tensors[i].spec.name;
+    if (name.rfind("norm.", 0) != 0) continue;
+    ++norms;
+    CHECK_MESSAGE(std::equal(f1.data(i), f1.data(i) + f1.tensors[i].spec.count(), f2.data(i)), name << " differs");
+  }
+  CHECK(norms == 6);
+  const nlohmann::json m1 = nlohmann::json::parse(f1.header.metadata_json);
+  const nlohmann::json m2 = nlohmann::json::parse(f2.header.metadata_json);
+  // Epoch 0 is the untrained net, the same weights on both: its rollouts (each rank scores its
+  // share of the validation demonstrations) give the same DTWs to the last bit.
+  REQUIRE(m1["result"].contains("epoch0_rollout_dtw_m"));
+  CHECK(m2["result"]["epoch0_rollout_dtw_m"] == m1["result"]["epoch0_rollout_dtw_m"]);
+  CHECK(m2["result"]["rollout_dtw_m"].size() == 3);
+  // DAgger's round: one policy rollout per training demonstration, on every rank.
+  CHECK(m2["training"]["dagger"]["run"][0]["sequences"] == single.split.train.size());
+  CHECK(m2["training"]["dagger"]["run"][0]["ticks"] == m1["training"]["dagger"]["run"][0]["ticks"]);
+  CHECK(m2["data"]["train_samples"] == m1["data"]["train_samples"]);
+  CHECK(m2["data"]["val_samples"] == m1["data"]["val_samples"]);
 }
 
 namespace {

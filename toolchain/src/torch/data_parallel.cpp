@@ -108,6 +108,18 @@ void ProcessGroup::sum(torch::Tensor& t, const char* what) {
   }
 }
 
+void ProcessGroup::broadcast(torch::Tensor& t, int root, const char* what) {
+  try {
+    std::vector<torch::Tensor> ts{t};
+    c10d::BroadcastOptions b;
+    b.rootRank = root;
+    impl_->group->broadcast(ts, b)->wait();
+  } catch (const std::exception& e) {
+    throw UserError(std::string("broadcast of the ") + what + " from rank " + std::to_string(root) + " failed (" +
+                    where_ + "): another rank died, stopped or timed out: " + message(e));
+  }
+}
+
 void ProcessGroup::sumGradients(const std::vector<torch::Tensor>& params) {
   torch::NoGradGuard no_grad;
   std::int64_t total = 0;

@@ -47,6 +47,10 @@ class ProcessGroup {
   /// rank receives the same bytes. `what` names the exchange in error messages.
   void sum(torch::Tensor& t, const char* what);
 
+  /// Copies `root`'s contiguous tensor `t` into every rank's `t` (Gloo broadcast): the same
+  /// bytes everywhere. Every rank passes a tensor of the same size and type.
+  void broadcast(torch::Tensor& t, int root, const char* what);
+
   /// Sums the gradients of `params` over all ranks in place: they are copied into one flat
   /// float bucket in the order given (the manifest order), all-reduced, copied back.
   /// Undefined gradients count as zeros.

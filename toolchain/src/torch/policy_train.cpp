@@ -7,13 +7,16 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
+#include <cstddef>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <memory>
 #include <ostream>
 #include <sstream>
+#include <stdexcept>
 
 namespace nao::tools {
 
@@ -39,6 +42,93 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// Sequences packed as doubles, one after another: demo, movement, rollout, the lengths of q,
+// a_prev, r and a, worst_miss_rad, drift_rad, then the four vectors' joints. Exact: every
+// field is a double or a small integer.
+constexpr std::size_t kPackedHead = 9;
+
+std::size_t packedSize(const PolicySequence& s) {
+  return kPackedHead + kNumJoints * (s.q.size() + s.a_prev.size() + s.r.size() + s.a.size());
+}
+
+double* pack(const PolicySequence& s, double* out) {
+  const double head[kPackedHead] = {static_cast<double>(s.demo),         static_cast<double>(s.movement),
+                                    static_cast<double>(s.rollout),      static_cast<double>(s.q.size()),
+                                    static_cast<double>(s.a_prev.size()), static_cast<double>(s.r.size()),
+                                    static_cast<double>(s.a.size()),      s.worst_miss_rad,
+                                    s.drift_rad};
+  out = std::copy(head, head + kPackedHead, out);
+  for (const std::vector<JointVector>* v : {&s.q, &s.a_prev, &s.r, &s.a})
+    for (const JointVector& x : *v) out = std::copy(x.data(), x.data() + kNumJoints, out);
+  return out;
+}
+
+const double* unpack(const double* in, const double* end, PolicySequence& s) {
+  if (end - in < static_cast<std::ptrdiff_t>(kPackedHead)) throw std::logic_error("gatherSequences: truncated record");
+  s.demo = static_cast<int>(in[0]);
+  s.movement = static_cast<int>(in[1]);
+  s.rollout = static_cast<int>(in[2]);
+  s.worst_miss_rad = in[7];
+  s.drift_rad = in[8];
+  std::vector<JointVector>* vs[4] = {&s.q, &s.a_prev, &s.r, &s.a};
+  const double* x = in + kPackedHead;
+  for (int k = 0; k < 4; ++k) {
+    const auto n = static_cast<std::size_t>(in[3 + k]);
+    if (static_cast<std::size_t>(end - x) < n * kNumJoints) throw std::logic_error("gatherSequences: truncated record");
+    vs[k]->resize(n);
+    for (JointVector& v : *vs[k]) {
+      std::copy(x, x + kNumJoints, v.data());
+      x += kNumJoints;
+    }
+  }
+  return x;
+}
+
+}  // namespace
+
+std::vector<PolicySequence> gatherSequences(ProcessGroup& g, std::vector<PolicySequence> mine) {
+  const int w = g.worldSize();
+  torch::Tensor sizes = torch::zeros({w}, torch::kInt64);
+  std::int64_t my_size = 0;
+  for (const PolicySequence& s : mine) my_size += static_cast<std::int64_t>(packedSize(s));
+  sizes[g.rank()] = my_size;
+  g.sum(sizes, "sequence sizes");
+  std::vector<PolicySequence> all;
+  for (int r = 0; r < w; ++r) {
+    torch::Tensor buf = torch::empty({sizes[r].item<std::int64_t>()}, torch::kFloat64);
+    double* const b = buf.data_ptr<double>();
+    double* const e = b + buf.numel();
+    if (r == g.rank()) {
+      double* out = b;
+      for (const PolicySequence& s : mine) out = pack(s, out);
+    }
+    g.broadcast(buf, r, "executed sequences");
+    if (r == g.rank()) {
+      for (PolicySequence& s : mine) all.push_back(std::move(s));
+      continue;
+    }
+    for (const double* in = b; in < e;) {
+      PolicySequence s;
+      in = unpack(in, e, s);
+      all.push_back(std::move(s));
+    }
+  }
+  return all;
+}
+
+namespace {
+
+// make(demos) for the listed demonstrations, in list order. With a group each rank makes a
+// contiguous share and the shares are gathered (sequences of one demonstration depend on it
+// alone: own seed stream, reset arm), so every rank gets what one process would make.
+template <class Make>
+std::vector<PolicySequence> sharedSequences(ProcessGroup* g, const std::vector<int>& demos, Make&& make) {
+  if (g == nullptr) return make(demos);
+  const auto [b, e] = shardRange(static_cast<std::int64_t>(demos.size()), g->worldSize(), g->rank());
+  const std::vector<int> mine(demos.begin() + b, demos.begin() + e);
+  return gatherSequences(*g, mine.empty() ? std::vector<PolicySequence>{} : make(mine));
+}
 
 // Executed sequences as normalised tensors (the net's norm.* buffers: the statistics it will
 // carry), one entry per sequence, and how to batch them.
@@ -171,8 +261,7 @@ void check(const PolicyData& data, const TrainOptions& o) {
   if (o.dagger_rounds < 0) throw UserError("DAgger rounds must not be negative");
   if (o.dagger_rounds > 0) {
     if (o.dagger_start < 1) throw UserError("the first DAgger round must follow an epoch (start at least 1)");
-    // Unsupported, not silently wrong: ranks would need to share the rollouts, a checkpoint would need them.
-    if (o.dist.world_size > 1) throw UserError("DAgger (--dagger-rounds) needs world size 1 (not data-parallel)");
+    // Unsupported, not silently wrong: a checkpoint would need the rollouts.
     if (!o.resume.empty()) throw UserError("DAgger (--dagger-rounds) cannot --resume a checkpoint");
     // The rollouts run the runtime's streaming inference, compiled for these two only.
     if (o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
@@ -377,8 +466,10 @@ std::vector<double> nearestNeighbourDtw(const ValPaths& v) {
 // DTW to the nearest validation demonstration of its movement: per movement the median, and
 // their mean (NaN if any is NaN: a non-finite rollout never wins).
 void scoreRollouts(const PolicyData& data, const std::vector<int>& val, const SimModel& sim,
-                   const ExecutionOptions& execution, const PolicyNet& net, const ValPaths& paths, EpochStats& st) {
-  const std::vector<PolicySequence> seqs = daggerRollouts(data, val, sim, execution, net, 0);
+                   const ExecutionOptions& execution, const PolicyNet& net, const ValPaths& paths, EpochStats& st,
+                   ProcessGroup* group) {
+  const std::vector<PolicySequence> seqs = sharedSequences(
+      group, val, [&](const std::vector<int>& d) { return daggerRollouts(data, d, sim, execution, net, 0); });
   std::vector<std::vector<double>> dtw(paths.by_movement.size());
   for (const PolicySequence& s : seqs) {
     const NearestDemo n = nearestDemo(handPath(sim.arm, s.q), paths.by_movement[static_cast<std::size_t>(s.movement)], -1);
@@ -425,14 +516,27 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   if (res.split.val.empty())
     throw UserError("no validation demonstration: early stopping needs a movement with at least 2 demonstrations "
                     "and a positive validation fraction");
-  // The executed rollouts (every rank makes the same ones: seeded, deterministic). Validation:
-  // the clean rollouts of the validation demonstrations.
+  // The group joins after the cheap checks and the data: a bad option fails alone, at once.
+  const std::string key = checkpointKey(o, res.fingerprint);
+  std::unique_ptr<ProcessGroup> group;
+  if (o.dist.world_size > 1) {
+    group = std::make_unique<ProcessGroup>(o.dist);
+    // Ranks that disagree would call different collectives: refuse before any work.
+    group->checkSame(fnv1a64(reinterpret_cast<const std::uint8_t*>(key.data()), key.size()), "options and data");
+  }
+  // The executed rollouts (seeded per demonstration, deterministic; each rank executes its
+  // share and every rank gets all). Validation: the clean rollouts of the validation demonstrations.
   const Clock::time_point t_exec = Clock::now();
-  if (progress) *progress << "executing the demonstrations on the simulated arm (expert labels)" << std::endl;
-  const std::vector<PolicySequence> train_seqs = executeDemos(data, res.split.train, sim, o.execution, o.seed, progress);
+  if (progress)
+    *progress << "executing the demonstrations on the simulated arm (expert labels"
+              << (group ? ", " + std::to_string(o.dist.world_size) + " ranks" : std::string()) << ")" << std::endl;
+  const std::vector<PolicySequence> train_seqs = sharedSequences(group.get(), res.split.train, [&](const std::vector<int>& d) {
+    return executeDemos(data, d, sim, o.execution, o.seed, progress);
+  });
   ExecutionOptions clean = o.execution;
   clean.noisy_rollouts = 0;
-  const std::vector<PolicySequence> val_seqs = executeDemos(data, res.split.val, sim, clean, o.seed, nullptr);
+  const std::vector<PolicySequence> val_seqs = sharedSequences(
+      group.get(), res.split.val, [&](const std::vector<int>& d) { return executeDemos(data, d, sim, clean, o.seed, nullptr); });
   for (const PolicySequence& s : train_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
   for (const PolicySequence& s : val_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
   res.execution_seconds = secondsSince(t_exec);
@@ -484,7 +588,6 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   double best_val = std::numeric_limits<double>::infinity();
   double epoch_seconds_sum = 0.0;
   int first_epoch = 1;
-  const std::string key = checkpointKey(o, res.fingerprint);
   if (!o.resume.empty()) {
     Checkpoint ck = readCheckpoint(o.resume, key, params, optimiser);
     best = std::move(ck.best);
@@ -496,15 +599,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     res.resumed_after = first_epoch - 1;
   }
 
-  // The group joins after the cheap checks and the data: a bad option fails alone, at once.
-  std::unique_ptr<ProcessGroup> group;
-  if (o.dist.world_size > 1) {
-    group = std::make_unique<ProcessGroup>(o.dist);
+  if (group) {
     // Ranks that disagree would call different collectives: refuse before the first batch.
-    group->checkSame(fnv1a64(reinterpret_cast<const std::uint8_t*>(key.data()), key.size(),
-                             fnv1a64(reinterpret_cast<const std::uint8_t*>(&res.train_samples),
-                                     sizeof res.train_samples)),
-                     "options and data");
+    group->checkSame(res.train_samples, "training samples");
     group->checkInSync(params);
   }
   const int rank = o.dist.rank;
@@ -524,7 +621,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       const SplitLoss v0 = evaluate(net, val, group.get());
       st.val_loss = v0.normalised;
       st.val_mse_rad2 = v0.mse_rad2;
-      scoreRollouts(data, res.split.val, sim, o.execution, net, val_paths, st);
+      scoreRollouts(data, res.split.val, sim, o.execution, net, val_paths, st, group.get());
       if (progress) {
         char line[200];
         std::snprintf(line, sizeof line, "epoch 0 (before training%s)  val %.4g  rollout DTW %.1f mm", 
@@ -592,8 +689,10 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     const SplitLoss v = evaluate(net, val, group.get());
     st.val_loss = v.normalised;
     st.val_mse_rad2 = v.mse_rad2;
-    // Every rank computes the same rollouts (deterministic): no exchange needed.
-    if (o.select_by_rollout) scoreRollouts(data, res.split.val, sim, o.execution, net, val_paths, st);
+    // Each rank rolls out its share of the validation demonstrations; all score all of them.
+    const Clock::time_point t_score = Clock::now();
+    if (o.select_by_rollout) scoreRollouts(data, res.split.val, sim, o.execution, net, val_paths, st, group.get());
+    const double score_seconds = secondsSince(t_score);
     const double criterion = o.select_by_rollout ? st.rollout_dtw_m : st.val_loss;
     if (criterion < best_val) {
       best_val = criterion;
@@ -613,9 +712,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       char line[240];
       if (o.select_by_rollout)
         std::snprintf(line, sizeof line,
-                      "%sepoch %d/%d  train %.4g  val %.4g  rollout DTW %.1f mm (best %.1f @ %d)  %.1f s  %.0f samples/s  ",
+                      "%sepoch %d/%d  train %.4g  val %.4g  rollout DTW %.1f mm (best %.1f @ %d)  %.1f s (rollouts %.1f s)  %.0f samples/s  ",
                       live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, 1e3 * st.rollout_dtw_m,
-                      1e3 * best_val, res.best_epoch, st.seconds, static_cast<double>(st.samples) / st.seconds);
+                      1e3 * best_val, res.best_epoch, st.seconds, score_seconds, static_cast<double>(st.samples) / st.seconds);
       else
         std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  %.0f samples/s  ",
                       live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, best_val, res.best_epoch,
@@ -633,7 +732,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       DaggerRound dr;
       dr.after_epoch = epoch;
       const int round = static_cast<int>(res.dagger.size()) + 1;
-      const std::vector<PolicySequence> seqs = daggerRollouts(data, res.split.train, sim, o.execution, net, round);
+      const std::vector<PolicySequence> seqs = sharedSequences(group.get(), res.split.train, [&](const std::vector<int>& d) {
+        return daggerRollouts(data, d, sim, o.execution, net, round);
+      });
       const SequenceTensors added = toTensors(net, seqs);
       for (std::size_t i = 0; i < added.size(); ++i) {
         train.qn.push_back(added.qn[i]);

@@ -149,6 +149,12 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
 std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
                                            const ExecutionOptions& execution, const PolicyNet& net, int round);
 
+/// Every rank's `mine`, in rank order, on every rank of `group`: each rank broadcasts its own
+/// sequences (Gloo), so every rank holds the doubles their owner computed. A collective: every
+/// rank calls it. The training shares out its simulated rollouts this way (each rank executes
+/// a contiguous share of the demonstrations; docs/training.md).
+std::vector<PolicySequence> gatherSequences(ProcessGroup& group, std::vector<PolicySequence> mine);
+
 /// Per-movement linear AR models as nao_rt reads them from the metadata (training.linear_ar,
 /// doubles; rt::linearArBase makes the runtime's float base of them).
 rt::LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models);
