@@ -362,6 +362,11 @@ TEST_CASE("world size 2 shares the expert's rollouts, the rollout scores and DAg
   CHECK(m2["training"]["dagger"]["run"][0]["sequences"] == single.split.train.size());
   CHECK(m2["training"]["dagger"]["run"][0]["ticks"] == m1["training"]["dagger"]["run"][0]["ticks"]);
   CHECK(m2["data"]["train_samples"] == m1["data"]["train_samples"]);
+  // The card says how the other ranks ran (the command it shows is rank 0's).
+  TrainResult as_two = single;
+  as_two.world_size = 2;
+  CHECK(modelCard(smallData(), o, as_two, "cmd", "m.bin").find("`toolchain/nao train --procs 2`") != std::string::npos);
+  CHECK(modelCard(smallData(), o, single, "cmd", "m.bin").find("--procs") == std::string::npos);
   CHECK(m2["data"]["val_samples"] == m1["data"]["val_samples"]);
 }
 

@@ -1016,6 +1016,10 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     s << buf;
   }
   s << "\n## Command\n\n```\n" << command_line << "\n```\n";
+  if (r.world_size > 1)
+    s << "\nRank 0's command: every rank R of the " << r.world_size
+      << " ran the same with `--rank R` (`toolchain/nao train --procs " << r.world_size
+      << "` starts them; the bytes depend on the world size, docs/training.md).\n";
   return s.str();
 }
 
