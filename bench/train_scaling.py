@@ -11,7 +11,14 @@ rank is what a batch would take with one free core per rank (a waiting rank slee
 kernel, it burns no CPU), so it is printed too, with the load average before and after.
 
 usage: bench/train_scaling.py DATA [--worlds 1 2] [--batches 10 40] [--tc build/bin/nao_toolchain]
+       bench/train_scaling.py DATA --epoch [--worlds 1 2]
+
+--epoch times what the issue's target is about instead: one whole epoch of the committed
+autonomous recipe (toolchain/nao train autonomous, --epochs 1) per world size, from rank 0's
+own lines: the expert's rollouts before training, the epoch (batches, validation loss and the
+validation rollouts of --select rollout-dtw, whose share is printed too) and the whole run.
 """
+import re
 import argparse
 import os
 import resource
@@ -50,13 +57,62 @@ def run(tc, data, world, batches, out_dir):
     return wall, cpu
 
 
+EPOCH_ARGS = ["--conditioning", "autonomous", "--lr", "1e-4", "--noisy-rollouts", "0", "--ar-residual",
+              "--select", "rollout-dtw"]
+
+
+def run_epoch(tc, data, world, out_dir):
+    """One epoch of the autonomous recipe; returns rank 0's (execution, epoch, rollouts, total) seconds."""
+    store = os.path.join(out_dir, f"store_epoch_{world}")
+    base = [tc, "train", "--config", "paper", "--data", data, "--epochs", "1", "--seed", "1",
+            "--out", os.path.join(out_dir, f"e_{world}.bin")] + EPOCH_ARGS
+    env = dict(os.environ)
+    if os.path.exists(OPENBLAS):
+        env["LD_PRELOAD"] = OPENBLAS
+    procs = []
+    for r in range(world):
+        cmd = base + (["--world-size", str(world), "--rank", str(r), "--rendezvous", "file://" + store]
+                      if world > 1 else [])
+        procs.append(subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT))
+    outs = [p.communicate()[0].decode() for p in procs]
+    for r, p in enumerate(procs):
+        if p.returncode != 0:
+            sys.exit(f"rank {r} of world size {world} failed:\n" + outs[r])
+    text = outs[0]
+    execution = float(re.search(r"validation \(\d+ ticks\) in (\d+(?:\.\d+)?) s", text).group(1))
+    m = re.search(r"epoch 1/1 .*?  (\d+\.\d+) s \(rollouts (\d+\.\d+) s\)", text)
+    total = float(re.search(r"ticks -> .*\), (\d+\.\d+) s", text).group(1))
+    return execution, float(m.group(1)), float(m.group(2)), total
+
+
+def main_epoch(a):
+    print(f"# {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, {os.cpu_count()} cores")
+    print(f"# command: bench/train_scaling.py {a.data} --epoch --worlds {' '.join(map(str, a.worlds))}")
+    print(f"# each rank: nao_toolchain train --config paper --epochs 1 --seed 1 {' '.join(EPOCH_ARGS)}")
+    print(f"# load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print("world  expert rollouts (s)  epoch (s)  of which rollouts (s)  run (s)  speed-up epoch  speed-up run")
+    ref = None
+    with tempfile.TemporaryDirectory(prefix="nao_scaling_") as d:
+        for w in a.worlds:
+            ex, ep, ro, tot = run_epoch(a.tc, a.data, w, d)
+            if ref is None:
+                ref = (ep, tot)
+            print(f"{w:5d}  {ex:19.1f}  {ep:9.1f}  {ro:21.1f}  {tot:7.1f}  {ref[0] / ep:14.2f}  {ref[1] / tot:12.2f}",
+                  flush=True)
+    print(f"# load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("data")
     ap.add_argument("--worlds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--batches", type=int, nargs=2, default=[10, 40])
     ap.add_argument("--tc", default="build/bin/nao_toolchain")
+    ap.add_argument("--epoch", action="store_true", help="time one whole epoch of the autonomous recipe")
     a = ap.parse_args()
+    if a.epoch:
+        main_epoch(a)
+        return
     lo, hi = a.batches
     print(f"# {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, {os.cpu_count()} cores")
     print(f"# command: bench/train_scaling.py {a.data} --worlds {' '.join(map(str, a.worlds))} "
