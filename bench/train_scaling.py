@@ -18,9 +18,9 @@ autonomous recipe (toolchain/nao train autonomous, --epochs 1) per world size, f
 own lines: the expert's rollouts before training, the epoch (batches, validation loss and the
 validation rollouts of --select rollout-dtw, whose share is printed too) and the whole run.
 """
-import re
 import argparse
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -30,20 +30,27 @@ import time
 OPENBLAS = "/usr/lib/x86_64-linux-gnu/openblas-serial/libopenblas.so.0"
 
 
+def start_ranks(base, world, store):
+    """Starts `world` ranks of the command `base` (serial OpenBLAS preloaded, as toolchain/nao
+    train does), over a file store when world > 1; returns their Popen objects, rank order."""
+    env = dict(os.environ)
+    if os.path.exists(OPENBLAS):
+        env["LD_PRELOAD"] = OPENBLAS
+    procs = []
+    for r in range(world):
+        cmd = base + (["--world-size", str(world), "--rank", str(r), "--rendezvous", "file://" + store]
+                      if world > 1 else [])
+        procs.append(subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT))
+    return procs
+
+
 def run(tc, data, world, batches, out_dir):
     """One timing run; returns (wall of rank 0, [cpu seconds per rank])."""
     store = os.path.join(out_dir, f"store_{world}_{batches}")
     base = [tc, "train", "--config", "paper", "--data", data, "--epochs", "1", "--seed", "1",
             "--max-batches", str(batches), "--out", os.path.join(out_dir, f"m_{world}_{batches}.bin")]
-    env = dict(os.environ)
-    if os.path.exists(OPENBLAS):
-        env["LD_PRELOAD"] = OPENBLAS
-    procs = []
     t0 = time.monotonic()
-    for r in range(world):
-        cmd = base + (["--world-size", str(world), "--rank", str(r), "--rendezvous", "file://" + store]
-                      if world > 1 else [])
-        procs.append(subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT))
+    procs = start_ranks(base, world, store)
     cpu = [0.0] * world
     wall = 0.0
     for r, p in enumerate(procs):
@@ -66,14 +73,7 @@ def run_epoch(tc, data, world, out_dir):
     store = os.path.join(out_dir, f"store_epoch_{world}")
     base = [tc, "train", "--config", "paper", "--data", data, "--epochs", "1", "--seed", "1",
             "--out", os.path.join(out_dir, f"e_{world}.bin")] + EPOCH_ARGS
-    env = dict(os.environ)
-    if os.path.exists(OPENBLAS):
-        env["LD_PRELOAD"] = OPENBLAS
-    procs = []
-    for r in range(world):
-        cmd = base + (["--world-size", str(world), "--rank", str(r), "--rendezvous", "file://" + store]
-                      if world > 1 else [])
-        procs.append(subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT))
+    procs = start_ranks(base, world, store)
     outs = [p.communicate()[0].decode() for p in procs]
     for r, p in enumerate(procs):
         if p.returncode != 0:

@@ -115,7 +115,7 @@ void run(const TrainArgs& a) {
 
   // Each Adam step and backward pass allocates tensors of up to the 24 MB of the paper model's
   // parameters; above glibc's default threshold they are mmap'ed and unmapped every time, and
-  // their pages fault in afresh (~1.3 M minor faults in 40 batches). Kept in the heap instead
+  // their pages fault in afresh (~1.3 M minor faults in a run of 40 batches). Kept in the heap instead
   // (the threshold's 64-bit maximum, 32 MB, and no trimming), the same arithmetic runs ~4 %
   // faster with the same bytes out (docs/training.md, "Speed").
   mallopt(M_MMAP_THRESHOLD, 32 * 1024 * 1024);
