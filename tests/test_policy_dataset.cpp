@@ -605,7 +605,107 @@ TEST_CASE("DAgger rollouts execute the policy's clamped action and the expert la
     CHECK(a[i].q == b[i].q);
     CHECK(a[i].a == b[i].a);
   }
+  // Without labels (scoring): the same states to the last bit, only the expert's work skipped.
+  for (const double push : {0.0, 0.3}) {
+    const RolloutPolicy p = [&](int movement, int, const JointVector& q, const JointVector& a_prev,
+                                const JointVector& r) -> JointVector { return law(push, movement, q, a_prev, r); };
+    const std::vector<PolicySequence> with = executePolicyRollouts(data, demos, model, o, p, 0);
+    const std::vector<PolicySequence> without = executePolicyRollouts(data, demos, model, o, p, 0, false);
+    REQUIRE(without.size() == with.size());
+    for (std::size_t i = 0; i < with.size(); ++i) {
+      INFO("push " << push << " demo " << with[i].demo);
+      CHECK(without[i].q == with[i].q);
+      CHECK(without[i].a_prev == with[i].a_prev);
+      CHECK(without[i].r == with[i].r);
+      CHECK(without[i].drift_rad == with[i].drift_rad);
+      CHECK(without[i].a.empty());
+      CHECK(with[i].a.size() == with[i].q.size());
+    }
+  }
+  ExecutionOptions mixed = o;
+  mixed.dagger_beta = 0.5;
+  CHECK_THROWS_WITH_AS(executePolicyRollouts(data, demos, model, mixed, mild, 1, false), doctest::Contains("labels"), UserError);
   CHECK_THROWS_WITH_AS(executePolicyRollouts(data, {99}, model, o, mild, 1), doctest::Contains("out of range"), UserError);
   CHECK_THROWS_WITH_AS(executePolicyRollouts(data, demos, model, o, RolloutPolicy{}, 1), doctest::Contains("no policy"),
                        UserError);
+}
+
+TEST_CASE("beta-mixed DAgger rollouts: expert ticks execute the label, beta 1 is the clean execution, round 0 stays pure") {
+  KeyPoseBlend blend;
+  blend.pole = 0.8;
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const PolicyData data = reachableSet(arm, blend);
+  const SimModel model = makeSimModel(arm);
+  const double period = model.params.dt_s * model.params.substeps_per_tick;
+  // A policy that drifts (momentum plus a push): far from the expert on every tick.
+  const auto law = [](int movement, const JointVector& q, const JointVector& a_prev, const JointVector& r) {
+    JointVector a = 0.9 * a_prev + 0.3 * r;
+    for (int j = 0; j < kNumJoints; ++j) a[j] += 0.01 * (movement + 1) + 0.02 * std::sin(3.0 * q[j]);
+    a[movement] += 0.1;
+    return a;
+  };
+  const RolloutPolicy policy = [&](int movement, int, const JointVector& q, const JointVector& a_prev,
+                                   const JointVector& r) -> JointVector { return law(movement, q, a_prev, r); };
+  const std::vector<int> demos = {1, 5, 7};
+
+  SUBCASE("beta 1: every tick is the expert's, so the rollout is the clean execution, field for field") {
+    ExecutionOptions o;
+    o.noisy_rollouts = 0;
+    const std::vector<PolicySequence> clean = executeDemos(data, demos, model, o, 1);
+    o.dagger_beta = 1.0;
+    const std::vector<PolicySequence> mixed = executePolicyRollouts(data, demos, model, o, policy, 1);
+    REQUIRE(mixed.size() == clean.size());
+    for (std::size_t i = 0; i < mixed.size(); ++i) {
+      CHECK(mixed[i].expert_ticks == mixed[i].ticks());
+      CHECK(mixed[i].q == clean[i].q);
+      CHECK(mixed[i].a_prev == clean[i].a_prev);
+      CHECK(mixed[i].r == clean[i].r);
+      CHECK(mixed[i].a == clean[i].a);
+    }
+  }
+
+  SUBCASE("beta 0.5: round i executes the expert on about 0.5^i of the ticks, the policy's clamped action on the rest") {
+    ExecutionOptions o;
+    o.dagger_beta = 0.5;
+    std::vector<std::vector<PolicySequence>> rounds;
+    for (int round = 0; round <= 2; ++round) {
+      const std::vector<PolicySequence> seqs = executePolicyRollouts(data, demos, model, o, policy, round);
+      std::size_t ticks = 0, expert = 0, seen_expert = 0, seen_policy = 0;
+      for (const PolicySequence& s : seqs) {
+        ticks += s.ticks();
+        expert += s.expert_ticks;
+        // Which command ran is seen in the next tick's a(t−1): the label (expert) or the law's
+        // action inside the controller's bounds (policy); the two differ on these ticks.
+        for (std::size_t t = 0; t + 1 < s.ticks(); ++t) {
+          JointVector c;
+          for (int j = 0; j < kNumJoints; ++j) {
+            const double step = arm.v_max[j] * period;
+            const double lo = std::max(arm.q_min[j], s.q[t][j] - step), hi = std::min(arm.q_max[j], s.q[t][j] + step);
+            c[j] = std::clamp(s.q[t][j] + law(s.movement, s.q[t], s.a_prev[t], s.r[t])[j], std::min(lo, hi), std::max(lo, hi));
+          }
+          const bool by_expert = s.a_prev[t + 1] == s.a[t];
+          const bool by_policy = (s.q[t] + s.a_prev[t + 1] - c).cwiseAbs().maxCoeff() < 1e-12;
+          CHECK(by_expert != by_policy);
+          seen_expert += by_expert ? 1 : 0;
+          seen_policy += by_policy ? 1 : 0;
+        }
+      }
+      INFO("round " << round << ": " << expert << " of " << ticks << " ticks by the expert");
+      // The last tick's command leaves no a(t−1) behind: at most one per sequence unseen.
+      CHECK(seen_expert <= expert);
+      CHECK(expert <= seen_expert + seqs.size());
+      CHECK(seen_expert + seen_policy + seqs.size() == ticks);
+      const double p = round == 0 ? 0.0 : std::pow(0.5, round);
+      const double sd = std::sqrt(static_cast<double>(ticks) * p * (1.0 - p));
+      CHECK(std::abs(static_cast<double>(expert) - p * static_cast<double>(ticks)) <= 4.0 * sd);
+      if (round == 0) CHECK(expert == 0);  // rollout scoring is always the pure policy
+      rounds.push_back(seqs);
+    }
+    // Seeded: the same round again gives the same sequences.
+    const std::vector<PolicySequence> again = executePolicyRollouts(data, demos, model, o, policy, 2);
+    for (std::size_t i = 0; i < again.size(); ++i) {
+      CHECK(again[i].q == rounds[2][i].q);
+      CHECK(again[i].expert_ticks == rounds[2][i].expert_ticks);
+    }
+  }
 }

@@ -287,7 +287,7 @@ std::string sequencesText(const std::vector<PolicySequence>& seqs) {
   std::ostringstream s;
   s.precision(17);
   for (const PolicySequence& q : seqs) {
-    s << q.demo << ' ' << q.movement << ' ' << q.rollout << ' ' << q.worst_miss_rad << ' ' << q.drift_rad << '\n';
+    s << q.demo << ' ' << q.movement << ' ' << q.rollout << ' ' << q.worst_miss_rad << ' ' << q.drift_rad << ' ' << q.expert_ticks << '\n';
     for (const std::vector<JointVector>* v : {&q.q, &q.a_prev, &q.r, &q.a}) {
       s << v->size() << ':';
       for (const JointVector& x : *v) s << ' ' << x.transpose();
@@ -335,6 +335,7 @@ TEST_CASE("world size 2 shares the expert's rollouts, the rollout scores and DAg
   o.select_by_rollout = true;
   o.dagger_rounds = 1;
   o.dagger_start = 1;
+  o.execution.dagger_beta = 0.5;   // each rank's expert ticks must reach every rank
   o.execution.noisy_rollouts = 1;  // two sequences per demonstration: the shares are whole demonstrations
   const std::vector<std::vector<std::uint8_t>> a = trainRanks(o, 2, TempDir().path);
   REQUIRE(a[0] == a[1]);
@@ -361,6 +362,8 @@ TEST_CASE("world size 2 shares the expert's rollouts, the rollout scores and DAg
   // DAgger's round: one policy rollout per training demonstration, on every rank.
   CHECK(m2["training"]["dagger"]["run"][0]["sequences"] == single.split.train.size());
   CHECK(m2["training"]["dagger"]["run"][0]["ticks"] == m1["training"]["dagger"]["run"][0]["ticks"]);
+  CHECK(m2["training"]["dagger"]["run"][0]["expert_ticks"] == m1["training"]["dagger"]["run"][0]["expert_ticks"]);
+  CHECK(m1["training"]["dagger"]["run"][0]["expert_ticks"] > 0);
   CHECK(m2["data"]["train_samples"] == m1["data"]["train_samples"]);
   // The card says how the other ranks ran (the command it shows is rank 0's).
   TrainResult as_two = single;

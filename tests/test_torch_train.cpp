@@ -333,9 +333,30 @@ TEST_CASE("training with one DAgger round adds one policy rollout per training d
   CHECK(r_off.history[0].val_loss == r.history[0].val_loss);
   CHECK(r_off.history[1].val_loss != r.history[1].val_loss);
   CHECK(a != c);
+  CHECK(round.expert_ticks == 0);  // pure: the policy executes every tick
+
+  // β-mixed: about half the round's ticks executed by the expert, recorded; other data again.
+  TrainOptions mixed = o;
+  mixed.execution.dagger_beta = 0.5;
+  TrainResult r_mixed;
+  const std::vector<std::uint8_t> m = trainBytes(mixed, &r_mixed);
+  REQUIRE(r_mixed.dagger.size() == 1);
+  const DaggerRound& mr = r_mixed.dagger.front();
+  MESSAGE("beta 0.5: " << mr.expert_ticks << " of " << mr.ticks << " ticks by the expert, drift " << mr.drift_rad
+                       << " rad (pure: " << round.drift_rad << " rad)");
+  CHECK(mr.ticks == round.ticks);
+  CHECK(mr.expert_ticks > mr.ticks / 4);
+  CHECK(mr.expert_ticks < mr.ticks * 3 / 4);
+  CHECK(r_mixed.history[0].val_loss == r.history[0].val_loss);
+  CHECK(m != a);
+  const nlohmann::json mm = nlohmann::json::parse(modelMetadata(smallData(), mixed, r_mixed));
+  CHECK(mm["training"]["dagger"]["beta"] == 0.5);
+  CHECK(mm["training"]["dagger"]["run"][0]["expert_ticks"] == mr.expert_ticks);
+  CHECK(meta["training"]["dagger"].find("beta") == meta["training"]["dagger"].end());
+  CHECK(modelCard(smallData(), mixed, r_mixed, "test", "m.bin").find("beta-mixed rollouts, beta 0.5^round") != std::string::npos);
 }
 
-TEST_CASE("DAgger is refused with --resume and for an architecture the runtime is not compiled for") {
+TEST_CASE("DAgger is refused with --resume, a beta of 1 and for an architecture the runtime is not compiled for") {
   TrainOptions o = smallOptions(1, 1);
   o.dagger_rounds = 1;
   TrainOptions resume = o;
@@ -347,6 +368,9 @@ TEST_CASE("DAgger is refused with --resume and for an architecture the runtime i
   TrainOptions start = o;
   start.dagger_start = 0;
   CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), start, nullptr), doctest::Contains("start"), UserError);
+  TrainOptions beta = o;
+  beta.execution.dagger_beta = 1.0;  // the policy would never act
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), beta, nullptr), doctest::Contains("beta"), UserError);
   // Without DAgger the same window trains (the refusal is DAgger's).
   window.dagger_rounds = 0;
   CHECK_NOTHROW(trainPolicy(smallData(), smallSim(), window, nullptr));

@@ -342,9 +342,8 @@ namespace {
 // the controller's per-tick command bounds [lo, hi], the expert's command toward the clamped
 // f(t+1) from a snapshot (sim is left in the tick's start state), and the tick's inputs and
 // label appended to `s`. Returns the expert's command; `miss` is its end-of-tick miss.
-JointVector labelTick(const PolicyDemo& demo, std::size_t t, const JointVector& q, const JointVector& a_prev,
-                      const SimModel& sim_model, SimData& sim, SimSnapshot& snap, const ExecutionOptions& o,
-                      PolicySequence& s, JointVector& lo, JointVector& hi, double& miss) {
+// The controller's per-tick command bounds at q: the position limits and one period's reach.
+void commandBounds(const SimModel& sim_model, const JointVector& q, JointVector& lo, JointVector& hi) {
   const ArmModel& arm = sim_model.arm;
   const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
   for (int j = 0; j < kNumJoints; ++j) {
@@ -353,6 +352,13 @@ JointVector labelTick(const PolicyDemo& demo, std::size_t t, const JointVector& 
     hi[j] = std::min(arm.q_max[j], q[j] + step);
     if (lo[j] > hi[j]) std::swap(lo[j], hi[j]);
   }
+}
+
+JointVector labelTick(const PolicyDemo& demo, std::size_t t, const JointVector& q, const JointVector& a_prev,
+                      const SimModel& sim_model, SimData& sim, SimSnapshot& snap, const ExecutionOptions& o,
+                      PolicySequence& s, JointVector& lo, JointVector& hi, double& miss) {
+  const ArmModel& arm = sim_model.arm;
+  commandBounds(sim_model, q, lo, hi);
   captureSim(sim, snap);
   const JointVector target = clampToLimits(arm, demo.f[t + 1]);
   const JointVector c = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
@@ -407,27 +413,49 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
 
 // The policy's rollout of demonstration d (see executePolicyRollouts), on `sim` (reset here).
 PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimModel& sim_model, SimData& sim,
-                                    const ExecutionOptions& o, const RolloutPolicy& policy, int round) {
+                                    const ExecutionOptions& o, const RolloutPolicy& policy, int round, bool labels) {
   const ArmModel& arm = sim_model.arm;
   const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
   PolicySequence s;
   s.demo = d;
   s.movement = demo.movement;
   s.rollout = -round;
+  // β-mixing: the expert's ticks keep the round's states near the demonstration while the
+  // policy's ticks still show where its own errors lead. Its own stream per (demo, round).
+  const double beta = round >= 1 ? std::pow(o.dagger_beta, round) : 0.0;
+  SplitMix64 rng(0x5851f42d4c957f2dull ^ (0x9e3779b97f4a7c15ull * static_cast<std::uint64_t>(d + 1)) ^
+                 (0xc2b2ae3d27d4eb4full * static_cast<std::uint64_t>(round + 1)));
   SimSnapshot snap;
   resetSim(sim_model, sim, demo.f.front());
   JointVector q = sim.q, a_prev = JointVector::Zero();
   for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
     s.drift_rad = std::max(s.drift_rad, (q - clampToLimits(arm, demo.f[t])).cwiseAbs().maxCoeff());
-    JointVector lo, hi;
-    double miss = 0.0;
-    labelTick(demo, t, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
-    s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
+    JointVector lo, hi, expert = JointVector::Zero();
+    if (labels) {
+      double miss = 0.0;
+      expert = labelTick(demo, t, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
+      s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
+    } else {
+      commandBounds(sim_model, q, lo, hi);
+      // The expert leaves the arm as restoreSim sets it, which is not bit for bit the state it
+      // captured (ODE renormalises the quaternions): the same round trip keeps q identical.
+      captureSim(sim, snap);
+      restoreSim(sim, snap);
+      s.q.push_back(q);
+      s.a_prev.push_back(a_prev);
+      s.r.push_back(clampToLimits(arm, demo.f[t + 1]) - q);
+    }
+    // The policy runs every tick (its streaming cache must see each one), even when the expert acts.
     JointVector a = policy(demo.movement, static_cast<int>(t), q, a_prev, s.r.back());
     if (!a.allFinite()) a.setZero();  // as the controller does (kFaultPolicyNonFinite)
-    // The controller's command: q + a inside the position limits and one period's reach.
+    // The controller's command: q + a inside the position limits and one period's reach; or
+    // the expert's own command (inside them already; q + (c − q) could round away from c).
     JointVector c_exec = q + a;
     for (int j = 0; j < kNumJoints; ++j) c_exec[j] = std::clamp(c_exec[j], lo[j], hi[j]);
+    if (labels && beta > 0.0 && static_cast<double>(rng.next() >> 11) * 0x1.0p-53 < beta) {
+      c_exec = expert;
+      ++s.expert_ticks;
+    }
     a_prev = c_exec - q;
     q = stepSim(sim_model, sim, c_exec);
   }
@@ -497,13 +525,14 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
 
 std::vector<PolicySequence> executePolicyRollouts(const PolicyData& data, const std::vector<int>& demos,
                                                   const SimModel& sim_model, const ExecutionOptions& o,
-                                                  const RolloutPolicy& policy, int round) {
+                                                  const RolloutPolicy& policy, int round, bool labels) {
   checkExecution(data, demos, o);
   if (!policy) throw UserError("execution: no policy to roll out");
+  if (!labels && round >= 1 && o.dagger_beta > 0.0) throw UserError("execution: beta-mixing needs the expert's labels");
   std::vector<PolicySequence> out;
   out.reserve(demos.size());
   SimData sim(sim_model, JointVector::Zero());
-  for (int d : demos) out.push_back(executePolicyRollout(data, d, sim_model, sim, o, policy, round));
+  for (int d : demos) out.push_back(executePolicyRollout(data, d, sim_model, sim, o, policy, round, labels));
   return out;
 }
 

@@ -27,6 +27,7 @@ struct TrainArgs {
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
   double residual_gain = -1.0;
   int dagger_rounds = 0, dagger_start = TrainOptions{}.dagger_start;
+  double dagger_beta = ExecutionOptions{}.dagger_beta;
   std::string select = "val-loss";
   bool ar_residual = false;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
@@ -92,6 +93,7 @@ void run(const TrainArgs& a) {
   o.max_batches = a.max_batches;
   o.dagger_rounds = a.dagger_rounds;
   o.dagger_start = a.dagger_start;
+  o.execution.dagger_beta = a.dagger_beta;
   o.select_by_rollout = a.select == "rollout-dtw";
   o.ar_residual = a.ar_residual;
   o.live_progress = isatty(fileno(stdout)) != 0;
@@ -257,11 +259,16 @@ void setup(CLI::App& app) {
   cmd->add_option("--dagger-rounds", args->dagger_rounds,
                   "DAgger: after each of this many epochs (from --dagger-start on) the current policy is rolled "
                   "out on the simulated arm from every training demonstration's start, the states it reaches are "
-                  "labelled by the expert and added to the training set (0: off; world size 1, no --resume)")
+                  "labelled by the expert and added to the training set (0: off; no --resume)")
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
   cmd->add_option("--dagger-start", args->dagger_start, "Epoch after which the first DAgger round runs")
       ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  cmd->add_option("--dagger-beta", args->dagger_beta,
+                  "DAgger's beta: in round i each tick executes the expert's command instead of the policy's with "
+                  "probability beta^i (seeded), so the states stay near the demonstrations; 0: pure policy")
+      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   cmd->add_option("--select", args->select,
                   "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "

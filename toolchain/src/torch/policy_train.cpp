@@ -44,9 +44,9 @@ using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // Sequences packed as doubles, one after another: demo, movement, rollout, the lengths of q,
-// a_prev, r and a, worst_miss_rad, drift_rad, then the four vectors' joints. Exact: every
-// field is a double or a small integer.
-constexpr std::size_t kPackedHead = 9;
+// a_prev, r and a, worst_miss_rad, drift_rad, expert_ticks, then the four vectors' joints.
+// Exact: every field is a double or a small integer.
+constexpr std::size_t kPackedHead = 10;
 
 std::size_t packedSize(const PolicySequence& s) {
   return kPackedHead + kNumJoints * (s.q.size() + s.a_prev.size() + s.r.size() + s.a.size());
@@ -57,7 +57,7 @@ double* pack(const PolicySequence& s, double* out) {
                                     static_cast<double>(s.rollout),      static_cast<double>(s.q.size()),
                                     static_cast<double>(s.a_prev.size()), static_cast<double>(s.r.size()),
                                     static_cast<double>(s.a.size()),      s.worst_miss_rad,
-                                    s.drift_rad};
+                                    s.drift_rad,                          static_cast<double>(s.expert_ticks)};
   out = std::copy(head, head + kPackedHead, out);
   for (const std::vector<JointVector>* v : {&s.q, &s.a_prev, &s.r, &s.a})
     for (const JointVector& x : *v) out = std::copy(x.data(), x.data() + kNumJoints, out);
@@ -71,6 +71,7 @@ const double* unpack(const double* in, const double* end, PolicySequence& s) {
   s.rollout = static_cast<int>(in[2]);
   s.worst_miss_rad = in[7];
   s.drift_rad = in[8];
+  s.expert_ticks = static_cast<std::size_t>(in[9]);
   std::vector<JointVector>* vs[4] = {&s.q, &s.a_prev, &s.r, &s.a};
   const double* x = in + kPackedHead;
   for (int k = 0; k < 4; ++k) {
@@ -234,6 +235,12 @@ SplitLoss evaluate(const PolicyNet& net, const SequenceTensors& t, ProcessGroup*
   return loss;
 }
 
+std::string formatG(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+
 std::string duration(double s) {
   char buf[32];
   if (s < 90)
@@ -263,6 +270,8 @@ void check(const PolicyData& data, const TrainOptions& o) {
     if (o.dagger_start < 1) throw UserError("the first DAgger round must follow an epoch (start at least 1)");
     // Unsupported, not silently wrong: a checkpoint would need the rollouts.
     if (!o.resume.empty()) throw UserError("DAgger (--dagger-rounds) cannot --resume a checkpoint");
+    if (!(o.execution.dagger_beta >= 0.0 && o.execution.dagger_beta < 1.0))
+      throw UserError("DAgger's beta must be in [0, 1): 1 would never execute the policy");
     // The rollouts run the runtime's streaming inference, compiled for these two only.
     if (o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
       throw UserError("DAgger (--dagger-rounds) needs the paper or small architecture as compiled (e.g. no --window)");
@@ -279,7 +288,7 @@ static_assert(kMaxLinearArOrder == kPolicyArMaxOrder, "the runtime's AR base rea
 // policy nao_rt runs), rolled out from every listed demonstration's start (executePolicyRollouts).
 template <class Dims>
 std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                                       const ExecutionOptions& execution, const PolicyNet& net, int round) {
+                                       const ExecutionOptions& execution, const PolicyNet& net, int round, bool labels) {
   const std::vector<std::vector<float>> floats = manifestFloats(net);
   std::vector<const float*> pointers;
   for (const std::vector<float>& f : floats) pointers.push_back(f.data());
@@ -298,7 +307,7 @@ std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector
     in.step = std::min(t, Dims::kMaxSteps - 1);  // as the controller clamps it
     return stepPolicy(weights, *ws, in).template cast<double>();
   };
-  return executePolicyRollouts(data, demos, sim, execution, policy, round);
+  return executePolicyRollouts(data, demos, sim, execution, policy, round, labels);
 }
 
 // Checkpoints (torch archives): the trainable parameters in manifest order, Adam's state, the
@@ -316,6 +325,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   k << "; batches " << o.max_batches;
   if (o.conditioning == Conditioning::kReference && o.residual_gain != 0.0) k << "; residual " << o.residual_gain;
   if (o.dagger_rounds > 0) k << "; dagger " << o.dagger_rounds << " " << o.dagger_start;
+  if (o.dagger_rounds > 0 && o.execution.dagger_beta > 0.0) k << " beta " << o.execution.dagger_beta;
   if (o.select_by_rollout) k << "; select rollout";
   if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) k << "; ar residual";
   return k.str();
@@ -423,10 +433,10 @@ SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>
 }
 
 std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                                           const ExecutionOptions& execution, const PolicyNet& net, int round) {
+                                           const ExecutionOptions& execution, const PolicyNet& net, int round, bool labels) {
   const PolicyArch& arch = net->arch();
-  if (arch == PaperPolicyDims::arch()) return rolloutsOf<PaperPolicyDims>(data, demos, sim, execution, net, round);
-  if (arch == SmallPolicyDims::arch()) return rolloutsOf<SmallPolicyDims>(data, demos, sim, execution, net, round);
+  if (arch == PaperPolicyDims::arch()) return rolloutsOf<PaperPolicyDims>(data, demos, sim, execution, net, round, labels);
+  if (arch == SmallPolicyDims::arch()) return rolloutsOf<SmallPolicyDims>(data, demos, sim, execution, net, round, labels);
   throw UserError("DAgger rollouts need the paper or small architecture as compiled");
 }
 
@@ -469,7 +479,7 @@ void scoreRollouts(const PolicyData& data, const std::vector<int>& val, const Si
                    const ExecutionOptions& execution, const PolicyNet& net, const ValPaths& paths, EpochStats& st,
                    ProcessGroup* group) {
   const std::vector<PolicySequence> seqs = sharedSequences(
-      group, val, [&](const std::vector<int>& d) { return daggerRollouts(data, d, sim, execution, net, 0); });
+      group, val, [&](const std::vector<int>& d) { return daggerRollouts(data, d, sim, execution, net, 0, false); });
   std::vector<std::vector<double>> dtw(paths.by_movement.size());
   for (const PolicySequence& s : seqs) {
     const NearestDemo n = nearestDemo(handPath(sim.arm, s.q), paths.by_movement[static_cast<std::size_t>(s.movement)], -1);
@@ -746,13 +756,16 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       train.ticks += added.ticks;
       dr.sequences = seqs.size();
       dr.ticks = tickCount(seqs);
-      for (const PolicySequence& seq : seqs) dr.drift_rad = std::max(dr.drift_rad, seq.drift_rad);
+      for (const PolicySequence& seq : seqs) {
+        dr.drift_rad = std::max(dr.drift_rad, seq.drift_rad);
+        dr.expert_ticks += seq.expert_ticks;
+      }
       dr.seconds = secondsSince(t_round);
       res.dagger.push_back(dr);
       if (progress) {
         char line[200];
-        std::snprintf(line, sizeof line, "DAgger round %d after epoch %d: %zu policy rollouts (%zu ticks, drift up to %.3g rad) in %.1f s",
-                      round, epoch, dr.sequences, dr.ticks, dr.drift_rad, dr.seconds);
+        std::snprintf(line, sizeof line, "DAgger round %d after epoch %d: %zu policy rollouts (%zu ticks, %zu by the expert, drift up to %.3g rad) in %.1f s",
+                      round, epoch, dr.sequences, dr.ticks, dr.expert_ticks, dr.drift_rad, dr.seconds);
         *progress << line << std::endl;
       }
     }
@@ -810,11 +823,18 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
     auto& dg = t["dagger"];
     dg["rounds"] = o.dagger_rounds;
     dg["start_epoch"] = o.dagger_start;
-    dg["policy"] = "pure (the current net executes every tick; expert labels)";
+    if (o.execution.dagger_beta > 0.0) {
+      dg["policy"] = "beta-mixed (each tick of round i executes the expert's command with probability beta^i; expert labels)";
+      dg["beta"] = o.execution.dagger_beta;
+    } else {
+      dg["policy"] = "pure (the current net executes every tick; expert labels)";
+    }
     dg["run"] = nlohmann::ordered_json::array();
-    for (const DaggerRound& x : r.dagger)
+    for (const DaggerRound& x : r.dagger) {
       dg["run"].push_back({{"after_epoch", x.after_epoch}, {"sequences", x.sequences}, {"ticks", x.ticks},
                            {"drift_rad", x.drift_rad}});
+      if (o.execution.dagger_beta > 0.0) dg["run"].back()["expert_ticks"] = x.expert_ticks;
+    }
   }
   if (o.select_by_rollout) t["select"] = "rollout_dtw";
   if (!r.net.is_empty() && !r.net->linearAr().empty()) {
@@ -959,11 +979,12 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   if (o.dagger_rounds > 0) {
     s << "| DAgger | " << o.dagger_rounds << " round" << (o.dagger_rounds == 1 ? "" : "s") << " after epochs "
       << o.dagger_start << ".." << o.dagger_start + o.dagger_rounds - 1
-      << " (pure policy rollouts, expert labels, aggregated); run:";
+      << (o.execution.dagger_beta > 0.0 ? " (beta-mixed rollouts, beta " + formatG(o.execution.dagger_beta) + "^round, expert labels, aggregated); run:"
+                                         : std::string(" (pure policy rollouts, expert labels, aggregated); run:"));
     if (r.dagger.empty()) s << " none";
     for (const DaggerRound& x : r.dagger) {
-      std::snprintf(buf, sizeof buf, " after epoch %d +%zu sequences (%zu ticks, drift %.3g rad, %.1f s);", x.after_epoch,
-                    x.sequences, x.ticks, x.drift_rad, x.seconds);
+      std::snprintf(buf, sizeof buf, " after epoch %d +%zu sequences (%zu ticks, %zu by the expert, drift %.3g rad, %.1f s);",
+                    x.after_epoch, x.sequences, x.ticks, x.expert_ticks, x.drift_rad, x.seconds);
       s << buf;
     }
     s << " |\n";

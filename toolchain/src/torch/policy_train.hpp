@@ -69,6 +69,7 @@ struct DaggerRound {
   int after_epoch = 0;         ///< 1-based
   std::size_t sequences = 0;   ///< added to the training set
   std::size_t ticks = 0;
+  std::size_t expert_ticks = 0;  ///< of those, executed by the expert (β-mixing)
   double drift_rad = 0.0;      ///< largest |q(t) − f(t)| the policy's rollouts reached
   double seconds = 0.0;        ///< wall time (card only, never model.bin)
 };
@@ -145,9 +146,11 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
 /// One DAgger round's sequences (TrainOptions::dagger_rounds): `net`'s present weights bound to
 /// the runtime's streaming inference (nao/policy.hpp stepPolicy, the policy nao_rt runs; the
 /// paper or small architecture) and rolled out from each listed demonstration's start by
-/// executePolicyRollouts (rollout = −round). Throws UserError for another architecture.
+/// executePolicyRollouts (rollout = −round; `labels` false: unlabelled, for scoring where the
+/// policy goes). Throws UserError for another architecture.
 std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                                           const ExecutionOptions& execution, const PolicyNet& net, int round);
+                                           const ExecutionOptions& execution, const PolicyNet& net, int round,
+                                           bool labels = true);
 
 /// Every rank's `mine`, in rank order, on every rank of `group`: each rank broadcasts its own
 /// sequences (Gloo), so every rank holds the doubles their owner computed. A collective: every

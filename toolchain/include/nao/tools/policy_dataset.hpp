@@ -114,6 +114,10 @@ struct ExecutionOptions {
   double noise_corr = 0.8;                         ///< ρ of the AR(1) noise, per tick
   int expert_iterations = 8;                       ///< secant steps per tick (iteration cap)
   double expert_tol_rad = 1e-7;                    ///< stop when every joint ends this close to f(t+1)
+  /// DAgger's β (Ross et al. 2011): in the policy's rollout of round i >= 1 each tick executes
+  /// the expert's command instead of the policy's with probability dagger_beta^i (seeded per
+  /// demonstration and round); 0 is the pure policy. Round 0 (rollout scoring) is always pure.
+  double dagger_beta = 0.0;
   /// Worker threads (the result does not depend on it). 1: Debian's ODE 0.16 crashed (segfault
   /// in libode) with two worlds stepped on two threads here; more only with an ODE built for it.
   int threads = 1;
@@ -130,6 +134,7 @@ struct PolicySequence {
   std::vector<JointVector> a;       ///< label: the expert's c(t) − q(t)
   double worst_miss_rad = 0.0;      ///< largest |q(t+1) − f(t+1)| of the expert's command (clean rollout)
   double drift_rad = 0.0;           ///< policy rollouts: largest |q(t) − f(t)| (clamped f) the policy reached
+  std::size_t expert_ticks = 0;     ///< policy rollouts: ticks that executed the expert's command (β-mixing)
   std::size_t ticks() const { return a.size(); }
 };
 
@@ -155,12 +160,15 @@ using RolloutPolicy = std::function<JointVector(int movement, int t, const Joint
 /// *policy's* action as the controller applies it (q + a clamped to the position limits and
 /// v_max·period, a non-finite action replaced by 0; the applied action is the next a(t−1)), and
 /// labelled at every visited state by the expert toward the demonstration's f(t+1) exactly as
-/// executeDemos labels its rollouts. Pure policy (no expert mixing): deterministic for a
-/// deterministic policy. One thread, in list order (the policy may be stateful). Sequences get
-/// rollout = −round. Throws UserError for bad options or indices.
+/// executeDemos labels its rollouts. Round i >= 1 executes the expert's command instead on a
+/// seeded share options.dagger_beta^i of the ticks (β-mixing; 0: the pure policy); round 0 is
+/// always the pure policy. Deterministic for a deterministic policy. One thread, in list order
+/// (the policy may be stateful). Sequences get rollout = −round. With `labels` false (scoring a
+/// policy by where it goes) the expert is not run: q, a_prev and r are recorded, `a` stays
+/// empty. Throws UserError for bad options or indices.
 std::vector<PolicySequence> executePolicyRollouts(const PolicyData& data, const std::vector<int>& demos,
                                                   const SimModel& sim_model, const ExecutionOptions& options,
-                                                  const RolloutPolicy& policy, int round);
+                                                  const RolloutPolicy& policy, int round, bool labels = true);
 
 /// Normalisation statistics over every tick of `sequences` (q, the labels a, r).
 NormStats normStats(const std::vector<PolicySequence>& sequences);
