@@ -701,6 +701,29 @@ TEST_CASE("beta-mixed DAgger rollouts: expert ticks execute the label, beta 1 is
       if (round == 0) CHECK(expert == 0);  // rollout scoring is always the pure policy
       rounds.push_back(seqs);
     }
+    // A drift bound ends each round's rollout before the first tick past it; scoring (round 0)
+    // is never cut. The policy pushes off by ~0.1 rad a tick, so the bound is reached early.
+    ExecutionOptions bounded = o;
+    bounded.dagger_max_drift_rad = 0.05;
+    const std::vector<PolicySequence> cut = executePolicyRollouts(data, demos, model, bounded, policy, 2);
+    const std::vector<PolicySequence> whole = executePolicyRollouts(data, demos, model, bounded, policy, 0);
+    for (std::size_t i = 0; i < cut.size(); ++i) {
+      const PolicyDemo& d = data.demos[static_cast<std::size_t>(cut[i].demo)];
+      INFO("bounded demo " << cut[i].demo);
+      CHECK(whole[i].ticks() == d.f.size() - 1);
+      REQUIRE(cut[i].ticks() >= 1);
+      CHECK(cut[i].ticks() < d.f.size() - 1);
+      // Every kept state is within the bound; the unbounded round 2 (same seed stream) passes it
+      // at exactly the tick where the cut one ends, and agrees with it before.
+      for (std::size_t t = 0; t < cut[i].ticks(); ++t)
+        CHECK((cut[i].q[t] - clampToLimits(arm, d.f[t])).cwiseAbs().maxCoeff() <= 0.05);
+      const PolicySequence& full = rounds[2][i];
+      REQUIRE(full.ticks() > cut[i].ticks());
+      const std::size_t n = cut[i].ticks();
+      CHECK((full.q[n] - clampToLimits(arm, d.f[n])).cwiseAbs().maxCoeff() > 0.05);
+      CHECK(std::equal(cut[i].a.begin(), cut[i].a.end(), full.a.begin()));
+      CHECK(cut[i].drift_rad > 0.05);  // the drift that ended it is reported
+    }
     // Seeded: the same round again gives the same sequences.
     const std::vector<PolicySequence> again = executePolicyRollouts(data, demos, model, o, policy, 2);
     for (std::size_t i = 0; i < again.size(); ++i) {

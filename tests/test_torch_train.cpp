@@ -354,6 +354,20 @@ TEST_CASE("training with one DAgger round adds one policy rollout per training d
   CHECK(mm["training"]["dagger"]["run"][0]["expert_ticks"] == mr.expert_ticks);
   CHECK(meta["training"]["dagger"].find("beta") == meta["training"]["dagger"].end());
   CHECK(modelCard(smallData(), mixed, r_mixed, "test", "m.bin").find("beta-mixed rollouts, beta 0.5^round") != std::string::npos);
+
+  // A drift bound: fewer ticks join, recorded.
+  TrainOptions bounded = mixed;
+  bounded.execution.dagger_max_drift_rad = 0.02;
+  TrainResult r_bounded;
+  const std::vector<std::uint8_t> bb = trainBytes(bounded, &r_bounded);
+  REQUIRE(r_bounded.dagger.size() == 1);
+  MESSAGE("max drift 0.02 rad: " << r_bounded.dagger.front().ticks << " of " << mr.ticks << " ticks kept");
+  CHECK(r_bounded.dagger.front().ticks < mr.ticks);
+  CHECK(r_bounded.dagger.front().ticks > 0);
+  CHECK(bb != m);
+  CHECK(nlohmann::json::parse(modelMetadata(smallData(), bounded, r_bounded))["training"]["dagger"]["max_drift_rad"] == 0.02);
+  CHECK(modelCard(smallData(), bounded, r_bounded, "test", "m.bin").find("each ended where its drift first exceeds 0.02 rad") !=
+        std::string::npos);
 }
 
 TEST_CASE("DAgger is refused with --resume, a beta of 1 and for an architecture the runtime is not compiled for") {

@@ -428,8 +428,15 @@ PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimMode
   SimSnapshot snap;
   resetSim(sim_model, sim, demo.f.front());
   JointVector q = sim.q, a_prev = JointVector::Zero();
+  const bool bounded = round >= 1 && o.dagger_max_drift_rad > 0.0;
+  bool cut = false;
   for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
-    s.drift_rad = std::max(s.drift_rad, (q - clampToLimits(arm, demo.f[t])).cwiseAbs().maxCoeff());
+    const double drift = (q - clampToLimits(arm, demo.f[t])).cwiseAbs().maxCoeff();
+    s.drift_rad = std::max(s.drift_rad, drift);
+    if (bounded && drift > o.dagger_max_drift_rad) {
+      cut = true;
+      break;
+    }
     JointVector lo, hi, expert = JointVector::Zero();
     if (labels) {
       double miss = 0.0;
@@ -459,7 +466,7 @@ PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimMode
     a_prev = c_exec - q;
     q = stepSim(sim_model, sim, c_exec);
   }
-  s.drift_rad = std::max(s.drift_rad, (q - clampToLimits(arm, demo.f.back())).cwiseAbs().maxCoeff());
+  if (!cut) s.drift_rad = std::max(s.drift_rad, (q - clampToLimits(arm, demo.f.back())).cwiseAbs().maxCoeff());
   return s;
 }
 
@@ -475,6 +482,8 @@ void checkExecution(const PolicyData& data, const std::vector<int>& demos, const
   if (!(o.noise_corr >= 0.0 && o.noise_corr < 1.0)) throw UserError("execution: noise_corr must be in [0, 1)");
   if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
   if (o.threads < 1) throw UserError("execution: threads must be at least 1");
+  if (!(o.dagger_beta >= 0.0 && o.dagger_beta <= 1.0)) throw UserError("execution: dagger_beta must be in [0, 1]");
+  if (!(o.dagger_max_drift_rad >= 0.0)) throw UserError("execution: dagger_max_drift_rad must not be negative");
   for (int d : demos)
     if (d < 0 || static_cast<std::size_t>(d) >= data.demos.size())
       throw UserError("execution: demonstration index " + std::to_string(d) + " is out of range");

@@ -27,7 +27,7 @@ struct TrainArgs {
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
   double residual_gain = -1.0;
   int dagger_rounds = 0, dagger_start = TrainOptions{}.dagger_start;
-  double dagger_beta = ExecutionOptions{}.dagger_beta;
+  double dagger_beta = ExecutionOptions{}.dagger_beta, dagger_max_drift = ExecutionOptions{}.dagger_max_drift_rad;
   std::string select = "val-loss";
   bool ar_residual = false;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
@@ -94,6 +94,7 @@ void run(const TrainArgs& a) {
   o.dagger_rounds = a.dagger_rounds;
   o.dagger_start = a.dagger_start;
   o.execution.dagger_beta = a.dagger_beta;
+  o.execution.dagger_max_drift_rad = a.dagger_max_drift;
   o.select_by_rollout = a.select == "rollout-dtw";
   o.ar_residual = a.ar_residual;
   o.live_progress = isatty(fileno(stdout)) != 0;
@@ -269,6 +270,11 @@ void setup(CLI::App& app) {
                   "DAgger's beta: in round i each tick executes the expert's command instead of the policy's with "
                   "probability beta^i (seeded), so the states stay near the demonstrations; 0: pure policy")
       ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--dagger-max-drift", args->dagger_max_drift,
+                  "DAgger: a round's rollout ends before the first tick where the arm is farther than this from "
+                  "the demonstration (rad, any joint); the states past it are not added. 0: no bound")
+      ->check(CLI::Range(0.0, 10.0))
       ->capture_default_str();
   cmd->add_option("--select", args->select,
                   "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "

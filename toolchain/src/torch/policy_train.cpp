@@ -326,6 +326,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   if (o.conditioning == Conditioning::kReference && o.residual_gain != 0.0) k << "; residual " << o.residual_gain;
   if (o.dagger_rounds > 0) k << "; dagger " << o.dagger_rounds << " " << o.dagger_start;
   if (o.dagger_rounds > 0 && o.execution.dagger_beta > 0.0) k << " beta " << o.execution.dagger_beta;
+  if (o.dagger_rounds > 0 && o.execution.dagger_max_drift_rad > 0.0) k << " max drift " << o.execution.dagger_max_drift_rad;
   if (o.select_by_rollout) k << "; select rollout";
   if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) k << "; ar residual";
   return k.str();
@@ -829,6 +830,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
     } else {
       dg["policy"] = "pure (the current net executes every tick; expert labels)";
     }
+    if (o.execution.dagger_max_drift_rad > 0.0) dg["max_drift_rad"] = o.execution.dagger_max_drift_rad;
     dg["run"] = nlohmann::ordered_json::array();
     for (const DaggerRound& x : r.dagger) {
       dg["run"].push_back({{"after_epoch", x.after_epoch}, {"sequences", x.sequences}, {"ticks", x.ticks},
@@ -979,8 +981,11 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   if (o.dagger_rounds > 0) {
     s << "| DAgger | " << o.dagger_rounds << " round" << (o.dagger_rounds == 1 ? "" : "s") << " after epochs "
       << o.dagger_start << ".." << o.dagger_start + o.dagger_rounds - 1
-      << (o.execution.dagger_beta > 0.0 ? " (beta-mixed rollouts, beta " + formatG(o.execution.dagger_beta) + "^round, expert labels, aggregated); run:"
-                                         : std::string(" (pure policy rollouts, expert labels, aggregated); run:"));
+      << (o.execution.dagger_beta > 0.0 ? " (beta-mixed rollouts, beta " + formatG(o.execution.dagger_beta) + "^round"
+                                         : std::string(" (pure policy rollouts"));
+    if (o.execution.dagger_max_drift_rad > 0.0)
+      s << ", each ended where its drift first exceeds " << formatG(o.execution.dagger_max_drift_rad) << " rad";
+    s << ", expert labels, aggregated); run:";
     if (r.dagger.empty()) s << " none";
     for (const DaggerRound& x : r.dagger) {
       std::snprintf(buf, sizeof buf, " after epoch %d +%zu sequences (%zu ticks, %zu by the expert, drift %.3g rad, %.1f s);",
