@@ -338,10 +338,6 @@ JointVector expertCommand(const SimModel& model, SimData& sim, const SimSnapshot
 
 namespace {
 
-// One tick of a rollout from the arm's present state (q measured, `a_prev` applied last tick):
-// the controller's per-tick command bounds [lo, hi], the expert's command toward the clamped
-// f(t+1) from a snapshot (sim is left in the tick's start state), and the tick's inputs and
-// label appended to `s`. Returns the expert's command; `miss` is its end-of-tick miss.
 // The controller's per-tick command bounds at q: the position limits and one period's reach.
 void commandBounds(const SimModel& sim_model, const JointVector& q, JointVector& lo, JointVector& hi) {
   const ArmModel& arm = sim_model.arm;
@@ -354,6 +350,10 @@ void commandBounds(const SimModel& sim_model, const JointVector& q, JointVector&
   }
 }
 
+// One tick of a rollout from the arm's present state (q measured, `a_prev` applied last tick):
+// the controller's per-tick command bounds [lo, hi], the expert's command toward the clamped
+// f(t+1) from a snapshot (sim is left in the tick's start state), and the tick's inputs and
+// label appended to `s`. Returns the expert's command; `miss` is its end-of-tick miss.
 JointVector labelTick(const PolicyDemo& demo, std::size_t t, const JointVector& q, const JointVector& a_prev,
                       const SimModel& sim_model, SimData& sim, SimSnapshot& snap, const ExecutionOptions& o,
                       PolicySequence& s, JointVector& lo, JointVector& hi, double& miss) {

@@ -43,10 +43,11 @@ struct TrainOptions {
   double residual_gain = -1.0;
   /// DAgger (docs/policy.md "Data"): after each of the epochs dagger_start .. dagger_start +
   /// dagger_rounds − 1 the current net is rolled out on the simulated arm from every training
-  /// demonstration's start (pure policy, executePolicyRollouts through the runtime's stepPolicy),
-  /// the states it reaches are labelled by the expert, and the sequences join the training set
-  /// for the remaining epochs (normalisation statistics and validation set unchanged). 0: off.
-  /// Only the paper and small architectures (the runtime's compiled Dims), world size 1, no resume.
+  /// demonstration's start (executePolicyRollouts through the runtime's stepPolicy; β-mixing and
+  /// a drift bound in `execution`), the states it reaches are labelled by the expert, and the
+  /// sequences join the training set for the remaining epochs (normalisation statistics and
+  /// validation set unchanged). 0: off. Only the paper and small architectures (the runtime's
+  /// compiled Dims), no resume; any world size (each rank rolls out its share).
   int dagger_rounds = 0;
   int dagger_start = 2;  ///< 1-based epoch after which the first round runs
   /// Model selection on rollouts (autonomous mode, paper §4.1; docs/policy.md): after every epoch

@@ -119,8 +119,8 @@ struct ExecutionOptions {
   /// demonstration and round); 0 is the pure policy. Round 0 (rollout scoring) is always pure.
   double dagger_beta = 0.0;
   /// DAgger: a round's rollout ends before the first tick whose drift |q(t) − f(t)| (clamped f,
-  /// any joint) exceeds this, rad; the states past it are too far for the expert's labels to be
-  /// learnable (measured: docs/policy.md). 0: no bound. Round 0 (scoring) is never cut.
+  /// any joint) exceeds this, rad: the states past it are left out (measured in docs/policy.md:
+  /// the labels of the states kept still did not help). 0: no bound. Round 0 (scoring) is never cut.
   double dagger_max_drift_rad = 0.0;
   /// Worker threads (the result does not depend on it). 1: Debian's ODE 0.16 crashed (segfault
   /// in libode) with two worlds stepped on two threads here; more only with an ODE built for it.
