@@ -517,6 +517,34 @@ TEST_CASE("executed rollouts: the expert's labels put the servo-lagged arm on f(
   CHECK_THROWS_WITH_AS(executeDemos(data, {99}, model, o, 1), doctest::Contains("out of range"), UserError);
 }
 
+namespace {
+
+// Policies that keep their momentum and push past the target (the autonomous failure):
+// stateless functions of their inputs, so a test can recompute every action. `push` rad per
+// tick on the movement's joint drives it into its limits (the clamp).
+JointVector driftingLaw(double push, int movement, const JointVector& q, const JointVector& a_prev, const JointVector& r) {
+  JointVector a = 0.9 * a_prev + 0.3 * r;
+  for (int j = 0; j < kNumJoints; ++j) a[j] += 0.01 * (movement + 1) + 0.02 * std::sin(3.0 * q[j]);
+  a[movement] += push;
+  return a;
+}
+
+// The controller's command for action a at q, recomputed independently: q + a inside the
+// position limits and one period's reach. `saturated` counts the clamped joints.
+JointVector clampedCommand(const ArmModel& arm, double period, const JointVector& q, const JointVector& a,
+                           std::size_t& saturated) {
+  JointVector c;
+  for (int j = 0; j < kNumJoints; ++j) {
+    const double step = arm.v_max[j] * period;
+    const double lo = std::max(arm.q_min[j], q[j] - step), hi = std::min(arm.q_max[j], q[j] + step);
+    c[j] = std::clamp(q[j] + a[j], std::min(lo, hi), std::max(lo, hi));
+    if (c[j] != q[j] + a[j]) ++saturated;
+  }
+  return c;
+}
+
+}  // namespace
+
 TEST_CASE("DAgger rollouts execute the policy's clamped action and the expert labels the states it reaches") {
   KeyPoseBlend blend;
   blend.pole = 0.8;
@@ -525,15 +553,7 @@ TEST_CASE("DAgger rollouts execute the policy's clamped action and the expert la
   const SimModel model = makeSimModel(arm);
   const double period = model.params.dt_s * model.params.substeps_per_tick;
   const ExecutionOptions o;
-  // Policies that keep their momentum and push past the target (the autonomous failure):
-  // stateless functions of their inputs, so the test can recompute every action. `push` rad per
-  // tick on the movement's joint drives it into its limits (the clamp).
-  const auto law = [](double push, int movement, const JointVector& q, const JointVector& a_prev, const JointVector& r) {
-    JointVector a = 0.9 * a_prev + 0.3 * r;
-    for (int j = 0; j < kNumJoints; ++j) a[j] += 0.01 * (movement + 1) + 0.02 * std::sin(3.0 * q[j]);
-    a[movement] += push;
-    return a;
-  };
+  const auto law = driftingLaw;
   const std::vector<int> demos = {1, 5, 7};
   for (const double push : {0.0, 0.3}) {
     INFO("push " << push);
@@ -569,14 +589,8 @@ TEST_CASE("DAgger rollouts execute the policy's clamped action and the expert la
       double worst_exec = 0.0;
       for (std::size_t t = 0; t + 1 < s.ticks(); ++t) {
         CHECK(s.r[t] == clampToLimits(arm, d.f[t + 1]) - s.q[t]);
-        const JointVector a = law(push, d.movement, s.q[t], s.a_prev[t], s.r[t]);
-        JointVector c;
-        for (int j = 0; j < kNumJoints; ++j) {
-          const double step = arm.v_max[j] * period;
-          const double lo = std::max(arm.q_min[j], s.q[t][j] - step), hi = std::min(arm.q_max[j], s.q[t][j] + step);
-          c[j] = std::clamp(s.q[t][j] + a[j], std::min(lo, hi), std::max(lo, hi));
-          if (c[j] != s.q[t][j] + a[j]) ++saturated;
-        }
+        const JointVector c =
+            clampedCommand(arm, period, s.q[t], law(push, d.movement, s.q[t], s.a_prev[t], s.r[t]), saturated);
         worst_exec = std::max(worst_exec, (s.q[t] + s.a_prev[t + 1] - c).cwiseAbs().maxCoeff());
       }
       CHECK(worst_exec < 1e-12);
@@ -639,10 +653,7 @@ TEST_CASE("beta-mixed DAgger rollouts: expert ticks execute the label, beta 1 is
   const double period = model.params.dt_s * model.params.substeps_per_tick;
   // A policy that drifts (momentum plus a push): far from the expert on every tick.
   const auto law = [](int movement, const JointVector& q, const JointVector& a_prev, const JointVector& r) {
-    JointVector a = 0.9 * a_prev + 0.3 * r;
-    for (int j = 0; j < kNumJoints; ++j) a[j] += 0.01 * (movement + 1) + 0.02 * std::sin(3.0 * q[j]);
-    a[movement] += 0.1;
-    return a;
+    return driftingLaw(0.1, movement, q, a_prev, r);
   };
   const RolloutPolicy policy = [&](int movement, int, const JointVector& q, const JointVector& a_prev,
                                    const JointVector& r) -> JointVector { return law(movement, q, a_prev, r); };
@@ -677,12 +688,8 @@ TEST_CASE("beta-mixed DAgger rollouts: expert ticks execute the label, beta 1 is
         // Which command ran is seen in the next tick's a(t−1): the label (expert) or the law's
         // action inside the controller's bounds (policy); the two differ on these ticks.
         for (std::size_t t = 0; t + 1 < s.ticks(); ++t) {
-          JointVector c;
-          for (int j = 0; j < kNumJoints; ++j) {
-            const double step = arm.v_max[j] * period;
-            const double lo = std::max(arm.q_min[j], s.q[t][j] - step), hi = std::min(arm.q_max[j], s.q[t][j] + step);
-            c[j] = std::clamp(s.q[t][j] + law(s.movement, s.q[t], s.a_prev[t], s.r[t])[j], std::min(lo, hi), std::max(lo, hi));
-          }
+          std::size_t clamped = 0;
+          const JointVector c = clampedCommand(arm, period, s.q[t], law(s.movement, s.q[t], s.a_prev[t], s.r[t]), clamped);
           const bool by_expert = s.a_prev[t + 1] == s.a[t];
           const bool by_policy = (s.q[t] + s.a_prev[t + 1] - c).cwiseAbs().maxCoeff() < 1e-12;
           CHECK(by_expert != by_policy);

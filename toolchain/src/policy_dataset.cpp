@@ -350,6 +350,17 @@ void commandBounds(const SimModel& sim_model, const JointVector& q, JointVector&
   }
 }
 
+// A tick's inputs appended to `s`: q(t), a(t−1) and r. The reference input r is how far the
+// tick's feature-extracted target f(t+1) (computed online by the controller from the snapped
+// key poses: controller.hpp, kFeatureBlendPole) is from the measured q(t). As a difference, not
+// as f(t+1) itself: in normalised units the label needs r − q to ~1e-3 of the angles' spread,
+// which the net learnt only slowly (measured).
+void recordInputs(const JointVector& q, const JointVector& a_prev, const JointVector& target, PolicySequence& s) {
+  s.q.push_back(q);
+  s.a_prev.push_back(a_prev);
+  s.r.push_back(target - q);
+}
+
 // One tick of a rollout from the arm's present state (q measured, `a_prev` applied last tick):
 // the controller's per-tick command bounds [lo, hi], the expert's command toward the clamped
 // f(t+1) from a snapshot (sim is left in the tick's start state), and the tick's inputs and
@@ -362,13 +373,7 @@ JointVector labelTick(const PolicyDemo& demo, std::size_t t, const JointVector& 
   captureSim(sim, snap);
   const JointVector target = clampToLimits(arm, demo.f[t + 1]);
   const JointVector c = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
-  s.q.push_back(q);
-  s.a_prev.push_back(a_prev);
-  // The reference input: how far the tick's feature-extracted target f(t+1) (computed online
-  // by the controller from the snapped key poses: controller.hpp, kFeatureBlendPole) is from
-  // the measured q(t). As a difference, not as f(t+1) itself: in normalised units the label
-  // needs r − q to ~1e-3 of the angles' spread, which the net learnt only slowly (measured).
-  s.r.push_back(target - q);
+  recordInputs(q, a_prev, target, s);
   s.a.push_back(c - q);
   return c;
 }
@@ -448,9 +453,7 @@ PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimMode
       // captured (ODE renormalises the quaternions): the same round trip keeps q identical.
       captureSim(sim, snap);
       restoreSim(sim, snap);
-      s.q.push_back(q);
-      s.a_prev.push_back(a_prev);
-      s.r.push_back(clampToLimits(arm, demo.f[t + 1]) - q);
+      recordInputs(q, a_prev, clampToLimits(arm, demo.f[t + 1]), s);
     }
     // The policy runs every tick (its streaming cache must see each one), even when the expert acts.
     JointVector a = policy(demo.movement, static_cast<int>(t), q, a_prev, s.r.back());
