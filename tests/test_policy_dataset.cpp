@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <random>
 #include <set>
@@ -391,7 +392,9 @@ struct Replay {
   std::size_t ticks_checked = 0, ticks_on_target = 0;  ///< label ends within 1e-5 rad of f(t+1)
 };
 
-Replay replay(const PolicyData& data, const PolicySequence& s, const SimModel& model) {
+// `target_of(t)`, if given, is where tick t's label should end instead of f(t+1) (aligned labels).
+Replay replay(const PolicyData& data, const PolicySequence& s, const SimModel& model,
+              const std::function<JointVector(std::size_t)>& target_of = {}) {
   const PolicyDemo& d = data.demos[static_cast<std::size_t>(s.demo)];
   const ArmModel& arm = model.arm;
   SimData sim(model, d.f.front());
@@ -399,7 +402,7 @@ Replay replay(const PolicyData& data, const PolicySequence& s, const SimModel& m
   Replay r;
   for (std::size_t t = 0; t < s.ticks(); ++t) {
     r.worst_q_diff = std::max(r.worst_q_diff, (sim.q - s.q[t]).cwiseAbs().maxCoeff());
-    const JointVector target = clampToLimits(arm, d.f[t + 1]);
+    const JointVector target = target_of ? target_of(t) : JointVector(clampToLimits(arm, d.f[t + 1]));
     r.worst_off_trajectory = std::max(r.worst_off_trajectory, (sim.q - clampToLimits(arm, d.f[t])).cwiseAbs().maxCoeff());
     captureSim(sim, snap);
     const JointVector end = stepSim(model, sim, sim.q + s.a[t]);
@@ -738,4 +741,176 @@ TEST_CASE("beta-mixed DAgger rollouts: expert ticks execute the label, beta 1 is
       CHECK(again[i].expert_ticks == rounds[2][i].expert_ticks);
     }
   }
+}
+
+namespace {
+
+// The aligned point of a state, by brute force over every tick of every clean execution of the
+// movement in the pool: ExecutionOptions::dagger_align_band's definition written out again here
+// (the test's oracle; the velocity of a mismatch weighs as if carried on for 2 ticks). `target`
+// is the successor label's aim for return share `ret`, `command` the clean execution's command.
+struct AlignedPoint {
+  JointVector target = JointVector::Zero(), command = JointVector::Zero();
+  double distance = 0.0;
+  bool found = false;
+};
+
+AlignedPoint alignedOracle(const PolicyData& data, const std::vector<PolicySequence>& pool, const ArmModel& arm,
+                           int movement, std::size_t t, const JointVector& q, const JointVector& q_before, int band,
+                           double ret) {
+  AlignedPoint p;
+  double best = 0.0;
+  for (const PolicySequence& seq : pool) {
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(seq.demo)];
+    if (demo.movement != movement || seq.rollout != 0) continue;
+    for (std::size_t k = 0; k < seq.ticks(); ++k) {
+      if (std::abs(static_cast<double>(k) - static_cast<double>(t)) > band) continue;
+      const JointVector at = clampToLimits(arm, demo.f[k]);
+      const JointVector prev = clampToLimits(arm, demo.f[k == 0 ? 0 : k - 1]);
+      double cost = 0.0;
+      for (int j = 0; j < kNumJoints; ++j) {
+        const double dp = q[j] - at[j], dv = 2.0 * ((q[j] - q_before[j]) - (at[j] - prev[j]));
+        cost += dp * dp + dv * dv;
+      }
+      if (!p.found || cost < best) {
+        best = cost;
+        p.found = true;
+        p.distance = (q - at).cwiseAbs().maxCoeff();
+        p.target = clampToLimits(arm, JointVector(clampToLimits(arm, demo.f[k + 1]) + (1.0 - ret) * (q - at)));
+        p.command = seq.q[k] + seq.a[k];
+      }
+    }
+  }
+  return p;
+}
+
+}  // namespace
+
+TEST_CASE("aligned DAgger labels aim at the nearest demonstration point's successor, not the clock's f(t+1)") {
+  KeyPoseBlend blend;
+  blend.pole = 0.8;
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const PolicyData data = reachableSet(arm, blend);  // per movement 3 demonstrations, 8, 9 and 10 ticks a key pose
+  const SimModel model = makeSimModel(arm);
+  const RolloutPolicy policy = [](int movement, int, const JointVector& q, const JointVector& a_prev,
+                                  const JointVector& r) -> JointVector { return driftingLaw(0.0, movement, q, a_prev, r); };
+  std::vector<int> all(data.demos.size());
+  for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+  ExecutionOptions with_noisy;  // the noisy rollouts in a pool are not aligned to
+  const std::vector<PolicySequence> pool = executeDemos(data, all, model, with_noisy, 3);
+  const std::vector<int> demos = {1, 5, 7};
+  ExecutionOptions o;
+  o.dagger_align_band = 5;
+  o.dagger_return = 0.5;
+  const std::vector<PolicySequence> seqs = executePolicyRollouts(data, demos, model, o, policy, 1, true, pool);
+  const std::vector<PolicySequence> clock = executePolicyRollouts(data, demos, model, ExecutionOptions{}, policy, 1);
+  REQUIRE(seqs.size() == demos.size());
+  std::size_t moved = 0;  // ticks whose aligned target is off the clock's and whose label ends on it
+  for (std::size_t i = 0; i < seqs.size(); ++i) {
+    const PolicySequence& s = seqs[i];
+    const PolicyDemo& d = data.demos[static_cast<std::size_t>(s.demo)];
+    INFO("demo " << s.demo);
+    REQUIRE(s.ticks() == d.f.size() - 1);
+    // The policy's states do not depend on the labels (no β): the clock's round visits them too.
+    CHECK(s.q == clock[i].q);
+    CHECK(s.a != clock[i].a);
+    std::vector<AlignedPoint> points;
+    for (std::size_t t = 0; t < s.ticks(); ++t) {
+      CHECK(s.r[t] == clampToLimits(arm, d.f[t + 1]) - s.q[t]);  // the input stays the clock's
+      points.push_back(alignedOracle(data, pool, arm, s.movement, t, s.q[t], s.q[t == 0 ? 0 : t - 1], 5, 0.5));
+      REQUIRE(points.back().found);
+    }
+    const Replay r = replay(data, s, model, [&](std::size_t t) { return points[t].target; });
+    MESSAGE("aligned labels: on the oracle's target (1e-5 rad) at " << r.ticks_on_target << " of " << r.ticks_checked
+                                                                    << " ticks; expert's worst miss " << s.worst_miss_rad);
+    CHECK(r.worst_q_diff < 1e-9);
+    CHECK(r.worst_label_miss <= s.worst_miss_rad + 1e-9);
+    CHECK(r.ticks_on_target >= r.ticks_checked / 2);
+    // Count the ticks that tell the two apart: the label ends on the aligned target, far from f(t+1).
+    SimData sim(model, d.f.front());
+    SimSnapshot snap;
+    for (std::size_t t = 0; t < s.ticks(); ++t) {
+      captureSim(sim, snap);
+      const JointVector end = stepSim(model, sim, sim.q + s.a[t]);
+      restoreSim(sim, snap);
+      if ((end - points[t].target).cwiseAbs().maxCoeff() < 1e-5 &&
+          (end - clampToLimits(arm, d.f[t + 1])).cwiseAbs().maxCoeff() > 1e-3)
+        ++moved;
+      stepSim(model, sim, t + 1 < s.ticks() ? JointVector(s.q[t] + s.a_prev[t + 1]) : JointVector(sim.q + s.a[t]));
+    }
+  }
+  MESSAGE("ticks labelled toward an aligned point 1 mrad or more from the clock's: " << moved);
+  CHECK(moved > 20);
+
+  // The labels do not depend on which share of the demonstrations is rolled out.
+  const std::vector<PolicySequence> alone = executePolicyRollouts(data, {5}, model, o, policy, 1, true, pool);
+  CHECK(alone.front().a == seqs[1].a);
+
+  // The drift bound measures the distance to the aligned point: every kept tick within it, the
+  // unbounded round past it exactly where the bounded one ends.
+  ExecutionOptions bounded = o;
+  bounded.dagger_max_drift_rad = 0.01;
+  const std::vector<PolicySequence> cut = executePolicyRollouts(data, demos, model, bounded, policy, 1, true, pool);
+  std::size_t ended = 0;
+  for (std::size_t i = 0; i < cut.size(); ++i) {
+    const PolicySequence& c = cut[i];
+    INFO("bounded demo " << c.demo);
+    REQUIRE(c.ticks() >= 1);
+    for (std::size_t t = 0; t < c.ticks(); ++t)
+      CHECK(alignedOracle(data, pool, arm, c.movement, t, c.q[t], c.q[t == 0 ? 0 : t - 1], 5, 0.5).distance <= 0.01);
+    CHECK(std::equal(c.a.begin(), c.a.end(), seqs[i].a.begin()));
+    const std::size_t n = c.ticks();
+    if (n < seqs[i].ticks()) {
+      ++ended;
+      CHECK(alignedOracle(data, pool, arm, c.movement, n, seqs[i].q[n], seqs[i].q[n - 1], 5, 0.5).distance > 0.01);
+    }
+  }
+  CHECK(ended > 0);  // the bound was reached
+
+  // Command labels: the clean execution's command at the aligned point, inside the controller's
+  // bounds at the state reached; no expert search (the servo does the returning).
+  ExecutionOptions command = o;
+  command.dagger_align_label = ExecutionOptions::AlignLabel::kCommand;
+  const std::vector<PolicySequence> commanded = executePolicyRollouts(data, demos, model, command, policy, 1, true, pool);
+  const double period = model.params.dt_s * model.params.substeps_per_tick;
+  std::size_t differ = 0, saturated = 0;
+  for (std::size_t i = 0; i < commanded.size(); ++i) {
+    const PolicySequence& c = commanded[i];
+    INFO("commanded demo " << c.demo);
+    CHECK(c.q == seqs[i].q);  // the policy's states again
+    double worst = 0.0;
+    for (std::size_t t = 0; t < c.ticks(); ++t) {
+      const AlignedPoint p = alignedOracle(data, pool, arm, c.movement, t, c.q[t], c.q[t == 0 ? 0 : t - 1], 5, 0.5);
+      const JointVector bounded_command = clampedCommand(arm, period, c.q[t], JointVector(p.command - c.q[t]), saturated);
+      worst = std::max(worst, (c.q[t] + c.a[t] - bounded_command).cwiseAbs().maxCoeff());
+      if ((c.a[t] - seqs[i].a[t]).cwiseAbs().maxCoeff() > 1e-3) ++differ;
+    }
+    CHECK(worst < 1e-12);
+  }
+  CHECK(differ > 20);  // not the successor labels
+
+  // Scoring (round 0, no labels) never aligns and needs no pool; labelled rounds do.
+  const std::vector<PolicySequence> scored = executePolicyRollouts(data, demos, model, o, policy, 0, false);
+  CHECK(scored.front().q == executePolicyRollouts(data, demos, model, ExecutionOptions{}, policy, 0, false).front().q);
+  CHECK_THROWS_WITH_AS(executePolicyRollouts(data, demos, model, o, policy, 1), doctest::Contains("align"), UserError);
+  std::vector<PolicySequence> noisy_only;
+  for (const PolicySequence& p : pool)
+    if (p.rollout != 0) noisy_only.push_back(p);
+  CHECK_THROWS_WITH_AS(executePolicyRollouts(data, demos, model, o, policy, 1, true, noisy_only), doctest::Contains("clean"),
+                       UserError);
+  // Only the clean executions count: the pool without its noisy rollouts gives the same labels.
+  std::vector<PolicySequence> clean_pool;
+  for (const PolicySequence& p : pool)
+    if (p.rollout == 0) clean_pool.push_back(p);
+  CHECK(executePolicyRollouts(data, demos, model, o, policy, 1, true, clean_pool).back().a == seqs.back().a);
+  ExecutionOptions bad = o;
+  bad.dagger_return = 0.0;
+  CHECK_THROWS_WITH_AS(executePolicyRollouts(data, demos, model, bad, policy, 1, true, pool),
+                       doctest::Contains("dagger_return"), UserError);
+  bad.dagger_return = 1.5;
+  CHECK_THROWS_AS(executePolicyRollouts(data, demos, model, bad, policy, 1, true, pool), UserError);
+  bad = o;
+  bad.dagger_align_band = -1;
+  CHECK_THROWS_WITH_AS(executePolicyRollouts(data, demos, model, bad, policy, 1, true, pool),
+                       doctest::Contains("dagger_align_band"), UserError);
 }

@@ -368,6 +368,38 @@ TEST_CASE("training with one DAgger round adds one policy rollout per training d
   CHECK(nlohmann::json::parse(modelMetadata(smallData(), bounded, r_bounded))["training"]["dagger"]["max_drift_rad"] == 0.02);
   CHECK(modelCard(smallData(), bounded, r_bounded, "test", "m.bin").find("each ended where its drift first exceeds 0.02 rad") !=
         std::string::npos);
+
+  // Aligned labels (the pool is the training split): the same states as the pure round (no β,
+  // no bound), other labels, so other weights; recorded in the metadata and the card.
+  TrainOptions aligned = o;
+  aligned.execution.dagger_align_band = 3;
+  aligned.execution.dagger_return = 0.5;
+  TrainResult r_aligned;
+  const std::vector<std::uint8_t> al = trainBytes(aligned, &r_aligned);
+  REQUIRE(r_aligned.dagger.size() == 1);
+  CHECK(r_aligned.dagger.front().ticks == round.ticks);
+  CHECK(r_aligned.dagger.front().drift_rad == round.drift_rad);
+  CHECK(r_aligned.history[0].val_loss == r.history[0].val_loss);
+  CHECK(r_aligned.history[1].train_loss != r.history[1].train_loss);
+  CHECK(al != a);
+  const nlohmann::json ma = nlohmann::json::parse(modelMetadata(smallData(), aligned, r_aligned));
+  CHECK(ma["training"]["dagger"]["align_band_ticks"] == 3);
+  CHECK(ma["training"]["dagger"]["return"] == 0.5);
+  CHECK(meta["training"]["dagger"].find("align_band_ticks") == meta["training"]["dagger"].end());
+  CHECK(modelCard(smallData(), aligned, r_aligned, "test", "m.bin").find("within 3 ticks of the clock, returning 0.5") !=
+        std::string::npos);
+  // Aligned commands: other labels again.
+  TrainOptions commanded = aligned;
+  commanded.execution.dagger_align_label = ExecutionOptions::AlignLabel::kCommand;
+  TrainResult r_commanded;
+  const std::vector<std::uint8_t> co = trainBytes(commanded, &r_commanded);
+  CHECK(r_commanded.dagger.front().ticks == round.ticks);
+  CHECK(co != al);
+  CHECK(co != a);
+  const nlohmann::json mc = nlohmann::json::parse(modelMetadata(smallData(), commanded, r_commanded));
+  CHECK(mc["training"]["dagger"]["labels"].get<std::string>().find("command") != std::string::npos);
+  CHECK(modelCard(smallData(), commanded, r_commanded, "test", "m.bin").find("the clean execution's command") !=
+        std::string::npos);
 }
 
 TEST_CASE("DAgger is refused with --resume, a beta of 1 and for an architecture the runtime is not compiled for") {

@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <fstream>
 #include <sstream>
 
@@ -365,17 +366,57 @@ void recordInputs(const JointVector& q, const JointVector& a_prev, const JointVe
 // the controller's per-tick command bounds [lo, hi], the expert's command toward the clamped
 // f(t+1) from a snapshot (sim is left in the tick's start state), and the tick's inputs and
 // label appended to `s`. Returns the expert's command; `miss` is its end-of-tick miss.
-JointVector labelTick(const PolicyDemo& demo, std::size_t t, const JointVector& q, const JointVector& a_prev,
-                      const SimModel& sim_model, SimData& sim, SimSnapshot& snap, const ExecutionOptions& o,
-                      PolicySequence& s, JointVector& lo, JointVector& hi, double& miss) {
-  const ArmModel& arm = sim_model.arm;
+// `clock_target` is the tick's clamped f(t+1) (the reference input r); the expert aims at
+// `label_target` (the same, except for DAgger's aligned labels).
+JointVector labelTick(const JointVector& clock_target, const JointVector& label_target, const JointVector& q,
+                      const JointVector& a_prev, const SimModel& sim_model, SimData& sim, SimSnapshot& snap,
+                      const ExecutionOptions& o, PolicySequence& s, JointVector& lo, JointVector& hi, double& miss) {
   commandBounds(sim_model, q, lo, hi);
   captureSim(sim, snap);
-  const JointVector target = clampToLimits(arm, demo.f[t + 1]);
-  const JointVector c = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
-  recordInputs(q, a_prev, target, s);
+  const JointVector c = expertCommand(sim_model, sim, snap, label_target, lo, hi, o, miss);
+  recordInputs(q, a_prev, clock_target, s);
   s.a.push_back(c - q);
   return c;
+}
+
+// How much a velocity mismatch counts against a position mismatch in the alignment: a per-tick
+// velocity error weighs as that error carried on for this many ticks. It tells the outward
+// from the return stroke through the same pose.
+constexpr double kAlignVelocityTicks = 2.0;
+
+// DAgger's aligned point (ExecutionOptions::dagger_align_band): among the pool's clean
+// executions of `movement`, the point (d, k) with |k − t| <= band and a successor that minimises
+// |q − F_d(k)|² + (kAlignVelocityTicks·|v − (F_d(k) − F_d(k−1))|)² (F: f clamped to the limits,
+// F_d(−1) = F_d(0): at rest; v = q(t) − q(t−1)); the first in pool and tick order on ties.
+// `seq` is null when no execution is long enough for the band.
+struct AlignedPoint {
+  const PolicySequence* seq = nullptr;
+  std::size_t k = 0;
+};
+
+AlignedPoint alignState(const PolicyData& data, const std::vector<PolicySequence>& pool, int movement, std::size_t t,
+                        const JointVector& q, const JointVector& v, const ArmModel& arm, int band_ticks) {
+  const std::size_t band = static_cast<std::size_t>(band_ticks);
+  double best = std::numeric_limits<double>::infinity();
+  AlignedPoint p;
+  for (const PolicySequence& seq : pool) {
+    if (seq.rollout != 0 || seq.movement != movement || seq.ticks() == 0) continue;
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(seq.demo)];
+    const std::size_t first = t > band ? t - band : 0, last = std::min(t + band, seq.ticks() - 1);
+    if (first > last) continue;
+    JointVector before = clampToLimits(arm, demo.f[first > 0 ? first - 1 : 0]);
+    for (std::size_t k = first; k <= last; ++k) {
+      const JointVector at = clampToLimits(arm, demo.f[k]);
+      const double cost = (q - at).squaredNorm() + (kAlignVelocityTicks * (v - (at - before))).squaredNorm();
+      if (cost < best) {
+        best = cost;
+        p.seq = &seq;
+        p.k = k;
+      }
+      before = at;
+    }
+  }
+  return p;
 }
 
 // Rollout k of demonstration d (see executeDemos), on `sim` (any state; reset here).
@@ -402,7 +443,8 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
   for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
     JointVector lo, hi;
     double miss = 0.0;
-    const JointVector c = labelTick(demo, t, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
+    const JointVector target = clampToLimits(sim_model.arm, demo.f[t + 1]);
+    const JointVector c = labelTick(target, target, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
     if (k == 0) s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
     JointVector c_exec = c;
     if (k > 0) {
@@ -418,7 +460,8 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
 
 // The policy's rollout of demonstration d (see executePolicyRollouts), on `sim` (reset here).
 PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimModel& sim_model, SimData& sim,
-                                    const ExecutionOptions& o, const RolloutPolicy& policy, int round, bool labels) {
+                                    const ExecutionOptions& o, const RolloutPolicy& policy, int round, bool labels,
+                                    const std::vector<PolicySequence>& align_pool) {
   const ArmModel& arm = sim_model.arm;
   const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
   PolicySequence s;
@@ -432,20 +475,43 @@ PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimMode
                  (0xc2b2ae3d27d4eb4full * static_cast<std::uint64_t>(round + 1)));
   SimSnapshot snap;
   resetSim(sim_model, sim, demo.f.front());
-  JointVector q = sim.q, a_prev = JointVector::Zero();
+  JointVector q = sim.q, q_last = sim.q, a_prev = JointVector::Zero();
   const bool bounded = round >= 1 && o.dagger_max_drift_rad > 0.0;
+  const bool aligned = round >= 1 && labels && o.dagger_align_band > 0;
   bool cut = false;
   for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
     const double drift = (q - clampToLimits(arm, demo.f[t])).cwiseAbs().maxCoeff();
     s.drift_rad = std::max(s.drift_rad, drift);
-    if (bounded && drift > o.dagger_max_drift_rad) {
+    const JointVector clock_target = clampToLimits(arm, demo.f[t + 1]);
+    JointVector label_target = clock_target;
+    double off = drift;  // what the drift bound measures: from the clock's point or the aligned one
+    AlignedPoint p;
+    if (aligned) {
+      p = alignState(data, align_pool, demo.movement, t, q, q - q_last, arm, o.dagger_align_band);
+      if (p.seq != nullptr) {
+        const std::vector<JointVector>& f = data.demos[static_cast<std::size_t>(p.seq->demo)].f;
+        const JointVector at = clampToLimits(arm, f[p.k]);
+        off = (q - at).cwiseAbs().maxCoeff();
+        label_target = clampToLimits(arm, JointVector(clampToLimits(arm, f[p.k + 1]) + (1.0 - o.dagger_return) * (q - at)));
+      }  // else (no execution long enough for the band): the clock's target
+    }
+    if (bounded && off > o.dagger_max_drift_rad) {
       cut = true;
       break;
     }
     JointVector lo, hi, expert = JointVector::Zero();
-    if (labels) {
+    if (labels && p.seq != nullptr && o.dagger_align_label == ExecutionOptions::AlignLabel::kCommand) {
+      // The clean execution's command at the aligned point, as the controller would bound it here.
+      commandBounds(sim_model, q, lo, hi);
+      captureSim(sim, snap);  // the same round trip as the other branches: q stays comparable
+      restoreSim(sim, snap);
+      expert = p.seq->q[p.k] + p.seq->a[p.k];
+      for (int j = 0; j < kNumJoints; ++j) expert[j] = std::clamp(expert[j], lo[j], hi[j]);
+      recordInputs(q, a_prev, clock_target, s);
+      s.a.push_back(expert - q);
+    } else if (labels) {
       double miss = 0.0;
-      expert = labelTick(demo, t, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
+      expert = labelTick(clock_target, label_target, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
       s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
     } else {
       commandBounds(sim_model, q, lo, hi);
@@ -453,7 +519,7 @@ PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimMode
       // captured (ODE renormalises the quaternions): the same round trip keeps q identical.
       captureSim(sim, snap);
       restoreSim(sim, snap);
-      recordInputs(q, a_prev, clampToLimits(arm, demo.f[t + 1]), s);
+      recordInputs(q, a_prev, clock_target, s);
     }
     // The policy runs every tick (its streaming cache must see each one), even when the expert acts.
     JointVector a = policy(demo.movement, static_cast<int>(t), q, a_prev, s.r.back());
@@ -467,6 +533,7 @@ PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimMode
       ++s.expert_ticks;
     }
     a_prev = c_exec - q;
+    q_last = q;
     q = stepSim(sim_model, sim, c_exec);
   }
   if (!cut) s.drift_rad = std::max(s.drift_rad, (q - clampToLimits(arm, demo.f.back())).cwiseAbs().maxCoeff());
@@ -487,6 +554,8 @@ void checkExecution(const PolicyData& data, const std::vector<int>& demos, const
   if (o.threads < 1) throw UserError("execution: threads must be at least 1");
   if (!(o.dagger_beta >= 0.0 && o.dagger_beta <= 1.0)) throw UserError("execution: dagger_beta must be in [0, 1]");
   if (!(o.dagger_max_drift_rad >= 0.0)) throw UserError("execution: dagger_max_drift_rad must not be negative");
+  if (o.dagger_align_band < 0) throw UserError("execution: dagger_align_band must not be negative");
+  if (!(o.dagger_return > 0.0 && o.dagger_return <= 1.0)) throw UserError("execution: dagger_return must be in (0, 1]");
   for (int d : demos)
     if (d < 0 || static_cast<std::size_t>(d) >= data.demos.size())
       throw UserError("execution: demonstration index " + std::to_string(d) + " is out of range");
@@ -537,14 +606,26 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
 
 std::vector<PolicySequence> executePolicyRollouts(const PolicyData& data, const std::vector<int>& demos,
                                                   const SimModel& sim_model, const ExecutionOptions& o,
-                                                  const RolloutPolicy& policy, int round, bool labels) {
+                                                  const RolloutPolicy& policy, int round, bool labels,
+                                                  const std::vector<PolicySequence>& align_pool) {
   checkExecution(data, demos, o);
   if (!policy) throw UserError("execution: no policy to roll out");
   if (!labels && round >= 1 && o.dagger_beta > 0.0) throw UserError("execution: beta-mixing needs the expert's labels");
+  if (labels && round >= 1 && o.dagger_align_band > 0) {
+    std::vector<int> clean;
+    for (const PolicySequence& p : align_pool)
+      if (p.rollout == 0) clean.push_back(p.demo);
+    if (clean.empty()) throw UserError("execution: aligned DAgger labels need clean executions to align to");
+    checkExecution(data, clean, o);
+    for (const PolicySequence& p : align_pool)
+      if (p.rollout == 0 && (p.q.size() != p.ticks() || p.movement != data.demos[static_cast<std::size_t>(p.demo)].movement ||
+                             p.ticks() + 1 > data.demos[static_cast<std::size_t>(p.demo)].f.size()))
+        throw UserError("execution: an alignment sequence does not fit its demonstration");
+  }
   std::vector<PolicySequence> out;
   out.reserve(demos.size());
   SimData sim(sim_model, JointVector::Zero());
-  for (int d : demos) out.push_back(executePolicyRollout(data, d, sim_model, sim, o, policy, round, labels));
+  for (int d : demos) out.push_back(executePolicyRollout(data, d, sim_model, sim, o, policy, round, labels, align_pool));
   return out;
 }
 

@@ -28,6 +28,9 @@ struct TrainArgs {
   double residual_gain = -1.0;
   int dagger_rounds = 0, dagger_start = TrainOptions{}.dagger_start;
   double dagger_beta = ExecutionOptions{}.dagger_beta, dagger_max_drift = ExecutionOptions{}.dagger_max_drift_rad;
+  int dagger_align_band = ExecutionOptions{}.dagger_align_band;
+  double dagger_return = ExecutionOptions{}.dagger_return;
+  std::string dagger_align_label = "successor";
   std::string select = "val-loss";
   bool ar_residual = false;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
@@ -95,6 +98,10 @@ void run(const TrainArgs& a) {
   o.dagger_start = a.dagger_start;
   o.execution.dagger_beta = a.dagger_beta;
   o.execution.dagger_max_drift_rad = a.dagger_max_drift;
+  o.execution.dagger_align_band = a.dagger_align_band;
+  o.execution.dagger_return = a.dagger_return;
+  o.execution.dagger_align_label = a.dagger_align_label == "command" ? ExecutionOptions::AlignLabel::kCommand
+                                                                     : ExecutionOptions::AlignLabel::kSuccessor;
   o.select_by_rollout = a.select == "rollout-dtw";
   o.ar_residual = a.ar_residual;
   o.live_progress = isatty(fileno(stdout)) != 0;
@@ -275,6 +282,24 @@ void setup(CLI::App& app) {
                   "DAgger: a round's rollout ends before the first tick where the arm is farther than this from "
                   "the demonstration (rad, any joint); the states past it are not added. 0: no bound")
       ->check(CLI::Range(0.0, 10.0))
+      ->capture_default_str();
+  cmd->add_option("--dagger-align", args->dagger_align_band,
+                  "DAgger: label each state toward the successor of the nearest point (position and velocity) of "
+                  "any training demonstration of the movement within this many ticks of the clock, instead of "
+                  "toward the rollout's own demonstration at the clock's tick; --dagger-max-drift then bounds the "
+                  "distance to that point. 0: the clock's labels")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
+  cmd->add_option("--dagger-align-label", args->dagger_align_label,
+                  "DAgger with --dagger-align: successor (the expert's command that ends the tick at the aligned "
+                  "point's successor, see --dagger-return) or command (the command the expert gave at the aligned "
+                  "point in that demonstration's clean execution: the servo takes the arm back at its own pace)")
+      ->check(CLI::IsMember({"successor", "command"}))
+      ->capture_default_str();
+  cmd->add_option("--dagger-return", args->dagger_return,
+                  "DAgger with --dagger-align: the share of the offset from the aligned point a label takes back in "
+                  "one tick (1: all of it)")
+      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   cmd->add_option("--select", args->select,
                   "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "

@@ -288,7 +288,8 @@ static_assert(kMaxLinearArOrder == kPolicyArMaxOrder, "the runtime's AR base rea
 // policy nao_rt runs), rolled out from every listed demonstration's start (executePolicyRollouts).
 template <class Dims>
 std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                                       const ExecutionOptions& execution, const PolicyNet& net, int round, bool labels) {
+                                       const ExecutionOptions& execution, const PolicyNet& net, int round, bool labels,
+                                       const std::vector<PolicySequence>& align_pool) {
   const std::vector<std::vector<float>> floats = manifestFloats(net);
   std::vector<const float*> pointers;
   for (const std::vector<float>& f : floats) pointers.push_back(f.data());
@@ -307,7 +308,7 @@ std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector
     in.step = std::min(t, Dims::kMaxSteps - 1);  // as the controller clamps it
     return stepPolicy(weights, *ws, in).template cast<double>();
   };
-  return executePolicyRollouts(data, demos, sim, execution, policy, round, labels);
+  return executePolicyRollouts(data, demos, sim, execution, policy, round, labels, align_pool);
 }
 
 // Checkpoints (torch archives): the trainable parameters in manifest order, Adam's state, the
@@ -327,6 +328,9 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   if (o.dagger_rounds > 0) k << "; dagger " << o.dagger_rounds << " " << o.dagger_start;
   if (o.dagger_rounds > 0 && o.execution.dagger_beta > 0.0) k << " beta " << o.execution.dagger_beta;
   if (o.dagger_rounds > 0 && o.execution.dagger_max_drift_rad > 0.0) k << " max drift " << o.execution.dagger_max_drift_rad;
+  if (o.dagger_rounds > 0 && o.execution.dagger_align_band > 0)
+    k << " aligned " << o.execution.dagger_align_band << " return " << o.execution.dagger_return << " label "
+      << static_cast<int>(o.execution.dagger_align_label);
   if (o.select_by_rollout) k << "; select rollout";
   if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) k << "; ar residual";
   return k.str();
@@ -434,10 +438,13 @@ SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>
 }
 
 std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                                           const ExecutionOptions& execution, const PolicyNet& net, int round, bool labels) {
+                                           const ExecutionOptions& execution, const PolicyNet& net, int round, bool labels,
+                                           const std::vector<PolicySequence>& align_pool) {
   const PolicyArch& arch = net->arch();
-  if (arch == PaperPolicyDims::arch()) return rolloutsOf<PaperPolicyDims>(data, demos, sim, execution, net, round, labels);
-  if (arch == SmallPolicyDims::arch()) return rolloutsOf<SmallPolicyDims>(data, demos, sim, execution, net, round, labels);
+  if (arch == PaperPolicyDims::arch())
+    return rolloutsOf<PaperPolicyDims>(data, demos, sim, execution, net, round, labels, align_pool);
+  if (arch == SmallPolicyDims::arch())
+    return rolloutsOf<SmallPolicyDims>(data, demos, sim, execution, net, round, labels, align_pool);
   throw UserError("DAgger rollouts need the paper or small architecture as compiled");
 }
 
@@ -744,7 +751,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       dr.after_epoch = epoch;
       const int round = static_cast<int>(res.dagger.size()) + 1;
       const std::vector<PolicySequence> seqs = sharedSequences(group.get(), res.split.train, [&](const std::vector<int>& d) {
-        return daggerRollouts(data, d, sim, o.execution, net, round);
+        return daggerRollouts(data, d, sim, o.execution, net, round, true, train_seqs);
       });
       const SequenceTensors added = toTensors(net, seqs);
       for (std::size_t i = 0; i < added.size(); ++i) {
@@ -831,6 +838,15 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
       dg["policy"] = "pure (the current net executes every tick; expert labels)";
     }
     if (o.execution.dagger_max_drift_rad > 0.0) dg["max_drift_rad"] = o.execution.dagger_max_drift_rad;
+    if (o.execution.dagger_align_band > 0) {
+      dg["align_band_ticks"] = o.execution.dagger_align_band;
+      if (o.execution.dagger_align_label == ExecutionOptions::AlignLabel::kCommand) {
+        dg["labels"] = "aligned command (the clean execution's command at the nearest training-demonstration point)";
+      } else {
+        dg["labels"] = "aligned successor (the expert toward the successor of the nearest training-demonstration point)";
+        dg["return"] = o.execution.dagger_return;
+      }
+    }
     dg["run"] = nlohmann::ordered_json::array();
     for (const DaggerRound& x : r.dagger) {
       dg["run"].push_back({{"after_epoch", x.after_epoch}, {"sequences", x.sequences}, {"ticks", x.ticks},
@@ -984,8 +1000,17 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
       << (o.execution.dagger_beta > 0.0 ? " (beta-mixed rollouts, beta " + formatG(o.execution.dagger_beta) + "^round"
                                          : std::string(" (pure policy rollouts"));
     if (o.execution.dagger_max_drift_rad > 0.0)
-      s << ", each ended where its drift first exceeds " << formatG(o.execution.dagger_max_drift_rad) << " rad";
-    s << ", expert labels, aggregated); run:";
+      s << ", each ended where its " << (o.execution.dagger_align_band > 0 ? "distance to the aligned point" : "drift")
+        << " first exceeds " << formatG(o.execution.dagger_max_drift_rad) << " rad";
+    if (o.execution.dagger_align_band > 0 && o.execution.dagger_align_label == ExecutionOptions::AlignLabel::kCommand)
+      s << ", labelled with the clean execution's command at the nearest training-demonstration point within "
+        << o.execution.dagger_align_band << " ticks of the clock";
+    else if (o.execution.dagger_align_band > 0)
+      s << ", expert labels toward the nearest training-demonstration point within " << o.execution.dagger_align_band
+        << " ticks of the clock, returning " << formatG(o.execution.dagger_return) << " of the offset per tick";
+    else
+      s << ", expert labels toward the clock's f(t+1)";
+    s << ", aggregated); run:";
     if (r.dagger.empty()) s << " none";
     for (const DaggerRound& x : r.dagger) {
       std::snprintf(buf, sizeof buf, " after epoch %d +%zu sequences (%zu ticks, %zu by the expert, drift %.3g rad, %.1f s);",

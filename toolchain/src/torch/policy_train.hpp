@@ -148,10 +148,10 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
 /// the runtime's streaming inference (nao/policy.hpp stepPolicy, the policy nao_rt runs; the
 /// paper or small architecture) and rolled out from each listed demonstration's start by
 /// executePolicyRollouts (rollout = −round; `labels` false: unlabelled, for scoring where the
-/// policy goes). Throws UserError for another architecture.
+/// policy goes; `align_pool`: executePolicyRollouts'). Throws UserError for another architecture.
 std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
                                            const ExecutionOptions& execution, const PolicyNet& net, int round,
-                                           bool labels = true);
+                                           bool labels = true, const std::vector<PolicySequence>& align_pool = {});
 
 /// Every rank's `mine`, in rank order, on every rank of `group`: each rank broadcasts its own
 /// sequences (Gloo), so every rank holds the doubles their owner computed. A collective: every

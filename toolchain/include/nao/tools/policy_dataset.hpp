@@ -122,6 +122,22 @@ struct ExecutionOptions {
   /// any joint) exceeds this, rad: the states past it are left out (measured in docs/policy.md:
   /// the labels of the states kept still did not help). 0: no bound. Round 0 (scoring) is never cut.
   double dagger_max_drift_rad = 0.0;
+  /// DAgger labels from a time-aligned point instead of the clock's (docs/policy.md "Data").
+  /// 0: the expert's target is the rollout's demonstration at f(t+1) (the clock), as for the
+  /// executed demonstrations. > 0: the point (d, k) of the alignment pool's demonstrations of
+  /// the movement nearest the arm's state (position and per-tick velocity) with |k − t| <= this
+  /// many ticks is found, and the label comes from it (dagger_align_label); the drift bound then
+  /// measures the distance to that point. Round 0 (scoring) labels nothing.
+  int dagger_align_band = 0;
+  /// What an aligned label is. kSuccessor: the expert's command (secant) that ends the tick at
+  /// f_d(k+1) + (1 − γ)(q − f_d(k)), γ = dagger_return. kCommand: the command the expert gave
+  /// at (d, k) in d's clean execution, inside the controller's bounds at q (no secant: the
+  /// servo itself takes the arm back, at its own pace).
+  enum class AlignLabel { kSuccessor, kCommand };
+  AlignLabel dagger_align_label = AlignLabel::kSuccessor;
+  /// kSuccessor: the share γ of the offset q − f_d(k) the label takes back in one tick; 1
+  /// returns at once. In (0, 1].
+  double dagger_return = 1.0;
   /// Worker threads (the result does not depend on it). 1: Debian's ODE 0.16 crashed (segfault
   /// in libode) with two worlds stepped on two threads here; more only with an ODE built for it.
   int threads = 1;
@@ -169,10 +185,15 @@ using RolloutPolicy = std::function<JointVector(int movement, int t, const Joint
 /// always the pure policy. Deterministic for a deterministic policy. One thread, in list order
 /// (the policy may be stateful). Sequences get rollout = −round. With `labels` false (scoring a
 /// policy by where it goes) the expert is not run: q, a_prev and r are recorded, `a` stays
-/// empty. Throws UserError for bad options or indices.
+/// empty. With options.dagger_align_band > 0 the labelled rounds align every state to the
+/// clean executions (rollout 0; others are ignored) in `align_pool`: those of the whole
+/// training split, whatever share of it `demos` is, so the labels do not depend on how the
+/// rollouts are shared out. r stays the clock's. Throws UserError for bad options or indices,
+/// or aligned labels without a clean execution to align to.
 std::vector<PolicySequence> executePolicyRollouts(const PolicyData& data, const std::vector<int>& demos,
                                                   const SimModel& sim_model, const ExecutionOptions& options,
-                                                  const RolloutPolicy& policy, int round, bool labels = true);
+                                                  const RolloutPolicy& policy, int round, bool labels = true,
+                                                  const std::vector<PolicySequence>& align_pool = {});
 
 /// Normalisation statistics over every tick of `sequences` (q, the labels a, r).
 NormStats normStats(const std::vector<PolicySequence>& sequences);
