@@ -635,6 +635,16 @@ TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature targ
   CHECK(status == 2);
 }
 
+TEST_CASE("an autonomous model's phase grid (metadata training.phase_ticks) is read or refused with the key's name") {
+  CHECK(rt::modelPhaseTicks("{}", "m") == 0);
+  CHECK(rt::modelPhaseTicks(R"({"training":{"seed":1}})", "m") == 0);
+  CHECK(rt::modelPhaseTicks(R"({"training":{"phase_ticks":150}})", "m") == 150);
+  for (const char* bad : {R"({"training":{"phase_ticks":0}})", R"({"training":{"phase_ticks":1.5}})",
+                          R"({"training":{"phase_ticks":"150"}})", R"({"training":{"phase_ticks":1000000}})"})
+    CHECK_THROWS_WITH_AS(rt::modelPhaseTicks(bad, "model.bin"), doctest::Contains("training.phase_ticks"),
+                         std::runtime_error);
+}
+
 TEST_CASE("a reference model's residual gain (metadata training.residual_gain) adds G r to the policy's action") {
   CHECK(rt::modelResidualGain("{}", "m") == 0.0f);
   CHECK(rt::modelResidualGain(R"({"training":{"seed":1}})", "m") == 0.0f);

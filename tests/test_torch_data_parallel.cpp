@@ -165,7 +165,8 @@ TEST_CASE("the Gloo-summed shard gradients equal the single-process gradient of 
   const auto batch = [&] {
     torch::manual_seed(7);
     PolicyBatch in{torch::randn({n, ticks, arch.tokens}), torch::randn({n, ticks, arch.tokens}),
-                   torch::randn({n, ticks, arch.tokens}), torch::randint(0, arch.movements, {n}, torch::kInt64)};
+                   torch::randn({n, ticks, arch.tokens}), torch::randint(0, arch.movements, {n}, torch::kInt64),
+                   torch::Tensor()};  // no phase steps: no lengths
     return std::make_pair(in, torch::randn({n, ticks, arch.tokens}));
   };
   const auto freshNet = [&] {
@@ -190,7 +191,7 @@ TEST_CASE("the Gloo-summed shard gradients equal the single-process gradient of 
     const auto [lo, hi] = shardRange(n, world, r);
     const torch::Tensor idx = torch::arange(lo, hi, torch::kInt64);
     const PolicyBatch shard{b_in.qn.index_select(0, idx), b_in.an.index_select(0, idx), b_in.rn.index_select(0, idx),
-                            b_in.movement.index_select(0, idx)};
+                            b_in.movement.index_select(0, idx), torch::Tensor()};
     ((net->forward(shard) - b_target.index_select(0, idx)).square().sum() / static_cast<double>(n * ticks * arch.tokens))
         .backward();
     const std::vector<torch::Tensor> p = net->trainableParameters();

@@ -1,6 +1,7 @@
 // Training the policy with libtorch: the module is the manifest, training is deterministic for a
 // seed, the exported file reads back to the module's tensors, the loss goes down, early
 // stopping exports the best epoch, the attention record follows docs/policy.md.
+#include "nao/controller.hpp"
 #include "nao/model_file.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/kmeans.hpp"
@@ -249,8 +250,13 @@ TEST_CASE("DAgger rollouts execute the net's own action (libtorch's forward on t
   ExecutionOptions clean;
   clean.noisy_rollouts = 0;
   const NormStats stats = normStats(executeDemos(smallData(), demos, smallSim(), clean, 1));
-  for (Conditioning c : {Conditioning::kAutonomous, Conditioning::kReference}) {
-    INFO(std::string(conditioningName(c)));
+  // Autonomous with phase steps too: the runtime's step rows (floor(t·P / L), L the
+  // demonstration's samples) must be the ones libtorch's forward uses.
+  const std::vector<std::pair<Conditioning, int>> cases = {
+      {Conditioning::kAutonomous, 0}, {Conditioning::kReference, 0}, {Conditioning::kAutonomous, 37}};
+  std::vector<std::vector<JointVector>> phase0_q;
+  for (const auto& [c, phase] : cases) {
+    INFO(std::string(conditioningName(c)) << ", phase steps " << phase);
     torch::manual_seed(7);
     PolicyNet net(smallArch(), c);
     {
@@ -262,17 +268,24 @@ TEST_CASE("DAgger rollouts execute the net's own action (libtorch's forward on t
     net->setNormalisation(stats);
     net->setCentroids(smallData().centroids);
     net->residual_gain = c == Conditioning::kReference ? 1.0894 : 0.0;
+    net->phase_ticks = phase;
     net->eval();
     const std::vector<PolicySequence> seqs = daggerRollouts(smallData(), demos, smallSim(), clean, net, 1);
+    if (c == Conditioning::kAutonomous && phase == 0)
+      for (const PolicySequence& s : seqs) phase0_q.push_back(s.q);
+    if (phase > 0)  // the phase changes what the net does
+      for (std::size_t i = 0; i < seqs.size(); ++i) CHECK(seqs[i].q != phase0_q.at(i));
     REQUIRE(seqs.size() == demos.size());
     torch::NoGradGuard no_grad;
     double worst = 0.0, largest_action = 0.0, drift = 0.0;
     std::size_t saturated = 0;
     for (const PolicySequence& s : seqs) {
       CHECK(s.rollout == -1);
-      const torch::Tensor act =
-          net->act(stacked(s.q), stacked(s.a_prev), stacked(s.r), torch::tensor({static_cast<std::int64_t>(s.movement)}))
-              .contiguous();
+      const auto samples = static_cast<std::int64_t>(smallData().demos[static_cast<std::size_t>(s.demo)].f.size());
+      const torch::Tensor act = net->act(stacked(s.q), stacked(s.a_prev), stacked(s.r),
+                                         torch::tensor({static_cast<std::int64_t>(s.movement)}), nullptr,
+                                         torch::tensor({samples}))
+                                    .contiguous();
       auto a = act.accessor<float, 3>();
       for (std::size_t t = 0; t + 1 < s.ticks(); ++t)
         for (int j = 0; j < kNumJoints; ++j) {
@@ -506,4 +519,44 @@ TEST_CASE("over the linear AR base the untrained net is the baseline; rollout se
   CHECK(card.find("| model selection | rollout DTW") != std::string::npos);
 
   CHECK_MESSAGE(a == trainBytes(o), "two runs with seed 43 gave different bytes");
+}
+
+TEST_CASE("phase steps: the step row follows the demonstration's phase, recorded, and refused where they cannot hold") {
+  // The controller's rule, which the trainer's rollouts use too: floor(t·P / L), clamped.
+  ControllerParams pace;
+  CHECK(policyStep(5, pace, 256) == 5);
+  CHECK(policyStep(300, pace, 256) == 255);
+  pace.phase_ticks = 150;
+  pace.run_ticks = 100;
+  CHECK(policyStep(0, pace, 256) == 0);
+  CHECK(policyStep(1, pace, 256) == 1);    // 1.5
+  CHECK(policyStep(2, pace, 256) == 3);
+  CHECK(policyStep(99, pace, 256) == 148);  // 148.5
+  pace.run_ticks = 300;
+  CHECK(policyStep(299, pace, 256) == 149);
+  CHECK(policyStep(1, pace, 256) == 0);
+  pace.phase_ticks = 1000;
+  CHECK(policyStep(299, pace, 256) == 255);
+
+  TrainOptions o = smallOptions(53, 2);
+  o.conditioning = Conditioning::kAutonomous;
+  TrainResult r0;
+  const std::vector<std::uint8_t> a = trainBytes(o, &r0);
+  TrainOptions phased = o;
+  phased.phase_ticks = 40;
+  TrainResult r1;
+  const std::vector<std::uint8_t> b = trainBytes(phased, &r1);
+  CHECK(a != b);
+  CHECK(r1.history[0].val_loss != r0.history[0].val_loss);
+  CHECK(b == trainBytes(phased));  // deterministic
+  CHECK(nlohmann::json::parse(modelMetadata(smallData(), phased, r1))["training"]["phase_ticks"] == 40);
+  CHECK(modelMetadata(smallData(), o, r0).find("phase_ticks") == std::string::npos);
+
+  TrainOptions reference = phased;
+  reference.conditioning = Conditioning::kReference;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), reference, nullptr), doctest::Contains("autonomous"), UserError);
+  TrainOptions cut = phased;
+  cut.dagger_rounds = 1;
+  cut.execution.dagger_max_drift_rad = 0.1;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), cut, nullptr), doctest::Contains("--dagger-max-drift"), UserError);
 }

@@ -215,6 +215,16 @@ float modelResidualGain(const std::string& metadata_json, const std::string& ori
   return static_cast<float>(g.get<double>());
 }
 
+std::int64_t modelPhaseTicks(const std::string& metadata_json, const std::string& origin) {
+  const nlohmann::json j = nlohmann::json::parse(metadata_json, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object() || !j.contains("training") || !j["training"].is_object() || !j["training"].contains("phase_ticks"))
+    return 0;
+  const nlohmann::json& v = j["training"]["phase_ticks"];
+  if (!v.is_number_integer() || v.get<std::int64_t>() < 1 || v.get<std::int64_t>() > 100000)
+    throw std::runtime_error(origin + ": the model's metadata has an unusable training.phase_ticks (an integer in [1, 100000])");
+  return v.get<std::int64_t>();
+}
+
 LinearArCoefficients modelLinearAr(const std::string& metadata_json, int movements, const std::string& origin) {
   LinearArCoefficients k;
   const nlohmann::json j = nlohmann::json::parse(metadata_json, nullptr, /*allow_exceptions=*/false);
@@ -329,6 +339,7 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   p.retarget = modelRetargetSetting(h.metadata_json, o.controller.retarget, p.model_source);
   p.residual_gain = modelResidualGain(h.metadata_json, p.model_source);
   p.linear_ar = modelLinearAr(h.metadata_json, h.arch.movements, p.model_source);
+  p.phase_ticks = modelPhaseTicks(h.metadata_json, p.model_source);
 
   std::int64_t default_ticks = 0;
   switch (p.spec.kind) {
@@ -617,6 +628,7 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
                 {"conditioning", conditioningName(p.model.header.conditioning)},
                 {"residual_gain", p.residual_gain},
                 {"linear_ar_base", !p.linear_ar.empty()},
+                {"phase_ticks", p.phase_ticks},
                 {"precision", weightPrecisionName(p.precision)}};
   j["reference"] = p.reference.description;
   j["retarget"] = {{"priority", retargetPriorityName(p.retarget.priority)},

@@ -171,6 +171,7 @@ struct PreparedRun {
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
   RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
   float residual_gain = 0.0f;          ///< the model's training.residual_gain (PolicyWeights)
+  std::int64_t phase_ticks = 0;        ///< the model's training.phase_ticks (ControllerParams)
   tools::ReferenceStream reference;    ///< synthetic/file (empty for none)
   ValidationSet validation;            ///< none only
   std::vector<tools::ReferenceStream> validation_demos;  ///< none only
@@ -194,6 +195,11 @@ float modelResidualGain(const std::string& metadata_json, const std::string& ori
 /// present but unusable (not `movements` movements of 5 joints, an order outside 1..12, a
 /// coefficient that is not a finite number).
 LinearArCoefficients modelLinearAr(const std::string& metadata_json, int movements, const std::string& origin);
+
+/// The phase grid an autonomous model's step embedding was trained on (metadata
+/// training.phase_ticks, ControllerParams::phase_ticks); 0 when the metadata has none. Throws
+/// std::runtime_error naming `origin` for a value that is present but not an integer in [1, 1e5].
+std::int64_t modelPhaseTicks(const std::string& metadata_json, const std::string& origin);
 
 /// `k` as the runtime's float base (on = !k.empty()).
 template <int M>
@@ -408,6 +414,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // longer read, so its memory goes back before the loop (resident set, docs/embedded.md).
     std::vector<std::uint8_t>().swap(p.model.bytes);
     ControllerParams controller_params = options.controller;
+    controller_params.phase_ticks = p.phase_ticks;  // the run's length sets the pace of a phase model
+    controller_params.run_ticks = p.ticks;
     controller_params.retarget = p.retarget;
     // The human's scale d_h is calibrated once per reference, as the training data and the
     // evaluation target were retargeted (one scale per demonstration from all its frames:

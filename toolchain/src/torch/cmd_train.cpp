@@ -31,6 +31,7 @@ struct TrainArgs {
   int dagger_align_band = ExecutionOptions{}.dagger_align_band;
   double dagger_return = ExecutionOptions{}.dagger_return;
   std::string dagger_align_label = "successor";
+  int phase_ticks = 0;
   std::string select = "val-loss";
   bool ar_residual = false;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
@@ -104,6 +105,7 @@ void run(const TrainArgs& a) {
                                                                      : ExecutionOptions::AlignLabel::kSuccessor;
   o.select_by_rollout = a.select == "rollout-dtw";
   o.ar_residual = a.ar_residual;
+  o.phase_ticks = a.phase_ticks;
   o.live_progress = isatty(fileno(stdout)) != 0;
   if (a.rank >= a.world_size)
     throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
@@ -300,6 +302,12 @@ void setup(CLI::App& app) {
                   "DAgger with --dagger-align: the share of the offset from the aligned point a label takes back in "
                   "one tick (1: all of it)")
       ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--phase-steps", args->phase_ticks,
+                  "Autonomous mode: index the step embedding by the movement's phase, "
+                  "floor(t * N / L) for tick t of a demonstration of L samples (nao_rt: of a run of L ticks: the "
+                  "policy is told how long the movement takes) instead of by t. 0: by t")
+      ->check(CLI::Range(0, 100000))
       ->capture_default_str();
   cmd->add_option("--select", args->select,
                   "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "

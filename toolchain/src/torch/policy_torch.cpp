@@ -229,10 +229,19 @@ torch::Tensor PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttention* 
   const torch::Tensor rn =
       conditioning_ == Conditioning::kAutonomous ? torch::zeros_like(batch.qn) : batch.rn;
   // Encoder tokens (τ, j): [qn, an, rn] embedded, plus joint, movement and the tick's step row.
-  const torch::Tensor step = torch::arange(n_ticks, torch::kInt64).clamp_max(arch_.max_steps - 1);
+  const torch::Tensor tick = torch::arange(n_ticks, torch::kInt64);
+  torch::Tensor step_rows;
+  if (phase_ticks > 0) {
+    if (!batch.length.defined() || batch.length.numel() != n_batch)
+      throw std::invalid_argument("a net with phase steps needs each sequence's length (PolicyBatch::length)");
+    const torch::Tensor step =
+        (tick.view({1, n_ticks}) * phase_ticks).div(batch.length.view({n_batch, 1}), "floor").clamp_max(arch_.max_steps - 1);
+    step_rows = step_emb.index_select(0, step.reshape({-1})).view({n_batch, n_ticks, 1, d});
+  } else {
+    step_rows = step_emb.index_select(0, tick.clamp_max(arch_.max_steps - 1)).view({1, n_ticks, 1, d});
+  }
   torch::Tensor x = embed_in->forward(torch::stack({batch.qn, batch.an, rn}, -1));  // [B,T,J,d]
-  x = x + joint_enc + movement_emb.index_select(0, batch.movement).view({n_batch, 1, 1, d}) +
-      step_emb.index_select(0, step).view({1, n_ticks, 1, d});
+  x = x + joint_enc + movement_emb.index_select(0, batch.movement).view({n_batch, 1, 1, d}) + step_rows;
   x = x.reshape({n_batch, n_ticks * n_joints, d});
   const WindowMask mask = windowMask(n_ticks, static_cast<int>(n_joints), static_cast<int>(window));
   for (const EncoderLayer& layer : enc) x = layer->forward(x, mask);
@@ -269,8 +278,10 @@ torch::Tensor PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttention* 
 }
 
 torch::Tensor PolicyNetImpl::act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
-                                 const torch::Tensor& movement, PolicyAttention* attention) const {
+                                 const torch::Tensor& movement, PolicyAttention* attention,
+                                 const torch::Tensor& length) const {
   PolicyBatch batch;
+  batch.length = length;
   batch.qn = (q - q_mean) / q_std;
   batch.an = (a_prev - a_mean) / a_std;
   batch.rn = (r - r_mean) / r_std;

@@ -33,6 +33,7 @@ struct PolicyBatch {
   torch::Tensor an;        ///< [B,T,J] float, normalised a(t-1)
   torch::Tensor rn;        ///< [B,T,J] float (ignored in autonomous mode: taken as 0)
   torch::Tensor movement;  ///< [B] int64
+  torch::Tensor length;    ///< [B] int64: each rollout's demonstration's samples L (phase steps only)
 };
 
 /// The attention record of docs/policy.md, per batch element and tick.
@@ -140,8 +141,10 @@ class PolicyNetImpl : public torch::nn::Module {
 
   /// The actions a(t) in rad [B,T,J] from raw sequences in rad (q, a(t-1), r: [B,T,J] float;
   /// movement [B] int64), normalised with the norm.* buffers (rn = 0 in autonomous mode).
+  /// `length` [B] int64: PolicyBatch::length, needed with phase steps only.
   torch::Tensor act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
-                    const torch::Tensor& movement, PolicyAttention* attention = nullptr) const;
+                    const torch::Tensor& movement, PolicyAttention* attention = nullptr,
+                    const torch::Tensor& length = {}) const;
 
   /// Stores the statistics in the norm.* buffers.
   void setNormalisation(const NormStats& stats);
@@ -157,6 +160,9 @@ class PolicyNetImpl : public torch::nn::Module {
   /// Reference mode: act() returns g·r plus the de-normalised network output, so forward()
   /// learns the residual of the first-order servo inversion (runtime PolicyWeights::residual_gain).
   double residual_gain = 0.0;
+  /// Autonomous mode: > 0 makes the step row of tick t floor(t·phase_ticks / L) for a
+  /// demonstration of L samples (the movement's phase on a fixed grid) instead of t.
+  std::int64_t phase_ticks = 0;
 
   /// Autonomous mode over the linear AR baseline (docs/policy.md): act() adds linearArBase, so
   /// forward() learns the residual over the fitted per-movement, per-joint AR model. One model

@@ -1,5 +1,6 @@
 #include "policy_train.hpp"
 
+#include "nao/controller.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
@@ -136,6 +137,7 @@ std::vector<PolicySequence> sharedSequences(ProcessGroup* g, const std::vector<i
 struct SequenceTensors {
   std::vector<torch::Tensor> qn, an, rn, target;  ///< each [T_i, J]
   std::vector<std::int64_t> movement;
+  std::vector<std::int64_t> length;               ///< each sequence's demonstration's samples (phase steps)
   std::int64_t ticks = 0;                         ///< all sequences together
   std::size_t size() const { return qn.size(); }
 };
@@ -163,6 +165,8 @@ SequenceTensors toTensors(const PolicyNet& net, const std::vector<PolicySequence
                   .squeeze(0);
     t.target.push_back((a - net->a_mean) / net->a_std);
     t.movement.push_back(s.movement);
+    // Phase steps count the demonstration's samples: as many ticks as nao_rt runs from its s_0.
+    t.length.push_back(static_cast<std::int64_t>(s.ticks()) + 1);
     t.ticks += static_cast<std::int64_t>(s.ticks());
   }
   return t;
@@ -185,7 +189,7 @@ Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index) {
   p.in.rn = torch::zeros({n, longest, kNumJoints});
   p.target = torch::zeros({n, longest, kNumJoints});
   p.mask = torch::zeros({n, longest, 1});
-  std::vector<std::int64_t> movement;
+  std::vector<std::int64_t> movement, length;
   for (std::int64_t b = 0; b < n; ++b) {
     const std::size_t i = index[static_cast<std::size_t>(b)];
     const std::int64_t len = t.qn[i].size(0);
@@ -195,9 +199,11 @@ Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index) {
     p.target[b].slice(0, 0, len).copy_(t.target[i]);
     p.mask[b].slice(0, 0, len).fill_(1.0);
     movement.push_back(t.movement[i]);
+    length.push_back(t.length[i]);
     p.ticks += len;
   }
   p.in.movement = torch::tensor(movement, torch::kInt64);
+  p.in.length = torch::tensor(length, torch::kInt64);
   return p;
 }
 
@@ -276,6 +282,11 @@ void check(const PolicyData& data, const TrainOptions& o) {
     if (o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
       throw UserError("DAgger (--dagger-rounds) needs the paper or small architecture as compiled (e.g. no --window)");
   }
+  if (o.phase_ticks < 0) throw UserError("phase steps must not be negative");
+  if (o.phase_ticks > 0 && o.conditioning != Conditioning::kAutonomous)
+    throw UserError("phase steps (--phase-steps) are for autonomous mode (reference mode has no step embedding)");
+  if (o.phase_ticks > 0 && o.dagger_rounds > 0 && o.execution.dagger_max_drift_rad > 0.0)
+    throw UserError("phase steps (--phase-steps) cannot take DAgger's cut rollouts (--dagger-max-drift): their length is not the demonstration's");
   if (o.select_by_rollout && o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
     throw UserError("model selection on rollouts (--select rollout-dtw) needs the paper or small architecture as "
                     "compiled (e.g. no --window)");
@@ -297,6 +308,7 @@ std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector
   weights.residual_gain = static_cast<float>(net->residual_gain);
   weights.linear_ar = rt::linearArBase<Dims::kMovements>(linearArCoefficients(net->linearAr()));
   const auto ws = makePolicyWorkspace<Dims>();
+  std::size_t rollout = static_cast<std::size_t>(-1);  // which of `demos` is being rolled out
   const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
                                    const JointVector& r) -> JointVector {
     if (t == 0) resetPolicyStream(*ws);
@@ -305,7 +317,12 @@ std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector
     in.a_prev = a_prev.cast<float>();
     in.r = r.cast<float>();  // ignored in autonomous mode
     in.movement = movement;
-    in.step = std::min(t, Dims::kMaxSteps - 1);  // as the controller clamps it
+    if (t == 0) ++rollout;
+    // As the controller computes it for a run as long as the demonstration (nao_rt --start-demo).
+    ControllerParams pace;
+    pace.phase_ticks = net->phase_ticks;
+    pace.run_ticks = static_cast<std::int64_t>(data.demos[static_cast<std::size_t>(demos[rollout])].f.size());
+    in.step = policyStep(t, pace, Dims::kMaxSteps);
     return stepPolicy(weights, *ws, in).template cast<double>();
   };
   return executePolicyRollouts(data, demos, sim, execution, policy, round, labels, align_pool);
@@ -333,6 +350,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
       << static_cast<int>(o.execution.dagger_align_label);
   if (o.select_by_rollout) k << "; select rollout";
   if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) k << "; ar residual";
+  if (o.phase_ticks > 0) k << "; phase " << o.phase_ticks;
   return k.str();
 }
 
@@ -574,6 +592,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
 
   PolicyNet net(o.arch, o.conditioning);
   net->residual_gain = res.residual_gain = residualGain(o, sim);
+  net->phase_ticks = o.phase_ticks;
   net->setNormalisation(res.stats);
   net->setCentroids(data.centroids);
   if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) {
@@ -824,6 +843,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["lr"] = o.lr;
   t["loss"] = "mse of normalised actions";
   if (r.residual_gain != 0.0) t["residual_gain"] = r.residual_gain;  // absent: none (older files)
+  if (o.phase_ticks > 0) t["phase_ticks"] = o.phase_ticks;
   // Only when they change the result: single-process files keep their bytes.
   if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;
   if (o.max_batches > 0) t["max_batches_per_epoch"] = o.max_batches;

@@ -63,6 +63,11 @@ struct TrainOptions {
   /// the validation split's, up to 12), as nao_toolchain evaluate fits it; the head starts at
   /// zero, so the untrained net is that baseline (with select_by_rollout, scored as "epoch 0").
   bool ar_residual = false;
+  /// Autonomous mode (docs/policy.md): > 0 indexes the step embedding by the movement's phase,
+  /// floor(t·phase_ticks / L) for tick t of a demonstration of L samples (nao_rt: a run of L
+  /// ticks), instead of by t. Not with a DAgger drift bound (a cut rollout's L is not its
+  /// demonstration's).
+  int phase_ticks = 0;
 };
 
 /// One DAgger round of a training run.
