@@ -445,12 +445,21 @@ PolicyData reachableSet(const ArmModel& arm, const KeyPoseBlend& blend) {
   return makePolicyData(centroids, demos);
 }
 
+// The arm, its simulation and reachableSet's demonstrations, as the execution tests use them.
+struct ReachableArm {
+  KeyPoseBlend blend = [] {
+    KeyPoseBlend b;
+    b.pole = 0.8;
+    return b;
+  }();
+  ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  PolicyData data = reachableSet(arm, blend);
+  SimModel model = makeSimModel(arm);
+  double period = model.params.dt_s * model.params.substeps_per_tick;  ///< one tick, s
+};
+
 TEST_CASE("executed rollouts: the expert's labels put the servo-lagged arm on f(t+1), clean and noisy, seeded") {
-  KeyPoseBlend blend;
-  blend.pole = 0.8;
-  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  const PolicyData data = reachableSet(arm, blend);
-  const SimModel model = makeSimModel(arm);
+  const auto& [blend, arm, data, model, period] = ReachableArm{};
   ExecutionOptions o;
   o.noisy_rollouts = 2;
   const std::vector<int> demos = {0, 4, 8};
@@ -549,12 +558,7 @@ JointVector clampedCommand(const ArmModel& arm, double period, const JointVector
 }  // namespace
 
 TEST_CASE("DAgger rollouts execute the policy's clamped action and the expert labels the states it reaches") {
-  KeyPoseBlend blend;
-  blend.pole = 0.8;
-  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  const PolicyData data = reachableSet(arm, blend);
-  const SimModel model = makeSimModel(arm);
-  const double period = model.params.dt_s * model.params.substeps_per_tick;
+  const auto& [blend, arm, data, model, period] = ReachableArm{};
   const ExecutionOptions o;
   const auto law = driftingLaw;
   const std::vector<int> demos = {1, 5, 7};
@@ -648,12 +652,7 @@ TEST_CASE("DAgger rollouts execute the policy's clamped action and the expert la
 }
 
 TEST_CASE("beta-mixed DAgger rollouts: expert ticks execute the label, beta 1 is the clean execution, round 0 stays pure") {
-  KeyPoseBlend blend;
-  blend.pole = 0.8;
-  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  const PolicyData data = reachableSet(arm, blend);
-  const SimModel model = makeSimModel(arm);
-  const double period = model.params.dt_s * model.params.substeps_per_tick;
+  const auto& [blend, arm, data, model, period] = ReachableArm{};
   // A policy that drifts (momentum plus a push): far from the expert on every tick.
   const auto law = [](int movement, const JointVector& q, const JointVector& a_prev, const JointVector& r) {
     return driftingLaw(0.1, movement, q, a_prev, r);
@@ -787,11 +786,8 @@ AlignedPoint alignedOracle(const PolicyData& data, const std::vector<PolicySeque
 }  // namespace
 
 TEST_CASE("aligned DAgger labels aim at the nearest demonstration point's successor, not the clock's f(t+1)") {
-  KeyPoseBlend blend;
-  blend.pole = 0.8;
-  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  const PolicyData data = reachableSet(arm, blend);  // per movement 3 demonstrations, 8, 9 and 10 ticks a key pose
-  const SimModel model = makeSimModel(arm);
+  // Per movement 3 demonstrations, 8, 9 and 10 ticks a key pose.
+  const auto& [blend, arm, data, model, period] = ReachableArm{};
   const RolloutPolicy policy = [](int movement, int, const JointVector& q, const JointVector& a_prev,
                                   const JointVector& r) -> JointVector { return driftingLaw(0.0, movement, q, a_prev, r); };
   std::vector<int> all(data.demos.size());
@@ -872,7 +868,6 @@ TEST_CASE("aligned DAgger labels aim at the nearest demonstration point's succes
   ExecutionOptions command = o;
   command.dagger_align_label = ExecutionOptions::AlignLabel::kCommand;
   const std::vector<PolicySequence> commanded = executePolicyRollouts(data, demos, model, command, policy, 1, true, pool);
-  const double period = model.params.dt_s * model.params.substeps_per_tick;
   std::size_t differ = 0, saturated = 0;
   for (std::size_t i = 0; i < commanded.size(); ++i) {
     const PolicySequence& c = commanded[i];

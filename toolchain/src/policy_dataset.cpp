@@ -500,26 +500,25 @@ PolicySequence executePolicyRollout(const PolicyData& data, int d, const SimMode
       break;
     }
     JointVector lo, hi, expert = JointVector::Zero();
-    if (labels && p.seq != nullptr && o.dagger_align_label == ExecutionOptions::AlignLabel::kCommand) {
-      // The clean execution's command at the aligned point, as the controller would bound it here.
-      commandBounds(sim_model, q, lo, hi);
-      captureSim(sim, snap);  // the same round trip as the other branches: q stays comparable
-      restoreSim(sim, snap);
-      expert = p.seq->q[p.k] + p.seq->a[p.k];
-      for (int j = 0; j < kNumJoints; ++j) expert[j] = std::clamp(expert[j], lo[j], hi[j]);
-      recordInputs(q, a_prev, clock_target, s);
-      s.a.push_back(expert - q);
-    } else if (labels) {
+    const bool command_label =
+        labels && p.seq != nullptr && o.dagger_align_label == ExecutionOptions::AlignLabel::kCommand;
+    if (labels && !command_label) {
       double miss = 0.0;
       expert = labelTick(clock_target, label_target, q, a_prev, sim_model, sim, snap, o, s, lo, hi, miss);
       s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
     } else {
+      // No expert search. It leaves the arm as restoreSim sets it, which is not bit for bit the
+      // state it captured (ODE renormalises the quaternions): the same round trip keeps q identical.
       commandBounds(sim_model, q, lo, hi);
-      // The expert leaves the arm as restoreSim sets it, which is not bit for bit the state it
-      // captured (ODE renormalises the quaternions): the same round trip keeps q identical.
       captureSim(sim, snap);
       restoreSim(sim, snap);
       recordInputs(q, a_prev, clock_target, s);
+      if (command_label) {
+        // The clean execution's command at the aligned point, as the controller would bound it here.
+        expert = p.seq->q[p.k] + p.seq->a[p.k];
+        for (int j = 0; j < kNumJoints; ++j) expert[j] = std::clamp(expert[j], lo[j], hi[j]);
+        s.a.push_back(expert - q);
+      }
     }
     // The policy runs every tick (its streaming cache must see each one), even when the expert acts.
     JointVector a = policy(demo.movement, static_cast<int>(t), q, a_prev, s.r.back());

@@ -309,6 +309,9 @@ std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector
   weights.linear_ar = rt::linearArBase<Dims::kMovements>(linearArCoefficients(net->linearAr()));
   const auto ws = makePolicyWorkspace<Dims>();
   std::size_t rollout = static_cast<std::size_t>(-1);  // which of `demos` is being rolled out
+  // The step row as the controller computes it for a run as long as the demonstration (nao_rt --start-demo).
+  ControllerParams pace;
+  pace.phase_ticks = net->phase_ticks;
   const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
                                    const JointVector& r) -> JointVector {
     if (t == 0) resetPolicyStream(*ws);
@@ -317,11 +320,7 @@ std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector
     in.a_prev = a_prev.cast<float>();
     in.r = r.cast<float>();  // ignored in autonomous mode
     in.movement = movement;
-    if (t == 0) ++rollout;
-    // As the controller computes it for a run as long as the demonstration (nao_rt --start-demo).
-    ControllerParams pace;
-    pace.phase_ticks = net->phase_ticks;
-    pace.run_ticks = static_cast<std::int64_t>(data.demos[static_cast<std::size_t>(demos[rollout])].f.size());
+    if (t == 0) pace.run_ticks = static_cast<std::int64_t>(data.demos[static_cast<std::size_t>(demos[++rollout])].f.size());
     in.step = policyStep(t, pace, Dims::kMaxSteps);
     return stepPolicy(weights, *ws, in).template cast<double>();
   };
