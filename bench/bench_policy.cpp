@@ -6,15 +6,24 @@
 //   BM_Policy_Int8 / _SSE / _AVX2  the same with the attention and FFN matrices in int8
 //                          (nao/quantize.hpp: quantised from the fp32 model at set-up, the bytes
 //                          nao_codegen --precision int8 compiles in)
-//   BM_WeightStream        the physical limit: one read of the same weight bytes (a vectorised
-//                          sum over the model's tensor data), i.e. weight bytes / single-core
-//                          read bandwidth, measured in the same run
+//   BM_Policy_*_AVX512     the same with the AVX-512 kernels (skipped without AVX-512 F/BW/VNNI)
+//   BM_WeightStream        the physical limit: one read of the same weight bytes (the fastest
+//                          read found: zmm or ymm loads into 8 accumulators, each line prefetched
+//                          64 KB ahead; the label names it), i.e. weight bytes / single-core read
+//                          bandwidth, measured in the same run
+//   BM_WeightStream_Eigen  the same bytes read by Eigen's vectorised sum (the limit quoted before
+//                          2026-11-26: 10-25 % slower than the prefetched read on this machine)
 // BM_Policy_Libtorch (bench_policy_torch.cpp) is libtorch eager on the same weights.
 // One inference (or one sweep) per iteration, each timed on its own; single thread.
 #include "bench_policy_common.hpp"
 #include "nao/quantize.hpp"
 
 #include <Eigen/Core>
+
+#include "nao/policy_kernels.hpp"
+#if NAO_POLICY_HAVE_AVX2
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -94,6 +103,11 @@ void BM_Policy_StaticEigen_AVX2(benchmark::State& state) {
   runStaticEigen(state, &k);
 }
 
+void BM_Policy_StaticEigen_AVX512(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kAvx512;
+  runStaticEigen(state, &k);
+}
+
 void BM_Policy_Int8(benchmark::State& state) { runStaticEigen(state, nullptr, true); }
 
 void BM_Policy_Int8_SSE(benchmark::State& state) {
@@ -106,17 +120,83 @@ void BM_Policy_Int8_AVX2(benchmark::State& state) {
   runStaticEigen(state, &k, true);
 }
 
-void BM_WeightStream(benchmark::State& state) {
+void BM_Policy_Int8_AVX512(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kAvx512;
+  runStaticEigen(state, &k, true);
+}
+
+#if NAO_POLICY_HAVE_AVX2
+// The fastest single-core read of the weight bytes found on this machine (2026-11-26, AMD EPYC
+// with AVX-512; /tmp experiments, 2000 sweeps each): Eigen's sum (SSE2) ~500-540 us, 8 AVX2
+// accumulators ~480-520 us, 8 AVX-512 accumulators without software prefetch ~590-670 us, the
+// same with each line prefetched 16-64 KB ahead ~400-470 us (4 KB ahead: ~500 us). So the limit
+// is that last read: a sum of zmm loads, 8 independent accumulators, prefetch 64 KB ahead.
+constexpr std::ptrdiff_t kStreamPrefetchFloats = 16384;  // 64 KB
+
+__attribute__((target("avx512f"), noinline)) float streamSumAvx512(const float* p, std::ptrdiff_t n) {
+  __m512 a[8];
+  for (auto& x : a) x = _mm512_setzero_ps();
+  std::ptrdiff_t i = 0;
+  for (; i + 128 <= n; i += 128) {
+    for (int k = 0; k < 8; ++k) __builtin_prefetch(p + i + kStreamPrefetchFloats + 16 * k, 0, 2);
+    for (int k = 0; k < 8; ++k) a[k] = _mm512_add_ps(a[k], _mm512_loadu_ps(p + i + 16 * k));
+  }
+  for (int k = 1; k < 8; ++k) a[0] = _mm512_add_ps(a[0], a[k]);
+  alignas(64) float lanes[16];
+  _mm512_store_ps(lanes, a[0]);
+  float s = 0.0f;
+  for (float x : lanes) s += x;
+  for (; i < n; ++i) s += p[i];
+  return s;
+}
+
+__attribute__((target("avx2"), noinline)) float streamSumAvx2(const float* p, std::ptrdiff_t n) {
+  __m256 a[8];
+  for (auto& x : a) x = _mm256_setzero_ps();
+  std::ptrdiff_t i = 0;
+  for (; i + 64 <= n; i += 64) {
+    for (int k = 0; k < 8; k += 2) __builtin_prefetch(p + i + kStreamPrefetchFloats + 8 * k, 0, 2);
+    for (int k = 0; k < 8; ++k) a[k] = _mm256_add_ps(a[k], _mm256_loadu_ps(p + i + 8 * k));
+  }
+  for (int k = 1; k < 8; ++k) a[0] = _mm256_add_ps(a[0], a[k]);
+  alignas(32) float lanes[8];
+  _mm256_store_ps(lanes, a[0]);
+  float s = 0.0f;
+  for (float x : lanes) s += x;
+  for (; i < n; ++i) s += p[i];
+  return s;
+}
+#endif
+
+/// One read of [p, p + n) by `how`: "eigen" (Eigen's vectorised sum at the build's baseline
+/// width), "avx2", "avx512" (the prefetched reads above).
+float streamSum(const std::string& how, const float* p, std::ptrdiff_t n) {
+#if NAO_POLICY_HAVE_AVX2
+  if (how == "avx512") return streamSumAvx512(p, n);
+  if (how == "avx2") return streamSumAvx2(p, n);
+#endif
+  (void)how;
+  return Eigen::Map<const Eigen::ArrayXf>(p, n).sum();
+}
+
+/// BM_WeightStream: the physical limit, one read of the weight bytes by the fastest read this
+/// CPU has (label): the prefetched AVX-512 or AVX2 sum, else Eigen's. _Eigen: Eigen's sum
+/// (what BM_WeightStream measured before 2026-11-26), reported beside it.
+void runWeightStream(benchmark::State& state, bool best) {
   if (!haveModel(state)) return;
   const ModelFile& model = paperModel();
   // The tensor data is one contiguous region (64-byte aligned tensors back to back).
   const float* first = model.data(0);
   const float* last = model.data(model.tensors.size() - 1) + model.tensors.back().spec.count();
-  const Eigen::Map<const Eigen::ArrayXf> all(first, last - first);
+  std::string how = "eigen";
+  if (best && policyKernelSupported(PolicyKernel::kAvx512))
+    how = "avx512";
+  else if (best && policyKernelSupported(PolicyKernel::kAvx2))
+    how = "avx2";
   Percentiles rec;
   for (auto _ : state) {
     const BenchClock::time_point t0 = BenchClock::now();
-    float s = all.sum();
+    float s = streamSum(how, first, last - first);
     benchmark::DoNotOptimize(s);
     const double sec = secondsSince(t0);
     state.SetIterationTime(sec);
@@ -124,14 +204,21 @@ void BM_WeightStream(benchmark::State& state) {
   }
   rec.report(state);
   state.counters["GB_per_s"] = static_cast<double>((last - first) * 4) / 1e3 / state.counters["p50_us"];
+  state.SetLabel(how);
 }
+
+void BM_WeightStream(benchmark::State& state) { runWeightStream(state, true); }
+void BM_WeightStream_Eigen(benchmark::State& state) { runWeightStream(state, false); }
 
 }  // namespace
 
 BENCHMARK(BM_Policy_StaticEigen)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_Policy_StaticEigen_SSE)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_Policy_StaticEigen_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
+BENCHMARK(BM_Policy_StaticEigen_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_Policy_Int8)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_Policy_Int8_SSE)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_Policy_Int8_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
+BENCHMARK(BM_Policy_Int8_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_WeightStream)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
+BENCHMARK(BM_WeightStream_Eigen)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);

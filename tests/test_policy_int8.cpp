@@ -31,6 +31,7 @@ using namespace nao;
 namespace {
 
 bool haveAvx2() { return policyKernelSupported(PolicyKernel::kAvx2); }
+bool haveAvx512() { return policyKernelSupported(PolicyKernel::kAvx512); }
 
 struct KernelGuard {
   PolicyKernel saved = activePolicyKernel();
@@ -105,6 +106,12 @@ void checkInt8Shape(std::uint64_t seed) {
     detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), avx.data());
     CHECK(std::memcmp(avx.data(), want.data(), want.size() * sizeof(float)) == 0);
   }
+  if (haveAvx512()) {
+    REQUIRE(selectPolicyKernel(PolicyKernel::kAvx512));
+    std::fill(avx.begin(), avx.end(), NAN);
+    detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), avx.data());
+    CHECK(std::memcmp(avx.data(), want.data(), want.size() * sizeof(float)) == 0);
+  }
 
   // Within what quantisation allows of fp32: |ΔW| <= sw/2 per weight and |Δx| <= sx/2 per input,
   // so |Δy| <= Σ_k (sw/2 |x_k| + |W_k| sx/2 + sw sx/4), plus float rounding (1e-5 relative).
@@ -168,7 +175,10 @@ TEST_CASE("int8 kernels: SSE2 and AVX2 equal exact integer sums bit for bit, and
   checkInt8Shape<128, 512, 5>(7);
   checkInt8Shape<512, 512, 5>(8);
   checkInt8Shape<128, 32, 5>(9);
+  checkInt8Shape<48, 34, 5>(10);  // the AVX-512 blocks of 32 and 16 rows, a partial strip
+  checkInt8Shape<40, 6, 3>(11);   // a block of 32, then 8 scalar rows
   if (!haveAvx2()) MESSAGE("AVX2 is not available on this CPU (or build): only the SSE2 int8 kernel was checked");
+  if (!haveAvx512()) MESSAGE("AVX-512 VNNI is not available on this CPU (or build): the avx512 int8 kernel was not checked");
 }
 
 namespace {
@@ -197,12 +207,22 @@ void checkTokenQuantisation(std::uint64_t seed) {
   }
   const std::int32_t top = xp[static_cast<std::size_t>(2 * (In / 2) + 2)];
   CHECK(static_cast<std::int16_t>(top >> 16) == 32767);
+#if NAO_POLICY_HAVE_AVX2
+  if (haveAvx512()) {  // the 16-lane quantiser: the same int16 values and scales
+    std::vector<std::int32_t> xp512(xp.size(), -1);
+    float sx512[J];
+    detail::quantizeTokensInt16Avx512<In, J>(X.data(), xp512.data(), sx512);
+    CHECK(xp512 == xp);
+    CHECK(std::memcmp(sx512, sx, sizeof sx) == 0);
+  }
+#endif
 }
 
 }  // namespace
 
 TEST_CASE("quantizeTokensInt16: per-column scale, round to nearest even, the column's max at 32767") {
   checkTokenQuantisation<64>(31);
+  checkTokenQuantisation<40>(33);  // two 16-lane blocks and a scalar tail of 8
   checkTokenQuantisation<10>(32);
 }
 
@@ -219,7 +239,7 @@ TEST_CASE("int8 kernels: the largest accumulator the layout allows does not over
   std::vector<float> X(static_cast<std::size_t>(In) * J, 3.0f);
   for (int k = 0; k < In; ++k) X[static_cast<std::size_t>(In + k)] = -3.0f;
   const std::vector<float> want = int8Reference<Out, In, J, false>(m, nullptr, X.data());
-  for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2}) {
+  for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2, PolicyKernel::kAvx512}) {
     if (!selectPolicyKernel(k)) continue;
     std::vector<float> y(want.size());
     detail::affineTokensInt8<Out, In, J, false>(m.q(), m.scale(Out, In), nullptr, X.data(), y.data());
@@ -240,7 +260,7 @@ TEST_CASE("int8 kernels: NaN stays NaN through the ReLU, and a column too small 
   std::vector<float> X(static_cast<std::size_t>(In) * J, 0.0f);
   X[2] = std::numeric_limits<float>::quiet_NaN();             // token 0
   for (int k = 0; k < In; ++k) X[static_cast<std::size_t>(In + k)] = k % 2 == 0 ? 1e-36f : -1e-36f;  // token 1
-  for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2}) {
+  for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2, PolicyKernel::kAvx512}) {
     if (!selectPolicyKernel(k)) continue;
     std::vector<float> y(static_cast<std::size_t>(Out) * J);
     detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), y.data());
@@ -375,6 +395,11 @@ TEST_CASE("stepPolicy with int8 weights: same bits under SSE2 and AVX2, near fp3
     REQUIRE(selectPolicyKernel(PolicyKernel::kAvx2));
     const std::vector<float> q_avx = rollActions(w, 4, kTicks);
     CHECK(std::memcmp(q_avx.data(), q_sse.data(), q_sse.size() * sizeof(float)) == 0);
+    if (haveAvx512()) {
+      REQUIRE(selectPolicyKernel(PolicyKernel::kAvx512));
+      const std::vector<float> q_512 = rollActions(w, 4, kTicks);
+      CHECK(std::memcmp(q_512.data(), q_sse.data(), q_sse.size() * sizeof(float)) == 0);
+    }
   } else {
     MESSAGE("AVX2 is not available on this CPU (or build): only the SSE2 int8 kernel was checked");
   }

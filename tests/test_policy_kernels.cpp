@@ -1,8 +1,8 @@
-// The policy kernels (nao/policy_kernels.hpp): the kSse and kAvx2 implementations of
+// The policy kernels (nao/policy_kernels.hpp): the kSse, kAvx2 and kAvx512 implementations of
 // affineTokens give bit-identical results, equal bit for bit to a plain scalar loop that sums
 // in k order with one rounded multiply and one rounded add per term; and whole stepPolicy runs
-// (actions, α, scores, cross_out) are bit-identical under either kernel. On a CPU without AVX2
-// the kSse half of every check still runs and a message says AVX2 was not available.
+// (actions, α, scores, cross_out) are bit-identical under every kernel. On a CPU without AVX2
+// (or AVX-512) the other checks still run and a message says which kernel was not available.
 #include "nao/policy.hpp"
 #include "support/random_policy.hpp"
 
@@ -26,9 +26,14 @@ namespace {
 float uniform(std::mt19937_64& rng, double lo, double hi) { return test::uniformFloat(rng, lo, hi); }
 
 bool haveAvx2() { return policyKernelSupported(PolicyKernel::kAvx2); }
+bool haveAvx512() { return policyKernelSupported(PolicyKernel::kAvx512); }
+
+constexpr PolicyKernel kAllKernels[] = {PolicyKernel::kSse, PolicyKernel::kAvx2, PolicyKernel::kAvx512};
 
 void noteAvx2Absent() {
   if (!haveAvx2()) MESSAGE("AVX2 is not available on this CPU (or build): only the SSE kernel was checked");
+  if (!haveAvx512())
+    MESSAGE("AVX-512 F/BW/VNNI is not available on this CPU (or build): the avx512 kernel was not checked");
 }
 
 /// Restores the kernel in use when it goes out of scope.
@@ -76,7 +81,7 @@ void fillWide(std::mt19937_64& rng, Eigen::MatrixBase<Derived>& m) {
   for (Eigen::Index i = 0; i < m.size(); ++i) m.derived().data()[i] = v[static_cast<std::size_t>(i)];
 }
 
-/// affineTokens of one shape: kSse and kAvx2 (if available) against the scalar definition,
+/// affineTokens of one shape: kSse, kAvx2 and kAvx512 (if available) against the scalar definition,
 /// bit for bit, with and without bias and ReLU, over several random draws.
 template <int Out, int In, int J>
 void checkShape(std::uint64_t seed) {
@@ -98,10 +103,16 @@ void checkShape(std::uint64_t seed) {
       const long d_avx = firstDifference(avx.data(), want.data(), want.size());
       CHECK_MESSAGE(d_avx < 0, "AVX2 differs from the scalar definition at ", d_avx);
     }
+    if (haveAvx512()) {
+      std::fill(avx.begin(), avx.end(), NAN);
+      detail::affineTokensAvx512<Out, In, J, kRelu>(W.data(), bias, X.data(), avx.data());
+      const long d_avx = firstDifference(avx.data(), want.data(), want.size());
+      CHECK_MESSAGE(d_avx < 0, "AVX-512 differs from the scalar definition at ", d_avx);
+    }
 #endif
-    // Through the dispatcher, both kernels.
+    // Through the dispatcher, every kernel.
     KernelGuard guard;
-    for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2}) {
+    for (PolicyKernel k : kAllKernels) {
       if (!selectPolicyKernel(k)) continue;
       std::fill(avx.begin(), avx.end(), NAN);
       detail::affineTokens<Out, In, J, kRelu>(W.data(), bias, X.data(), avx.data());
@@ -166,8 +177,8 @@ std::vector<float> recordOf(const PolicyWorkspace<Dims>& ws) {
 }
 
 /// For `n_models` random weight sets, both conditioning modes and `n_inputs` random inputs:
-/// the step under kSse and under kAvx2 records the same bits. Returns the number of steps
-/// compared under both kernels (0 without AVX2).
+/// the step under kSse, under kAvx2 and under kAvx512 records the same bits. Returns the number
+/// of steps compared with another kernel (0 without AVX2).
 template <class Dims>
 int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs) {
   KernelGuard guard;
@@ -182,6 +193,7 @@ int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs) {
       const auto ws_sse = makePolicyWorkspace<Dims>();
       const auto ws_sse2 = makePolicyWorkspace<Dims>();
       const auto ws_avx = makePolicyWorkspace<Dims>();
+      const auto ws_avx512 = makePolicyWorkspace<Dims>();
       std::mt19937_64 rng(seed + 7 + static_cast<std::uint64_t>(m));
       for (int n = 0; n < n_inputs; ++n) {
         const PolicyInput in = randomInput(rng, n % Dims::kMovements, (n * 37) % (Dims::kMaxSteps + 10));
@@ -192,13 +204,18 @@ int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs) {
         // SSE is deterministic on its own: a second stream with the same history gives the same bits.
         stepPolicy(w, *ws_sse2, in);
         CHECK(sameBits(recordOf(*ws_sse2).data(), a.data(), a.size()));
+        INFO("model ", m, ", ", conditioningName(c), ", input ", n);
         if (!selectPolicyKernel(PolicyKernel::kAvx2)) continue;
         stepPolicy(w, *ws_avx, in);
         const std::vector<float> b = recordOf(*ws_avx);
         const long d = firstDifference(a.data(), b.data(), a.size());
-        INFO("model ", m, ", ", conditioningName(c), ", input ", n);
         CHECK_MESSAGE(d < 0, "SSE and AVX2 records differ at float ", d, " (0-4 actions, then α, score, mass, age profile, cross_out)");
         ++compared;
+        if (!selectPolicyKernel(PolicyKernel::kAvx512)) continue;
+        stepPolicy(w, *ws_avx512, in);
+        const std::vector<float> e = recordOf(*ws_avx512);
+        const long d512 = firstDifference(a.data(), e.data(), a.size());
+        CHECK_MESSAGE(d512 < 0, "SSE and AVX-512 records differ at float ", d512, " (0-4 actions, then α, score, mass, age profile, cross_out)");
       }
     }
   }
@@ -207,31 +224,41 @@ int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs) {
 
 }  // namespace
 
-TEST_CASE("kernel selection: SSE always available, AVX2 when the CPU has it; the choice sticks") {
+TEST_CASE("kernel selection: SSE always available, AVX2 and AVX-512 when the CPU has them; the choice sticks") {
   KernelGuard guard;
   CHECK(policyKernelSupported(PolicyKernel::kSse));
   CHECK(std::string(policyKernelName(PolicyKernel::kSse)) == "sse");
   CHECK(std::string(policyKernelName(PolicyKernel::kAvx2)) == "avx2");
+  CHECK(std::string(policyKernelName(PolicyKernel::kAvx512)) == "avx512");
   CHECK(selectPolicyKernel(PolicyKernel::kSse));
   CHECK(activePolicyKernel() == PolicyKernel::kSse);
   CHECK(selectPolicyKernel(PolicyKernel::kAvx2) == haveAvx2());
   CHECK(activePolicyKernel() == (haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse));
+  const PolicyKernel before = activePolicyKernel();
+  CHECK(selectPolicyKernel(PolicyKernel::kAvx512) == haveAvx512());
+  CHECK(activePolicyKernel() == (haveAvx512() ? PolicyKernel::kAvx512 : before));
+  if (haveAvx512()) CHECK(haveAvx2());  // its window attention is the AVX2 one
 #if !NAO_POLICY_HAVE_AVX2
   CHECK_FALSE(haveAvx2());  // no AVX2 code in a non-x86 build
+  CHECK_FALSE(haveAvx512());
 #endif
   const std::string what = std::string("kernels: sse yes, avx2 ") + (haveAvx2() ? "yes" : "no") +
+                           ", avx512 " + (haveAvx512() ? "yes" : "no") +
                            "; default (NAO_POLICY_KERNEL, CPU): " + policyKernelName(defaultPolicyKernel());
   MESSAGE(what);
   noteAvx2Absent();
 }
 
-TEST_CASE("NAO_POLICY_KERNEL: 'sse' forces SSE, 'avx2' / 'auto' / unset pick AVX2 when available") {
+TEST_CASE("NAO_POLICY_KERNEL: 'sse' forces SSE, 'avx2' caps at AVX2, 'avx512' / 'auto' / unset pick the best") {
   const char* old = std::getenv("NAO_POLICY_KERNEL");
   const std::string saved = old != nullptr ? old : "";
-  const PolicyKernel best = haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
+  const PolicyKernel avx2 = haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
+  const PolicyKernel best = haveAvx512() ? PolicyKernel::kAvx512 : avx2;
   setenv("NAO_POLICY_KERNEL", "sse", 1);
   CHECK(defaultPolicyKernel() == PolicyKernel::kSse);
   setenv("NAO_POLICY_KERNEL", "avx2", 1);
+  CHECK(defaultPolicyKernel() == avx2);
+  setenv("NAO_POLICY_KERNEL", "avx512", 1);
   CHECK(defaultPolicyKernel() == best);
   setenv("NAO_POLICY_KERNEL", "auto", 1);
   CHECK(defaultPolicyKernel() == best);
@@ -317,7 +344,7 @@ void checkWindowKernels(std::uint64_t seed) {
   float alpha[N];
   for (float& a : alpha) a = uniform(rng, 0.0, 1.0);
   KernelGuard guard;
-  for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2}) {
+  for (PolicyKernel k : kAllKernels) {
     if (!selectPolicyKernel(k)) continue;
     for (int n : {1, W / 2, W})
       for (int slot : {0, n - 1, W - 1}) {
@@ -385,4 +412,83 @@ TEST_CASE("stepPolicy records the same bits under SSE and AVX2: odd dims (leftov
   const int compared = checkStepBitIdentical<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>>(3000, 4, 40);
   CHECK(compared == (haveAvx2() ? 4 * 2 * 40 : 0));
   noteAvx2Absent();
+}
+
+TEST_CASE("expSoftmax: within 2 ulp of std::exp on [-87, 0], 0 below, NaN kept; every lane width the same bits") {
+  // Dense over the softmax's domain (x = score − max score <= 0) plus its edges.
+  std::vector<float> xs;
+  for (int i = 0; i <= 400000; ++i) xs.push_back(-87.0f * static_cast<float>(i) / 400000.0f);
+  for (float x : {0.0f, -0.0f, -1e-30f, -1e-7f, -0.34657359f, -0.6931472f, -86.99f, -87.0f, -87.0001f, -88.0f, -100.0f,
+                  -1e30f, -std::numeric_limits<float>::infinity()})
+    xs.push_back(x);
+  double worst_ulp = 0.0;
+  for (float x : xs) {
+    const float got = detail::expSoftmax(x);
+    if (x < -87.0f) {
+      CHECK(got == 0.0f);
+      continue;
+    }
+    const double want = std::exp(static_cast<double>(x));
+    const double ulp = std::ldexp(1.0, std::ilogb(static_cast<float>(want)) - 23);
+    worst_ulp = std::max(worst_ulp, std::fabs(static_cast<double>(got) - want) / ulp);
+  }
+  MESSAGE("expSoftmax: worst error " << worst_ulp << " ulp over " << xs.size() << " points");
+  CHECK(worst_ulp <= 2.0);
+  CHECK(std::isnan(detail::expSoftmax(std::numeric_limits<float>::quiet_NaN())));
+  // expShifted under every kernel: the scalar definition's bits in every lane and in the tails.
+  KernelGuard guard;
+  std::mt19937_64 rng(77);
+  std::vector<float> base(103);
+  for (float& v : base) v = uniform(rng, -40.0, 3.0);
+  base[7] = std::numeric_limits<float>::quiet_NaN();
+  base[20] = -std::numeric_limits<float>::infinity();
+  const float shift = 3.0f;
+  for (PolicyKernel k : kAllKernels) {
+    if (!selectPolicyKernel(k)) continue;
+    for (int count : {103, 96, 17, 3}) {
+      std::vector<float> s = base;
+      detail::expShifted(s.data(), count, shift);
+      for (int m = 0; m < 103; ++m) {
+        const float want = m < count ? detail::expSoftmax(base[static_cast<std::size_t>(m)] - shift) : base[static_cast<std::size_t>(m)];
+        INFO(policyKernelName(k), " count ", count, " m ", m);
+        if (std::isnan(want))
+          CHECK(std::isnan(s[static_cast<std::size_t>(m)]));
+        else
+          CHECK(sameBits(&s[static_cast<std::size_t>(m)], &want, 1));
+      }
+    }
+  }
+}
+
+TEST_CASE("headSumNorm: SSE and AVX-512 equal the 16-lane definition bit for bit and Eigen's norm to float rounding") {
+  constexpr int D = 128, H = 4;
+  std::mt19937_64 rng(91);
+  KernelGuard guard;
+  for (int draw = 0; draw < 200; ++draw) {
+    std::vector<float> fv(static_cast<std::size_t>(D) * H);
+    for (float& v : fv) v = uniform(rng, -2.0, 2.0);
+    float a[H];
+    for (float& v : a) v = uniform(rng, 0.0, 1.0);
+    const float* f[H];
+    for (int h = 0; h < H; ++h) f[h] = fv.data() + h * D;
+    const float want = detail::headSumNormScalar<D, H>(a, f);
+    Eigen::Matrix<float, D, 1> c = Eigen::Matrix<float, D, 1>::Zero();
+    for (int h = 0; h < H; ++h) c += a[h] * Eigen::Map<const Eigen::Matrix<float, D, 1>>(f[h]);
+    CHECK(want == doctest::Approx(c.norm()).epsilon(1e-6));
+#if defined(__SSE2__)
+    const float sse = detail::headSumNormSse<D, H>(a, f);
+    CHECK(sameBits(&sse, &want, 1));
+#endif
+#if NAO_POLICY_HAVE_AVX2
+    if (haveAvx512()) {
+      const float v512 = detail::headSumNormAvx512<D, H>(a, f);
+      CHECK(sameBits(&v512, &want, 1));
+    }
+#endif
+    for (PolicyKernel k : kAllKernels) {
+      if (!selectPolicyKernel(k)) continue;
+      const float got = detail::headSumNorm<D, H>(a, f);
+      CHECK(sameBits(&got, &want, 1));
+    }
+  }
 }

@@ -90,7 +90,7 @@ TEST_CASE("the attention record follows docs/policy.md: per-body-part rows sum t
   const std::int64_t n_batch = 2, n_ticks = arch.window + 4, n_joints = arch.tokens, d = arch.d_model,
                      n_heads = arch.heads, window = arch.window;
   PolicyBatch in{torch::randn({n_batch, n_ticks, n_joints}), torch::randn({n_batch, n_ticks, n_joints}),
-                 torch::randn({n_batch, n_ticks, n_joints}), torch::tensor({0, 2}, torch::kInt64)};
+                 torch::randn({n_batch, n_ticks, n_joints}), torch::tensor({0, 2}, torch::kInt64), torch::Tensor()};
   PolicyAttention att;
   const torch::Tensor out = net->forward(in, &att);
   CHECK(out.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_joints});
@@ -136,10 +136,10 @@ TEST_CASE("a later tick never changes an earlier action (causal in time), a whol
   torch::NoGradGuard no_grad;
   const std::int64_t n_ticks = 2 * arch.window + 3;
   PolicyBatch in{torch::randn({1, n_ticks, 5}), torch::randn({1, n_ticks, 5}), torch::randn({1, n_ticks, 5}),
-                 torch::tensor({1}, torch::kInt64)};
+                 torch::tensor({1}, torch::kInt64), torch::Tensor()};
   const torch::Tensor full = net->forward(in);
   const std::int64_t cut = arch.window + 1;
-  PolicyBatch prefix{in.qn.slice(1, 0, cut), in.an.slice(1, 0, cut), in.rn.slice(1, 0, cut), in.movement};
+  PolicyBatch prefix{in.qn.slice(1, 0, cut), in.an.slice(1, 0, cut), in.rn.slice(1, 0, cut), in.movement, torch::Tensor()};
   CHECK((net->forward(prefix) - full.slice(1, 0, cut)).abs().max().item<float>() < 1e-5f);
 }
 
@@ -149,7 +149,7 @@ TEST_CASE("reference mode ignores the step, autonomous mode ignores the referenc
   const PolicyNet ref(arch, Conditioning::kReference), aut(arch, Conditioning::kAutonomous);
   torch::NoGradGuard no_grad;
   PolicyBatch in{torch::randn({2, 6, 5}), torch::randn({2, 6, 5}), torch::randn({2, 6, 5}),
-                 torch::tensor({0, 2}, torch::kInt64)};
+                 torch::tensor({0, 2}, torch::kInt64), torch::Tensor()};
   PolicyBatch other_ref = in;
   other_ref.rn = torch::randn({2, 6, 5});
   CHECK_FALSE(torch::equal(ref->forward(in), ref->forward(other_ref)));

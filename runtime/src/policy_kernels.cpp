@@ -19,9 +19,29 @@ bool cpuHasAvx2() noexcept {
 #endif
 }
 
+bool cpuHasAvx512() noexcept {
+#if NAO_POLICY_HAVE_AVX2
+  // The kernel's instructions: AVX-512 F (zmm arithmetic), BW (vpmovsxbw to zmm), VNNI
+  // (vpdpwssd); its window attention is AVX2. GCC's cpu model also checks the OS's XCR0 for the
+  // opmask and zmm state.
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") != 0 && __builtin_cpu_supports("avx512f") != 0 &&
+         __builtin_cpu_supports("avx512bw") != 0 && __builtin_cpu_supports("avx512vnni") != 0;
+#else
+  return false;
+#endif
+}
+
 }  // namespace
 
-const char* policyKernelName(PolicyKernel k) noexcept { return k == PolicyKernel::kAvx2 ? "avx2" : "sse"; }
+const char* policyKernelName(PolicyKernel k) noexcept {
+  switch (k) {
+    case PolicyKernel::kAvx2: return "avx2";
+    case PolicyKernel::kAvx512: return "avx512";
+    case PolicyKernel::kSse: break;
+  }
+  return "sse";
+}
 
 bool policyKernelSupported(PolicyKernel k) noexcept {
   if (k == PolicyKernel::kSse) return true;
@@ -29,14 +49,21 @@ bool policyKernelSupported(PolicyKernel k) noexcept {
     static const bool avx2 = cpuHasAvx2();
     return avx2;
   }
+  if (k == PolicyKernel::kAvx512) {
+    static const bool avx512 = cpuHasAvx512();
+    return avx512;
+  }
   return false;
 }
 
 PolicyKernel defaultPolicyKernel() noexcept {
   const char* env = std::getenv("NAO_POLICY_KERNEL");
   if (env != nullptr && std::strcmp(env, "sse") == 0) return PolicyKernel::kSse;
-  // "avx2", "auto", "", unset, anything else: the best supported.
-  return policyKernelSupported(PolicyKernel::kAvx2) ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
+  const bool avx2 = policyKernelSupported(PolicyKernel::kAvx2);
+  if (env != nullptr && std::strcmp(env, "avx2") == 0) return avx2 ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
+  // "avx512", "auto", "", unset, anything else: the best supported.
+  if (policyKernelSupported(PolicyKernel::kAvx512)) return PolicyKernel::kAvx512;
+  return avx2 ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
 }
 
 bool selectPolicyKernel(PolicyKernel k) noexcept {

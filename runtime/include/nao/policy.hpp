@@ -269,7 +269,6 @@ struct PolicyWorkspace {
   std::array<Ring, LD> cross_v{};
   /// f_h(M) = Wo_h V_h of the last decoder layer's cross-attention per memory token (norm score).
   std::array<Ring, H> f_ring{};
-  Eigen::Matrix<float, D, 1> contribution = Eigen::Matrix<float, D, 1>::Zero();
   /// α of the latest attention over the window (scratch): [h][query i][age * J + j].
   float alpha[H][J][N] = {};
 
@@ -549,7 +548,10 @@ inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<
 /// (keys, transposed) and V (n = min(ticks, W), the newest tick in `slot`), with the age bias:
 /// ws.o (before Wo) and α in ws.alpha[h][i][age * J + j]. The softmax and the value sum visit
 /// the keys newest first, so the sums do not depend on where the ring happens to start. The
-/// scores are those of Eigen's per-key dot, bit for bit (detail::windowScores).
+/// scores are those of Eigen's per-key dot, bit for bit (detail::windowScores). A head's J
+/// queries go through each pass side by side: every query's maximum, sum and value sum still
+/// run over its keys in order (the same bits as one query at a time), but the J chains of
+/// dependent operations overlap instead of waiting on each other.
 template <class Dims>
 inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typename PolicyWorkspace<Dims>::KeyRing& K,
                             const typename PolicyWorkspace<Dims>::Ring& V, int slot, int n, PolicyWorkspace<Dims>& ws) {
@@ -557,42 +559,48 @@ inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typen
   constexpr int NP = PolicyWorkspace<Dims>::kKeyRows;
   const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
   // Slots 0 .. n−1 hold the window (n < W only before the ring first wraps): keys 0 .. n·J−1.
-  const int rows = (n * J + kKeyRowBlock - 1) / kKeyRowBlock * kKeyRowBlock;
-  alignas(32) float raw[NP];  // scores by ring row
+  const int keys = n * J;
+  const int rows = (keys + kKeyRowBlock - 1) / kKeyRowBlock * kKeyRowBlock;
+  alignas(64) float raw[J][NP];  // scores by ring row, per query
   for (int hd = 0; hd < Dims::kHeads; ++hd) {
     const int c0 = hd * Dh;
     for (int i = 0; i < J; ++i) {
       const float* q = ws.q.col(i).data() + c0;
       if constexpr (kWindowKernelExact<Dh>) {
-        windowScores<Dh, NP>(q, K.data() + static_cast<std::ptrdiff_t>(c0) * NP, rows, scale, raw);
+        windowScores<Dh, NP>(q, K.data() + static_cast<std::ptrdiff_t>(c0) * NP, rows, scale, raw[i]);
       } else {
-        for (int r = 0; r < n * J; ++r) {
+        for (int r = 0; r < keys; ++r) {
           float dot = 0.0f;
           for (int d = 0; d < Dh; ++d) dot += q[d] * K(r, c0 + d);
-          raw[r] = dot * scale;
+          raw[i][r] = dot * scale;
         }
       }
-      float* s = ws.alpha[hd][i];
-      float s_max = -std::numeric_limits<float>::infinity();
-      for (int age = 0; age < n; ++age) {
-        const int base = ((slot - age + W) % W) * J;
-        const float bias = A.age_bias(age, hd);
-        for (int j = 0; j < J; ++j) {
-          const float v = raw[base + j] + bias;
-          s[age * J + j] = v;
-          s_max = std::max(s_max, v);
-        }
-      }
-      float sum = 0.0f;
-      for (int m = 0; m < n * J; ++m) {
-        s[m] = std::exp(s[m] - s_max);
-        sum += s[m];
-      }
-      const float inv = 1.0f / sum;
-      for (int m = 0; m < n * J; ++m) s[m] *= inv;
-      windowValues<Dh, J, W>(s, V.data() + c0, D, slot, n, ws.o.col(i).data() + c0);
-      for (int m = n * J; m < N; ++m) s[m] = 0.0f;
     }
+    float (*s)[N] = ws.alpha[hd];
+    float s_max[J], sum[J];
+    for (int i = 0; i < J; ++i) {
+      s_max[i] = -std::numeric_limits<float>::infinity();
+      sum[i] = 0.0f;
+    }
+    for (int age = 0; age < n; ++age) {
+      const int base = ((slot - age + W) % W) * J;
+      const float bias = A.age_bias(age, hd);
+      for (int j = 0; j < J; ++j)
+        for (int i = 0; i < J; ++i) {
+          const float v = raw[i][base + j] + bias;
+          s[i][age * J + j] = v;
+          s_max[i] = std::max(s_max[i], v);
+        }
+    }
+    for (int i = 0; i < J; ++i) expShifted(s[i], keys, s_max[i]);
+    for (int m = 0; m < keys; ++m)
+      for (int i = 0; i < J; ++i) sum[i] += s[i][m];
+    for (int i = 0; i < J; ++i) {
+      const float inv = 1.0f / sum[i];
+      for (int m = 0; m < keys; ++m) s[i][m] *= inv;
+      for (int m = keys; m < N; ++m) s[i][m] = 0.0f;
+    }
+    windowValuesQueries<Dh, J, W, J>(s[0], N, V.data() + c0, D, slot, n, ws.o.data() + c0, D);
   }
 }
 
@@ -613,14 +621,19 @@ inline void crossAttentionRecord(int slot, int n, PolicyWorkspace<Dims>& ws) {
           ws.mass[j] += a;
           ws.age_profile[age] += a;
         }
+  // ‖Σ_h α_h f_h‖ per query, key tick and joint (detail::headSumNorm: one summation order at
+  // every lane width).
   for (int i = 0; i < J; ++i)
     for (int age = 0; age < n; ++age) {
       const int base = ((slot - age + W) % W) * J;
       for (int j = 0; j < J; ++j) {
-        ws.contribution.setZero();
-        for (int hd = 0; hd < H; ++hd)
-          ws.contribution += ws.alpha[hd][i][age * J + j] * ws.f_ring[static_cast<std::size_t>(hd)].col(base + j);
-        ws.score[j] += ws.contribution.norm();
+        float a[H];
+        const float* f[H];
+        for (int hd = 0; hd < H; ++hd) {
+          a[hd] = ws.alpha[hd][i][age * J + j];
+          f[hd] = ws.f_ring[static_cast<std::size_t>(hd)].col(base + j).data();
+        }
+        ws.score[j] += headSumNorm<Dims::kDModel, H>(a, f);
       }
     }
 }

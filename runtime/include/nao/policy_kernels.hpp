@@ -5,15 +5,20 @@
 //          -march flags, which is what the NAO V6's Atom E3845 runs (SSE4.2, no AVX).
 //   kAvx2  8-wide AVX2 intrinsics in __attribute__((target("avx2"))) functions, picked when the
 //          CPU has AVX2 (x86-64 with GCC or Clang only; elsewhere only kSse exists).
+//   kAvx512 16-wide AVX-512 intrinsics (target("avx512f,avx512bw,avx512vnni")) for the matrix
+//          products, fp32 and int8 (vpdpwssd); the window attention keeps the AVX2 kernels.
+//          Picked when the CPU has AVX2, AVX-512 F/BW and AVX512-VNNI (and the OS saves the zmm
+//          state). Built wherever kAvx2 is (NAO_POLICY_HAVE_AVX2; the NAO preset has neither).
 //
-// Both compute every Y(r, t) as b(r) + W(r,0) X(0,t) + W(r,1) X(1,t) + ... in k order, one
+// All compute every Y(r, t) as b(r) + W(r,0) X(0,t) + W(r,1) X(1,t) + ... in k order, one
 // rounded multiply then one rounded add per term (never fused: -ffp-contract=off, and the AVX2
 // functions are compiled without the FMA ISA), so the two give bit-identical results; the lane
 // width only changes how many rows are computed at once (tests/test_policy_kernels.cpp).
 //
 // Selection: the first use (normally bindPolicyWeights, i.e. configure time) reads the
 // environment variable NAO_POLICY_KERNEL (unset, "" or "auto": the best the CPU supports;
-// "sse": force kSse; "avx2": kAvx2 if supported, else kSse; anything else: auto) and caches the
+// "sse": force kSse; "avx2": kAvx2 if supported, else kSse; "avx512": kAvx512 if supported, else
+// the best below it; anything else: auto) and caches the
 // result. selectPolicyKernel overrides it (tests, benchmarks). The real-time cost is one relaxed
 // atomic load per affineTokens call.
 #pragma once
@@ -25,6 +30,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
 // The AVX2 kernel exists in x86-64 GCC/Clang builds (target attribute, __builtin_cpu_supports).
@@ -46,9 +52,9 @@
 namespace nao {
 
 /// The implementations of affineTokens (see the top of this file).
-enum class PolicyKernel : int { kSse = 0, kAvx2 = 1 };
+enum class PolicyKernel : int { kSse = 0, kAvx2 = 1, kAvx512 = 2 };
 
-/// "sse" or "avx2".
+/// "sse", "avx2" or "avx512".
 const char* policyKernelName(PolicyKernel k) noexcept;
 
 /// True if this build has the kernel and this CPU can run it (kSse: always).
@@ -79,6 +85,10 @@ inline PolicyKernel activePolicyKernel() noexcept {
   if (k < 0) k = detail::resolvePolicyKernel();
   return static_cast<PolicyKernel>(k);
 }
+
+/// True for the kernels that may run AVX2 code (kAvx512 implies AVX2: its window attention is
+/// the AVX2 one).
+inline bool policyKernelHasAvx2(PolicyKernel k) noexcept { return k != PolicyKernel::kSse; }
 
 namespace detail {
 
@@ -243,6 +253,70 @@ __attribute__((target("avx2"), noinline)) void affineTokensAvx2(const float* W, 
   if constexpr (kRelu)
     for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
 }
+
+// ---------------------------------------------------------------------------------------------
+// kAvx512: the kAvx2 loop order at 16 lanes (strips of kAvx2Strip columns; blocks of 32 rows,
+// 2·J zmm accumulators; the next strip prefetched in address order, two lines per column and
+// block). Multiply then add, never fused, each row's terms in k order: the same bits as kSse
+// and kAvx2. Nothing here may run unless policyKernelSupported(PolicyKernel::kAvx512).
+#define NAO_AVX512_TARGET target("avx512f,avx512bw,avx512vnni,avx2")
+
+/// Rows r .. r+16R-1 of Y(:, t) += W(:, k0 .. k0+kc-1) X(k0 .. k0+kc-1, t), all t, in k order.
+template <int Out, int In, int J, int R>
+__attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateStripAvx512(const float* W, const float* X,
+                                                                                  float* Y, int k0, int kc, int r) {
+  __m512 acc[R][J];
+#pragma GCC unroll 8
+  for (int t = 0; t < J; ++t)
+#pragma GCC unroll 4
+    for (int i = 0; i < R; ++i) acc[i][t] = _mm512_loadu_ps(Y + t * Out + r + 16 * i);
+  const float* Wk = W + static_cast<std::ptrdiff_t>(k0) * Out + r;
+  const float* Xk = X + k0;
+  // This block's share of the next strip: R·kc lines from r·kc (see accumulateStripAvx2).
+  const float* next = W + static_cast<std::ptrdiff_t>(k0 + kc) * Out + static_cast<std::ptrdiff_t>(r) * kc;
+#pragma GCC unroll 2
+  for (int k = 0; k < kc; ++k) {
+#pragma GCC unroll 4
+    for (int i = 0; i < R; ++i) __builtin_prefetch(next + 16 * (R * k + i), 0, 2);
+    __m512 w[R];
+#pragma GCC unroll 4
+    for (int i = 0; i < R; ++i) w[i] = _mm512_loadu_ps(Wk + static_cast<std::ptrdiff_t>(k) * Out + 16 * i);
+#pragma GCC unroll 8
+    for (int t = 0; t < J; ++t) {
+      const __m512 x = _mm512_set1_ps(Xk[t * In + k]);
+#pragma GCC unroll 4
+      for (int i = 0; i < R; ++i) acc[i][t] = _mm512_add_ps(acc[i][t], _mm512_mul_ps(w[i], x));
+    }
+  }
+#pragma GCC unroll 8
+  for (int t = 0; t < J; ++t)
+#pragma GCC unroll 4
+    for (int i = 0; i < R; ++i) _mm512_storeu_ps(Y + t * Out + r + 16 * i, acc[i][t]);
+}
+
+/// affineTokens with the kAvx512 kernel: strips of columns; in each, blocks of 32 rows, then
+/// of 16, then the AVX2 kernel's 8-row block and single rows (same order of operations).
+template <int Out, int In, int J, bool kRelu>
+__attribute__((NAO_AVX512_TARGET, noinline)) void affineTokensAvx512(const float* W, const float* b, const float* X,
+                                                                      float* Y) {
+  for (int t = 0; t < J; ++t)
+    for (int r = 0; r < Out; ++r) Y[t * Out + r] = b != nullptr ? b[r] : 0.0f;
+  for (int k0 = 0; k0 < In; k0 += kAvx2Strip) {
+    const int kc = std::min(kAvx2Strip, In - k0);
+    int r = 0;
+    for (; r + 32 <= Out; r += 32) accumulateStripAvx512<Out, In, J, 2>(W, X, Y, k0, kc, r);
+    for (; r + 16 <= Out; r += 16) accumulateStripAvx512<Out, In, J, 1>(W, X, Y, k0, kc, r);
+    for (; r + 8 <= Out; r += 8) accumulateStripAvx2<Out, In, J, 1>(W, X, Y, k0, kc, r);
+    for (; r < Out; ++r)
+      for (int t = 0; t < J; ++t) {
+        float s = Y[t * Out + r];
+        for (int k = k0; k < k0 + kc; ++k) s += W[static_cast<std::ptrdiff_t>(k) * Out + r] * X[t * In + k];
+        Y[t * Out + r] = s;
+      }
+  }
+  if constexpr (kRelu)
+    for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
+}
 #endif  // NAO_POLICY_HAVE_AVX2
 
 // ---------------------------------------------------------------------------------------------
@@ -340,6 +414,67 @@ inline void quantizeTokensInt16(const float* X, std::int32_t* xp, float* sx) {
     sx[t] = m / 32767.0f;
   }
 }
+
+#if NAO_POLICY_HAVE_AVX2
+/// quantizeTokensInt16 with 16 lanes (kAvx512): the same max, the same non-finite test, the
+/// same products, roundings and clamps, so the same int16 values and scales.
+template <int In, int J>
+__attribute__((target("avx512f,avx512bw"), noinline)) void quantizeTokensInt16Avx512(const float* X, std::int32_t* xp,
+                                                                                      float* sx) {
+  static_assert(In % 2 == 0, "the int8 kernels take input columns in pairs");
+  constexpr int kVec = In / 16 * 16;
+  // The zero-masked forms with every lane selected: GCC 12's unmasked ones pass an undefined
+  // register as the merge source and warn (-Wuninitialized); the results are the same.
+  constexpr __mmask16 kAll = 0xffff;
+  for (int t = 0; t < J; ++t) {
+    const float* x = X + t * In;
+    std::int32_t* out = xp + t * (In / 2);
+    float m = 0.0f, poison = 0.0f;
+    if constexpr (kVec > 0) {
+      const __m512 zero = _mm512_setzero_ps();
+      __m512 vm = zero, vp = zero;
+      for (int k = 0; k < kVec; k += 16) {
+        const __m512 v = _mm512_loadu_ps(x + k);
+        vm = _mm512_maskz_max_ps(kAll, vm, _mm512_abs_ps(v));
+        vp = _mm512_add_ps(vp, _mm512_mul_ps(v, zero));
+      }
+      alignas(64) float lm[16], lp[16];
+      _mm512_store_ps(lm, vm);
+      _mm512_store_ps(lp, vp);
+      for (int i = 0; i < 16; ++i) {
+        m = std::max(m, lm[i]);
+        poison += lp[i];
+      }
+    }
+    for (int k = kVec; k < In; ++k) {
+      m = std::max(m, std::fabs(x[k]));
+      poison += x[k] * 0.0f;
+    }
+    const float inv = 32767.0f / m;
+    if (poison != 0.0f || m == 0.0f || !(inv <= std::numeric_limits<float>::max())) {
+      // As quantizeTokensInt16: NaN scale for a non-finite column, zero for a (near-)zero one.
+      for (int p = 0; p < In / 2; ++p) out[p] = 0;
+      sx[t] = poison != 0.0f ? std::numeric_limits<float>::quiet_NaN() : 0.0f;
+      continue;
+    }
+    if constexpr (kVec > 0) {
+      const __m512 vinv = _mm512_set1_ps(inv);
+      const __m512i lim = _mm512_set1_epi32(32767), nlim = _mm512_set1_epi32(-32767);
+      for (int k = 0; k < kVec; k += 16) {
+        __m512i a = _mm512_maskz_cvtps_epi32(kAll, _mm512_mul_ps(_mm512_loadu_ps(x + k), vinv));
+        a = _mm512_maskz_max_epi32(kAll, _mm512_maskz_min_epi32(kAll, a, lim), nlim);
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k / 2), _mm512_maskz_cvtepi32_epi16(kAll, a));
+      }
+    }
+    for (int k = kVec; k < In; k += 2) {
+      const auto q0 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k] * inv), -32767.0f, 32767.0f));
+      const auto q1 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k + 1] * inv), -32767.0f, 32767.0f));
+      out[k / 2] = static_cast<std::int32_t>(static_cast<std::uint32_t>(q0 & 0xffff) | (static_cast<std::uint32_t>(q1) << 16));
+    }
+    sx[t] = m / 32767.0f;
+  }
+}
+#endif  // NAO_POLICY_HAVE_AVX2
 
 /// Y = b + (acc · (sw · sx)), then ReLU: the int8 kernels' shared epilogue (one order of
 /// rounding whatever kernel filled acc [J][Out]; the SSE2 lanes do the same operations).
@@ -472,6 +607,68 @@ __attribute__((target("avx2"), noinline)) void accumulateInt8Avx2(const std::int
   }
   if constexpr (Out % 8 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, kRows);
 }
+
+/// Rows r .. r+16R-1 of the int8 product over pairs p0 .. p0+pc-1 (one strip), for
+/// accumulateInt8Avx512.
+template <int Out, int In, int J, int R>
+__attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateInt8BlockAvx512(const std::int8_t* Wq,
+                                                                                      const std::int32_t* xp,
+                                                                                      std::int32_t* acc, int p0,
+                                                                                      int pc, int r) {
+  constexpr int P = In / 2;
+  const bool more = p0 + pc < P;  // the next strip of this matrix, as in the SSE2 kernel
+  // The block's share of the next strip: R·pc·32 bytes from r·2·pc, one line every 2/R pairs.
+  const std::int8_t* share =
+      more ? Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2 + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr;
+  __m512i a[R][J];
+#pragma GCC unroll 8
+  for (int t = 0; t < J; ++t)
+#pragma GCC unroll 2
+    for (int i = 0; i < R; ++i) a[i][t] = _mm512_setzero_si512();
+  const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
+#pragma GCC unroll 4
+  for (int k = 0; k < pc; ++k) {
+    if (more && (k & (2 / R - 1)) == 0) __builtin_prefetch(share + 32 * R * k, 0, 2);
+    __m512i v[R];
+#pragma GCC unroll 2
+    for (int i = 0; i < R; ++i)
+      v[i] = _mm512_cvtepi8_epi16(
+          _mm256_loadu_si256(reinterpret_cast<const __m256i*>(w + static_cast<std::ptrdiff_t>(k) * Out * 2 + 32 * i)));
+#pragma GCC unroll 8
+    for (int t = 0; t < J; ++t) {
+      const __m512i x = _mm512_set1_epi32(xp[t * P + p0 + k]);
+#pragma GCC unroll 2
+      for (int i = 0; i < R; ++i) a[i][t] = _mm512_dpwssd_epi32(a[i][t], v[i], x);
+    }
+  }
+#pragma GCC unroll 8
+  for (int t = 0; t < J; ++t)
+#pragma GCC unroll 2
+    for (int i = 0; i < R; ++i) {
+      std::int32_t* y = acc + t * Out + r + 16 * i;
+      _mm512_storeu_si512(y, p0 == 0 ? a[i][t] : _mm512_add_epi32(_mm512_loadu_si512(y), a[i][t]));
+    }
+}
+
+/// The int8 product with AVX-512 VNNI: strips of kInt8Strip pairs; in each, blocks of 32 rows
+/// (one 64-byte line per pair: two vpmovsxbw loads of 16 rows), 2·J int32 accumulators in zmm
+/// registers, each pair added by one vpdpwssd (both int16 products and the accumulator in one
+/// instruction, wrapping like pmaddwd + paddd; no sum here comes near 2^31, see above). Rows
+/// left over: a block of 16, then the scalar rows.
+template <int Out, int In, int J>
+__attribute__((NAO_AVX512_TARGET, noinline)) void accumulateInt8Avx512(const std::int8_t* Wq, const std::int32_t* xp,
+                                                                        std::int32_t* acc) {
+  static_assert(In % 2 == 0 && In <= kInt8MaxIn, "int8 kernel: In even and at most kInt8MaxIn");
+  constexpr int P = In / 2;
+  constexpr int kRows = Out / 16 * 16;
+  for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
+    const int pc = std::min(kInt8Strip, P - p0);
+    int r = 0;
+    for (; r + 32 <= kRows; r += 32) accumulateInt8BlockAvx512<Out, In, J, 2>(Wq, xp, acc, p0, pc, r);
+    for (; r < kRows; r += 16) accumulateInt8BlockAvx512<Out, In, J, 1>(Wq, xp, acc, p0, pc, r);
+  }
+  if constexpr (Out % 16 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, kRows);
+}
 #endif  // NAO_POLICY_HAVE_AVX2
 
 /// Y = dequant(Wq) X + b (b may be null), then ReLU if kRelu, with int8 weights (see above).
@@ -482,9 +679,17 @@ inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float
   alignas(64) std::int32_t xp[J * (In / 2)];
   alignas(64) std::int32_t acc[J * Out];
   float sx[J];
-  quantizeTokensInt16<In, J>(X, xp, sx);
 #if NAO_POLICY_HAVE_AVX2
-  if (activePolicyKernel() == PolicyKernel::kAvx2)
+  const PolicyKernel kernel = activePolicyKernel();
+  if (kernel == PolicyKernel::kAvx512)
+    quantizeTokensInt16Avx512<In, J>(X, xp, sx);
+  else
+#endif
+    quantizeTokensInt16<In, J>(X, xp, sx);
+#if NAO_POLICY_HAVE_AVX2
+  if (kernel == PolicyKernel::kAvx512)
+    accumulateInt8Avx512<Out, In, J>(Wq, xp, acc);
+  else if (kernel == PolicyKernel::kAvx2)
     accumulateInt8Avx2<Out, In, J>(Wq, xp, acc);
   else
 #endif
@@ -513,8 +718,8 @@ inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float
 // The value sum is elementwise (o[d] += α·v[d], keys in the caller's order), the same at any
 // width.
 
-/// Rows of a key ring are padded to a multiple of this (the AVX2 kernel's 8 lanes).
-inline constexpr int kKeyRowBlock = 8;
+/// Rows of a key ring are padded to a multiple of this (the AVX-512 kernel's 16 lanes).
+inline constexpr int kKeyRowBlock = 16;
 
 /// True if the score kernels reproduce Eigen's dot of Dh floats bit for bit at this build's
 /// packet width (else windowAttention keeps a plain loop over the transposed keys).
@@ -621,13 +826,76 @@ __attribute__((target("avx2"), noinline)) void windowValuesAvx2(const float* a, 
   }
   for (int p = 0; p < Dh / 8; ++p) _mm256_storeu_ps(o + p * 8, acc[p]);
 }
+
+/// windowScoresSse with 16 keys per pass (kAvx512; the same bits: the lanes are independent keys).
+template <int Dh, int NP>
+__attribute__((NAO_AVX512_TARGET, noinline)) void windowScoresAvx512(const float* q, const float* KT, int rows,
+                                                                      float scale, float* s) {
+  static_assert(kWindowKernelExact<Dh>, "Eigen's dot order is reproduced for packets of 4 only");
+  static_assert(NP % 16 == 0, "key rows padded to whole zmm registers");
+  constexpr int P = 4, M = Dh / P;
+  const __m512 sc = _mm512_set1_ps(scale);
+  for (int k0 = 0; k0 < rows; k0 += 16) {
+    __m512 lane[P];
+#pragma GCC unroll 4
+    for (int l = 0; l < P; ++l) {
+      __m512 t[M];
+#pragma GCC unroll 16
+      for (int m = 0; m < M; ++m)
+        t[m] = _mm512_mul_ps(_mm512_set1_ps(q[m * P + l]), _mm512_loadu_ps(KT + (m * P + l) * NP + k0));
+#pragma GCC unroll 4
+      for (int w = 1; w < M; w *= 2)
+#pragma GCC unroll 8
+        for (int m = 0; m + w < M; m += 2 * w) t[m] = _mm512_add_ps(t[m], t[m + w]);
+      lane[l] = t[0];
+    }
+    _mm512_storeu_ps(s + k0, _mm512_mul_ps(_mm512_add_ps(_mm512_add_ps(lane[0], lane[2]), _mm512_add_ps(lane[1], lane[3])), sc));
+  }
+}
+
+/// windowValuesSse for Q queries at once (kAvx512): query i's weights at a + i·a_stride, its
+/// output at o + i·o_stride. Each query's sum runs over the keys in the same order (the same
+/// bits); the Q independent chains of adds overlap instead of waiting on each other.
+template <int Dh, int J, int W, int Q>
+__attribute__((NAO_AVX512_TARGET, noinline)) void windowValuesAvx512(const float* a, int a_stride, const float* V, int ld,
+                                                                      int slot, int n, float* o, int o_stride) {
+  static_assert(Dh % 16 == 0, "whole zmm registers of a head");
+  constexpr int NV = Dh / 16;
+  __m512 acc[Q][NV];
+  for (auto& row : acc)
+    for (auto& x : row) x = _mm512_setzero_ps();
+  for (int age = 0; age < n; ++age) {
+    const int base = ((slot - age + W) % W) * J;
+    for (int j = 0; j < J; ++j) {
+      const float* v = V + static_cast<std::ptrdiff_t>(base + j) * ld;
+      __m512 vv[NV];
+#pragma GCC unroll 8
+      for (int p = 0; p < NV; ++p) vv[p] = _mm512_loadu_ps(v + p * 16);
+#pragma GCC unroll 8
+      for (int i = 0; i < Q; ++i) {
+        const __m512 w = _mm512_set1_ps(a[i * a_stride + age * J + j]);
+#pragma GCC unroll 8
+        for (int p = 0; p < NV; ++p) acc[i][p] = _mm512_add_ps(acc[i][p], _mm512_mul_ps(w, vv[p]));
+      }
+    }
+  }
+  for (int i = 0; i < Q; ++i)
+    for (int p = 0; p < NV; ++p) _mm512_storeu_ps(o + i * o_stride + p * 16, acc[i][p]);
+}
 #endif  // NAO_POLICY_HAVE_AVX2
 
 /// The scores of windowScoresSse with the active kernel (the same bits with either).
 template <int Dh, int NP>
 inline void windowScores(const float* q, const float* KT, int rows, float scale, float* s) {
 #if NAO_POLICY_HAVE_AVX2
-  if (activePolicyKernel() == PolicyKernel::kAvx2) {
+  const PolicyKernel kernel = activePolicyKernel();
+  if constexpr (NP % 16 == 0) {
+    if (kernel == PolicyKernel::kAvx512) {
+      windowScoresAvx512<Dh, NP>(q, KT, rows, scale, s);
+      return;
+    }
+  }
+  if (policyKernelHasAvx2(kernel)) {
     windowScoresAvx2<Dh, NP>(q, KT, rows, scale, s);
     return;
   }
@@ -640,13 +908,246 @@ template <int Dh, int J, int W>
 inline void windowValues(const float* a, const float* V, int ld, int slot, int n, float* o) {
 #if NAO_POLICY_HAVE_AVX2
   if constexpr (Dh % 8 == 0) {
-    if (activePolicyKernel() == PolicyKernel::kAvx2) {
+    if (policyKernelHasAvx2(activePolicyKernel())) {
       windowValuesAvx2<Dh, J, W>(a, V, ld, slot, n, o);
       return;
     }
   }
 #endif
   windowValuesSse<Dh, J, W>(a, V, ld, slot, n, o);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The softmax's exponential (expShifted). glibc's expf was ~6 % of a step (16,000 calls: 8
+// attention layers × 4 heads × 5 queries × 100 keys); this one runs in vector lanes. One
+// definition in plain float multiplies and adds (never fused), evaluated identically by the
+// scalar function and by every lane width, so the kernels keep giving the same bits:
+//   x ← max(x, −87)            (NaN stays NaN: the comparison keeps x)
+//   n = round-to-nearest-even(x · log2 e),  r = (x − n·C1) − n·C2   (C1 + C2 = ln 2, C1 exact in
+//   8 bits: n·C1 is exact)
+//   p = ((((p0 r + p1) r + p2) r + p3) r + p4) r + p5,  e = (p · r² + r) + 1
+//   e^x = e · 2^n (exponent bits), and 0 for x < −87 (below 1.7e-38: a softmax weight that small
+//   is 0 to float precision)
+// Constants: the Cephes single-precision expf minimax polynomial on [−ln2/2, ln2/2]. Accuracy
+// against std::exp: tests/test_policy_kernels.cpp.
+namespace expconst {
+inline constexpr float kLow = -87.0f;
+inline constexpr float kLog2e = 1.44269504088896341f;
+inline constexpr float kC1 = 0.693359375f;
+inline constexpr float kC2 = -2.12194440e-4f;
+inline constexpr float kP0 = 1.9875691500e-4f, kP1 = 1.3981999507e-3f, kP2 = 8.3334519073e-3f;
+inline constexpr float kP3 = 4.1665795894e-2f, kP4 = 1.6666665459e-1f, kP5 = 5.0000001201e-1f;
+}  // namespace expconst
+
+/// The definition above for one float (the lanes' reference; x <= 0 expected: x − max score).
+inline float expSoftmax(float x) noexcept {
+  using namespace expconst;
+  // Outside the domain (NaN, or above e^88 where the lanes' exponent bits wrap): keep the cast
+  // below defined. NaN stays NaN as in the lanes.
+  if (!(x <= 88.0f)) return x != x ? x : std::numeric_limits<float>::infinity();
+  const bool flush = x < kLow;
+  x = kLow > x ? kLow : x;
+  const float fx = x * kLog2e;
+  const auto n = static_cast<std::int32_t>(std::nearbyint(fx));
+  const auto fn = static_cast<float>(n);
+  float r = x - fn * kC1;
+  r = r - fn * kC2;
+  const float z = r * r;
+  float p = kP0 * r;
+  p = p + kP1;
+  p = p * r;
+  p = p + kP2;
+  p = p * r;
+  p = p + kP3;
+  p = p * r;
+  p = p + kP4;
+  p = p * r;
+  p = p + kP5;
+  p = p * z;
+  p = p + r;
+  p = p + 1.0f;
+  const std::uint32_t bits = static_cast<std::uint32_t>(n + 127) << 23;
+  float scale;
+  std::memcpy(&scale, &bits, sizeof scale);
+  const float e = p * scale;
+  return flush ? 0.0f : e;
+}
+
+#if defined(__SSE2__)
+/// expSoftmax in 4 lanes.
+inline __m128 expSoftmaxSse(__m128 x) noexcept {
+  using namespace expconst;
+  const __m128 low = _mm_set1_ps(kLow);
+  const __m128 keep = _mm_cmpnlt_ps(x, low);  // not (x < low): true for NaN too
+  x = _mm_max_ps(low, x);                     // low > x ? low : x
+  const __m128i n = _mm_cvtps_epi32(_mm_mul_ps(x, _mm_set1_ps(kLog2e)));
+  const __m128 fn = _mm_cvtepi32_ps(n);
+  __m128 r = _mm_sub_ps(x, _mm_mul_ps(fn, _mm_set1_ps(kC1)));
+  r = _mm_sub_ps(r, _mm_mul_ps(fn, _mm_set1_ps(kC2)));
+  const __m128 z = _mm_mul_ps(r, r);
+  __m128 p = _mm_mul_ps(_mm_set1_ps(kP0), r);
+  p = _mm_mul_ps(_mm_add_ps(p, _mm_set1_ps(kP1)), r);
+  p = _mm_mul_ps(_mm_add_ps(p, _mm_set1_ps(kP2)), r);
+  p = _mm_mul_ps(_mm_add_ps(p, _mm_set1_ps(kP3)), r);
+  p = _mm_mul_ps(_mm_add_ps(p, _mm_set1_ps(kP4)), r);
+  p = _mm_mul_ps(_mm_add_ps(p, _mm_set1_ps(kP5)), z);
+  p = _mm_add_ps(_mm_add_ps(p, r), _mm_set1_ps(1.0f));
+  const __m128 scale = _mm_castsi128_ps(_mm_slli_epi32(_mm_add_epi32(n, _mm_set1_epi32(127)), 23));
+  return _mm_and_ps(_mm_mul_ps(p, scale), keep);
+}
+#endif
+
+#if NAO_POLICY_HAVE_AVX2
+/// expSoftmax in 16 lanes (kAvx512).
+__attribute__((NAO_AVX512_TARGET, always_inline)) inline __m512 expSoftmaxAvx512(__m512 x) noexcept {
+  using namespace expconst;
+  const __m512 low = _mm512_set1_ps(kLow);
+  const __mmask16 keep = _mm512_cmp_ps_mask(x, low, _CMP_NLT_UQ);  // not (x < low): true for NaN
+  x = _mm512_mask_blend_ps(_mm512_cmp_ps_mask(low, x, _CMP_GT_OQ), x, low);  // low > x ? low : x
+  // Zero-masked forms with every lane selected, as in quantizeTokensInt16Avx512 (GCC 12 warns
+  // on the unmasked ones).
+  constexpr __mmask16 kAll = 0xffff;
+  const __m512i n = _mm512_maskz_cvtps_epi32(kAll, _mm512_mul_ps(x, _mm512_set1_ps(kLog2e)));
+  const __m512 fn = _mm512_maskz_cvtepi32_ps(kAll, n);
+  __m512 r = _mm512_sub_ps(x, _mm512_mul_ps(fn, _mm512_set1_ps(kC1)));
+  r = _mm512_sub_ps(r, _mm512_mul_ps(fn, _mm512_set1_ps(kC2)));
+  const __m512 z = _mm512_mul_ps(r, r);
+  __m512 p = _mm512_mul_ps(_mm512_set1_ps(kP0), r);
+  p = _mm512_mul_ps(_mm512_add_ps(p, _mm512_set1_ps(kP1)), r);
+  p = _mm512_mul_ps(_mm512_add_ps(p, _mm512_set1_ps(kP2)), r);
+  p = _mm512_mul_ps(_mm512_add_ps(p, _mm512_set1_ps(kP3)), r);
+  p = _mm512_mul_ps(_mm512_add_ps(p, _mm512_set1_ps(kP4)), r);
+  p = _mm512_mul_ps(_mm512_add_ps(p, _mm512_set1_ps(kP5)), z);
+  p = _mm512_add_ps(_mm512_add_ps(p, r), _mm512_set1_ps(1.0f));
+  const __m512 scale = _mm512_castsi512_ps(_mm512_maskz_slli_epi32(kAll, _mm512_add_epi32(n, _mm512_set1_epi32(127)), 23));
+  return _mm512_maskz_mov_ps(keep, _mm512_mul_ps(p, scale));
+}
+
+__attribute__((NAO_AVX512_TARGET, noinline)) inline void expShiftedAvx512(float* s, int count, float shift) noexcept {
+  const __m512 sh = _mm512_set1_ps(shift);
+  int m = 0;
+  for (; m + 16 <= count; m += 16) _mm512_storeu_ps(s + m, expSoftmaxAvx512(_mm512_sub_ps(_mm512_loadu_ps(s + m), sh)));
+  for (; m < count; ++m) s[m] = expSoftmax(s[m] - shift);
+}
+#endif
+
+/// s[m] = expSoftmax(s[m] − shift) for m < count, in the widest lanes the active kernel has
+/// (the same bits at any width).
+inline void expShifted(float* s, int count, float shift) noexcept {
+#if NAO_POLICY_HAVE_AVX2
+  if (activePolicyKernel() == PolicyKernel::kAvx512) {
+    expShiftedAvx512(s, count, shift);
+    return;
+  }
+#endif
+  int m = 0;
+#if defined(__SSE2__)
+  const __m128 sh = _mm_set1_ps(shift);
+  for (; m + 4 <= count; m += 4) _mm_storeu_ps(s + m, expSoftmaxSse(_mm_sub_ps(_mm_loadu_ps(s + m), sh)));
+#endif
+  for (; m < count; ++m) s[m] = expSoftmax(s[m] - shift);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The norm-based attention score's vector norm (headSumNorm): ‖Σ_h a[h] f_h‖ over D floats, in
+// one order at every lane width (so the kernels give the same bits):
+//   c[d] = a[0] f_0[d] + a[1] f_1[d] + ... (left to right, the first term without a zero added)
+//   part[l] = Σ c[d]² over d ≡ l (mod 16), d ascending, for the 16 lanes l
+//   the lanes as a tree: part[l] += part[l + 8], then + 4, + 2, + 1; the norm is √part[0]
+// Eigen's norm() summed in an order that depends on the packet width; this one is 16 lanes wide
+// by definition, which SSE computes as 4 packets and AVX-512 as one register.
+
+/// headSumNorm by its definition (any D; the reference of the vector forms).
+template <int D, int H>
+inline float headSumNormScalar(const float* a, const float* const* f) noexcept {
+  float part[16] = {};
+  for (int d = 0; d < D; ++d) {
+    float c = a[0] * f[0][d];
+    for (int h = 1; h < H; ++h) c = c + a[h] * f[h][d];
+    part[d % 16] = part[d % 16] + c * c;
+  }
+  for (int w = 8; w >= 1; w /= 2)
+    for (int l = 0; l < w; ++l) part[l] = part[l] + part[l + w];
+  return std::sqrt(part[0]);
+}
+
+#if defined(__SSE2__)
+/// headSumNorm with 4 packets of 4 lanes (D a multiple of 16).
+template <int D, int H>
+inline float headSumNormSse(const float* a, const float* const* f) noexcept {
+  static_assert(D % 16 == 0, "whole groups of 16 lanes");
+  __m128 part[4] = {_mm_setzero_ps(), _mm_setzero_ps(), _mm_setzero_ps(), _mm_setzero_ps()};
+  __m128 ah[H];
+  for (int h = 0; h < H; ++h) ah[h] = _mm_set1_ps(a[h]);
+  for (int d0 = 0; d0 < D; d0 += 16)
+#pragma GCC unroll 4
+    for (int q = 0; q < 4; ++q) {
+      __m128 c = _mm_mul_ps(ah[0], _mm_loadu_ps(f[0] + d0 + 4 * q));
+      for (int h = 1; h < H; ++h) c = _mm_add_ps(c, _mm_mul_ps(ah[h], _mm_loadu_ps(f[h] + d0 + 4 * q)));
+      part[q] = _mm_add_ps(part[q], _mm_mul_ps(c, c));
+    }
+  // Lanes l and l + 8: packets 0 + 2 and 1 + 3; then l + 4, l + 2, l + 1.
+  __m128 x = _mm_add_ps(_mm_add_ps(part[0], part[2]), _mm_add_ps(part[1], part[3]));
+  x = _mm_add_ps(x, _mm_movehl_ps(x, x));
+  x = _mm_add_ss(x, _mm_shuffle_ps(x, x, 1));
+  return std::sqrt(_mm_cvtss_f32(x));
+}
+#endif
+
+#if NAO_POLICY_HAVE_AVX2
+/// headSumNorm with one zmm register of 16 lanes (kAvx512; D a multiple of 16).
+template <int D, int H>
+__attribute__((NAO_AVX512_TARGET, noinline)) float headSumNormAvx512(const float* a, const float* const* f) noexcept {
+  static_assert(D % 16 == 0, "whole groups of 16 lanes");
+  __m512 part = _mm512_setzero_ps();
+  __m512 ah[H];
+  for (int h = 0; h < H; ++h) ah[h] = _mm512_set1_ps(a[h]);
+#pragma GCC unroll 8
+  for (int d0 = 0; d0 < D; d0 += 16) {
+    __m512 c = _mm512_mul_ps(ah[0], _mm512_loadu_ps(f[0] + d0));
+    for (int h = 1; h < H; ++h) c = _mm512_add_ps(c, _mm512_mul_ps(ah[h], _mm512_loadu_ps(f[h] + d0)));
+    part = _mm512_add_ps(part, _mm512_mul_ps(c, c));
+  }
+  // Lanes l + 8 (the two halves), l + 4, l + 2, l + 1.
+  // (Zero-masked extracts of both halves: GCC 12 warns on the unmasked forms, see kAll.)
+  const __m512d pd = _mm512_castps_pd(part);
+  const __m256 y = _mm256_add_ps(_mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, pd, 0)),
+                                 _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, pd, 1)));
+  __m128 x = _mm_add_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
+  x = _mm_add_ps(x, _mm_movehl_ps(x, x));
+  x = _mm_add_ss(x, _mm_shuffle_ps(x, x, 1));
+  return std::sqrt(_mm_cvtss_f32(x));
+}
+#endif
+
+/// ‖Σ_h a[h] f_h‖ in the order above, with the active kernel's widest lanes.
+template <int D, int H>
+inline float headSumNorm(const float* a, const float* const* f) noexcept {
+  if constexpr (D % 16 == 0) {
+#if NAO_POLICY_HAVE_AVX2
+    if (activePolicyKernel() == PolicyKernel::kAvx512) return headSumNormAvx512<D, H>(a, f);
+#endif
+#if defined(__SSE2__)
+    return headSumNormSse<D, H>(a, f);
+#endif
+  }
+  return headSumNormScalar<D, H>(a, f);
+}
+
+/// windowValues for Q queries: query i's weights at a + i·a_stride, its output at
+/// o + i·o_stride (the same bits as Q calls of windowValues).
+template <int Dh, int J, int W, int Q>
+inline void windowValuesQueries(const float* a, int a_stride, const float* V, int ld, int slot, int n, float* o,
+                                int o_stride) {
+#if NAO_POLICY_HAVE_AVX2
+  if constexpr (Dh % 16 == 0) {
+    if (activePolicyKernel() == PolicyKernel::kAvx512) {
+      windowValuesAvx512<Dh, J, W, Q>(a, a_stride, V, ld, slot, n, o, o_stride);
+      return;
+    }
+  }
+#endif
+  for (int i = 0; i < Q; ++i) windowValues<Dh, J, W>(a + i * a_stride, V, ld, slot, n, o + i * o_stride);
 }
 
 /// Y = W X + b (b may be null: zero), then ReLU if kRelu; every column an independent token.
@@ -657,7 +1158,12 @@ inline void windowValues(const float* a, const float* V, int ld, int slot, int n
 template <int Out, int In, int J, bool kRelu>
 inline void affineTokens(const float* W, const float* b, const float* X, float* Y) {
 #if NAO_POLICY_HAVE_AVX2
-  if (activePolicyKernel() == PolicyKernel::kAvx2) {
+  const PolicyKernel kernel = activePolicyKernel();
+  if (kernel == PolicyKernel::kAvx512) {
+    affineTokensAvx512<Out, In, J, kRelu>(W, b, X, Y);
+    return;
+  }
+  if (kernel == PolicyKernel::kAvx2) {
     affineTokensAvx2<Out, In, J, kRelu>(W, b, X, Y);
     return;
   }
