@@ -2,6 +2,7 @@
 // status 1 for anything else.
 #include "rt_info.hpp"
 
+#include "nao/policy_kernels.hpp"
 #include "nao/quantize.hpp"
 #include "support/test_util.hpp"
 
@@ -99,6 +100,7 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(j["source"] == path);
   CHECK(j["weights"] == "file");
   CHECK(j["precision"] == "fp32");
+  CHECK(j["kernel"] == nao::policyKernelName(nao::defaultPolicyKernel()));
   nao::rt::InfoOptions o8 = withWeights(path);
   o8.precision = "int8";
   CHECK(nlohmann::json::parse(info(o8).out)["precision"] == "int8");

@@ -5,6 +5,7 @@
 #include "rt_run.hpp"
 
 #include "nao/model_file.hpp"
+#include "nao/policy_kernels.hpp"
 #include "nao/controller.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/random_policy.hpp"
@@ -231,6 +232,7 @@ TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 a
     REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
     const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
     CHECK(s["model"]["precision"] == precision);
+    CHECK(s["model"]["kernel"] == policyKernelName(activePolicyKernel()));
     ticks[i] = bytes(dir / "ticks.csv");
     rmse[i] = r.report.ee_rmse_m;
     ++i;

@@ -1,6 +1,7 @@
 #include "rt_info.hpp"
 
 #include "nao/arm_model.hpp"
+#include "nao/policy_kernels.hpp"
 #include "nao/quantize.hpp"
 
 #include <nlohmann/json.hpp>
@@ -49,6 +50,8 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source, con
   // Issue 14's contract: where the weights come from and their precision.
   j["weights"] = source == "compiled-in" ? "compiled" : "file";
   j["precision"] = precision;
+  // The kernel stepPolicy would run here (CPU, NAO_POLICY_KERNEL): every kernel gives the same bits.
+  j["kernel"] = policyKernelName(defaultPolicyKernel());
   ordered_json joints = ordered_json::array();
   for (const TrainedJoint& t : h.joints)
     joints.push_back({{"name", t.name}, {"lower", t.lower}, {"upper", t.upper}, {"velocity", t.velocity}});

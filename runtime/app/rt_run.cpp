@@ -2,6 +2,7 @@
 // (rt_run.hpp): configure-time preparation and the output after the loop.
 #include "rt_run.hpp"
 
+#include "nao/policy_kernels.hpp"
 #include "nao/tools/synth.hpp"
 
 #include <nlohmann/json.hpp>
@@ -629,7 +630,8 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
                 {"residual_gain", p.residual_gain},
                 {"linear_ar_base", !p.linear_ar.empty()},
                 {"phase_ticks", p.phase_ticks},
-                {"precision", weightPrecisionName(p.precision)}};
+                {"precision", weightPrecisionName(p.precision)},
+                {"kernel", policyKernelName(activePolicyKernel())}};
   j["reference"] = p.reference.description;
   j["retarget"] = {{"priority", retargetPriorityName(p.retarget.priority)},
                    {"lambda_q", p.retarget.lambda_q},
