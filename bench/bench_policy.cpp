@@ -11,6 +11,8 @@
 //                          read found: zmm or ymm loads into 8 accumulators, each line prefetched
 //                          64 KB ahead; the label names it), i.e. weight bytes / single-core read
 //                          bandwidth, measured in the same run
+//   BM_Policy_Cold_* / BM_Policy_Int8_Cold_* / BM_WeightStream_Cold  the same after evicting the
+//                          caches before every iteration (untimed): the weights come from DRAM
 //   BM_WeightStream_Eigen  the same bytes read by Eigen's vectorised sum (the limit quoted before
 //                          2026-11-26: 10-25 % slower than the prefetched read on this machine)
 // BM_Policy_Libtorch (bench_policy_torch.cpp) is libtorch eager on the same weights.
@@ -34,8 +36,18 @@ namespace {
 using namespace nao;
 using namespace nao::bench;
 
-/// stepPolicy with `kernel` (nullptr: the runtime's choice), one inference per iteration.
-void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, bool int8 = false) {
+/// Pushes everything else out of the caches (untimed, before a cold iteration): writes one
+/// byte per line of a buffer 4x this machine's 32 MB L3, as 100 ms of other work between two
+/// 10 Hz ticks might.
+void evictCaches() {
+  static std::vector<unsigned char> junk(std::size_t{128} << 20, 1);
+  for (std::size_t i = 0; i < junk.size(); i += 64) junk[i] = static_cast<unsigned char>(junk[i] + 1);
+  benchmark::ClobberMemory();
+}
+
+/// stepPolicy with `kernel` (nullptr: the runtime's choice), one inference per iteration;
+/// `cold`: the caches evicted before each one (untimed).
+void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, bool int8 = false, bool cold = false) {
   if (!haveModel(state)) return;
   const PolicyKernel saved = activePolicyKernel();
   if (kernel != nullptr && !selectPolicyKernel(*kernel)) {
@@ -57,6 +69,7 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, bool in
   std::size_t i = 0;
   for (auto _ : state) {
     const PolicyInput& in = inputs[i++ % inputs.size()];
+    if (cold) evictCaches();
     const BenchClock::time_point t0 = BenchClock::now();
     const auto& a = stepPolicy(w, *ws, in);
     benchmark::DoNotOptimize(a.data());
@@ -109,6 +122,29 @@ void BM_Policy_StaticEigen_AVX512(benchmark::State& state) {
 }
 
 void BM_Policy_Int8(benchmark::State& state) { runStaticEigen(state, nullptr, true); }
+
+// Cold: every step after the caches were evicted (the 10 Hz loop's case when other work runs
+// between ticks), fp32 and int8 with the kernels forced.
+void BM_Policy_Cold_SSE(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kSse;
+  runStaticEigen(state, &k, false, true);
+}
+void BM_Policy_Cold_AVX2(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kAvx2;
+  runStaticEigen(state, &k, false, true);
+}
+void BM_Policy_Cold_AVX512(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kAvx512;
+  runStaticEigen(state, &k, false, true);
+}
+void BM_Policy_Int8_Cold_AVX2(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kAvx2;
+  runStaticEigen(state, &k, true, true);
+}
+void BM_Policy_Int8_Cold_AVX512(benchmark::State& state) {
+  const PolicyKernel k = PolicyKernel::kAvx512;
+  runStaticEigen(state, &k, true, true);
+}
 
 void BM_Policy_Int8_SSE(benchmark::State& state) {
   const PolicyKernel k = PolicyKernel::kSse;
@@ -182,7 +218,7 @@ float streamSum(const std::string& how, const float* p, std::ptrdiff_t n) {
 /// BM_WeightStream: the physical limit, one read of the weight bytes by the fastest read this
 /// CPU has (label): the prefetched AVX-512 or AVX2 sum, else Eigen's. _Eigen: Eigen's sum
 /// (what BM_WeightStream measured before 2026-11-26), reported beside it.
-void runWeightStream(benchmark::State& state, bool best) {
+void runWeightStream(benchmark::State& state, bool best, bool cold = false) {
   if (!haveModel(state)) return;
   const ModelFile& model = paperModel();
   // The tensor data is one contiguous region (64-byte aligned tensors back to back).
@@ -195,6 +231,7 @@ void runWeightStream(benchmark::State& state, bool best) {
     how = "avx2";
   Percentiles rec;
   for (auto _ : state) {
+    if (cold) evictCaches();
     const BenchClock::time_point t0 = BenchClock::now();
     float s = streamSum(how, first, last - first);
     benchmark::DoNotOptimize(s);
@@ -209,6 +246,8 @@ void runWeightStream(benchmark::State& state, bool best) {
 
 void BM_WeightStream(benchmark::State& state) { runWeightStream(state, true); }
 void BM_WeightStream_Eigen(benchmark::State& state) { runWeightStream(state, false); }
+/// The same read after evicting the caches: the weights from DRAM, the cold step's limit.
+void BM_WeightStream_Cold(benchmark::State& state) { runWeightStream(state, true, true); }
 
 }  // namespace
 
@@ -222,3 +261,10 @@ BENCHMARK(BM_Policy_Int8_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->
 BENCHMARK(BM_Policy_Int8_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_WeightStream)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
 BENCHMARK(BM_WeightStream_Eigen)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
+// Cold: 200 iterations (each eviction writes 128 MB, ~10-20 ms, untimed).
+BENCHMARK(BM_Policy_Cold_SSE)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
+BENCHMARK(BM_Policy_Cold_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
+BENCHMARK(BM_Policy_Cold_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
+BENCHMARK(BM_Policy_Int8_Cold_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
+BENCHMARK(BM_Policy_Int8_Cold_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
+BENCHMARK(BM_WeightStream_Cold)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
