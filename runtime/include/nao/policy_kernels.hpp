@@ -330,10 +330,11 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void affineTokensAvx512(const float
 //       sx(t) = max|X(:, t)| / 32767 (quantizeTokensInt16)
 //   Y(r, t) = b(r) + float(Σ_k Wq(r, k) xq(k, t)) · (sw(r) · sx(t))
 //
-// One pmaddwd multiplies a row's pair of int8 weights (sign-extended to int16) by the token's
-// pair of int16 values and adds the two products into an int32 lane. Integer sums are exact
-// (|Σ| <= 512 · 127 · 32767 < 2^31 for In <= 512), so the SSE2 and AVX2 kernels give the same
-// bits in any order; only the final conversion and two multiplies round (in one fixed order).
+// One pmaddwd (SSE2, AVX2) multiplies a row's pair of int8 weights (sign-extended to int16) by
+// the token's pair of int16 values and adds the two products into an int32 lane (AVX-512 VNNI's
+// vpdpwssd also adds that lane to the accumulator). Integer sums are exact
+// (|Σ| <= 512 · 127 · 32767 < 2^31 for In <= 512), so the SSE2, AVX2 and AVX-512 kernels give the
+// same bits in any order; only the final conversion and two multiplies round (in one fixed order).
 
 /// Largest In the int32 accumulators of the int8 kernels cannot overflow for.
 inline constexpr int kInt8MaxIn = 512;
@@ -705,7 +706,7 @@ inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float
 // Window attention (policy.hpp windowAttention): one query's scores against every key of a
 // ring, and the α-weighted sum of the values. Before these kernels the scores were Eigen's
 // fixed-size dot of two Dh-vectors, one key at a time (about 12 % of a paper-model step); here
-// the keys are the lanes, so 4 (SSE) or 8 (AVX2) scores come out of each pass over the query.
+// the keys are the lanes, so 4 (SSE), 8 (AVX2) or 16 (AVX-512) scores come out of each pass over the query.
 // The keys are stored transposed for that (PolicyWorkspace::KeyRing: column d holds dimension d
 // of every key, rows padded to kKeyRowBlock).
 //
@@ -714,7 +715,7 @@ inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float
 // q[4m..4m+3]·k[4m..4m+3] for m = 0..Dh/4−1 summed as a pairwise tree over m (for Dh/4 a power of
 // two, halving is the same tree as bottom-up pairs), then the 4 lanes as (x0 + x2) + (x1 + x3).
 // So the scores, and every bit after them, are those of the Eigen code they replace, with
-// either kernel (tests/test_policy_kernels.cpp checks this against Eigen's dot on random data).
+// every kernel (tests/test_policy_kernels.cpp checks this against Eigen's dot on random data).
 // The value sum is elementwise (o[d] += α·v[d], keys in the caller's order), the same at any
 // width.
 
@@ -884,7 +885,7 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void windowValuesAvx512(const float
 }
 #endif  // NAO_POLICY_HAVE_AVX2
 
-/// The scores of windowScoresSse with the active kernel (the same bits with either).
+/// The scores of windowScoresSse with the active kernel (the same bits with every kernel).
 template <int Dh, int NP>
 inline void windowScores(const float* q, const float* KT, int rows, float scale, float* s) {
 #if NAO_POLICY_HAVE_AVX2
@@ -903,7 +904,7 @@ inline void windowScores(const float* q, const float* KT, int rows, float scale,
   windowScoresSse<Dh, NP>(q, KT, rows, scale, s);
 }
 
-/// The value sum of windowValuesSse with the active kernel (the same bits with either).
+/// The value sum of windowValuesSse with the active kernel (the same bits with every kernel).
 template <int Dh, int J, int W>
 inline void windowValues(const float* a, const float* V, int ld, int slot, int n, float* o) {
 #if NAO_POLICY_HAVE_AVX2
