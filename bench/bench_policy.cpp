@@ -104,63 +104,6 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, bool in
   selectPolicyKernel(saved);
 }
 
-void BM_Policy_StaticEigen(benchmark::State& state) { runStaticEigen(state, nullptr); }
-
-void BM_Policy_StaticEigen_SSE(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kSse;
-  runStaticEigen(state, &k);
-}
-
-void BM_Policy_StaticEigen_AVX2(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kAvx2;
-  runStaticEigen(state, &k);
-}
-
-void BM_Policy_StaticEigen_AVX512(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kAvx512;
-  runStaticEigen(state, &k);
-}
-
-void BM_Policy_Int8(benchmark::State& state) { runStaticEigen(state, nullptr, true); }
-
-// Cold: every step after the caches were evicted (the 10 Hz loop's case when other work runs
-// between ticks), fp32 and int8 with the kernels forced.
-void BM_Policy_Cold_SSE(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kSse;
-  runStaticEigen(state, &k, false, true);
-}
-void BM_Policy_Cold_AVX2(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kAvx2;
-  runStaticEigen(state, &k, false, true);
-}
-void BM_Policy_Cold_AVX512(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kAvx512;
-  runStaticEigen(state, &k, false, true);
-}
-void BM_Policy_Int8_Cold_AVX2(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kAvx2;
-  runStaticEigen(state, &k, true, true);
-}
-void BM_Policy_Int8_Cold_AVX512(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kAvx512;
-  runStaticEigen(state, &k, true, true);
-}
-
-void BM_Policy_Int8_SSE(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kSse;
-  runStaticEigen(state, &k, true);
-}
-
-void BM_Policy_Int8_AVX2(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kAvx2;
-  runStaticEigen(state, &k, true);
-}
-
-void BM_Policy_Int8_AVX512(benchmark::State& state) {
-  const PolicyKernel k = PolicyKernel::kAvx512;
-  runStaticEigen(state, &k, true);
-}
-
 #if NAO_POLICY_HAVE_AVX2
 // The fastest single-core read of the weight bytes found on this machine (2026-11-26, AMD EPYC
 // with AVX-512; /tmp experiments, 2000 sweeps each): Eigen's sum (SSE2) ~500-540 us, 8 AVX2
@@ -244,27 +187,64 @@ void runWeightStream(benchmark::State& state, bool best, bool cold = false) {
   state.SetLabel(how);
 }
 
-void BM_WeightStream(benchmark::State& state) { runWeightStream(state, true); }
-void BM_WeightStream_Eigen(benchmark::State& state) { runWeightStream(state, false); }
-/// The same read after evicting the caches: the weights from DRAM, the cold step's limit.
-void BM_WeightStream_Cold(benchmark::State& state) { runWeightStream(state, true, true); }
+/// One row per registered benchmark: kernel forced (none: the runtime's choice), int8 weights,
+/// caches evicted before every iteration (cold: 200 iterations, each eviction writes 128 MB).
+struct PolicyCase {
+  const char* name;
+  bool forced;
+  PolicyKernel kernel;
+  bool int8;
+  bool cold;
+};
+
+constexpr PolicyCase kPolicyCases[] = {
+    {"BM_Policy_StaticEigen", false, PolicyKernel::kSse, false, false},
+    {"BM_Policy_StaticEigen_SSE", true, PolicyKernel::kSse, false, false},
+    {"BM_Policy_StaticEigen_AVX2", true, PolicyKernel::kAvx2, false, false},
+    {"BM_Policy_StaticEigen_AVX512", true, PolicyKernel::kAvx512, false, false},
+    {"BM_Policy_Int8", false, PolicyKernel::kSse, true, false},
+    {"BM_Policy_Int8_SSE", true, PolicyKernel::kSse, true, false},
+    {"BM_Policy_Int8_AVX2", true, PolicyKernel::kAvx2, true, false},
+    {"BM_Policy_Int8_AVX512", true, PolicyKernel::kAvx512, true, false},
+    // Cold: every step after the caches were evicted (the 10 Hz loop's case when other work
+    // runs between ticks).
+    {"BM_Policy_Cold_SSE", true, PolicyKernel::kSse, false, true},
+    {"BM_Policy_Cold_AVX2", true, PolicyKernel::kAvx2, false, true},
+    {"BM_Policy_Cold_AVX512", true, PolicyKernel::kAvx512, false, true},
+    {"BM_Policy_Int8_Cold_AVX2", true, PolicyKernel::kAvx2, true, true},
+    {"BM_Policy_Int8_Cold_AVX512", true, PolicyKernel::kAvx512, true, true},
+};
+
+/// The weight reads: the fastest (BM_WeightStream), Eigen's, and the fastest after eviction.
+struct StreamCase {
+  const char* name;
+  bool best;
+  bool cold;
+};
+
+constexpr StreamCase kStreamCases[] = {
+    {"BM_WeightStream", true, false}, {"BM_WeightStream_Eigen", false, false}, {"BM_WeightStream_Cold", true, true}};
+
+benchmark::internal::Benchmark* timed(benchmark::internal::Benchmark* b, bool cold) {
+  return b->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(cold ? 200 : 2000);
+}
+
+// Registered in this order: the hot policy steps, the hot reads, then the cold ones.
+const bool kRegistered = [] {
+  for (bool cold : {false, true}) {
+    for (const PolicyCase& c : kPolicyCases)
+      if (c.cold == cold)
+        timed(benchmark::RegisterBenchmark(c.name,
+                                           [c](benchmark::State& state) {
+                                             runStaticEigen(state, c.forced ? &c.kernel : nullptr, c.int8, c.cold);
+                                           }),
+              cold);
+    for (const StreamCase& c : kStreamCases)
+      if (c.cold == cold)
+        timed(benchmark::RegisterBenchmark(c.name, [c](benchmark::State& state) { runWeightStream(state, c.best, c.cold); }),
+              cold);
+  }
+  return true;
+}();
 
 }  // namespace
-
-BENCHMARK(BM_Policy_StaticEigen)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_Policy_StaticEigen_SSE)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_Policy_StaticEigen_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_Policy_StaticEigen_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_Policy_Int8)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_Policy_Int8_SSE)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_Policy_Int8_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_Policy_Int8_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_WeightStream)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-BENCHMARK(BM_WeightStream_Eigen)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(2000);
-// Cold: 200 iterations (each eviction writes 128 MB, ~10-20 ms, untimed).
-BENCHMARK(BM_Policy_Cold_SSE)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
-BENCHMARK(BM_Policy_Cold_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
-BENCHMARK(BM_Policy_Cold_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
-BENCHMARK(BM_Policy_Int8_Cold_AVX2)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
-BENCHMARK(BM_Policy_Int8_Cold_AVX512)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);
-BENCHMARK(BM_WeightStream_Cold)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(200);

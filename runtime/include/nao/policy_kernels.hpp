@@ -93,6 +93,34 @@ inline bool policyKernelHasAvx2(PolicyKernel k) noexcept { return k != PolicyKer
 namespace detail {
 
 // ---------------------------------------------------------------------------------------------
+// The parts every fp32 kernel shares (no vector width in them, so the same bits anywhere).
+
+/// Y(:, t) = b, or 0 without a bias, for every token: where every kernel's sums start.
+template <int Out, int J>
+inline void initTokens(const float* b, float* Y) {
+  for (int t = 0; t < J; ++t)
+    for (int r = 0; r < Out; ++r) Y[t * Out + r] = b != nullptr ? b[r] : 0.0f;
+}
+
+/// Rows r0 .. Out−1 of Y(:, t) += W(:, k0 .. k0+kc−1) X(k0 .. k0+kc−1, t), all t, one at a time
+/// in k order: the rows a vector kernel's blocks leave over.
+template <int Out, int In, int J>
+inline void accumulateRowsScalar(const float* W, const float* X, float* Y, int k0, int kc, int r0) {
+  for (int r = r0; r < Out; ++r)
+    for (int t = 0; t < J; ++t) {
+      float s = Y[t * Out + r];
+      for (int k = k0; k < k0 + kc; ++k) s += W[static_cast<std::ptrdiff_t>(k) * Out + r] * X[t * In + k];
+      Y[t * Out + r] = s;
+    }
+}
+
+/// Y = max(Y, 0) over every token.
+template <int Out, int J>
+inline void reluTokens(float* Y) {
+  for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
+}
+
+// ---------------------------------------------------------------------------------------------
 // kSse: Eigen packets at the baseline width.
 
 using Packet = Eigen::internal::packet_traits<float>::type;
@@ -163,12 +191,10 @@ template <int Out, int In, int J, bool kRelu>
 inline void affineTokensSse(const float* W, const float* b, const float* X, float* Y) {
   // 4 columns x 2 packets x J tokens: measured fastest of 2-16 columns, 1-3 packets (SSE2).
   constexpr int kPanel = 4;
-  for (int t = 0; t < J; ++t)
-    for (int r = 0; r < Out; ++r) Y[t * Out + r] = b != nullptr ? b[r] : 0.0f;
+  initTokens<Out, J>(b, Y);
   for (int k0 = 0; k0 + kPanel <= In; k0 += kPanel) accumulatePanel<Out, In, J, kPanel>(W, X, Y, k0);
   if constexpr (In % kPanel != 0) accumulatePanel<Out, In, J, In % kPanel>(W, X, Y, In - In % kPanel);
-  if constexpr (kRelu)
-    for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
+  if constexpr (kRelu) reluTokens<Out, J>(Y);
 }
 
 #if NAO_POLICY_HAVE_AVX2
@@ -236,22 +262,15 @@ __attribute__((target("avx2"), always_inline)) inline void accumulateStripAvx2(c
 template <int Out, int In, int J, bool kRelu>
 __attribute__((target("avx2"), noinline)) void affineTokensAvx2(const float* W, const float* b, const float* X,
                                                                  float* Y) {
-  for (int t = 0; t < J; ++t)
-    for (int r = 0; r < Out; ++r) Y[t * Out + r] = b != nullptr ? b[r] : 0.0f;
+  initTokens<Out, J>(b, Y);
   for (int k0 = 0; k0 < In; k0 += kAvx2Strip) {
     const int kc = std::min(kAvx2Strip, In - k0);
     int r = 0;
     for (; r + 16 <= Out; r += 16) accumulateStripAvx2<Out, In, J, 2>(W, X, Y, k0, kc, r);
     for (; r + 8 <= Out; r += 8) accumulateStripAvx2<Out, In, J, 1>(W, X, Y, k0, kc, r);
-    for (; r < Out; ++r)
-      for (int t = 0; t < J; ++t) {
-        float s = Y[t * Out + r];
-        for (int k = k0; k < k0 + kc; ++k) s += W[static_cast<std::ptrdiff_t>(k) * Out + r] * X[t * In + k];
-        Y[t * Out + r] = s;
-      }
+    accumulateRowsScalar<Out, In, J>(W, X, Y, k0, kc, r);
   }
-  if constexpr (kRelu)
-    for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
+  if constexpr (kRelu) reluTokens<Out, J>(Y);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -299,23 +318,16 @@ __attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateStripAvx
 template <int Out, int In, int J, bool kRelu>
 __attribute__((NAO_AVX512_TARGET, noinline)) void affineTokensAvx512(const float* W, const float* b, const float* X,
                                                                       float* Y) {
-  for (int t = 0; t < J; ++t)
-    for (int r = 0; r < Out; ++r) Y[t * Out + r] = b != nullptr ? b[r] : 0.0f;
+  initTokens<Out, J>(b, Y);
   for (int k0 = 0; k0 < In; k0 += kAvx2Strip) {
     const int kc = std::min(kAvx2Strip, In - k0);
     int r = 0;
     for (; r + 32 <= Out; r += 32) accumulateStripAvx512<Out, In, J, 2>(W, X, Y, k0, kc, r);
     for (; r + 16 <= Out; r += 16) accumulateStripAvx512<Out, In, J, 1>(W, X, Y, k0, kc, r);
     for (; r + 8 <= Out; r += 8) accumulateStripAvx2<Out, In, J, 1>(W, X, Y, k0, kc, r);
-    for (; r < Out; ++r)
-      for (int t = 0; t < J; ++t) {
-        float s = Y[t * Out + r];
-        for (int k = k0; k < k0 + kc; ++k) s += W[static_cast<std::ptrdiff_t>(k) * Out + r] * X[t * In + k];
-        Y[t * Out + r] = s;
-      }
+    accumulateRowsScalar<Out, In, J>(W, X, Y, k0, kc, r);
   }
-  if constexpr (kRelu)
-    for (int i = 0; i < Out * J; ++i) Y[i] = std::max(Y[i], 0.0f);
+  if constexpr (kRelu) reluTokens<Out, J>(Y);
 }
 #endif  // NAO_POLICY_HAVE_AVX2
 
@@ -338,6 +350,16 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void affineTokensAvx512(const float
 
 /// Largest In the int32 accumulators of the int8 kernels cannot overflow for.
 inline constexpr int kInt8MaxIn = 512;
+
+/// Entries k0 .. n−1 of one token (k0 even) as int16 pairs: round-to-nearest-even(x · inv),
+/// clamped to ±32767 (the vector quantisers' tails).
+inline void quantizePairsScalar(const float* x, std::int32_t* out, int k0, int n, float inv) {
+  for (int k = k0; k < n; k += 2) {
+    const auto q0 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k] * inv), -32767.0f, 32767.0f));
+    const auto q1 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k + 1] * inv), -32767.0f, 32767.0f));
+    out[k / 2] = static_cast<std::int32_t>(static_cast<std::uint32_t>(q0 & 0xffff) | (static_cast<std::uint32_t>(q1) << 16));
+  }
+}
 
 /// Quantises the J columns of X [In, J] (column-major) to int16 pairs packed as int32 (lane
 /// p of column t: xq(2p, t) in the low half, xq(2p + 1, t) in the high half) and their scales
@@ -407,11 +429,7 @@ inline void quantizeTokensInt16(const float* X, std::int32_t* xp, float* sx) {
       }
     }
 #endif
-    for (; k < In; k += 2) {
-      const auto q0 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k] * inv), -32767.0f, 32767.0f));
-      const auto q1 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k + 1] * inv), -32767.0f, 32767.0f));
-      out[k / 2] = static_cast<std::int32_t>(static_cast<std::uint32_t>(q0 & 0xffff) | (static_cast<std::uint32_t>(q1) << 16));
-    }
+    quantizePairsScalar(x, out, k, In, inv);
     sx[t] = m / 32767.0f;
   }
 }
@@ -467,11 +485,7 @@ __attribute__((target("avx512f,avx512bw"), noinline)) void quantizeTokensInt16Av
         _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k / 2), _mm512_maskz_cvtepi32_epi16(kAll, a));
       }
     }
-    for (int k = kVec; k < In; k += 2) {
-      const auto q0 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k] * inv), -32767.0f, 32767.0f));
-      const auto q1 = static_cast<std::int32_t>(std::clamp(std::nearbyint(x[k + 1] * inv), -32767.0f, 32767.0f));
-      out[k / 2] = static_cast<std::int32_t>(static_cast<std::uint32_t>(q0 & 0xffff) | (static_cast<std::uint32_t>(q1) << 16));
-    }
+    quantizePairsScalar(x, out, kVec, In, inv);
     sx[t] = m / 32767.0f;
   }
 }
