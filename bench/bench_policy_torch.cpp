@@ -65,3 +65,35 @@ void BM_Policy_Libtorch(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(BM_Policy_Libtorch)->UseManualTime()->Unit(benchmark::kMicrosecond)->Iterations(1000);
+
+namespace {
+
+// BM_TrainStep_Paper/T: one training sequence of T ticks through the paper net, forward and
+// backward (the unit of work a rank does per global batch), one thread, random weights and inputs.
+void BM_TrainStep_Paper(benchmark::State& state) {
+  torch::set_num_threads(1);
+  torch::manual_seed(1);
+  nao::tools::PolicyNet net(nao::paperArch(), nao::Conditioning::kAutonomous);
+  net->train();
+  const std::int64_t ticks = state.range(0);
+  nao::tools::PolicyBatch b;
+  b.qn = torch::randn({1, ticks, 5});
+  b.an = torch::randn({1, ticks, 5});
+  b.rn = torch::zeros({1, ticks, 5});
+  b.movement = torch::zeros({1}, torch::kInt64);
+  b.length = torch::full({1}, ticks, torch::kInt64);
+  const torch::Tensor target = torch::randn({1, ticks, 5});
+  for (auto _ : state) {
+    for (auto& p : net->parameters()) p.mutable_grad() = torch::Tensor();
+    const torch::Tensor loss = (net->forward(b) - target).square().mean();
+    loss.backward();
+    benchmark::DoNotOptimize(loss.data_ptr<float>());
+  }
+  // Seconds per tick: constant if the cost is linear in the length.
+  state.counters["s_per_tick"] = benchmark::Counter(static_cast<double>(ticks), benchmark::Counter::kIsIterationInvariantRate |
+                                                                                    benchmark::Counter::kInvert);
+}
+
+}  // namespace
+
+BENCHMARK(BM_TrainStep_Paper)->Arg(50)->Arg(100)->Arg(150)->Arg(188)->Unit(benchmark::kMillisecond)->MinTime(2.0);

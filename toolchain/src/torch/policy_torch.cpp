@@ -53,12 +53,29 @@ torch::Tensor LayerNormImpl::forward(const torch::Tensor& x) const {
   return torch::layer_norm(x, {gain.size(0)}, gain, bias, 1e-5);
 }
 
-WindowMask windowMask(std::int64_t ticks, int joints, int window) {
-  const torch::Tensor tick = torch::arange(ticks, torch::kInt64).repeat_interleave(joints);  // tick of token
-  const torch::Tensor age = tick.unsqueeze(1) - tick.unsqueeze(0);                          // [query, key]
+WindowMask windowMask(std::int64_t ticks, int joints, int window, WindowLayout layout) {
   WindowMask m;
-  m.blocked = age.lt(0).logical_or(age.ge(window));
-  m.age = age.clamp(0, window - 1);
+  m.ticks = ticks;
+  m.joints = joints;
+  m.window = window;
+  const std::int64_t nb = (ticks + window - 1) / window;
+  const bool blocked = layout == WindowLayout::kBlocked ||
+                       (layout == WindowLayout::kAuto && nb * 2 * window * window < ticks * ticks);
+  if (!blocked) {
+    const torch::Tensor tick = torch::arange(ticks, torch::kInt64).repeat_interleave(joints);  // tick of token
+    const torch::Tensor age = tick.unsqueeze(1) - tick.unsqueeze(0);                          // [query, key]
+    m.blocked = age.lt(0).logical_or(age.ge(window));
+    m.age = age.clamp(0, window - 1);
+    return m;
+  }
+  m.blocks = nb;
+  // Query tick i of block b is tick bW + i; key tick k of the pair of blocks is (b−1)W + k.
+  const torch::Tensor q_tick = torch::arange(window, torch::kInt64).repeat_interleave(joints) + window;
+  const torch::Tensor k_tick = torch::arange(2 * window, torch::kInt64).repeat_interleave(joints);
+  const torch::Tensor age = q_tick.unsqueeze(1) - k_tick.unsqueeze(0);  // [W·J, 2W·J]
+  m.block_age = age.clamp(0, window - 1);
+  m.block_blocked = age.lt(0).logical_or(age.ge(window)).unsqueeze(0).repeat({nb, 1, 1});
+  m.block_blocked.select(0, 0).slice(1, 0, static_cast<std::int64_t>(window) * joints).fill_(true);  // before tick 0
   return m;
 }
 
@@ -86,6 +103,7 @@ torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor
 
 torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor& z, const WindowMask& mask,
                                      torch::Tensor* alpha, torch::Tensor* values) const {
+  if (mask.blocks > 0) return attendBlocked(x, z, mask, alpha, values);
   // [H, query, key]: the head's bias of the pair's age; blocked pairs -inf.
   const torch::Tensor bias =
       age_bias.index_select(1, mask.age.reshape({-1}))
@@ -109,6 +127,41 @@ torch::Tensor AttentionImpl::attend(const torch::Tensor& x, const torch::Tensor&
   if (alpha) *alpha = a;
   if (values) *values = v;
   const torch::Tensor o = a.matmul(v).transpose(1, 2).reshape({n_batch, n_query, d});
+  return o.matmul(wo).add(bo);
+}
+
+torch::Tensor AttentionImpl::attendBlocked(const torch::Tensor& x, const torch::Tensor& z, const WindowMask& mask,
+                                           torch::Tensor* alpha, torch::Tensor* values) const {
+  const std::int64_t n_batch = x.size(0), d = wq.size(0), d_h = d / heads;
+  const std::int64_t wj = static_cast<std::int64_t>(mask.window) * mask.joints, nb = mask.blocks;
+  const std::int64_t n_tok = mask.ticks * mask.joints, pad_end = nb * wj - n_tok;
+  // Queries [B,H,nb,WJ,d_h]; keys and values of blocks −1..nb−1 [B,H,nb+1,WJ,d_h], then each
+  // block's pair (b−1, b) side by side [B,H,nb,2WJ,d_h]. Padding tokens are zeros, always blocked.
+  const auto blocks = [&](const torch::Tensor& t, std::int64_t n) {
+    return t.view({n_batch, n, wj, heads, d_h}).permute({0, 3, 1, 2, 4});
+  };
+  const auto pairs = [&](const torch::Tensor& t) {
+    const torch::Tensor b = blocks(torch::constant_pad_nd(t, {0, 0, wj, pad_end}), nb + 1);
+    return torch::cat({b.slice(2, 0, nb), b.slice(2, 1, nb + 1)}, 3);
+  };
+  const torch::Tensor q = blocks(torch::constant_pad_nd(x.matmul(wq).add(bq), {0, 0, 0, pad_end}), nb);
+  const torch::Tensor v_tokens = z.matmul(wv).add(bv);
+  const torch::Tensor k = pairs(z.matmul(wk).add(bk)), v = pairs(v_tokens);
+  const torch::Tensor bias = age_bias.index_select(1, mask.block_age.reshape({-1}))
+                                 .view({heads, 1, wj, 2 * wj})
+                                 .expand({heads, nb, wj, 2 * wj})
+                                 .masked_fill(mask.block_blocked, -std::numeric_limits<float>::infinity());
+  const torch::Tensor scores = q.matmul(k.transpose(-2, -1)).div(std::sqrt(static_cast<double>(d_h))) + bias;
+  const torch::Tensor a = torch::softmax(scores, -1);  // [B,H,nb,WJ,2WJ]
+  if (alpha) {
+    // Back to the full layout's [B,H,T·J,T·J] (zeros outside the window), for the record.
+    torch::Tensor full = torch::zeros({n_batch, heads, nb * wj, (nb + 1) * wj}, a.options());
+    for (std::int64_t b = 0; b < nb; ++b)
+      full.slice(2, b * wj, (b + 1) * wj).slice(3, b * wj, (b + 2) * wj).copy_(a.select(2, b));
+    *alpha = full.slice(2, 0, n_tok).slice(3, wj, wj + n_tok);
+  }
+  if (values) *values = v_tokens.view({n_batch, n_tok, heads, d_h}).transpose(1, 2);
+  const torch::Tensor o = a.matmul(v).permute({0, 2, 3, 1, 4}).reshape({n_batch, nb * wj, d}).slice(1, 0, n_tok);
   return o.matmul(wo).add(bo);
 }
 
@@ -243,7 +296,7 @@ torch::Tensor PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttention* 
   torch::Tensor x = embed_in->forward(torch::stack({batch.qn, batch.an, rn}, -1));  // [B,T,J,d]
   x = x + joint_enc + movement_emb.index_select(0, batch.movement).view({n_batch, 1, 1, d}) + step_rows;
   x = x.reshape({n_batch, n_ticks * n_joints, d});
-  const WindowMask mask = windowMask(n_ticks, static_cast<int>(n_joints), static_cast<int>(window));
+  const WindowMask mask = windowMask(n_ticks, static_cast<int>(n_joints), static_cast<int>(window), window_layout);
   for (const EncoderLayer& layer : enc) x = layer->forward(x, mask);
   const torch::Tensor memory = enc_norm->forward(x);
 

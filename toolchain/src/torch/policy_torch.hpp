@@ -47,11 +47,27 @@ struct PolicyAttention {
 
 /// The sliding-window structure of T ticks: for query token (t, i) and key token (τ, j),
 /// age = t − τ; allowed iff 0 <= age < W.
+///
+/// Two layouts of the same attention. Full: every query against all T·J keys, the pairs outside
+/// the window blocked (cost and memory ∝ T²). Blocked: the ticks cut into nb blocks of W; the
+/// queries of block b only meet the keys of blocks b−1 and b (2W ticks, block −1 being padding
+/// before tick 0), which hold every key of their window (cost ∝ T). A blocked pair gets weight 0
+/// in both, so they are the same function; the float sums run over fewer zeros in the blocked one.
 struct WindowMask {
+  std::int64_t ticks = 0;
+  int joints = 0, window = 0;
+  std::int64_t blocks = 0;  ///< nb > 0: the blocked layout; 0: the full one
+  // Full layout:
   torch::Tensor age;      ///< [T·J, T·J] int64, clamped to 0..W-1
   torch::Tensor blocked;  ///< [T·J, T·J] bool: age < 0 or age >= W
+  // Blocked layout (query token i of a block against key token k of its blocks b−1, b):
+  torch::Tensor block_age;      ///< [W·J, 2W·J] int64, clamped to 0..W-1
+  torch::Tensor block_blocked;  ///< [nb, W·J, 2W·J] bool (block 0 also blocks its padding keys)
 };
-WindowMask windowMask(std::int64_t ticks, int joints, int window);
+enum class WindowLayout { kAuto, kFull, kBlocked };
+/// kAuto takes the blocked layout when its score count (nb·2W² per joint pair) is below the
+/// full one's (T²): from T ≈ 2.2 W on.
+WindowMask windowMask(std::int64_t ticks, int joints, int window, WindowLayout layout = WindowLayout::kAuto);
 
 /// x W + b with W stored [in, out] ("weight", "bias").
 class AffineImpl : public torch::nn::Module {
@@ -90,6 +106,8 @@ class AttentionImpl : public torch::nn::Module {
  private:
   torch::Tensor attend(const torch::Tensor& x, const torch::Tensor& z, const torch::Tensor& bias,
                        torch::Tensor* alpha, torch::Tensor* values) const;
+  torch::Tensor attendBlocked(const torch::Tensor& x, const torch::Tensor& z, const WindowMask& mask,
+                              torch::Tensor* alpha, torch::Tensor* values) const;
 };
 TORCH_MODULE(Attention);
 
@@ -163,6 +181,9 @@ class PolicyNetImpl : public torch::nn::Module {
   /// Autonomous mode: > 0 makes the step row of tick t floor(t·phase_ticks / L) for a
   /// demonstration of L samples (the movement's phase on a fixed grid) instead of t.
   std::int64_t phase_ticks = 0;
+  /// How forward() lays out the window attention (WindowMask): the same function either way;
+  /// kAuto takes the cheaper one for the sequence length.
+  WindowLayout window_layout = WindowLayout::kAuto;
 
   /// Autonomous mode over the linear AR baseline (docs/policy.md): act() adds linearArBase, so
   /// forward() learns the residual over the fitted per-movement, per-joint AR model. One model
