@@ -11,10 +11,10 @@ rank is what a batch would take with one free core per rank (a waiting rank slee
 kernel, it burns no CPU), so it is printed too, with the load average before and after.
 
 usage: bench/train_scaling.py DATA [--worlds 1 2] [--batches 10 40] [--tc build/bin/nao_toolchain]
-       bench/train_scaling.py DATA --epoch [--worlds 1 2]
+       bench/train_scaling.py DATA --epoch [--recipe autonomous|default] [--worlds 1 2]
 
---epoch times what the issue's target is about instead: one whole epoch of the committed
-autonomous recipe (toolchain/nao train autonomous, --epochs 1) per world size, from rank 0's
+--epoch times what the issue's target is about instead: one whole epoch of a committed model's
+recipe (toolchain/nao train autonomous or default, --epochs 1) per world size, from rank 0's
 own lines: the expert's rollouts before training, the epoch (batches, validation loss and the
 validation rollouts of --select rollout-dtw, whose share is printed too) and the whole run.
 """
@@ -64,15 +64,20 @@ def run(tc, data, world, batches, out_dir):
     return wall, cpu
 
 
-EPOCH_ARGS = ["--conditioning", "autonomous", "--lr", "1e-4", "--noisy-rollouts", "0", "--ar-residual",
-              "--select", "rollout-dtw"]
+# The committed models' recipes (toolchain/nao train), less the epoch count.
+RECIPES = {
+    "autonomous": ["--conditioning", "autonomous", "--lr", "1e-4", "--noisy-rollouts", "0", "--ar-residual",
+                   "--select", "rollout-dtw"],
+    "default": ["--conditioning", "reference", "--lr", "3e-4"],
+}
 
 
-def run_epoch(tc, data, world, out_dir):
-    """One epoch of the autonomous recipe; returns rank 0's (execution, epoch, rollouts, total) seconds."""
+def run_epoch(tc, data, world, out_dir, recipe):
+    """One epoch of a recipe; returns rank 0's (execution, epoch, rollouts, total) seconds
+    (rollouts: the validation rollouts of --select rollout-dtw, 0 without them)."""
     store = os.path.join(out_dir, f"store_epoch_{world}")
     base = [tc, "train", "--config", "paper", "--data", data, "--epochs", "1", "--seed", "1",
-            "--out", os.path.join(out_dir, f"e_{world}.bin")] + EPOCH_ARGS
+            "--out", os.path.join(out_dir, f"e_{world}.bin")] + RECIPES[recipe]
     procs = start_ranks(base, world, store)
     outs = [p.communicate()[0].decode() for p in procs]
     for r, p in enumerate(procs):
@@ -80,21 +85,21 @@ def run_epoch(tc, data, world, out_dir):
             sys.exit(f"rank {r} of world size {world} failed:\n" + outs[r])
     text = outs[0]
     execution = float(re.search(r"validation \(\d+ ticks\) in (\d+(?:\.\d+)?) s", text).group(1))
-    m = re.search(r"epoch 1/1 .*?  (\d+\.\d+) s \(rollouts (\d+\.\d+) s\)", text)
+    m = re.search(r"epoch 1/1 .*?  (\d+\.\d+) s(?: \(rollouts (\d+\.\d+) s\))?  ", text)
     total = float(re.search(r"ticks -> .*\), (\d+\.\d+) s", text).group(1))
-    return execution, float(m.group(1)), float(m.group(2)), total
+    return execution, float(m.group(1)), float(m.group(2) or 0.0), total
 
 
 def main_epoch(a):
     print(f"# {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, {os.cpu_count()} cores")
-    print(f"# command: bench/train_scaling.py {a.data} --epoch --worlds {' '.join(map(str, a.worlds))}")
-    print(f"# each rank: nao_toolchain train --config paper --epochs 1 --seed 1 {' '.join(EPOCH_ARGS)}")
+    print(f"# command: bench/train_scaling.py {a.data} --epoch --recipe {a.recipe} --worlds {' '.join(map(str, a.worlds))}")
+    print(f"# each rank: nao_toolchain train --config paper --epochs 1 --seed 1 {' '.join(RECIPES[a.recipe])}")
     print(f"# load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print("world  expert rollouts (s)  epoch (s)  of which rollouts (s)  run (s)  speed-up epoch  speed-up run")
     ref = None
     with tempfile.TemporaryDirectory(prefix="nao_scaling_") as d:
         for w in a.worlds:
-            ex, ep, ro, tot = run_epoch(a.tc, a.data, w, d)
+            ex, ep, ro, tot = run_epoch(a.tc, a.data, w, d, a.recipe)
             if ref is None:
                 ref = (ep, tot)
             print(f"{w:5d}  {ex:19.1f}  {ep:9.1f}  {ro:21.1f}  {tot:7.1f}  {ref[0] / ep:14.2f}  {ref[1] / tot:12.2f}",
@@ -108,7 +113,9 @@ def main():
     ap.add_argument("--worlds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--batches", type=int, nargs=2, default=[10, 40])
     ap.add_argument("--tc", default="build/bin/nao_toolchain")
-    ap.add_argument("--epoch", action="store_true", help="time one whole epoch of the autonomous recipe")
+    ap.add_argument("--epoch", action="store_true", help="time one whole epoch of a committed model's recipe")
+    ap.add_argument("--recipe", choices=sorted(RECIPES), default="autonomous",
+                    help="with --epoch: the recipe of models/autonomous.bin (default) or models/default.bin")
     a = ap.parse_args()
     if a.epoch:
         main_epoch(a)
