@@ -87,7 +87,8 @@ def run_epoch(tc, data, world, out_dir, recipe):
     execution = float(re.search(r"validation \(\d+ ticks\) in (\d+(?:\.\d+)?) s", text).group(1))
     m = re.search(r"epoch 1/1 .*?  (\d+\.\d+) s(?: \(rollouts (\d+\.\d+) s\))?  ", text)
     total = float(re.search(r"ticks -> .*\), (\d+\.\d+) s", text).group(1))
-    return execution, float(m.group(1)), float(m.group(2) or 0.0), total
+    line = re.search(r"epoch 1/1 [^\r\n]*", text).group(0).strip()
+    return execution, float(m.group(1)), float(m.group(2) or 0.0), total, line
 
 
 def main_epoch(a):
@@ -97,14 +98,17 @@ def main_epoch(a):
     print(f"# load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print("world  expert rollouts (s)  epoch (s)  of which rollouts (s)  run (s)  speed-up epoch  speed-up run")
     ref = None
+    lines = []
     with tempfile.TemporaryDirectory(prefix="nao_scaling_") as d:
         for w in a.worlds:
-            ex, ep, ro, tot = run_epoch(a.tc, a.data, w, d, a.recipe)
+            ex, ep, ro, tot, line = run_epoch(a.tc, a.data, w, d, a.recipe)
             if ref is None:
                 ref = (ep, tot)
             print(f"{w:5d}  {ex:19.1f}  {ep:9.1f}  {ro:21.1f}  {tot:7.1f}  {ref[0] / ep:14.2f}  {ref[1] / tot:12.2f}",
                   flush=True)
+            lines.append(f"#   world {w}, rank 0: {line}")
     print(f"# load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print("\n".join(lines))
 
 
 def main():
