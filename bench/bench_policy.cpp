@@ -13,6 +13,8 @@
 //                          bandwidth, measured in the same run
 //   BM_Policy_Cold_* / BM_Policy_Int8_Cold_* / BM_WeightStream_Cold  the same after evicting the
 //                          caches before every iteration (untimed): the weights come from DRAM
+//   BM_MulAddFloor         the arithmetic limit: as many separately rounded multiply-adds as a
+//                          step does (matrix weights × 5 tokens), from registers, widest width
 //   BM_WeightStream_Eigen  the same bytes read by Eigen's vectorised sum (the limit quoted before
 //                          2026-11-26: 10-25 % slower than the prefetched read on this machine)
 // BM_Policy_Libtorch (bench_policy_torch.cpp) is libtorch eager on the same weights.
@@ -187,6 +189,105 @@ void runWeightStream(benchmark::State& state, bool best, bool cold = false) {
   state.SetLabel(how);
 }
 
+/// Independent chains a = a + x·y per width: more than latency × pipes of the multiply and of the
+/// add, so the issue rate limits, not a chain.
+constexpr int kMulAddChains = 12;
+
+#if NAO_POLICY_HAVE_AVX2
+/// `iters` rounds of kMulAddChains chains of 16 lanes, the multiply and the add separately
+/// rounded (as every policy kernel computes: -ffp-contract=off, no FMA), from registers.
+
+__attribute__((target("avx512f"), noinline)) float mulAddAvx512(std::int64_t iters, float seed) {
+  __m512 a[kMulAddChains], x[kMulAddChains];
+  for (int k = 0; k < kMulAddChains; ++k) {
+    a[k] = _mm512_set1_ps(seed * static_cast<float>(k));
+    x[k] = _mm512_set1_ps(1.0f + seed * static_cast<float>(k));
+  }
+  const __m512 y = _mm512_set1_ps(0.999f);
+  for (std::int64_t i = 0; i < iters; ++i)
+    for (int k = 0; k < kMulAddChains; ++k) a[k] = _mm512_add_ps(a[k], _mm512_mul_ps(x[k], y));
+  for (int k = 1; k < kMulAddChains; ++k) a[0] = _mm512_add_ps(a[0], a[k]);
+  alignas(64) float lanes[16];
+  _mm512_store_ps(lanes, a[0]);  // not _mm512_reduce_add_ps: GCC 12 warns inside it
+  float s = 0.0f;
+  for (float v : lanes) s += v;
+  return s;
+}
+
+__attribute__((target("avx2"), noinline)) float mulAddAvx2(std::int64_t iters, float seed) {
+  __m256 a[kMulAddChains], x[kMulAddChains];
+  for (int k = 0; k < kMulAddChains; ++k) {
+    a[k] = _mm256_set1_ps(seed * static_cast<float>(k));
+    x[k] = _mm256_set1_ps(1.0f + seed * static_cast<float>(k));
+  }
+  const __m256 y = _mm256_set1_ps(0.999f);
+  for (std::int64_t i = 0; i < iters; ++i)
+    for (int k = 0; k < kMulAddChains; ++k) a[k] = _mm256_add_ps(a[k], _mm256_mul_ps(x[k], y));
+  for (int k = 1; k < kMulAddChains; ++k) a[0] = _mm256_add_ps(a[0], a[k]);
+  alignas(32) float lanes[8];
+  _mm256_store_ps(lanes, a[0]);
+  float s = 0.0f;
+  for (float v : lanes) s += v;
+  return s;
+}
+#endif
+
+/// BM_MulAddFloor: the arithmetic limit of the fp32 step, beside BM_WeightStream's read limit.
+/// A step multiplies every weight of the model's matrices by each of the tick's J = 5 tokens
+/// and adds the product (a weight is read once and used J times); this issues that many
+/// separately rounded multiply-adds at the CPU's widest kernel width with nothing to load.
+/// Neither limit includes the other: a step takes at least the larger of the two.
+void runMulAddFloor(benchmark::State& state) {
+  if (!haveModel(state)) return;
+  const ModelFile& model = paperModel();
+  std::int64_t weights = 0;
+  for (const auto& t : model.tensors) {
+    const std::string& n = t.spec.name;
+    const bool matrix = t.spec.shape.size() == 2 && n.find("age_bias") == std::string::npos &&
+                        n.rfind("embed.", 0) != 0;  // embeddings are looked up, not multiplied
+    if (matrix) weights += static_cast<std::int64_t>(t.spec.count());
+  }
+  const std::int64_t mul_adds = weights * 5;
+  int lanes = 4;
+#if NAO_POLICY_HAVE_AVX2
+  if (policyKernelSupported(PolicyKernel::kAvx512))
+    lanes = 16;
+  else if (policyKernelSupported(PolicyKernel::kAvx2))
+    lanes = 8;
+#endif
+  const std::int64_t iters = mul_adds / (static_cast<std::int64_t>(lanes) * kMulAddChains);
+  Percentiles rec;
+  float seed = 1e-7f;
+  for (auto _ : state) {
+    const BenchClock::time_point t0 = BenchClock::now();
+    float s = 0.0f;
+#if NAO_POLICY_HAVE_AVX2
+    if (lanes == 16) s = mulAddAvx512(iters, seed);
+    else if (lanes == 8) s = mulAddAvx2(iters, seed);
+#endif
+    if (lanes == 4) {
+      // SSE2 baseline through Eigen's packets.
+      Eigen::Array4f a[kMulAddChains], x[kMulAddChains];
+      for (int k = 0; k < kMulAddChains; ++k) {
+        a[k] = Eigen::Array4f::Constant(seed * static_cast<float>(k));
+        x[k] = Eigen::Array4f::Constant(1.0f + seed * static_cast<float>(k));
+      }
+      for (std::int64_t i = 0; i < iters; ++i)
+        for (int k = 0; k < kMulAddChains; ++k) a[k] = a[k] + x[k] * 0.999f;
+      for (int k = 0; k < kMulAddChains; ++k) s += a[k].sum();
+    }
+    benchmark::DoNotOptimize(s);
+    const double sec = secondsSince(t0);
+    state.SetIterationTime(sec);
+    rec.add(sec);
+    seed += 1e-9f;
+  }
+  rec.report(state);
+  state.counters["mul_adds_M"] = static_cast<double>(mul_adds) / 1e6;
+  state.counters["G_mul_add_per_s"] = static_cast<double>(mul_adds) / 1e3 / state.counters["p50_us"];
+  state.SetLabel(lanes == 16 ? "avx512" : lanes == 8 ? "avx2" : "sse");
+}
+
 /// One row per registered benchmark: kernel forced (none: the runtime's choice), int8 weights,
 /// caches evicted before every iteration (cold: 200 iterations, each eviction writes 128 MB).
 struct PolicyCase {
@@ -243,6 +344,7 @@ const bool kRegistered = [] {
       if (c.cold == cold)
         timed(benchmark::RegisterBenchmark(c.name, [c](benchmark::State& state) { runWeightStream(state, c.best, c.cold); }),
               cold);
+    if (!cold) timed(benchmark::RegisterBenchmark("BM_MulAddFloor", runMulAddFloor), false);
   }
   return true;
 }();
