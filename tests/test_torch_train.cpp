@@ -145,56 +145,64 @@ TEST_CASE("a later tick never changes an earlier action (causal in time), a whol
 
 TEST_CASE("the blocked layout of the window attention is the full one: outputs, gradients and the attention record") {
   torch::manual_seed(9);
-  const PolicyArch arch = smallArch();
-  PolicyNet net(arch, Conditioning::kAutonomous);
-  {
-    // Non-zero biases and age biases, so that a misplaced age or block shows.
-    torch::NoGradGuard no_grad;
-    for (auto& p : net->parameters())
-      if (p.dim() == 1 || p.size(-1) == arch.window) p.add_(torch::randn_like(p) * 0.3);
-  }
-  const std::int64_t w = arch.window;
-  const std::vector<torch::Tensor> params = net->trainableParameters();
   const auto maxAbs = [](const torch::Tensor& t) { return t.abs().max().item<double>(); };
-  // 1 tick, less than a block, a block, a block and a bit, several with a ragged end.
-  for (const std::int64_t n_ticks : {std::int64_t{1}, w - 1, w, w + 1, 2 * w + 3, 5 * w + 2}) {
-    CAPTURE(n_ticks);
-    PolicyBatch in{torch::randn({2, n_ticks, 5}), torch::randn({2, n_ticks, 5}), torch::randn({2, n_ticks, 5}),
-                   torch::tensor({0, 2}, torch::kInt64), torch::Tensor()};
-    const torch::Tensor target = torch::randn({2, n_ticks, 5});
-    torch::Tensor out[2];
-    std::vector<torch::Tensor> grad[2];
-    PolicyAttention att[2];
-    const WindowLayout layouts[2] = {WindowLayout::kFull, WindowLayout::kBlocked};
-    for (int l = 0; l < 2; ++l) {
-      net->window_layout = layouts[l];
-      for (const torch::Tensor& p : params) p.mutable_grad() = torch::Tensor();
-      out[l] = net->forward(in);
-      (out[l] - target).square().mean().backward();
-      for (const torch::Tensor& p : params) grad[l].push_back(p.grad().clone());
+  // The small architecture's window, and windows of 1 tick (a block is one tick) and 3.
+  for (const int window : {smallArch().window, 1, 3}) {
+    CAPTURE(window);
+    PolicyArch arch = smallArch();
+    arch.window = window;
+    PolicyNet net(arch, Conditioning::kAutonomous);
+    const std::vector<torch::Tensor> params = net->trainableParameters();
+    const std::int64_t w = window;
+    const auto isAgeBias = [&](const torch::Tensor& p) { return p.dim() == 2 && p.size(0) == arch.heads && p.size(1) == w; };
+    {
+      // Non-zero biases and age biases, so that a misplaced age or block shows.
       torch::NoGradGuard no_grad;
-      net->forward(in, &att[l]);
+      for (auto& p : net->parameters())
+        if (p.dim() == 1 || isAgeBias(p)) p.add_(torch::randn_like(p) * 0.3);
     }
-    net->window_layout = WindowLayout::kAuto;
-    CHECK(maxAbs(out[0]) > 0.1);
-    CHECK(maxAbs(out[0] - out[1]) < 1e-5);
-    // Float sums over other counts of exact zeros: rounding apart, the same gradient. Some are
-    // zero but for rounding (a key bias shifts every score of a query alike), so the measure is
-    // the whole gradient's norm.
-    double diff2 = 0.0, norm2 = 0.0, age_bias_grad = 0.0;
-    for (std::size_t i = 0; i < params.size(); ++i) {
-      diff2 += (grad[0][i] - grad[1][i]).square().sum().item<double>();
-      norm2 += grad[0][i].square().sum().item<double>();
-      if (params[i].dim() == 2 && params[i].size(1) == w) age_bias_grad = std::max(age_bias_grad, maxAbs(grad[0][i]));
+    // 1 tick, less than a block, a block, a block and a bit, several with a ragged end.
+    for (const std::int64_t n_ticks : {std::int64_t{1}, std::max<std::int64_t>(w - 1, 1), w, w + 1, 2 * w + 3, 5 * w + 2}) {
+      CAPTURE(n_ticks);
+      PolicyBatch in{torch::randn({2, n_ticks, 5}), torch::randn({2, n_ticks, 5}), torch::randn({2, n_ticks, 5}),
+                     torch::tensor({0, 2}, torch::kInt64), torch::Tensor()};
+      const torch::Tensor target = torch::randn({2, n_ticks, 5});
+      torch::Tensor out[2];
+      std::vector<torch::Tensor> grad[2];
+      PolicyAttention att[2];
+      const WindowLayout layouts[2] = {WindowLayout::kFull, WindowLayout::kBlocked};
+      for (int l = 0; l < 2; ++l) {
+        net->window_layout = layouts[l];
+        for (const torch::Tensor& p : params) p.mutable_grad() = torch::Tensor();
+        out[l] = net->forward(in);
+        (out[l] - target).square().mean().backward();
+        for (const torch::Tensor& p : params) grad[l].push_back(p.grad().clone());
+        torch::NoGradGuard no_grad;
+        net->forward(in, &att[l]);
+      }
+      net->window_layout = WindowLayout::kAuto;
+      CHECK(maxAbs(out[0]) > 0.1);
+      CHECK(maxAbs(out[0] - out[1]) < 1e-5);
+      // Float sums over other counts of exact zeros: rounding apart, the same gradient. Some are
+      // zero but for rounding (a key bias shifts every score of a query alike), so the measure
+      // is the whole gradient's norm.
+      double diff2 = 0.0, norm2 = 0.0, age_bias_grad = 0.0;
+      for (std::size_t i = 0; i < params.size(); ++i) {
+        diff2 += (grad[0][i] - grad[1][i]).square().sum().item<double>();
+        norm2 += grad[0][i].square().sum().item<double>();
+        if (isAgeBias(params[i])) age_bias_grad = std::max(age_bias_grad, maxAbs(grad[0][i]));
+      }
+      CHECK(std::sqrt(diff2 / norm2) < 1e-6);
+      // The age biases learn once a window holds older ticks (with W = 1 there is only age 0,
+      // a shift of every score alike).
+      if (n_ticks > 1 && w > 1) CHECK(age_bias_grad > 1e-6);
+      for (std::size_t k = 0; k < att[0].cross.size(); ++k) CHECK(maxAbs(att[0].cross[k] - att[1].cross[k]) < 1e-6);
+      CHECK(maxAbs(att[0].age_profile - att[1].age_profile) < 1e-6);
+      CHECK(maxAbs(att[0].score - att[1].score) <= 1e-5 * maxAbs(att[0].score));
     }
-    CHECK(std::sqrt(diff2 / norm2) < 1e-6);
-    // The age biases learn from every sequence longer than a tick (older ticks in the window).
-    if (n_ticks > 1) CHECK(age_bias_grad > 1e-6);
-    for (std::size_t k = 0; k < att[0].cross.size(); ++k) CHECK(maxAbs(att[0].cross[k] - att[1].cross[k]) < 1e-6);
-    CHECK(maxAbs(att[0].age_profile - att[1].age_profile) < 1e-6);
-    CHECK(maxAbs(att[0].score - att[1].score) <= 1e-5 * maxAbs(att[0].score));
   }
   // The automatic choice: the full layout for short sequences, blocks of W from ~2.2 W on.
+  const std::int64_t w = smallArch().window;
   CHECK(windowMask(2 * w, 5, static_cast<int>(w)).blocks == 0);
   CHECK(windowMask(3 * w, 5, static_cast<int>(w)).blocks == 3);
   CHECK(windowMask(3 * w + 1, 5, static_cast<int>(w)).blocks == 4);
