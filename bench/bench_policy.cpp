@@ -193,42 +193,42 @@ void runWeightStream(benchmark::State& state, bool best, bool cold = false) {
 /// add, so the issue rate limits, not a chain.
 constexpr int kMulAddChains = 12;
 
-#if NAO_POLICY_HAVE_AVX2
-/// `iters` rounds of kMulAddChains chains of 16 lanes, the multiply and the add separately
-/// rounded (as every policy kernel computes: -ffp-contract=off, no FMA), from registers.
+typedef float Float4 __attribute__((vector_size(16)));
+typedef float Float8 __attribute__((vector_size(32)));
+typedef float Float16 __attribute__((vector_size(64)));
 
-__attribute__((target("avx512f"), noinline)) float mulAddAvx512(std::int64_t iters, float seed) {
-  __m512 a[kMulAddChains], x[kMulAddChains];
+/// `iters` rounds of kMulAddChains chains of L lanes (V: a GCC vector of L floats), the multiply
+/// and the add separately rounded (as every policy kernel computes: -ffp-contract=off, no FMA),
+/// from registers. Inlined into a wrapper compiled for the width's instruction set.
+template <class V, int L>
+__attribute__((always_inline)) inline float mulAddChains(std::int64_t iters, float seed) {
+  V a[kMulAddChains], x[kMulAddChains];
   for (int k = 0; k < kMulAddChains; ++k) {
-    a[k] = _mm512_set1_ps(seed * static_cast<float>(k));
-    x[k] = _mm512_set1_ps(1.0f + seed * static_cast<float>(k));
+    a[k] = V{} + seed * static_cast<float>(k);
+    x[k] = V{} + (1.0f + seed * static_cast<float>(k));
   }
-  const __m512 y = _mm512_set1_ps(0.999f);
-  for (std::int64_t i = 0; i < iters; ++i)
-    for (int k = 0; k < kMulAddChains; ++k) a[k] = _mm512_add_ps(a[k], _mm512_mul_ps(x[k], y));
-  for (int k = 1; k < kMulAddChains; ++k) a[0] = _mm512_add_ps(a[0], a[k]);
-  alignas(64) float lanes[16];
-  _mm512_store_ps(lanes, a[0]);  // not _mm512_reduce_add_ps: GCC 12 warns inside it
+  // y shrinks by one ulp-sized factor every round, so no product is loop-invariant (a compiler
+  // hoists x·y otherwise and times the adds alone); one multiply per round on top of the
+  // kMulAddChains multiply-adds.
+  V y = V{} + 0.999f;
+  const V decay = V{} + (1.0f - 0x1p-23f);
+  for (std::int64_t i = 0; i < iters; ++i) {
+    for (int k = 0; k < kMulAddChains; ++k) a[k] = a[k] + x[k] * y;
+    y = y * decay;
+  }
+  for (int k = 1; k < kMulAddChains; ++k) a[0] = a[0] + a[k];
   float s = 0.0f;
-  for (float v : lanes) s += v;
+  for (int i = 0; i < L; ++i) s += a[0][i];
   return s;
 }
 
+__attribute__((noinline)) float mulAddSse(std::int64_t iters, float seed) { return mulAddChains<Float4, 4>(iters, seed); }
+#if NAO_POLICY_HAVE_AVX2
 __attribute__((target("avx2"), noinline)) float mulAddAvx2(std::int64_t iters, float seed) {
-  __m256 a[kMulAddChains], x[kMulAddChains];
-  for (int k = 0; k < kMulAddChains; ++k) {
-    a[k] = _mm256_set1_ps(seed * static_cast<float>(k));
-    x[k] = _mm256_set1_ps(1.0f + seed * static_cast<float>(k));
-  }
-  const __m256 y = _mm256_set1_ps(0.999f);
-  for (std::int64_t i = 0; i < iters; ++i)
-    for (int k = 0; k < kMulAddChains; ++k) a[k] = _mm256_add_ps(a[k], _mm256_mul_ps(x[k], y));
-  for (int k = 1; k < kMulAddChains; ++k) a[0] = _mm256_add_ps(a[0], a[k]);
-  alignas(32) float lanes[8];
-  _mm256_store_ps(lanes, a[0]);
-  float s = 0.0f;
-  for (float v : lanes) s += v;
-  return s;
+  return mulAddChains<Float8, 8>(iters, seed);
+}
+__attribute__((target("avx512f"), noinline)) float mulAddAvx512(std::int64_t iters, float seed) {
+  return mulAddChains<Float16, 16>(iters, seed);
 }
 #endif
 
@@ -236,7 +236,7 @@ __attribute__((target("avx2"), noinline)) float mulAddAvx2(std::int64_t iters, f
 /// A step multiplies every weight of the model's matrices by each of the tick's J = 5 tokens
 /// and adds the product (a weight is read once and used J times); this issues that many
 /// separately rounded multiply-adds at the CPU's widest kernel width with nothing to load.
-/// Neither limit includes the other: a step takes at least the larger of the two.
+/// A step takes at least the larger of this and the read.
 void runMulAddFloor(benchmark::State& state) {
   if (!haveModel(state)) return;
   const ModelFile& model = paperModel();
@@ -263,19 +263,9 @@ void runMulAddFloor(benchmark::State& state) {
     float s = 0.0f;
 #if NAO_POLICY_HAVE_AVX2
     if (lanes == 16) s = mulAddAvx512(iters, seed);
-    else if (lanes == 8) s = mulAddAvx2(iters, seed);
+    if (lanes == 8) s = mulAddAvx2(iters, seed);
 #endif
-    if (lanes == 4) {
-      // SSE2 baseline through Eigen's packets.
-      Eigen::Array4f a[kMulAddChains], x[kMulAddChains];
-      for (int k = 0; k < kMulAddChains; ++k) {
-        a[k] = Eigen::Array4f::Constant(seed * static_cast<float>(k));
-        x[k] = Eigen::Array4f::Constant(1.0f + seed * static_cast<float>(k));
-      }
-      for (std::int64_t i = 0; i < iters; ++i)
-        for (int k = 0; k < kMulAddChains; ++k) a[k] = a[k] + x[k] * 0.999f;
-      for (int k = 0; k < kMulAddChains; ++k) s += a[k].sum();
-    }
+    if (lanes == 4) s = mulAddSse(iters, seed);
     benchmark::DoNotOptimize(s);
     const double sec = secondsSince(t0);
     state.SetIterationTime(sec);
