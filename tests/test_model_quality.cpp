@@ -15,6 +15,7 @@
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -54,8 +55,16 @@ Scores score(const std::string& path) {
   for (std::size_t m = 0; m < model.header.movement_names.size(); ++m)
     for (int k = 0; k < PaperPolicyDims::kClusters; ++k)
       centroid_map[model.header.movement_names[m]].push_back(centroid(w, static_cast<int>(m), k).cast<double>());
+  // A model trained at a canonical pace (docs/policy.md) was validated on its validation
+  // demonstrations paced onto its templates (training demonstrations, regenerated here too).
+  std::vector<std::string> names = val;
+  const nlohmann::json* pace = nullptr;
+  if (meta.at("training").contains("canonical_pace")) {
+    pace = &meta.at("training").at("canonical_pace");
+    for (const auto& t : pace->at("templates")) names.push_back(t.get<std::string>());
+  }
   std::vector<tools::PolicyDemo> demos;
-  for (const std::string& name : val) {
+  for (const std::string& name : names) {
     const std::size_t cut = name.rfind('_');
     const std::string movement = name.substr(0, cut);
     const int index = std::stoi(name.substr(cut + 1));
@@ -81,9 +90,24 @@ Scores score(const std::string& path) {
     demos.push_back(d);
   }
   // The validation rollouts as training makes them: executed on the simulated arm, clean.
-  const tools::PolicyData data = tools::makePolicyData(centroid_map, demos);
+  tools::PolicyData data = tools::makePolicyData(centroid_map, demos);
+  if (pace) {
+    std::vector<int> templates;
+    for (std::size_t m = 0; m < data.movement_names.size(); ++m) {
+      const std::string t = pace->at("templates").at(m).get<std::string>();
+      int index = -1;
+      for (std::size_t i = 0; i < data.demos.size(); ++i)
+        if (data.demos[i].name == t) index = static_cast<int>(i);
+      REQUIRE(index >= 0);
+      CHECK(data.demos[static_cast<std::size_t>(index)].f.size() == pace->at("ticks").at(m).get<std::size_t>());
+      templates.push_back(index);
+    }
+    data = tools::pacedData(data, templates, tools::parsePaceMethod(pace->at("method").get<std::string>()));
+  }
   std::vector<int> all;
-  for (std::size_t i = 0; i < data.demos.size(); ++i) all.push_back(static_cast<int>(i));
+  for (std::size_t i = 0; i < data.demos.size(); ++i)
+    if (std::find(val.begin(), val.end(), data.demos[i].name) != val.end()) all.push_back(static_cast<int>(i));
+  REQUIRE(all.size() == val.size());
   tools::ExecutionOptions clean;
   clean.noisy_rollouts = 0;
   const std::vector<tools::PolicySequence> seqs =

@@ -14,6 +14,7 @@
 #include <fstream>
 #include <functional>
 #include <map>
+#include <optional>
 #include <random>
 #include <set>
 
@@ -142,6 +143,144 @@ TEST_CASE("the standard movements get indices elbow = 0, whole_arm = 1, wrist = 
   CHECK(data.movement_names == std::vector<std::string>{"elbow", "whole_arm", "wrist"});
   for (const PolicyDemo& d : data.demos)
     CHECK(data.movement_names[static_cast<std::size_t>(d.movement)] + "_000" == d.name);
+}
+
+TEST_CASE("canonical pace: a trajectory resampled linearly into the pace's ticks, then held, its length unchanged") {
+  // A ramp f(t) = f0 + t·v: linear interpolation of it is exact, so the paced ramp is
+  // f0 + t·(n−1)/(l−1)·v for t < l, whatever the rounding of the sample index.
+  const JointVector f0 = jv(0.1, -0.2, 0.3, 0.4, -0.5), v = jv(0.01, 0.02, -0.03, 0.005, 0.0);
+  const int n = 37;
+  std::vector<JointVector> ramp;
+  for (int t = 0; t < n; ++t) ramp.push_back(f0 + static_cast<double>(t) * v);
+  for (const int l : {2, 3, 10, 19, 36}) {
+    CAPTURE(l);
+    const std::vector<JointVector> p = pacedTrajectory(ramp, l);
+    REQUIRE(p.size() == ramp.size());
+    CHECK(p.front() == ramp.front());
+    for (int t = 0; t < n; ++t) {
+      const double u = t < l ? static_cast<double>(t) * (n - 1) / (l - 1) : n - 1.0;
+      CHECK((p[static_cast<std::size_t>(t)] - (f0 + u * v)).cwiseAbs().maxCoeff() < 1e-12);
+    }
+    // The movement is over at sample l − 1 and held from there.
+    CHECK(p[static_cast<std::size_t>(l - 1)] == ramp.back());
+  }
+  // A pace at least the length leaves the trajectory as it is; a curve keeps its samples'
+  // values where the resampling lands on one (t·(n−1) a multiple of l − 1).
+  const std::vector<JointVector> w = wave(1, 2, 41);
+  CHECK(pacedTrajectory(w, 41) == w);
+  CHECK(pacedTrajectory(w, 500) == w);
+  const std::vector<JointVector> half = pacedTrajectory(w, 21);  // u = 2t
+  for (int t = 0; t < 21; ++t) CHECK(half[static_cast<std::size_t>(t)] == w[static_cast<std::size_t>(2 * t)]);
+  for (int t = 21; t < 41; ++t) CHECK(half[static_cast<std::size_t>(t)] == w.back());
+  CHECK_THROWS_AS(pacedTrajectory(w, 1), UserError);
+}
+
+TEST_CASE("DTW pace: a time-warped copy is warped back onto its template, loops lined up") {
+  // The template: two loops of a circle in joints 1 and 2 over 60 samples. The demonstration: the
+  // same path on a clock that runs slow, then fast (clock(x) = template time of demonstration time
+  // x), 80 samples: the warp's slope is 1.91 then 1.03, inside the bounds [1/2, 2].
+  const int l = 60, n = 80;
+  const auto pose = [](double s) {  // s in [0, 1]: two loops
+    return jv(0.2 + 0.3 * s, 0.4 * std::sin(4.0 * M_PI * s), 0.4 * std::cos(4.0 * M_PI * s), -0.1, 0.05 * s);
+  };
+  std::vector<JointVector> tmpl, f;
+  for (int k = 0; k < l; ++k) tmpl.push_back(pose(static_cast<double>(k) / (l - 1)));
+  const auto clock = [](double x) { return x < 0.5 ? 0.7 * x : 0.35 + 1.3 * (x - 0.5); };  // [0,1] -> [0,1]
+  for (int t = 0; t < n; ++t) f.push_back(pose(clock(static_cast<double>(t) / (n - 1))));
+
+  const std::optional<std::vector<double>> warp = dtwWarp(f, tmpl);
+  REQUIRE(warp);
+  const std::vector<double>& u = *warp;
+  REQUIRE(u.size() == static_cast<std::size_t>(l));
+  CHECK(u.front() == 0.0);
+  CHECK(u.back() == n - 1.0);
+  CHECK(std::is_sorted(u.begin(), u.end()));
+  // The warp inverts the clock: template sample k sits at f's sample clock^-1(k/(l−1))·(n−1),
+  // within the grids' resolution (a few samples).
+  const auto inverse = [](double y) { return y < 0.35 ? y / 0.7 : 0.5 + (y - 0.35) / 1.3; };
+  double worst_u = 0.0;
+  for (int k = 0; k < l; ++k)
+    worst_u = std::max(worst_u, std::abs(u[static_cast<std::size_t>(k)] - inverse(static_cast<double>(k) / (l - 1)) * (n - 1)));
+  CHECK(worst_u < 3.0);
+
+  // Paced by DTW, the demonstration lies on the template sample by sample (the loops line up);
+  // paced linearly it does not (its clock is not linear).
+  const std::vector<JointVector> dtw = pacedTrajectory(f, tmpl, PaceMethod::kDtw);
+  const std::vector<JointVector> lin = pacedTrajectory(f, tmpl, PaceMethod::kLinear);
+  REQUIRE(dtw.size() == f.size());
+  CHECK(lin == pacedTrajectory(f, l));
+  double worst_dtw = 0.0, worst_lin = 0.0;
+  for (int k = 0; k < l; ++k) {
+    worst_dtw = std::max(worst_dtw, (dtw[static_cast<std::size_t>(k)] - tmpl[static_cast<std::size_t>(k)]).norm());
+    worst_lin = std::max(worst_lin, (lin[static_cast<std::size_t>(k)] - tmpl[static_cast<std::size_t>(k)]).norm());
+  }
+  CHECK(worst_dtw < 0.1);
+  CHECK(worst_lin > 0.4);
+  CHECK(dtw.front() == f.front());
+  for (int t = l - 1; t < n; ++t) CHECK(dtw[static_cast<std::size_t>(t)] == f.back());
+  // A demonstration no longer than its template is left as it is; a trajectory onto itself is itself.
+  CHECK(pacedTrajectory(tmpl, f, PaceMethod::kDtw) == tmpl);
+  CHECK(pacedTrajectory(tmpl, tmpl, PaceMethod::kDtw) == tmpl);
+  const std::optional<std::vector<double>> self = dtwWarp(tmpl, tmpl);
+  REQUIRE(self);
+  for (int k = 0; k < l; ++k) CHECK((*self)[static_cast<std::size_t>(k)] == doctest::Approx(k).epsilon(1e-12));
+  // The slope bound: every step of the warp within [1/2, 2]; a demonstration more than twice as
+  // long as its template has no warp, and is paced linearly instead.
+  for (int k = 1; k < l; ++k) {
+    CHECK(u[static_cast<std::size_t>(k)] - u[static_cast<std::size_t>(k - 1)] <= 2.0 + 1e-12);
+    CHECK(u[static_cast<std::size_t>(k)] - u[static_cast<std::size_t>(k - 1)] >= 0.5 - 1e-12);
+  }
+  std::vector<JointVector> slow;
+  for (int t = 0; t < 2 * l; ++t) slow.push_back(pose(static_cast<double>(t) / (2 * l - 1)));
+  CHECK_FALSE(dtwWarp(slow, tmpl));
+  CHECK(dtwWarp(std::vector<JointVector>(slow.begin(), slow.begin() + 2 * l - 1), tmpl));  // 2 (L − 1) + 1 samples
+  CHECK(pacedTrajectory(slow, tmpl, PaceMethod::kDtw) == pacedTrajectory(slow, l));
+  CHECK_THROWS_AS(dtwWarp({f.front()}, tmpl), UserError);
+  CHECK(parsePaceMethod("dtw") == PaceMethod::kDtw);
+  CHECK(std::string(paceMethodName(PaceMethod::kLinear)) == "linear");
+  CHECK_THROWS_AS(parsePaceMethod("fast"), UserError);
+}
+
+TEST_CASE("canonical pace of a data set: each movement onto its template, names, times and lengths unchanged") {
+  const PolicyData data = standardSet(3);  // lengths 20, 23, 26 per movement
+  const std::vector<int> all = allDemos(data);
+  // The shortest listed demonstration of each movement (index 0 of each, 20 samples).
+  const std::vector<int> tmpl = paceTemplates(data, all);
+  REQUIRE(tmpl.size() == 3);
+  for (int m = 0; m < 3; ++m) {
+    CHECK(data.demos[static_cast<std::size_t>(tmpl[static_cast<std::size_t>(m)])].movement == m);
+    CHECK(data.demos[static_cast<std::size_t>(tmpl[static_cast<std::size_t>(m)])].f.size() == 20);
+  }
+  // Only the listed demonstrations count: without the index-0 demos, the 23-sample ones.
+  std::vector<int> later;
+  for (int d : all)
+    if (data.demos[static_cast<std::size_t>(d)].name.back() != '0') later.push_back(d);
+  for (int t : paceTemplates(data, later)) CHECK(data.demos[static_cast<std::size_t>(t)].f.size() == 23);
+  CHECK(paceTemplates(data, {}) == std::vector<int>{-1, -1, -1});
+
+  for (const PaceMethod method : {PaceMethod::kLinear, PaceMethod::kDtw}) {
+    CAPTURE(paceMethodName(method));
+    const PolicyData p = pacedData(data, tmpl, method);
+    REQUIRE(p.demos.size() == data.demos.size());
+    CHECK(p.movement_names == data.movement_names);
+    for (std::size_t i = 0; i < p.demos.size(); ++i) {
+      const PolicyDemo &a = data.demos[i], &b = p.demos[i];
+      CAPTURE(a.name);
+      CHECK(b.name == a.name);
+      CHECK(b.t_s == a.t_s);
+      const std::vector<JointVector>& t = data.demos[static_cast<std::size_t>(tmpl[static_cast<std::size_t>(a.movement)])].f;
+      CHECK(b.f == pacedTrajectory(a.f, t, method));
+      REQUIRE(b.label.size() == a.label.size());
+      // The held tail carries the last sample's label.
+      for (std::size_t k = std::min(a.f.size(), t.size()); k < b.label.size(); ++k) CHECK(b.label[k] == a.label.back());
+    }
+    // The result is a valid data set, and pacing changes its fingerprint.
+    CHECK_NOTHROW(makePolicyData({{"elbow", data.centroids[0]}, {"whole_arm", data.centroids[1]}, {"wrist", data.centroids[2]}}, p.demos));
+    CHECK(dataFingerprint(p) != dataFingerprint(data));
+  }
+  CHECK_THROWS_AS(pacedData(data, {tmpl[0], tmpl[1]}, PaceMethod::kLinear), UserError);
+  CHECK_THROWS_AS(pacedData(data, {tmpl[0], tmpl[0], tmpl[2]}, PaceMethod::kLinear), UserError);  // wrong movement
+  CHECK_THROWS_AS(pacedData(data, {tmpl[0], -1, tmpl[2]}, PaceMethod::kDtw), UserError);
 }
 
 TEST_CASE("the split is by demonstration: every demo in exactly one part, round(0.2 n) validation per movement") {

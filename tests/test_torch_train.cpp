@@ -625,3 +625,71 @@ TEST_CASE("phase steps: the step row follows the demonstration's phase, recorded
   cut.execution.dagger_max_drift_rad = 0.1;
   CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), cut, nullptr), doctest::Contains("--dagger-max-drift"), UserError);
 }
+
+TEST_CASE("canonical pace: trained on the paced demonstrations (AR base included), scored against them as they are") {
+  TrainOptions o = smallOptions(59, 1);
+  o.val_fraction = 0.5;  // two validation demonstrations per movement: a nearest neighbour each
+  o.conditioning = Conditioning::kAutonomous;
+  o.ar_residual = true;
+  o.select_by_rollout = true;
+  TrainOptions paced = o;
+  paced.canonical_pace = PaceMethod::kDtw;
+  TrainResult r0, r1;
+  const std::vector<std::uint8_t> a = trainBytes(o, &r0);
+  const std::vector<std::uint8_t> b = trainBytes(paced, &r1);
+  CHECK(a != b);
+  const PolicyData& data = smallData();
+  REQUIRE(r1.split.train == r0.split.train);
+  const std::vector<int> tmpl = paceTemplates(data, r1.split.train);
+  CHECK(r1.pace_templates == tmpl);
+  CHECK(r0.pace_templates.empty());
+  // The small set's demonstrations differ in length, so pacing changes something to learn.
+  bool longer = false;
+  for (int d : r1.split.train) {
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
+    longer = longer || demo.f.size() > data.demos[static_cast<std::size_t>(tmpl[static_cast<std::size_t>(demo.movement)])].f.size();
+  }
+  REQUIRE(longer);
+  // The AR base is fitted on the paced trajectories (as evaluate fits it for this model).
+  const PolicyData p = pacedData(data, tmpl, PaceMethod::kDtw);
+  for (int m = 0; m < 3; ++m) {
+    std::vector<std::vector<JointVector>> tr, va;
+    for (int d : r1.split.train)
+      if (p.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(p.demos[static_cast<std::size_t>(d)].f);
+    for (int d : r1.split.val)
+      if (p.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(p.demos[static_cast<std::size_t>(d)].f);
+    const LinearArModel expect = fitLinearAr(tr, va, kMaxLinearArOrder);
+    for (int j = 0; j < kNumJoints; ++j) {
+      const LinearArJoint& got = r1.net->linearAr()[static_cast<std::size_t>(m)].joints[static_cast<std::size_t>(j)];
+      CHECK(got.beta == expect.joints[static_cast<std::size_t>(j)].beta);
+      CHECK(got.alpha == expect.joints[static_cast<std::size_t>(j)].alpha);
+    }
+  }
+  // Validation targets are paced too (other baselines), the rollouts' yardstick is not.
+  CHECK(r1.val_baselines.repeat_last != r0.val_baselines.repeat_last);
+  REQUIRE(r1.val_nn_dtw_m.size() == 3);
+  for (double x : r1.val_nn_dtw_m) CHECK(std::isfinite(x));
+  CHECK(r1.val_nn_dtw_m == r0.val_nn_dtw_m);
+  const nlohmann::json meta = nlohmann::json::parse(modelMetadata(data, paced, r1));
+  const nlohmann::json& cp = meta["training"]["canonical_pace"];
+  CHECK(cp["method"] == "dtw");
+  for (int m = 0; m < 3; ++m) {
+    const PolicyDemo& t = data.demos[static_cast<std::size_t>(tmpl[static_cast<std::size_t>(m)])];
+    CHECK(cp["templates"][m] == t.name);
+    CHECK(cp["ticks"][m].get<std::size_t>() == t.f.size());
+  }
+  CHECK(modelMetadata(data, o, r0).find("canonical_pace") == std::string::npos);
+  CHECK(modelCard(data, paced, r1, "test", "m.bin").find("| canonical pace | dtw") != std::string::npos);
+  CHECK(b == trainBytes(paced));  // deterministic
+  TrainOptions linear = paced;
+  linear.canonical_pace = PaceMethod::kLinear;
+  CHECK(trainBytes(linear) != b);
+
+  TrainOptions reference = paced;
+  reference.conditioning = Conditioning::kReference;
+  reference.ar_residual = reference.select_by_rollout = false;
+  CHECK_THROWS_WITH_AS(trainPolicy(data, smallSim(), reference, nullptr), doctest::Contains("autonomous"), UserError);
+  TrainOptions both = paced;
+  both.phase_ticks = 40;
+  CHECK_THROWS_WITH_AS(trainPolicy(data, smallSim(), both, nullptr), doctest::Contains("--phase-steps"), UserError);
+}

@@ -10,6 +10,7 @@
 #include <atomic>
 #include <exception>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <cmath>
 #include <cstdio>
@@ -765,6 +766,156 @@ std::string hex64(std::uint64_t value) {
   char buf[17];
   std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(value));
   return buf;
+}
+
+const char* paceMethodName(PaceMethod method) { return method == PaceMethod::kDtw ? "dtw" : "linear"; }
+
+PaceMethod parsePaceMethod(const std::string& name) {
+  if (name == "linear") return PaceMethod::kLinear;
+  if (name == "dtw") return PaceMethod::kDtw;
+  throw UserError("unknown pace method '" + name + "' (linear or dtw)");
+}
+
+namespace {
+
+// f at fractional sample position u (0 <= u <= size − 1), linearly interpolated.
+JointVector sampleAt(const std::vector<JointVector>& f, double u) {
+  const std::size_t n = f.size();
+  if (!(u > 0.0)) return f.front();
+  if (u >= static_cast<double>(n - 1)) return f.back();
+  const auto i = static_cast<std::size_t>(u);
+  const double w = u - static_cast<double>(i);
+  return JointVector((1.0 - w) * f[i] + w * f[i + 1]);
+}
+
+}  // namespace
+
+std::vector<JointVector> pacedTrajectory(const std::vector<JointVector>& f, int pace_ticks) {
+  if (pace_ticks < 2) throw UserError("a canonical pace needs at least 2 samples, not " + std::to_string(pace_ticks));
+  const std::size_t n = f.size();
+  if (n < 2) return f;
+  const std::size_t l = std::min<std::size_t>(static_cast<std::size_t>(pace_ticks), n);
+  std::vector<JointVector> out(n, f.back());
+  // Sample t of the paced movement is time u = t·(n−1)/(l−1) of the original, in samples.
+  for (std::size_t t = 0; t < l; ++t) {
+    const std::size_t num = t * (n - 1);
+    const std::size_t i = num / (l - 1);
+    const double w = static_cast<double>(num % (l - 1)) / static_cast<double>(l - 1);
+    out[t] = i + 1 < n ? JointVector((1.0 - w) * f[i] + w * f[i + 1]) : f[n - 1];
+  }
+  return out;
+}
+
+std::optional<std::vector<double>> dtwWarp(const std::vector<JointVector>& f, const std::vector<JointVector>& tmpl) {
+  const std::size_t n = f.size(), l = tmpl.size();
+  if (n < 2 || l < 2) throw UserError("a time warp needs at least 2 samples on each side");
+  // Steps (di, dk) = (1,1), (2,1), (1,2): the warp's slope stays in [1/2, 2], so no stretch of f
+  // is sped up more than twice (an unconstrained path can skip a whole loop in one template
+  // sample: steps of ~1 rad per tick that no servo follows). A step's cost is the cells it passes.
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<double> cost(n * l), acc(n * l, inf);
+  std::vector<std::uint8_t> step(n * l, 0);  // 1: (1,1), 2: (2,1), 3: (1,2)
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t k = 0; k < l; ++k) cost[i * l + k] = (f[i] - tmpl[k]).norm();
+  acc[0] = cost[0];
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t k = 0; k < l; ++k) {
+      if (i == 0 && k == 0) continue;
+      double best = inf;
+      std::uint8_t arg = 0;
+      if (i >= 1 && k >= 1 && acc[(i - 1) * l + k - 1] < best) best = acc[(i - 1) * l + k - 1], arg = 1;
+      if (i >= 2 && k >= 1 && acc[(i - 2) * l + k - 1] + cost[(i - 1) * l + k] < best)
+        best = acc[(i - 2) * l + k - 1] + cost[(i - 1) * l + k], arg = 2;
+      if (i >= 1 && k >= 2 && acc[(i - 1) * l + k - 2] + cost[i * l + k - 1] < best)
+        best = acc[(i - 1) * l + k - 2] + cost[i * l + k - 1], arg = 3;
+      if (arg == 0) continue;
+      acc[i * l + k] = best + cost[i * l + k];
+      step[i * l + k] = arg;
+    }
+  if (!(acc[n * l - 1] < inf)) return std::nullopt;  // more than twice as long (or short) as the template
+  // Back from the end: the position in f of every template sample.
+  std::vector<double> raw(l, 0.0), u(l);
+  std::size_t i = n - 1, k = l - 1;
+  raw[k] = static_cast<double>(i);
+  while (i > 0 || k > 0) {
+    const std::uint8_t s = step[i * l + k];
+    if (s == 3) raw[k - 1] = static_cast<double>(i) - 0.5;
+    i -= s == 2 ? 2 : 1;
+    k -= s == 3 ? 2 : 1;
+    raw[k] = static_cast<double>(i);
+  }
+  // Steps of slope 1/2, 1 and 2 make a jerky clock; a short average smooths it (slopes stay
+  // within [1/2, 2]).
+  constexpr std::size_t kHalf = 2;
+  for (std::size_t j = 0; j < l; ++j) {
+    // Symmetric, narrowing at the ends (a straight warp stays straight).
+    const std::size_t h = std::min({kHalf, j, l - 1 - j});
+    double sum = 0.0;
+    for (std::size_t q = j - h; q <= j + h; ++q) sum += raw[q];
+    u[j] = sum / static_cast<double>(2 * h + 1);
+  }
+  u.front() = 0.0;
+  u.back() = static_cast<double>(n - 1);
+  for (std::size_t j = 1; j < l; ++j) u[j] = std::min(std::max(u[j], u[j - 1]), static_cast<double>(n - 1));
+  return u;
+}
+
+std::vector<JointVector> pacedTrajectory(const std::vector<JointVector>& f, const std::vector<JointVector>& tmpl,
+                                         PaceMethod method) {
+  const std::size_t n = f.size(), l = tmpl.size();
+  if (l < 2) throw UserError("a canonical pace needs a template of at least 2 samples");
+  if (n <= l) return f;
+  const std::optional<std::vector<double>> u = method == PaceMethod::kDtw ? dtwWarp(f, tmpl) : std::nullopt;
+  if (!u) return pacedTrajectory(f, static_cast<int>(l));  // linear, or no warp within the slope bounds
+  std::vector<JointVector> out(n, f.back());
+  for (std::size_t k = 0; k < l; ++k) out[k] = sampleAt(f, (*u)[k]);
+  return out;
+}
+
+std::vector<int> paceTemplates(const PolicyData& data, const std::vector<int>& demos) {
+  std::vector<int> tmpl(static_cast<std::size_t>(data.movements()), -1);
+  for (int d : demos) {
+    const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
+    int& t = tmpl.at(static_cast<std::size_t>(demo.movement));
+    if (t < 0 || demo.f.size() < data.demos[static_cast<std::size_t>(t)].f.size()) t = d;
+  }
+  return tmpl;
+}
+
+PolicyData pacedData(const PolicyData& data, const std::vector<int>& templates, PaceMethod method) {
+  if (static_cast<int>(templates.size()) != data.movements())
+    throw UserError("a canonical pace needs one template per movement (" + std::to_string(data.movements()) + "), not " +
+                    std::to_string(templates.size()));
+  for (std::size_t m = 0; m < templates.size(); ++m) {
+    const int t = templates[m];
+    if (t < 0 || static_cast<std::size_t>(t) >= data.demos.size() || data.demos[static_cast<std::size_t>(t)].movement != static_cast<int>(m))
+      throw UserError("a canonical pace needs a template demonstration of movement " + data.movement_names[m]);
+  }
+  PolicyData out = data;
+  for (std::size_t di = 0; di < out.demos.size(); ++di) {
+    const PolicyDemo& orig = data.demos[di];
+    PolicyDemo& d = out.demos[di];
+    const std::vector<JointVector>& tmpl = data.demos[static_cast<std::size_t>(templates[static_cast<std::size_t>(d.movement)])].f;
+    const std::size_t n = d.f.size(), m = std::min(tmpl.size(), n);
+    if (n < 2 || m == n) continue;
+    // The position in the original of every paced sample (the last for the hold).
+    std::vector<double> u(n, static_cast<double>(n - 1));
+    const std::optional<std::vector<double>> w = method == PaceMethod::kDtw ? dtwWarp(orig.f, tmpl) : std::nullopt;
+    if (w) {
+      std::copy(w->begin(), w->end(), u.begin());
+      for (std::size_t t = 0; t < m; ++t) d.f[t] = sampleAt(orig.f, u[t]);
+      for (std::size_t t = m; t < n; ++t) d.f[t] = orig.f.back();
+    } else {
+      d.f = pacedTrajectory(orig.f, static_cast<int>(m));
+      for (std::size_t t = 0; t < m; ++t) u[t] = static_cast<double>(t * (n - 1)) / static_cast<double>(m - 1);
+    }
+    for (std::size_t t = 0; t < n; ++t) {
+      const auto i = static_cast<std::size_t>(std::lround(u[t]));
+      d.label[t] = orig.label[i];
+      d.measured[t] = orig.measured[i];
+    }
+  }
+  return out;
 }
 
 std::vector<std::string> demoNames(const PolicyData& data, const std::vector<int>& demos) {

@@ -34,6 +34,7 @@ struct TrainArgs {
   int phase_ticks = 0;
   std::string select = "val-loss";
   bool ar_residual = false;
+  std::string canonical_pace = "off";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
@@ -106,6 +107,7 @@ void run(const TrainArgs& a) {
   o.select_by_rollout = a.select == "rollout-dtw";
   o.ar_residual = a.ar_residual;
   o.phase_ticks = a.phase_ticks;
+  if (a.canonical_pace != "off") o.canonical_pace = parsePaceMethod(a.canonical_pace);
   o.live_progress = isatty(fileno(stdout)) != 0;
   if (a.rank >= a.world_size)
     throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
@@ -308,6 +310,14 @@ void setup(CLI::App& app) {
                   "floor(t * N / L) for tick t of a demonstration of L samples (nao_rt: of a run of L ticks: the "
                   "policy is told how long the movement takes) instead of by t. 0: by t")
       ->check(CLI::Range(0, 100000))
+      ->capture_default_str();
+  cmd->add_option("--canonical-pace", args->canonical_pace,
+                  "Autonomous mode: train every demonstration at the pace of its movement's shortest training "
+                  "demonstration (the template), then held at its last pose for the rest of its length: linear (the "
+                  "whole movement resampled linearly) or dtw (time-warped onto the template by dynamic time warping, "
+                  "which lines up the loops too); off: as demonstrated. Rollouts are still scored against the "
+                  "demonstrations as they are (docs/policy.md)")
+      ->check(CLI::IsMember({"off", "linear", "dtw"}))
       ->capture_default_str();
   cmd->add_option("--select", args->select,
                   "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "

@@ -287,6 +287,10 @@ void check(const PolicyData& data, const TrainOptions& o) {
     throw UserError("phase steps (--phase-steps) are for autonomous mode (reference mode has no step embedding)");
   if (o.phase_ticks > 0 && o.dagger_rounds > 0 && o.execution.dagger_max_drift_rad > 0.0)
     throw UserError("phase steps (--phase-steps) cannot take DAgger's cut rollouts (--dagger-max-drift): their length is not the demonstration's");
+  if (o.canonical_pace && o.conditioning != Conditioning::kAutonomous)
+    throw UserError("a canonical pace (--canonical-pace) is for autonomous mode (reference mode follows the human's own pace)");
+  if (o.canonical_pace && o.phase_ticks > 0)
+    throw UserError("a canonical pace (--canonical-pace) and phase steps (--phase-steps) are two answers to one question: take one");
   if (o.select_by_rollout && o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
     throw UserError("model selection on rollouts (--select rollout-dtw) needs the paper or small architecture as "
                     "compiled (e.g. no --window)");
@@ -350,6 +354,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   if (o.select_by_rollout) k << "; select rollout";
   if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) k << "; ar residual";
   if (o.phase_ticks > 0) k << "; phase " << o.phase_ticks;
+  if (o.canonical_pace) k << "; canonical pace " << paceMethodName(*o.canonical_pace);
   return k.str();
 }
 
@@ -551,6 +556,25 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   if (res.split.val.empty())
     throw UserError("no validation demonstration: early stopping needs a movement with at least 2 demonstrations "
                     "and a positive validation fraction");
+  // Canonical pace: the training data at one pace per movement (the rollouts are scored
+  // against `data` as it is).
+  PolicyData paced;
+  if (o.canonical_pace) {
+    res.pace_templates = paceTemplates(data, res.split.train);
+    for (std::size_t m = 0; m < res.pace_templates.size(); ++m)
+      if (res.pace_templates[m] < 0 || data.demos[static_cast<std::size_t>(res.pace_templates[m])].f.size() < 2)
+        throw UserError("--canonical-pace: movement " + data.movement_names[m] + " has no training demonstration of 2 samples or more");
+    paced = pacedData(data, res.pace_templates, *o.canonical_pace);
+    if (progress) {
+      *progress << "canonical pace (" << paceMethodName(*o.canonical_pace) << "): every movement at the pace of its shortest training demonstration (";
+      for (std::size_t m = 0; m < res.pace_templates.size(); ++m) {
+        const PolicyDemo& t = data.demos[static_cast<std::size_t>(res.pace_templates[m])];
+        *progress << (m ? ", " : "") << t.name << " " << t.f.size() << " ticks";
+      }
+      *progress << "), then held" << std::endl;
+    }
+  }
+  const PolicyData& tdata = o.canonical_pace ? paced : data;
   // The group joins after the cheap checks and the data: a bad option fails alone, at once.
   const std::string key = checkpointKey(o, res.fingerprint);
   std::unique_ptr<ProcessGroup> group;
@@ -566,12 +590,12 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     *progress << "executing the demonstrations on the simulated arm (expert labels"
               << (group ? ", " + std::to_string(o.dist.world_size) + " ranks" : std::string()) << ")" << std::endl;
   const std::vector<PolicySequence> train_seqs = sharedSequences(group.get(), res.split.train, [&](const std::vector<int>& d) {
-    return executeDemos(data, d, sim, o.execution, o.seed, progress);
+    return executeDemos(tdata, d, sim, o.execution, o.seed, progress);
   });
   ExecutionOptions clean = o.execution;
   clean.noisy_rollouts = 0;
   const std::vector<PolicySequence> val_seqs = sharedSequences(
-      group.get(), res.split.val, [&](const std::vector<int>& d) { return executeDemos(data, d, sim, clean, o.seed, nullptr); });
+      group.get(), res.split.val, [&](const std::vector<int>& d) { return executeDemos(tdata, d, sim, clean, o.seed, nullptr); });
   for (const PolicySequence& s : train_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
   for (const PolicySequence& s : val_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
   res.execution_seconds = secondsSince(t_exec);
@@ -600,9 +624,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     for (int m = 0; m < data.movements(); ++m) {
       std::vector<std::vector<JointVector>> tr, va;
       for (int d : res.split.train)
-        if (data.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(data.demos[static_cast<std::size_t>(d)].f);
+        if (tdata.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(tdata.demos[static_cast<std::size_t>(d)].f);
       for (int d : res.split.val)
-        if (data.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(data.demos[static_cast<std::size_t>(d)].f);
+        if (tdata.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(tdata.demos[static_cast<std::size_t>(d)].f);
       if (tr.empty() || va.empty())
         throw UserError("--ar-residual: movement " + data.movement_names[static_cast<std::size_t>(m)] +
                         " needs training and validation demonstrations");
@@ -769,7 +793,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       dr.after_epoch = epoch;
       const int round = static_cast<int>(res.dagger.size()) + 1;
       const std::vector<PolicySequence> seqs = sharedSequences(group.get(), res.split.train, [&](const std::vector<int>& d) {
-        return daggerRollouts(data, d, sim, o.execution, net, round, true, train_seqs);
+        return daggerRollouts(tdata, d, sim, o.execution, net, round, true, train_seqs);
       });
       const SequenceTensors added = toTensors(net, seqs);
       for (std::size_t i = 0; i < added.size(); ++i) {
@@ -843,6 +867,14 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["loss"] = "mse of normalised actions";
   if (r.residual_gain != 0.0) t["residual_gain"] = r.residual_gain;  // absent: none (older files)
   if (o.phase_ticks > 0) t["phase_ticks"] = o.phase_ticks;
+  if (o.canonical_pace && !r.pace_templates.empty()) {
+    nlohmann::json ticks = nlohmann::json::array(), names = nlohmann::json::array();
+    for (int d : r.pace_templates) {
+      ticks.push_back(data.demos.at(static_cast<std::size_t>(d)).f.size());
+      names.push_back(data.demos.at(static_cast<std::size_t>(d)).name);
+    }
+    t["canonical_pace"] = {{"method", paceMethodName(*o.canonical_pace)}, {"ticks", ticks}, {"templates", names}};
+  }
   // Only when they change the result: single-process files keep their bytes.
   if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;
   if (o.max_batches > 0) t["max_batches_per_epoch"] = o.max_batches;
@@ -983,6 +1015,18 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
       for (const LinearArJoint& jm : r.net->linearAr()[m].joints) s << " " << jm.order;
     }
     s << " |\n";
+  }
+  if (o.canonical_pace && !r.pace_templates.empty()) {
+    s << "| canonical pace | " << paceMethodName(*o.canonical_pace)
+      << ": every demonstration trained on with its movement "
+      << (*o.canonical_pace == PaceMethod::kDtw ? "time-warped by DTW onto" : "resampled linearly to the length of")
+      << " its movement's shortest training demonstration, then held at its last pose (its length unchanged):";
+    for (std::size_t m = 0; m < r.pace_templates.size(); ++m) {
+      const PolicyDemo& t = data.demos.at(static_cast<std::size_t>(r.pace_templates[m]));
+      s << (m ? "," : "") << " " << t.name << " (" << t.f.size() << " ticks)";
+    }
+    s << "; the linear AR base is fitted on the same paced trajectories; rollouts are scored against the "
+         "demonstrations as they are |\n";
   }
   if (o.select_by_rollout) {
     s << "| model selection | rollout DTW: after every epoch the net (runtime streaming inference) is rolled out on "

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <iosfwd>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -68,6 +69,11 @@ struct TrainOptions {
   /// ticks), instead of by t. Not with a DAgger drift bound (a cut rollout's L is not its
   /// demonstration's).
   int phase_ticks = 0;
+  /// Autonomous mode (docs/policy.md "Canonical pace"): set, every demonstration of movement m
+  /// is trained on at the pace of m's shortest training demonstration (pacedData onto
+  /// paceTemplates of the training split, linearly or by DTW), then held, at its own length. The
+  /// rollouts are still scored against the demonstrations as they are.
+  std::optional<PaceMethod> canonical_pace;
 };
 
 /// One DAgger round of a training run.
@@ -125,6 +131,9 @@ struct TrainResult {
   /// TrainOptions::select_by_rollout: per movement, the median over its validation
   /// demonstrations of the DTW to the nearest other one (what a rollout is compared with), m.
   std::vector<double> val_nn_dtw_m;
+  /// TrainOptions::canonical_pace: per movement, the template demonstration (index into the
+  /// data's demos; metadata training.canonical_pace); empty when off.
+  std::vector<int> pace_templates;
   /// select_by_rollout: the net before the first epoch, scored the same way (epoch 0; with
   /// ar_residual that is the linear AR baseline itself): reported as the bar, never exported.
   /// Epoch −1: not scored (off, or resumed).

@@ -14,6 +14,7 @@
 #include <functional>
 #include <iosfwd>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -227,6 +228,47 @@ std::uint64_t dataFingerprint(const PolicyData& data);
 
 /// 16 lower-case hex digits.
 std::string hex64(std::uint64_t value);
+
+/// How the training demonstrations are brought to one pace (autonomous mode; docs/policy.md
+/// "Canonical pace"): onto a template demonstration of the movement.
+enum class PaceMethod {
+  kLinear,  ///< the whole trajectory resampled linearly into the template's sample count
+  kDtw,     ///< time-warped onto the template by slope-limited dynamic time warping (dtwWarp)
+};
+const char* paceMethodName(PaceMethod method);  ///< "linear" / "dtw"
+/// "linear" / "dtw"; throws UserError naming the choices for anything else.
+PaceMethod parsePaceMethod(const std::string& name);
+
+/// Trajectory f of T samples resampled linearly in time so that the whole of it takes
+/// min(pace_ticks, T) samples, then held at its last pose for the rest of its own T samples (the
+/// length is unchanged, f(0) and the last pose too). Throws UserError unless pace_ticks >= 2.
+std::vector<JointVector> pacedTrajectory(const std::vector<JointVector>& f, int pace_ticks);
+
+/// Dynamic time warping of f (T samples) onto tmpl (L samples) in joint space (Euclidean distance
+/// per sample pair), with the steps (1,1), (2,1), (1,2) (f, template) so that the warp's slope
+/// stays in [1/2, 2] (no stretch of f sped up more than twice), ties in that order: for each
+/// template sample k the position u(k) in f, in samples, from the optimal path (a (1,2) step
+/// puts the skipped template sample half-way), smoothed by a centred moving average over 5
+/// samples (narrower near the ends), then u(0) = 0, u(L−1) = T−1 and made non-decreasing.
+/// nullopt when no such path exists (T − 1 > 2 (L − 1) or L − 1 > 2 (T − 1)). Throws UserError
+/// for fewer than 2 samples on either side.
+std::optional<std::vector<double>> dtwWarp(const std::vector<JointVector>& f, const std::vector<JointVector>& tmpl);
+
+/// f at the pace of tmpl (L samples): for T <= L, f unchanged; otherwise f's movement in L
+/// samples (kLinear: pacedTrajectory(f, L); kDtw: f interpolated linearly at dtwWarp(f, tmpl), or
+/// linearly paced when f is more than twice as long as tmpl and no warp exists),
+/// then held at f's last pose for the rest of its T samples. Length, f(0) and last pose unchanged.
+std::vector<JointVector> pacedTrajectory(const std::vector<JointVector>& f, const std::vector<JointVector>& tmpl,
+                                         PaceMethod method);
+
+/// Per movement (index m), the template of its pace: the index of its shortest listed
+/// demonstration (the first in list order among equals); -1 for a movement with none listed.
+std::vector<int> paceTemplates(const PolicyData& data, const std::vector<int>& demos);
+
+/// `data` with every demonstration of movement m paced onto demonstration templates[m]
+/// (pacedTrajectory: f, and the label and measured flag of the nearest original sample); names,
+/// times and lengths unchanged. Throws UserError unless there is a valid template per movement.
+PolicyData pacedData(const PolicyData& data, const std::vector<int>& templates, PaceMethod method);
 
 /// Names of the listed demonstrations.
 std::vector<std::string> demoNames(const PolicyData& data, const std::vector<int>& demos);
