@@ -13,11 +13,13 @@
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <string>
 
 using namespace nao;
 using namespace nao::tools;
@@ -177,7 +179,7 @@ TEST_CASE("evaluate on the committed models writes the summary contract; issue 1
   REQUIRE_MESSAGE(status == 0, readText(out / "evaluate.log"));
   const nlohmann::json s = nlohmann::json::parse(readText(out / "eval" / "summary.json"));
   const nlohmann::json detail = nlohmann::json::parse(readText(out / "eval" / "detail.json"));
-  for (const char* movement : {"whole_arm", "elbow", "wrist"}) {
+  for (const std::string movement : {"whole_arm", "elbow", "wrist"}) {
     CAPTURE(movement);
     REQUIRE(s.contains(movement));
     const nlohmann::json& m = s[movement];
@@ -208,9 +210,11 @@ TEST_CASE("evaluate on the committed models writes the summary contract; issue 1
     const double gain = m["gain_law_rmse_m"];
     // Issue 13's thresholds. Measured with the committed models (README): reference mode meets
     // 3 mm on every movement (0.41-0.54 mm) and beats both the blend law and the first-order
-    // servo inversion; the autonomous model (a residual over the linear AR baseline) beats that
-    // baseline on every movement but misses both autonomous thresholds. Unmet thresholds stay
-    // WARN (reported, not counted as passed) until a model meets them.
+    // servo inversion; the autonomous model (a residual over the linear AR baseline, trained on
+    // time-warped demonstrations) beats that baseline on every movement and meets both
+    // autonomous thresholds on whole_arm (13.5 mm against 14.0 and 0.43x), which is checked as a
+    // regression guard. The thresholds it misses (elbow, wrist) stay WARN (reported, not
+    // counted as passed) until a model meets them.
     CHECK_MESSAGE(autonomous < ar, movement << ": autonomous rollout DTW " << autonomous * 1e3
                                             << " mm is not below the linear AR baseline's " << ar * 1e3 << " mm");
     CHECK_MESSAGE(reference < law, movement << ": reference-mode hand RMSE " << reference * 1e3
@@ -219,11 +223,26 @@ TEST_CASE("evaluate on the committed models writes the summary contract; issue 1
                                              << " mm is not below the gain law's " << gain * 1e3 << " mm");
     CHECK_MESSAGE(reference <= 3e-3, movement << ": reference-mode hand RMSE " << reference * 1e3
                                               << " mm > 3 mm (issue 13; blend law " << law * 1e3 << " mm)");
-    WARN_MESSAGE(autonomous <= demo_nn, movement << ": autonomous rollout DTW " << autonomous * 1e3
-                                                 << " mm > demonstrations' nearest-neighbour DTW " << demo_nn * 1e3
-                                                 << " mm (issue 13)");
-    WARN_MESSAGE(autonomous <= 0.5 * ar, movement << ": autonomous rollout DTW " << autonomous * 1e3
-                                                  << " mm > 0.5 x linear AR baseline's " << ar * 1e3 << " mm (issue 13)");
+    if (movement == "whole_arm") {
+      CHECK_MESSAGE(autonomous <= demo_nn, movement << ": autonomous rollout DTW " << autonomous * 1e3
+                                                    << " mm > demonstrations' nearest-neighbour DTW " << demo_nn * 1e3
+                                                    << " mm (issue 13)");
+      CHECK_MESSAGE(autonomous <= 0.5 * ar, movement << ": autonomous rollout DTW " << autonomous * 1e3
+                                                     << " mm > 0.5 x linear AR baseline's " << ar * 1e3 << " mm (issue 13)");
+    } else {
+      WARN_MESSAGE(autonomous <= demo_nn, movement << ": autonomous rollout DTW " << autonomous * 1e3
+                                                   << " mm > demonstrations' nearest-neighbour DTW " << demo_nn * 1e3
+                                                   << " mm (issue 13)");
+      WARN_MESSAGE(autonomous <= 0.5 * ar, movement << ": autonomous rollout DTW " << autonomous * 1e3
+                                                    << " mm > 0.5 x linear AR baseline's " << ar * 1e3 << " mm (issue 13)");
+    }
+    // A model trained at a canonical pace: the bar is the better of the two AR fits.
+    if (m.contains("linear_ar_fit")) {
+      const double as_demo = m["linear_ar_as_demonstrated_dtw_m"], paced = m["linear_ar_canonical_pace_dtw_m"];
+      CHECK(ar == std::min(as_demo, paced));
+      CHECK(m["linear_ar_fit"] == (paced < as_demo ? "canonical_pace" : "as_demonstrated"));
+      CHECK(detail[movement].contains("linear_ar_canonical_pace"));
+    }
   }
   // Deterministic: the same evaluation twice gives the same summary, byte for byte.
   const std::string again = std::string("'") + NAO_TOOLCHAIN_EXE + "' evaluate --autonomous-model '" +
