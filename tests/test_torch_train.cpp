@@ -29,6 +29,17 @@ using nao::test::smallData;
 using nao::test::smallOptions;
 using nao::test::smallSim;
 
+// The linear AR baseline evaluate fits for movement m: `data`'s training-split f, order chosen on
+// its validation split's.
+LinearArModel expectedLinearAr(const PolicyData& data, const PolicySplit& split, int m) {
+  std::vector<std::vector<JointVector>> tr, va;
+  for (int d : split.train)
+    if (data.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(data.demos[static_cast<std::size_t>(d)].f);
+  for (int d : split.val)
+    if (data.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(data.demos[static_cast<std::size_t>(d)].f);
+  return fitLinearAr(tr, va, kMaxLinearArOrder);
+}
+
 std::vector<TrainedJoint> urdfJoints() { return trainedJoints(loadArmModel(nao::test::kUrdfPath)); }
 
 std::vector<std::uint8_t> trainBytes(const TrainOptions& o, TrainResult* out = nullptr) {
@@ -512,12 +523,7 @@ TEST_CASE("over the linear AR base the untrained net is the baseline; rollout se
   // The base is the baseline evaluate fits: the training split's f, order on the validation split's.
   const PolicyData& data = smallData();
   for (int m = 0; m < 3; ++m) {
-    std::vector<std::vector<JointVector>> tr, va;
-    for (int d : r.split.train)
-      if (data.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(data.demos[static_cast<std::size_t>(d)].f);
-    for (int d : r.split.val)
-      if (data.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(data.demos[static_cast<std::size_t>(d)].f);
-    const LinearArModel expect = fitLinearAr(tr, va, kMaxLinearArOrder);
+    const LinearArModel expect = expectedLinearAr(data, r.split, m);
     for (int j = 0; j < kNumJoints; ++j) {
       const LinearArJoint& got = r.net->linearAr()[static_cast<std::size_t>(m)].joints[static_cast<std::size_t>(j)];
       CHECK(got.order == expect.joints[static_cast<std::size_t>(j)].order);
@@ -653,12 +659,7 @@ TEST_CASE("canonical pace: trained on the paced demonstrations (AR base included
   // The AR base is fitted on the paced trajectories (as evaluate fits it for this model).
   const PolicyData p = pacedData(data, tmpl, PaceMethod::kDtw);
   for (int m = 0; m < 3; ++m) {
-    std::vector<std::vector<JointVector>> tr, va;
-    for (int d : r1.split.train)
-      if (p.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(p.demos[static_cast<std::size_t>(d)].f);
-    for (int d : r1.split.val)
-      if (p.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(p.demos[static_cast<std::size_t>(d)].f);
-    const LinearArModel expect = fitLinearAr(tr, va, kMaxLinearArOrder);
+    const LinearArModel expect = expectedLinearAr(p, r1.split, m);
     for (int j = 0; j < kNumJoints; ++j) {
       const LinearArJoint& got = r1.net->linearAr()[static_cast<std::size_t>(m)].joints[static_cast<std::size_t>(j)];
       CHECK(got.beta == expect.joints[static_cast<std::size_t>(j)].beta);

@@ -860,16 +860,41 @@ std::optional<std::vector<double>> dtwWarp(const std::vector<JointVector>& f, co
   return u;
 }
 
-std::vector<JointVector> pacedTrajectory(const std::vector<JointVector>& f, const std::vector<JointVector>& tmpl,
-                                         PaceMethod method) {
+namespace {
+
+// f at the pace of tmpl (pacedTrajectory) and, for every paced sample, its position in f.
+struct Paced {
+  std::vector<JointVector> f;
+  std::vector<double> u;
+};
+
+Paced pace(const std::vector<JointVector>& f, const std::vector<JointVector>& tmpl, PaceMethod method) {
   const std::size_t n = f.size(), l = tmpl.size();
   if (l < 2) throw UserError("a canonical pace needs a template of at least 2 samples");
-  if (n <= l) return f;
-  const std::optional<std::vector<double>> u = method == PaceMethod::kDtw ? dtwWarp(f, tmpl) : std::nullopt;
-  if (!u) return pacedTrajectory(f, static_cast<int>(l));  // linear, or no warp within the slope bounds
-  std::vector<JointVector> out(n, f.back());
-  for (std::size_t k = 0; k < l; ++k) out[k] = sampleAt(f, (*u)[k]);
-  return out;
+  Paced p;
+  if (n <= l) {
+    p.f = f;
+    for (std::size_t t = 0; t < n; ++t) p.u.push_back(static_cast<double>(t));
+    return p;
+  }
+  p.u.assign(n, static_cast<double>(n - 1));  // the hold
+  const std::optional<std::vector<double>> w = method == PaceMethod::kDtw ? dtwWarp(f, tmpl) : std::nullopt;
+  if (w) {
+    std::copy(w->begin(), w->end(), p.u.begin());
+    p.f.assign(n, f.back());
+    for (std::size_t k = 0; k < l; ++k) p.f[k] = sampleAt(f, p.u[k]);
+  } else {  // linear, or no warp within the slope bounds
+    p.f = pacedTrajectory(f, static_cast<int>(l));
+    for (std::size_t t = 0; t < l; ++t) p.u[t] = static_cast<double>(t * (n - 1)) / static_cast<double>(l - 1);
+  }
+  return p;
+}
+
+}  // namespace
+
+std::vector<JointVector> pacedTrajectory(const std::vector<JointVector>& f, const std::vector<JointVector>& tmpl,
+                                         PaceMethod method) {
+  return pace(f, tmpl, method).f;
 }
 
 std::vector<int> paceTemplates(const PolicyData& data, const std::vector<int>& demos) {
@@ -895,22 +920,11 @@ PolicyData pacedData(const PolicyData& data, const std::vector<int>& templates, 
   for (std::size_t di = 0; di < out.demos.size(); ++di) {
     const PolicyDemo& orig = data.demos[di];
     PolicyDemo& d = out.demos[di];
-    const std::vector<JointVector>& tmpl = data.demos[static_cast<std::size_t>(templates[static_cast<std::size_t>(d.movement)])].f;
-    const std::size_t n = d.f.size(), m = std::min(tmpl.size(), n);
-    if (n < 2 || m == n) continue;
-    // The position in the original of every paced sample (the last for the hold).
-    std::vector<double> u(n, static_cast<double>(n - 1));
-    const std::optional<std::vector<double>> w = method == PaceMethod::kDtw ? dtwWarp(orig.f, tmpl) : std::nullopt;
-    if (w) {
-      std::copy(w->begin(), w->end(), u.begin());
-      for (std::size_t t = 0; t < m; ++t) d.f[t] = sampleAt(orig.f, u[t]);
-      for (std::size_t t = m; t < n; ++t) d.f[t] = orig.f.back();
-    } else {
-      d.f = pacedTrajectory(orig.f, static_cast<int>(m));
-      for (std::size_t t = 0; t < m; ++t) u[t] = static_cast<double>(t * (n - 1)) / static_cast<double>(m - 1);
-    }
-    for (std::size_t t = 0; t < n; ++t) {
-      const auto i = static_cast<std::size_t>(std::lround(u[t]));
+    const Paced p = pace(orig.f, data.demos[static_cast<std::size_t>(templates[static_cast<std::size_t>(d.movement)])].f, method);
+    d.f = p.f;
+    // The label and measured flag of the original sample nearest each paced one.
+    for (std::size_t t = 0; t < p.u.size(); ++t) {
+      const auto i = static_cast<std::size_t>(std::lround(p.u[t]));
       d.label[t] = orig.label[i];
       d.measured[t] = orig.measured[i];
     }

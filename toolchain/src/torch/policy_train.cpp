@@ -562,8 +562,8 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   if (o.canonical_pace) {
     res.pace_templates = paceTemplates(data, res.split.train);
     for (std::size_t m = 0; m < res.pace_templates.size(); ++m)
-      if (res.pace_templates[m] < 0 || data.demos[static_cast<std::size_t>(res.pace_templates[m])].f.size() < 2)
-        throw UserError("--canonical-pace: movement " + data.movement_names[m] + " has no training demonstration of 2 samples or more");
+      if (res.pace_templates[m] < 0)
+        throw UserError("--canonical-pace: movement " + data.movement_names[m] + " has no training demonstration");
     paced = pacedData(data, res.pace_templates, *o.canonical_pace);
     if (progress) {
       *progress << "canonical pace (" << paceMethodName(*o.canonical_pace) << "): every movement at the pace of its shortest training demonstration (";
