@@ -8,8 +8,9 @@
 # with the load average before and after. Usage: bench/lola_roundtrip.sh [BUILD_DIR] > result.txt
 # The autonomous-mode model runs its policy on every tick (a synthetic reference ends after
 # ~13 s, after which the controller bypasses the policy and the ticks get cheap).
-# Environment: PRECISION=fp32|int8 (nao_rt --precision, default fp32); MODES="default
-# answer-first io-thread" (any subset, in that order; default: the first two).
+# Environment: PRECISION=fp32|int8 (nao_rt --precision, default fp32); MODES="default no-warm
+# answer-first io-thread" (any subset, in that order; default: default and answer-first).
+# no-warm: the default without warming the cache before the tick's packet (--lola-no-warm).
 set -euo pipefail
 build="${1:-build}"
 precision="${PRECISION:-fp32}"
@@ -21,6 +22,7 @@ for mode in $modes; do
   flags=(--precision "$precision")
   case "$mode" in
     default) ;;
+    no-warm) flags+=(--lola-no-warm) ;;
     answer-first) flags+=(--lola-answer-first) ;;
     io-thread) flags+=(--lola-io-thread) ;;
     *) echo "lola_roundtrip.sh: unknown mode '$mode'" >&2; exit 2 ;;
@@ -48,5 +50,7 @@ print(f"answered within the 12 ms cycle (robot side): {sim['answered_in_cycle']}
       f"({100.0 * sim['answered_in_cycle'] / max(1, sim['sent']):.2f} %)")
 print(f"ticks {s['ticks']}, tick_us p50 {s['tick_us']['p50']:.0f} p99 {s['tick_us']['p99']:.0f} max {s['tick_us']['max']:.0f}, "
       f"allocations after activate {s['allocations_after_activate']}")
+if l.get("warm"):
+    print(f"cache warmed before each tick's packet: {l['warm_us_mean']:.0f} us per tick (mean)")
 EOF
 done

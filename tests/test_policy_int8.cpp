@@ -418,3 +418,33 @@ TEST_CASE("stepPolicy with int8 weights: same bits under SSE2 and AVX2, near fp3
   REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
   CHECK(rollActions(w, 4, kTicks) == fp32);
 }
+
+TEST_CASE("warmPolicy reads each view stepPolicy uses once: the int8 bytes instead of an int8 model's fp32 matrices") {
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const PolicyArch arch = SmallPolicyDims::arch();
+  const test::RandomPolicy p = test::makeRandomPolicy(arch, arm, 22);
+  PolicyWeights<SmallPolicyDims> w =
+      bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), Conditioning::kReference);
+  auto ws = makePolicyWorkspace<SmallPolicyDims>();
+  // From the manifest, by name: every tensor in fp32; the int8 model swaps the attention
+  // projections and the FFN weights for their bytes (one per weight) and per-row float scales.
+  std::size_t fp32 = 0, int8 = 0;
+  for (const TensorSpec& t : policyManifest(arch)) {
+    const std::string& n = t.name;
+    const auto ends = [&n](const std::string& tail) {
+      return n.size() >= tail.size() && n.compare(n.size() - tail.size(), tail.size(), tail) == 0;
+    };
+    const bool projection = ends(".wq") || ends(".wk") || ends(".wv") || ends(".wo");
+    const bool ffn_weight = n.find(".ffn.") != std::string::npos && ends(".weight");
+    const std::size_t count = t.count();
+    fp32 += 4 * count;
+    int8 += projection || ffn_weight ? count + 4 * static_cast<std::size_t>(t.shape[1]) : 4 * count;  // [in, out]
+  }
+  std::uint64_t sink = 0;
+  CHECK(warmPolicy(w, *ws, sink) == fp32 + sizeof(*ws));
+  CHECK(sink > 0);
+  const AlignedBytes blob = quantizePolicyInt8(w);
+  bindQuantizedWeights<SmallPolicyDims>(w, blob.data.get());
+  CHECK(int8 < fp32 / 2);
+  CHECK(warmPolicy(w, *ws, sink) == int8 + sizeof(*ws));
+}

@@ -660,6 +660,11 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
                  {"tracking_cycles", c.tracking_cycles},
                  {"io_thread", o.lola.io_thread},
                  {"overrun_ticks", c.overrun_ticks},
+                 {"warm", c.before_tick_calls > 0},
+                 {"warm_skipped", c.before_tick_skipped},
+                 {"warm_us_mean", c.before_tick_calls > 0 ? ordered_json(1e-3 * static_cast<double>(c.before_tick_ns) /
+                                                                         static_cast<double>(c.before_tick_calls))
+                                                          : ordered_json(nullptr)},
                  {"io_allocations", c.io_allocations >= 0 ? ordered_json(c.io_allocations) : ordered_json(nullptr)},
                  {"round_trip_us", statsJson(latencyStats(rtt_us))},
                  {"stop", totals.stop == RobotStop::kLinkLost ? "link_lost"

@@ -69,6 +69,9 @@ struct RunOptions {
   /// ode (the in-process arm, default) or lola[:SOCKET] (LoLA, default socket /tmp/robocup).
   std::string robot = "ode";
   LolaParams lola;             ///< LoLA safety parameters (socket_path from `robot`)
+  /// LoLA on one thread: load the policy's weights and workspace into the cache in the cycle
+  /// before each tick's packet (warmPolicy; --lola-no-warm turns it off, docs/lola.md).
+  bool lola_warm = true;
   /// > 0: busy-wait this long before every tick's work, as a slower CPU would take (tests and
   /// benchmarks of the LoLA timing; not in tick_us).
   std::int64_t emulate_tick_ns = 0;
@@ -427,11 +430,24 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     const ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, options.sim);
     auto data = std::make_unique<ControllerData<Dims>>(model.sim, p.q_start);
     std::unique_ptr<LolaBackend> lola;
+    // What the cycle before a tick's packet warms (LolaParams::before_tick).
+    struct WarmContext {
+      const PolicyWeights<Dims>* weights;
+      const PolicyWorkspace<Dims>* workspace;
+      std::uint64_t sink;
+    } warm{&model.policy, data->policy.get(), 0};
     if (robot.lola) {
       // The socket is opened here, before activate.
       LolaParams lola_params = options.lola;
       lola_params.socket_path = robot.socket_path;
       lola_params.io_probe = probe != nullptr ? probe->companion() : nullptr;
+      if (options.lola_warm && !lola_params.io_thread) {
+        lola_params.before_tick = [](void* c) {
+          auto* w = static_cast<WarmContext*>(c);
+          warmPolicy(*w->weights, *w->workspace, w->sink);
+        };
+        lola_params.before_tick_context = &warm;
+      }
       installLolaStopSignals();
       lola = std::make_unique<LolaBackend>(p.arm, lola_params);
       data->robot = lola.get();

@@ -73,6 +73,14 @@ struct LolaParams {
   double io_wait_ms = 4.0;
   /// Counts the I/O thread's allocations from the first tick to deactivate (io_thread only).
   AllocationProbe* io_probe = nullptr;
+  /// One thread only: called on the control thread once per tick in the idle time before the
+  /// packet that ends the tick, before_tick_lead_ms before that packet is due (a cycle after the
+  /// previous one); skipped if the packet comes first (nao_rt: warmPolicy, so the tick does not
+  /// read its weights from memory, docs/lola.md). Must be real-time safe and take less than the
+  /// lead; its time is counted in LolaCounters::before_tick_ns.
+  void (*before_tick)(void* context) = nullptr;
+  void* before_tick_context = nullptr;
+  double before_tick_lead_ms = 1.5;
   int gap_cycles = 2;                ///< no packet for more than this many cycles: packet-gap fault
   int link_lost_cycles = 84;         ///< no packet for this many cycles (~1 s): link lost, stop
   std::size_t latency_capacity = 1 << 16;  ///< per-cycle round-trip samples kept (summary, bench)
@@ -88,6 +96,9 @@ struct LolaCounters {
   std::int64_t tracking_cycles = 0;  ///< cycles with a tracking error
   std::int64_t io_allocations = -1;  ///< the I/O thread's allocations after activate (-1: not counted)
   std::int64_t overrun_ticks = 0;    ///< io_thread: ticks whose command came after the next boundary
+  std::int64_t before_tick_calls = 0;  ///< LolaParams::before_tick calls
+  std::int64_t before_tick_ns = 0;     ///< and their total time
+  std::int64_t before_tick_skipped = 0;  ///< ticks whose packet came before the hook's time
 };
 
 /// Installs SIGINT/SIGTERM handlers that ask a running LolaBackend for a safe stop (and make
@@ -122,6 +133,7 @@ class LolaBackend final : public RobotBackend {
   void measure();               // the packet's measurement: q_meas_, tracking
   void respond(std::int64_t t_in_ns, bool waited);  // this cycle's setpoint and stiffness, sent
   void failLink();
+  void beforeTickPacket();      // waits until the lead before the tick's packet, calls before_tick
   void ioMain();                // the I/O thread (io_thread)
   void publishTick();           // I/O thread: the tick boundary's measurement to the control thread
   const JointVector& commandThreaded(const JointVector& q_cmd);

@@ -745,6 +745,52 @@ bool usesInt8(const PolicyWeights<Dims>& w) noexcept {
   return w.enc[0].attn.wq8.w != nullptr;
 }
 
+namespace detail {
+/// One load per 64-byte line of [p, p + bytes) (and of its last byte), added to `sink` so the
+/// loads cannot be dropped. Returns bytes.
+inline std::size_t touchLines(const void* p, std::size_t bytes, std::uint64_t& sink) noexcept {
+  const auto* c = static_cast<const volatile unsigned char*>(p);
+  std::uint64_t s = 0;
+  for (std::size_t i = 0; i < bytes; i += 64) s += c[i];
+  if (bytes > 0) s += c[bytes - 1];
+  sink += s;
+  return bytes;
+}
+}  // namespace detail
+
+/// Loads every byte the next stepPolicy reads into the cache: each view stepPolicy uses (a
+/// matrix's int8 bytes and scales instead of its fp32 view in an int8 model) and the workspace
+/// with its key/value rings. For a caller with idle time before a step whose data the cache has
+/// lost since the last one: in the 100 ms between two 10 Hz ticks the 24 MB of fp32 weights
+/// leave it, and the step then reads them from memory (~2x its hot time here, BM_Policy_Cold_*).
+/// nao_rt on LoLA calls it shortly before each tick's packet (docs/lola.md). Adds the bytes'
+/// sum to `sink` (meaningless; keep it somewhere) and returns the number of bytes read. No
+/// allocation.
+template <class Dims>
+std::size_t warmPolicy(const PolicyWeights<Dims>& w, const PolicyWorkspace<Dims>& ws, std::uint64_t& sink) noexcept {
+  // The visitors take a mutable model (they also bind); nothing here writes through it.
+  auto& m = const_cast<PolicyWeights<Dims>&>(w);
+  // The fp32 matrices an int8 model does not read.
+  constexpr std::size_t kQuantCount = 4 * (Dims::kEncoderLayers + 2 * Dims::kDecoderLayers) +
+                                      4 * (Dims::kEncoderLayers + Dims::kDecoderLayers);
+  std::array<const float*, kQuantCount> skip{};
+  std::size_t n_skip = 0, bytes = 0;
+  detail::visitQuantViews(m, [&](const auto& view, auto& q) {
+    using Q = std::remove_reference_t<decltype(q)>;
+    if (q.w == nullptr || n_skip == kQuantCount) return;
+    skip[n_skip++] = view.data();
+    bytes += detail::touchLines(q.w, static_cast<std::size_t>(Q::kOut) * Q::kIn, sink);
+    bytes += detail::touchLines(q.scale, static_cast<std::size_t>(Q::kOut) * sizeof(float), sink);
+  });
+  detail::visitWeightViews(m, [&](const detail::ViewName&, auto& view) {
+    if (view.data() == nullptr) return;
+    for (std::size_t i = 0; i < n_skip; ++i)
+      if (skip[i] == view.data()) return;
+    bytes += detail::touchLines(view.data(), static_cast<std::size_t>(view.size()) * sizeof(float), sink);
+  });
+  return bytes + detail::touchLines(&ws, sizeof(ws), sink);
+}
+
 /// Starts a new rollout: the window is empty (the next step is tick 0 and sees only itself).
 /// Real-time safe. Ring contents are not cleared: a slot is read only after this stream wrote it.
 template <class Dims>
