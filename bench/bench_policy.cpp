@@ -17,6 +17,8 @@
 //                          step does (matrix weights × 5 tokens), from registers, widest width
 //   BM_WeightStream_Eigen  the same bytes read by Eigen's vectorised sum (the limit quoted before
 //                          2026-11-26: 10-25 % slower than the prefetched read on this machine)
+//   BM_Layout_Strided / _Packed  24 MB of 512x512 matrices x 5 tokens with the AVX-512 product in
+//                          model.bin's column-major layout and repacked block by block (below)
 // BM_Policy_Libtorch (bench_policy_torch.cpp) is libtorch eager on the same weights.
 // One inference (or one sweep) per iteration, each timed on its own; single thread.
 #include "bench_policy_common.hpp"
@@ -31,6 +33,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 
 namespace {
@@ -278,6 +281,107 @@ void runMulAddFloor(benchmark::State& state) {
   state.SetLabel(lanes == 16 ? "avx512" : lanes == 8 ? "avx2" : "sse");
 }
 
+#if NAO_POLICY_HAVE_AVX2
+// BM_Layout_Strided / BM_Layout_Packed: where the fp32 step's products lose to the read
+// (2026-11-26). 24 distinct 512x512 matrices (24 MB, the model's size; the FFN's middle
+// matrices are this shape) times J = 5 tokens with AVX-512, one sweep per iteration:
+//   _Strided: the runtime's kernel (affineTokensAvx512) on the column-major matrices of
+//             model.bin: a block of 32 rows reads 128 bytes of each of a strip's 16 columns,
+//             2 KB apart;
+//   _Packed:  the same loop order on the matrices repacked so that each (strip, block) is 2 KB
+//             in a row, read in address order with the data 32 KB ahead prefetched.
+// Both add each row's terms in k order, multiply then add: the same bits (counter same_bits).
+constexpr int kLayoutRows = 512, kLayoutCols = 512, kLayoutTokens = 5, kLayoutMatrices = 24;
+constexpr int kLayoutStrip = 16, kLayoutBlock = 32;
+
+/// W (column-major [kLayoutRows, kLayoutCols]) as strips of kLayoutStrip columns, each as blocks of
+/// kLayoutBlock rows, each block column by column.
+std::vector<float> packLayout(const float* W) {
+  std::vector<float> p;
+  p.reserve(static_cast<std::size_t>(kLayoutRows) * kLayoutCols);
+  for (int k0 = 0; k0 < kLayoutCols; k0 += kLayoutStrip)
+    for (int r = 0; r < kLayoutRows; r += kLayoutBlock)
+      for (int k = k0; k < k0 + kLayoutStrip; ++k)
+        for (int i = 0; i < kLayoutBlock; ++i) p.push_back(W[static_cast<std::size_t>(k) * kLayoutRows + r + i]);
+  return p;
+}
+
+__attribute__((target("avx512f"), noinline)) void affinePackedAvx512(const float* P, const float* X, float* Y) {
+  constexpr int J = kLayoutTokens, R = kLayoutBlock / 16;
+  for (int i = 0; i < kLayoutRows * J; ++i) Y[i] = 0.0f;
+  const float* w = P;
+  for (int k0 = 0; k0 < kLayoutCols; k0 += kLayoutStrip) {
+    for (int r = 0; r < kLayoutRows; r += kLayoutBlock, w += kLayoutBlock * kLayoutStrip) {
+      __m512 acc[R][J];
+#pragma GCC unroll 8
+      for (int t = 0; t < J; ++t)
+#pragma GCC unroll 4
+        for (int i = 0; i < R; ++i) acc[i][t] = _mm512_loadu_ps(Y + t * kLayoutRows + r + 16 * i);
+#pragma GCC unroll 2
+      for (int k = 0; k < kLayoutStrip; ++k) {
+#pragma GCC unroll 4
+        for (int i = 0; i < R; ++i) __builtin_prefetch(w + kLayoutBlock * k + 16 * i + 8192, 0, 2);
+        __m512 wv[R];
+#pragma GCC unroll 4
+        for (int i = 0; i < R; ++i) wv[i] = _mm512_loadu_ps(w + kLayoutBlock * k + 16 * i);
+#pragma GCC unroll 8
+        for (int t = 0; t < J; ++t) {
+          const __m512 x = _mm512_set1_ps(X[t * kLayoutCols + k0 + k]);
+#pragma GCC unroll 4
+          for (int i = 0; i < R; ++i) acc[i][t] = _mm512_add_ps(acc[i][t], _mm512_mul_ps(wv[i], x));
+        }
+      }
+#pragma GCC unroll 8
+      for (int t = 0; t < J; ++t)
+#pragma GCC unroll 4
+        for (int i = 0; i < R; ++i) _mm512_storeu_ps(Y + t * kLayoutRows + r + 16 * i, acc[i][t]);
+    }
+  }
+}
+
+void runLayout(benchmark::State& state, bool packed) {
+  if (!policyKernelSupported(PolicyKernel::kAvx512)) {
+    state.SkipWithError("the AVX-512 kernel is not supported here");
+    return;
+  }
+  constexpr std::size_t kSize = static_cast<std::size_t>(kLayoutRows) * kLayoutCols;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-0.1f, 0.1f);
+  std::vector<std::vector<float>> W(kLayoutMatrices), P(kLayoutMatrices);
+  for (int m = 0; m < kLayoutMatrices; ++m) {
+    W[m].resize(kSize);
+    for (float& x : W[m]) x = u(rng);
+    P[m] = packLayout(W[m].data());
+  }
+  std::vector<float> X(static_cast<std::size_t>(kLayoutCols) * kLayoutTokens), Y(kLayoutRows * kLayoutTokens),
+      Z(kLayoutRows * kLayoutTokens);
+  for (float& x : X) x = u(rng);
+  detail::affineTokensAvx512<kLayoutRows, kLayoutCols, kLayoutTokens, false>(W[0].data(), nullptr, X.data(), Y.data());
+  affinePackedAvx512(P[0].data(), X.data(), Z.data());
+  const bool same = std::memcmp(Y.data(), Z.data(), Y.size() * sizeof(float)) == 0;
+  Percentiles rec;
+  for (auto _ : state) {
+    const BenchClock::time_point t0 = BenchClock::now();
+    for (int m = 0; m < kLayoutMatrices; ++m) {
+      if (packed)
+        affinePackedAvx512(P[m].data(), X.data(), Y.data());
+      else
+        detail::affineTokensAvx512<kLayoutRows, kLayoutCols, kLayoutTokens, false>(W[m].data(), nullptr, X.data(),
+                                                                                   Y.data());
+      benchmark::DoNotOptimize(Y.data());
+    }
+    const double sec = secondsSince(t0);
+    state.SetIterationTime(sec);
+    rec.add(sec);
+  }
+  rec.report(state);
+  state.counters["same_bits"] = same ? 1.0 : 0.0;
+  state.counters["GB_per_s"] = static_cast<double>(kLayoutMatrices * kSize * 4) / 1e3 / state.counters["p50_us"];
+  state.counters["G_mul_add_per_s"] =
+      static_cast<double>(kLayoutMatrices) * kSize * kLayoutTokens / 1e3 / state.counters["p50_us"];
+}
+#endif
+
 /// One row per registered benchmark: kernel forced (none: the runtime's choice), int8 weights,
 /// caches evicted before every iteration (cold: 200 iterations, each eviction writes 128 MB).
 struct PolicyCase {
@@ -335,6 +439,12 @@ const bool kRegistered = [] {
         timed(benchmark::RegisterBenchmark(c.name, [c](benchmark::State& state) { runWeightStream(state, c.best, c.cold); }),
               cold);
     if (!cold) timed(benchmark::RegisterBenchmark("BM_MulAddFloor", runMulAddFloor), false);
+#if NAO_POLICY_HAVE_AVX2
+    if (!cold) {
+      timed(benchmark::RegisterBenchmark("BM_Layout_Strided", [](benchmark::State& st) { runLayout(st, false); }), true);
+      timed(benchmark::RegisterBenchmark("BM_Layout_Packed", [](benchmark::State& st) { runLayout(st, true); }), true);
+    }
+#endif
   }
   return true;
 }();
