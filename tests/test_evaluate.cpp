@@ -256,6 +256,28 @@ TEST_CASE("evaluate on the committed models writes the summary contract; issue 1
   CHECK(s2["elbow"]["linear_ar_dtw_m"] == s["elbow"]["linear_ar_dtw_m"]);
   CHECK(s2["elbow"]["demo_nn_dtw_m"] == s["elbow"]["demo_nn_dtw_m"]);
   CHECK(s2["elbow"]["reference_rmse_per_seed_m"][0] == s["elbow"]["reference_rmse_per_seed_m"][0]);
+
+  // --test-seed: scored on demonstrations neither training nor selection saw; the AR baseline is
+  // the same fit (training split, orders chosen on the validation demonstrations).
+  const std::string test_set = std::string("'") + NAO_TOOLCHAIN_EXE + "' evaluate --autonomous-model '" +
+                               auto_model.string() + "' --reference-model '" + ref_model.string() + "' --urdf '" +
+                               test::kUrdfPath + "' --nao-rt '" + NAO_RT_EXE +
+                               "' --data regenerate --jobs 2 --movement elbow --seeds 1 --test-seed 100 --test-demos 4"
+                               " --out '" + (out / "test_set").string() + "' >'" + (out / "test_set.log").string() +
+                               "' 2>&1";
+  REQUIRE_MESSAGE(std::system(test_set.c_str()) == 0, readText(out / "test_set.log"));
+  const nlohmann::json s3 = nlohmann::json::parse(readText(out / "test_set" / "summary.json"));
+  const nlohmann::json d3 = nlohmann::json::parse(readText(out / "test_set" / "detail.json"));
+  CHECK(s3["evaluation"]["demo_set"]["kind"] == "test");
+  CHECK(s3["evaluation"]["demo_set"]["synth_seed"] == 1000100);
+  CHECK(s["evaluation"]["demo_set"]["kind"] == "validation");
+  CHECK(s3["elbow"]["autonomous_runs"] == 4);
+  CHECK(d3["elbow"]["heldout_demos"] ==
+        nlohmann::json{"elbow_test100_000", "elbow_test100_001", "elbow_test100_002", "elbow_test100_003"});
+  CHECK(d3["elbow"]["autonomous"][3]["start_demo"] == "elbow_test100_003");
+  CHECK(s3["elbow"]["linear_ar_orders"] == s["elbow"]["linear_ar_orders"]);
+  CHECK(d3["elbow"]["linear_ar"]["joints"] == detail["elbow"]["linear_ar"]["joints"]);
+  CHECK(s3["elbow"]["demo_nn_dtw_m"] != s["elbow"]["demo_nn_dtw_m"]);
   std::error_code ec;
   fs::remove_all(out, ec);
 }

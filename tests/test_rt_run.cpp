@@ -543,6 +543,73 @@ TEST_CASE("--start-demo rolls out from one validation demonstration's s_0 for it
   CHECK(status == 2);
 }
 
+TEST_CASE("--test-seed rolls out from a test set the model never saw: demonstrations 0..N-1 of run seed 1000000 + S") {
+  const rt::ValidationSet t = rt::testDemos("wrist", 7, 3);
+  CHECK(t.seed == tools::kReferenceSeedBase + 7);
+  CHECK_FALSE(t.seed_assumed);
+  CHECK(t.names == std::vector<std::string>{"wrist_test7_000", "wrist_test7_001", "wrist_test7_002"});
+  CHECK(t.indices == std::vector<int>{0, 1, 2});
+  CHECK_THROWS_AS(rt::testDemos("wrist", 7, 0), std::invalid_argument);
+
+  const std::string model = writeModel("autonomous_test_set.bin", Conditioning::kAutonomous,
+                                       R"({"split":{"train":["elbow_000"],"val":["elbow_003","elbow_010"]}})");
+  const fs::path dir = tempDir("test_set");
+  rt::RunOptions o = options(model, "none", dir);
+  o.movement = "elbow";
+  o.test_seed = 7;
+  o.test_demos = 3;
+  o.start_demo = 2;
+  const Outcome r = run(o);
+  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+  const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
+  CHECK(s["demo_set"] == "test");
+  CHECK(s["validation_demos"] == nlohmann::json{"elbow_test7_000", "elbow_test7_001", "elbow_test7_002"});
+  CHECK(s["validation_seed"] == tools::kReferenceSeedBase + 7);
+  CHECK(s["start_demo"] == "elbow_test7_002");
+  CHECK(s["ee_dtw_per_demo_m"].size() == 3);
+  // It starts where that demonstration's feature-extracted trajectory starts and runs its length.
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const ModelFile file = readModelFile(model);
+  std::vector<JointVector> centroids;
+  const float* c = file.data(file.find("centroids"));
+  for (int k = 0; k < Dims::kClusters; ++k) {
+    JointVector q;
+    for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];  // movement 0 = elbow
+    centroids.push_back(q);
+  }
+  const tools::ReferenceStream d = tools::makeDemoReference(arm, tools::Movement::kElbow, tools::kReferenceSeedBase + 7,
+                                                            2, centroids);
+  CHECK(r.report.ticks == static_cast<std::int64_t>(d.target.size()));
+  // Another demonstration than the validation one at the same index (seed 1, index 2): both
+  // start at rest, snapped to the same key pose, but their trajectories differ.
+  const tools::ReferenceStream v = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 2, centroids);
+  bool differ = d.target.size() != v.target.size();
+  for (std::size_t i = 0; !differ && i < d.target.size(); ++i) differ = d.target[i] != v.target[i];
+  CHECK(differ);
+
+  // The validation set stays the default and is named so.
+  const fs::path vdir = tempDir("test_set_default");
+  rt::RunOptions dflt = options(model, "none", vdir);
+  dflt.movement = "elbow";
+  dflt.ticks = 5;
+  REQUIRE(run(dflt).report.status == 0);
+  CHECK(nlohmann::json::parse(bytes(vdir / "summary.json"))["demo_set"] == "validation");
+
+  int status = 0;
+  rt::RunOptions with_reference = options(referenceModel(), "synthetic:elbow");
+  with_reference.test_seed = 7;
+  CHECK(errorLine(with_reference, status).find("--test-seed") != std::string::npos);
+  CHECK(status == 2);
+  rt::CommandLine cl;
+  std::ostringstream out, err;
+  const char* argv[] = {"nao_rt", "--test-seed", "100", "--test-demos", "16"};
+  REQUIRE(rt::parseCommandLine(5, argv, cl, out, err) == -1);
+  CHECK(cl.run.test_seed == 100);
+  CHECK(cl.run.test_demos == 16);
+  const char* bad[] = {"nao_rt", "--test-demos", "0"};
+  CHECK(rt::parseCommandLine(3, bad, cl, out, err) == 2);
+}
+
 TEST_CASE("--blend-law-pole runs the blend-law baseline on a reference model, is refused for an autonomous one, and is recorded") {
   rt::CommandLine cl;
   std::ostringstream out, err;

@@ -49,6 +49,16 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                  "(default: the mean s_0 and mean length of all of them)")
       ->type_name("I")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--test-seed", o.test_seed,
+                 "none only: instead of the model's validation demonstrations, start from (and score\n"
+                 "the run against) a test set the trainer never saw, neither to fit nor to select:\n"
+                 "demonstrations 0..N-1 of synthesiser run seed 1000000 + S (N: --test-demos)")
+      ->type_name("S")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--test-demos", o.test_demos, "Size N of the --test-seed set per movement")
+      ->type_name("N")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   app.add_option("--blend-law-pole", o.controller.blend_law_pole,
                  "Baseline, reference-conditioned models only: replace the policy by the key-pose\n"
                  "blend law its labels follow, a = p^2 a(t-1) + (1-p)^2 (r - q), with pole p in\n"

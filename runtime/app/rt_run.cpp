@@ -205,6 +205,20 @@ ValidationSet validationDemos(const std::string& metadata_json, const std::strin
   return v;
 }
 
+ValidationSet testDemos(const std::string& movement, std::uint64_t test_seed, int count) {
+  if (count < 1) throw std::invalid_argument("a test set needs at least one demonstration");
+  ValidationSet v;
+  v.seed = tools::kReferenceSeedBase + test_seed;
+  v.seed_assumed = false;
+  for (int i = 0; i < count; ++i) {
+    char index[16];
+    std::snprintf(index, sizeof index, "%03d", i);
+    v.names.push_back(movement + "_test" + std::to_string(test_seed) + "_" + index);
+    v.indices.push_back(i);
+  }
+  return v;
+}
+
 float modelResidualGain(const std::string& metadata_json, const std::string& origin) {
   const nlohmann::json j = nlohmann::json::parse(metadata_json, nullptr, /*allow_exceptions=*/false);
   if (!j.is_object() || !j.contains("training") || !j["training"].is_object() ||
@@ -297,6 +311,8 @@ RetargetParams modelRetargetSetting(const std::string& metadata_json, const Reta
 PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   PreparedRun p;
   p.spec = parseReferenceSpec(o.reference, o.movement);
+  if (o.test_seed >= 0 && p.spec.kind != ReferenceKind::kNone)
+    throw UsageError("--test-seed needs --reference none (it replaces the validation demonstrations a rollout starts from)");
   if (o.start_demo >= 0 && p.spec.kind != ReferenceKind::kNone)
     throw UsageError("--start-demo needs --reference none (it picks the held-out demonstration to start from)");
   if (!(o.controller.blend_law_pole >= 0.0 && o.controller.blend_law_pole < 1.0))
@@ -355,7 +371,9 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
       if (!isSynthMovement(p.spec.movement))
         throw std::runtime_error("--reference none: the validation demonstrations of '" + p.spec.movement +
                                  "' cannot be regenerated (the synthesiser draws whole_arm, elbow and wrist)");
-      p.validation = validationDemos(h.metadata_json, p.spec.movement, p.model_source);
+      p.validation = o.test_seed >= 0 ? testDemos(p.spec.movement, static_cast<std::uint64_t>(o.test_seed), o.test_demos)
+                                      : validationDemos(h.metadata_json, p.spec.movement, p.model_source);
+      const char* set = o.test_seed >= 0 ? "test" : "validation";
       const tools::Movement m = tools::parseMovement(p.spec.movement);
       JointVector s0 = JointVector::Zero();
       double length = 0.0;
@@ -369,18 +387,18 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
       default_ticks = static_cast<std::int64_t>(std::lround(length / n));
       p.reference.movement = p.spec.movement;
       p.reference.description = "none (rollout from s_0, the mean start of " +
-                                std::to_string(p.validation_demos.size()) + " validation demonstration(s), seed " +
+                                std::to_string(p.validation_demos.size()) + " " + set + " demonstration(s), seed " +
                                 std::to_string(p.validation.seed) + ")";
       if (o.start_demo >= 0) {
         // The paper's protocol: one rollout from the s_0 of one held-out demonstration, as long as it.
         if (o.start_demo >= static_cast<int>(p.validation_demos.size()))
-          throw UsageError("--start-demo " + std::to_string(o.start_demo) + ": the model has " +
-                           std::to_string(p.validation_demos.size()) + " validation demonstration(s) of " +
+          throw UsageError("--start-demo " + std::to_string(o.start_demo) + ": there are " +
+                           std::to_string(p.validation_demos.size()) + " " + set + " demonstration(s) of " +
                            p.spec.movement + " (0.." + std::to_string(p.validation_demos.size() - 1) + ")");
         const tools::ReferenceStream& d = p.validation_demos[static_cast<std::size_t>(o.start_demo)];
         p.q_start = d.target.front();
         default_ticks = static_cast<std::int64_t>(d.target.size());
-        p.reference.description = "none (rollout from s_0 of validation demonstration " +
+        p.reference.description = std::string("none (rollout from s_0 of ") + set + " demonstration " +
                                   p.validation.names[static_cast<std::size_t>(o.start_demo)] + ", index " +
                                   std::to_string(o.start_demo) + " of " + std::to_string(p.validation_demos.size()) +
                                   ", seed " + std::to_string(p.validation.seed) + ")";
@@ -606,6 +624,8 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
   j["ee_rmse_ticks"] = n_ref;
   if (p.spec.kind == ReferenceKind::kNone) {
     j["ee_dtw_m"] = numberOrNull(report.ee_dtw_m);
+    // With --test-seed the demonstrations below are the test set's (the keys keep their names).
+    j["demo_set"] = o.test_seed >= 0 ? "test" : "validation";
     j["validation_demos"] = p.validation.names;
     j["validation_seed"] = p.validation.seed;
     j["validation_seed_assumed"] = p.validation.seed_assumed;

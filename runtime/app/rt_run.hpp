@@ -58,6 +58,12 @@ struct RunOptions {
   /// the movement's held-out demonstrations, in split.val order) and runs its length; -1: the
   /// mean s_0 and mean length of all of them (--start-demo).
   int start_demo = -1;
+  /// none only: >= 0 replaces the model's validation demonstrations by a test set, demonstrations
+  /// 0 .. test_demos-1 of synthesiser run seed kReferenceSeedBase + test_seed (never a training or
+  /// validation demonstration, and not selected on: the trainer never saw them), for --start-demo
+  /// and the summary's nearest-demonstration DTW (--test-seed, --test-demos).
+  std::int64_t test_seed = -1;
+  int test_demos = 16;
   std::int64_t ticks = 0;      ///< > 0: run this many ticks
   double seconds = 0.0;        ///< > 0: run this long (rounded to whole ticks); else the default length
   bool realtime = false;       ///< absolute 10 Hz deadlines (clock_nanosleep), SCHED_FIFO + mlockall if permitted
@@ -149,6 +155,11 @@ struct ValidationSet {
 /// Reads split.val (and data.synth_seed when present) from a model's metadata JSON and keeps the
 /// demonstrations of `movement`. Throws std::runtime_error naming `origin` when there are none.
 ValidationSet validationDemos(const std::string& metadata_json, const std::string& movement, const std::string& origin);
+
+/// A test set of `movement`: demonstrations 0 .. count-1 of run seed kReferenceSeedBase +
+/// test_seed (the seeds nao_rt's synthetic references come from, never a training seed), named
+/// <movement>_test<seed>_<index>. Throws std::invalid_argument if count < 1.
+ValidationSet testDemos(const std::string& movement, std::uint64_t test_seed, int count);
 
 /// The linear AR base an autonomous model was trained over (metadata training.linear_ar: per
 /// movement, per joint {"order", "c", "beta", "alpha"}; PolicyWeights::linear_ar), as doubles.

@@ -62,6 +62,8 @@ struct Args {
   int jobs = 2;
   int max_order = 12;
   int min_demos = 16;
+  std::int64_t test_seed = -1;  ///< >= 0: score on the test set of this seed (rt::testDemos), not on validation
+  int test_demos = 16;
   bool data_given = false;
 };
 
@@ -312,20 +314,24 @@ void evaluate(const Args& a) {
     }
     MovementWork w;
     w.name = name;
+    // v: the model's validation demonstrations (the AR order is chosen on them); scored: the ones
+    // scored, v itself, or with --test-seed a test set that neither training nor selection saw.
     const rt::ValidationSet v = rt::validationDemos(auto_model.header.metadata_json, name, a.autonomous_model);
-    if (static_cast<int>(v.names.size()) < a.min_demos)
+    const bool test = a.test_seed >= 0;
+    const rt::ValidationSet scored = test ? rt::testDemos(name, static_cast<std::uint64_t>(a.test_seed), a.test_demos) : v;
+    if (!test && static_cast<int>(v.names.size()) < a.min_demos)
       throw UserError(a.autonomous_model + " holds out " + std::to_string(v.names.size()) + " demonstration(s) of " +
                       name + "; the protocol needs at least " + std::to_string(a.min_demos) +
                       " (--min-demos; retrain with a larger validation fraction)");
     const std::vector<JointVector> key_poses = modelKeyPoses(auto_model, static_cast<int>(it - names.begin()));
     w.held.movement = name;
-    w.held.seed = v.seed;
-    w.held.seed_assumed = v.seed_assumed;
-    w.held.names = v.names;
-    w.held.indices = v.indices;
-    std::fprintf(stderr, "evaluate: %s: regenerating %zu held-out demonstrations (synth seed %llu)\n", name.c_str(),
-                 v.names.size(), static_cast<unsigned long long>(v.seed));
-    w.held.target = regenerateTargets(arm, name, v.seed, v.indices, key_poses, retarget);
+    w.held.seed = scored.seed;
+    w.held.seed_assumed = scored.seed_assumed;
+    w.held.names = scored.names;
+    w.held.indices = scored.indices;
+    std::fprintf(stderr, "evaluate: %s: regenerating %zu %s demonstrations (synth seed %llu)\n", name.c_str(),
+                 scored.names.size(), test ? "test" : "held-out", static_cast<unsigned long long>(scored.seed));
+    w.held.target = regenerateTargets(arm, name, scored.seed, scored.indices, key_poses, retarget);
     for (const auto& t : w.held.target) w.held.hand.push_back(handPath(arm, t));
     for (std::size_t i = 0; i < w.held.hand.size(); ++i)
       w.demo_nn.push_back(nearestDemo(w.held.hand[i], w.held.hand, static_cast<int>(i)));
@@ -353,7 +359,7 @@ void evaluate(const Args& a) {
         }
       std::fprintf(stderr, "evaluate: %s: regenerating %zu training demonstrations\n", name.c_str(), idx.size());
       train = regenerateTargets(arm, name, v.seed, idx, key_poses, retarget);
-      val = w.held.target;
+      val = test ? regenerateTargets(arm, name, v.seed, v.indices, key_poses, retarget) : w.held.target;
     }
     if (train.empty()) throw UserError(a.autonomous_model + ": no training demonstration of " + name + " (split.train)");
     if (val.empty()) throw UserError("no held-out demonstration of " + name + " in the data set " + a.data);
@@ -392,13 +398,16 @@ void evaluate(const Args& a) {
     // nao_rt runs: one autonomous rollout per held-out demonstration, reference mode per seed.
     const fs::path mdir = out / name;
     for (const char* sub : {"autonomous", "reference", "blend_law", "gain_law"}) fs::remove_all(mdir / sub, ec);
-    for (std::size_t i = 0; i < v.names.size(); ++i) {
+    for (std::size_t i = 0; i < scored.names.size(); ++i) {
       w.auto_jobs.push_back(jobs.size());
-      jobs.push_back({name + " autonomous " + v.names[i],
-                      {nao_rt.string(), "--weights", a.autonomous_model, "--urdf", a.urdf, "--reference", "none",
-                       "--movement", name, "--start-demo", std::to_string(i), "--zero-timing", "--log",
-                       (mdir / "autonomous" / v.names[i]).string()},
-                      mdir / "autonomous" / v.names[i]});
+      std::vector<std::string> argv = {nao_rt.string(), "--weights", a.autonomous_model, "--urdf", a.urdf,
+                                       "--reference", "none", "--movement", name, "--start-demo", std::to_string(i),
+                                       "--zero-timing", "--log", (mdir / "autonomous" / scored.names[i]).string()};
+      if (test)
+        for (const std::string& x : {std::string("--test-seed"), std::to_string(a.test_seed), std::string("--test-demos"),
+                                     std::to_string(a.test_demos)})
+          argv.push_back(x);
+      jobs.push_back({name + " autonomous " + scored.names[i], argv, mdir / "autonomous" / scored.names[i]});
     }
     char pole_text[32], gain_text[32];
     std::snprintf(pole_text, sizeof pole_text, "%.17g", pole);
@@ -536,6 +545,11 @@ void evaluate(const Args& a) {
       {"units", "m"},
       {"autonomous_model", {{"path", a.autonomous_model}, {"checksum", "0x" + hex64(auto_model.checksum)}}},
       {"reference_model", {{"path", a.reference_model}, {"checksum", "0x" + hex64(ref_model.checksum)}}},
+      {"demo_set", a.test_seed >= 0 ? json{{"kind", "test"},
+                                            {"test_seed", a.test_seed},
+                                            {"synth_seed", rt::testDemos("x", static_cast<std::uint64_t>(a.test_seed), 1).seed},
+                                            {"per_movement", a.test_demos}}
+                                      : json{{"kind", "validation"}}},
       {"linear_ar_training_data", data_source},
       {"linear_ar_max_order", a.max_order},
       {"linear_ar_canonical_pace", pace_method ? json{{"method", paceMethodName(*pace_method)}, {"templates", pace_templates}}
@@ -583,6 +597,14 @@ void setup(CLI::App& app) {
   cmd->add_option("--jobs", args->jobs, "nao_rt processes at a time")->check(CLI::Range(1, 64))->capture_default_str();
   cmd->add_option("--max-order", args->max_order, "Largest linear AR order tried (orders 1..N, chosen per joint)")
       ->check(CLI::Range(1, kMaxLinearArOrder))
+      ->capture_default_str();
+  cmd->add_option("--test-seed", args->test_seed,
+                  "Score on a test set instead of the model's validation demonstrations: --test-demos\n"
+                  "demonstrations per movement of synthesiser run seed 1000000 + S, which neither training\n"
+                  "nor model selection saw (the AR order is still chosen on the validation demonstrations)")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--test-demos", args->test_demos, "Test demonstrations per movement with --test-seed")
+      ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   cmd->add_option("--min-demos", args->min_demos, "Fewest held-out demonstrations per movement accepted")
       ->check(CLI::Range(1, 1000))
