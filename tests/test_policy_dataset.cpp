@@ -283,58 +283,6 @@ TEST_CASE("canonical pace of a data set: each movement onto its template, names,
   CHECK_THROWS_AS(pacedData(data, {tmpl[0], -1, tmpl[2]}, PaceMethod::kDtw), UserError);
 }
 
-TEST_CASE("canonical pace per start key pose: each demonstration onto the shortest of its movement and start") {
-  PolicyData data = standardSet(3);  // lengths 20, 23, 26 per movement
-  const std::vector<int> all = allDemos(data);
-  // The 23-sample demonstrations start at another key pose (7) than the others (3).
-  for (PolicyDemo& d : data.demos) d.label.front() = d.f.size() == 23 ? 7 : 3;
-  const std::vector<int> by_movement = paceTemplates(data, all);
-  const std::vector<int> per_movement = paceTemplatesPerDemo(data, all, PaceGroup::kMovement);
-  const std::vector<int> per_start = paceTemplatesPerDemo(data, all, PaceGroup::kStart);
-  REQUIRE(per_start.size() == data.demos.size());
-  for (std::size_t i = 0; i < data.demos.size(); ++i) {
-    const PolicyDemo& d = data.demos[i];
-    CAPTURE(d.name);
-    CHECK(per_movement[i] == by_movement[static_cast<std::size_t>(d.movement)]);
-    const PolicyDemo& t = data.demos[static_cast<std::size_t>(per_start[i])];
-    CHECK(t.movement == d.movement);
-    CHECK(t.label.front() == d.label.front());
-    CHECK(t.f.size() == (d.f.size() == 23 ? 23u : 20u));  // its start's shortest: itself for the 23s
-  }
-  // A start with no listed demonstration takes its movement's template.
-  std::vector<int> no_other;
-  for (int d : all)
-    if (data.demos[static_cast<std::size_t>(d)].f.size() != 23) no_other.push_back(d);
-  const std::vector<int> fallback = paceTemplatesPerDemo(data, no_other, PaceGroup::kStart);
-  for (std::size_t i = 0; i < data.demos.size(); ++i)
-    CHECK(fallback[i] == by_movement[static_cast<std::size_t>(data.demos[i].movement)]);
-
-  for (const PaceMethod method : {PaceMethod::kLinear, PaceMethod::kDtw}) {
-    CAPTURE(paceMethodName(method));
-    // Per movement, the two entry points agree.
-    const PolicyData a = pacedData(data, by_movement, method), b = pacedDataPerDemo(data, per_movement, method);
-    for (std::size_t i = 0; i < a.demos.size(); ++i) CHECK(a.demos[i].f == b.demos[i].f);
-    const PolicyData p = pacedDataPerDemo(data, per_start, method);
-    for (std::size_t i = 0; i < p.demos.size(); ++i) {
-      const PolicyDemo& d = data.demos[i];
-      CAPTURE(d.name);
-      CHECK(p.demos[i].f == pacedTrajectory(d.f, data.demos[static_cast<std::size_t>(per_start[i])].f, method));
-      // Paced onto itself: unchanged (the per-movement pace shortens it to 20 samples and holds).
-      if (d.f.size() == 23) {
-        CHECK(p.demos[i].f == d.f);
-        CHECK(a.demos[i].f != d.f);
-      }
-    }
-  }
-  CHECK_THROWS_AS(pacedDataPerDemo(data, by_movement, PaceMethod::kLinear), UserError);  // one per movement, not per demo
-  std::vector<int> wrong = per_start;
-  wrong[0] = by_movement[1];  // a template of another movement
-  CHECK_THROWS_AS(pacedDataPerDemo(data, wrong, PaceMethod::kDtw), UserError);
-  CHECK(parsePaceGroup("start") == PaceGroup::kStart);
-  CHECK(std::string(paceGroupName(PaceGroup::kMovement)) == "movement");
-  CHECK_THROWS_AS(parsePaceGroup("label"), UserError);
-}
-
 TEST_CASE("the split is by demonstration: every demo in exactly one part, round(0.2 n) validation per movement") {
   const PolicyData data = standardSet(10);
   const PolicySplit split = splitByDemonstration(data, 0.2, 7);

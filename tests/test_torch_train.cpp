@@ -685,39 +685,6 @@ TEST_CASE("canonical pace: trained on the paced demonstrations (AR base included
   TrainOptions linear = paced;
   linear.canonical_pace = PaceMethod::kLinear;
   CHECK(trainBytes(linear) != b);
-  CHECK(r1.pace_templates_per_demo == paceTemplatesPerDemo(data, r1.split.train, PaceGroup::kMovement));
-
-  // Per start key pose: each demonstration onto its (movement, start) group's template; the AR
-  // base on those paced trajectories; the groups in the metadata.
-  TrainOptions by_start = paced;
-  by_start.pace_group = PaceGroup::kStart;
-  TrainResult r2;
-  const std::vector<std::uint8_t> c = trainBytes(by_start, &r2);
-  const std::vector<int> per_start = paceTemplatesPerDemo(data, r2.split.train, PaceGroup::kStart);
-  CHECK(r2.pace_templates_per_demo == per_start);
-  CHECK(r2.pace_templates == tmpl);
-  std::set<std::pair<int, int>> starts;
-  for (const PolicyDemo& d : data.demos) starts.insert({d.movement, d.label.front()});
-  MESSAGE("small set: " << starts.size() << " (movement, start key pose) groups");
-  if (per_start != r1.pace_templates_per_demo) CHECK(c != b);
-  const PolicyData ps = pacedDataPerDemo(data, per_start, PaceMethod::kDtw);
-  for (int m = 0; m < 3; ++m) {
-    const LinearArModel expect = expectedLinearAr(ps, r2.split, m);
-    for (int j = 0; j < kNumJoints; ++j)
-      CHECK(r2.net->linearAr()[static_cast<std::size_t>(m)].joints[static_cast<std::size_t>(j)].alpha ==
-            expect.joints[static_cast<std::size_t>(j)].alpha);
-  }
-  const nlohmann::json cs = nlohmann::json::parse(modelMetadata(data, by_start, r2))["training"]["canonical_pace"];
-  CHECK(cs["group"] == "start");
-  CHECK(cs["start_templates"].size() == starts.size());
-  for (const auto& g : cs["start_templates"]) {
-    const std::string tname = g["template"];
-    const auto t = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& d) { return d.name == tname; });
-    REQUIRE(t != data.demos.end());
-    CHECK(data.movement_names[static_cast<std::size_t>(t->movement)] == g["movement"]);
-    CHECK(g["ticks"].get<std::size_t>() == t->f.size());
-  }
-  CHECK_FALSE(nlohmann::json::parse(modelMetadata(data, paced, r1))["training"]["canonical_pace"].contains("group"));
 
   TrainOptions reference = paced;
   reference.conditioning = Conditioning::kReference;

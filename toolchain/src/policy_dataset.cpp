@@ -7,7 +7,6 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <map>
 #include <atomic>
 #include <exception>
 #include <mutex>
@@ -917,60 +916,11 @@ PolicyData pacedData(const PolicyData& data, const std::vector<int>& templates, 
     if (t < 0 || static_cast<std::size_t>(t) >= data.demos.size() || data.demos[static_cast<std::size_t>(t)].movement != static_cast<int>(m))
       throw UserError("a canonical pace needs a template demonstration of movement " + data.movement_names[m]);
   }
-  std::vector<int> per_demo;
-  for (const PolicyDemo& d : data.demos) per_demo.push_back(templates[static_cast<std::size_t>(d.movement)]);
-  return pacedDataPerDemo(data, per_demo, method);
-}
-
-const char* paceGroupName(PaceGroup group) { return group == PaceGroup::kStart ? "start" : "movement"; }
-
-PaceGroup parsePaceGroup(const std::string& name) {
-  if (name == "movement") return PaceGroup::kMovement;
-  if (name == "start") return PaceGroup::kStart;
-  throw UserError("unknown pace group '" + name + "' (movement or start)");
-}
-
-std::vector<int> paceTemplatesPerDemo(const PolicyData& data, const std::vector<int>& demos, PaceGroup group) {
-  const std::vector<int> by_movement = paceTemplates(data, demos);
-  const auto startOf = [&data](int d) { return data.demos.at(static_cast<std::size_t>(d)).label.front(); };
-  // Shortest listed demonstration per (movement, start label).
-  std::map<std::pair<int, int>, int> by_start;
-  if (group == PaceGroup::kStart)
-    for (int d : demos) {
-      const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
-      const auto key = std::make_pair(demo.movement, startOf(d));
-      const auto it = by_start.find(key);
-      if (it == by_start.end() || demo.f.size() < data.demos[static_cast<std::size_t>(it->second)].f.size())
-        by_start[key] = d;
-    }
-  std::vector<int> out;
-  for (std::size_t di = 0; di < data.demos.size(); ++di) {
-    const PolicyDemo& demo = data.demos[di];
-    int t = by_movement[static_cast<std::size_t>(demo.movement)];
-    const auto it = by_start.find(std::make_pair(demo.movement, startOf(static_cast<int>(di))));
-    if (it != by_start.end()) t = it->second;
-    out.push_back(t);
-  }
-  return out;
-}
-
-PolicyData pacedDataPerDemo(const PolicyData& data, const std::vector<int>& templates, PaceMethod method) {
-  if (templates.size() != data.demos.size())
-    throw UserError("a canonical pace needs one template per demonstration (" + std::to_string(data.demos.size()) +
-                    "), not " + std::to_string(templates.size()));
-  for (std::size_t di = 0; di < data.demos.size(); ++di) {
-    const int t = templates[di];
-    if (t < 0 || static_cast<std::size_t>(t) >= data.demos.size() ||
-        data.demos[static_cast<std::size_t>(t)].movement != data.demos[di].movement)
-      throw UserError("a canonical pace needs a template demonstration of movement " +
-                      data.movement_names.at(static_cast<std::size_t>(data.demos[di].movement)) + " for " +
-                      data.demos[di].name);
-  }
   PolicyData out = data;
   for (std::size_t di = 0; di < out.demos.size(); ++di) {
     const PolicyDemo& orig = data.demos[di];
     PolicyDemo& d = out.demos[di];
-    const Paced p = pace(orig.f, data.demos[static_cast<std::size_t>(templates[di])].f, method);
+    const Paced p = pace(orig.f, data.demos[static_cast<std::size_t>(templates[static_cast<std::size_t>(d.movement)])].f, method);
     d.f = p.f;
     // The label and measured flag of the original sample nearest each paced one.
     for (std::size_t t = 0; t < p.u.size(); ++t) {

@@ -268,9 +268,6 @@ void evaluate(const Args& a) {
   std::optional<PaceMethod> pace_method;
   std::vector<std::string> pace_templates;
   std::vector<std::size_t> pace_ticks;
-  // group "start": per (movement name, start key pose label) the template's name (others: the
-  // movement's template above).
-  std::map<std::pair<std::string, int>, std::string> start_templates;
   if (meta.is_object() && meta.contains("training") && meta["training"].is_object() &&
       meta["training"].contains("canonical_pace")) {
     const json& p = meta["training"]["canonical_pace"];
@@ -287,17 +284,6 @@ void evaluate(const Args& a) {
         throw UserError(bad);
       pace_ticks.push_back(p["ticks"][m].get<std::size_t>());
       pace_templates.push_back(p["templates"][m].get<std::string>());
-    }
-    if (p.contains("group") && p["group"] == "start") {
-      if (!p.contains("start_templates") || !p["start_templates"].is_array()) throw UserError(bad);
-      for (const json& g : p["start_templates"]) {
-        if (!g.is_object() || !g.contains("movement") || !g["movement"].is_string() || !g.contains("start_label") ||
-            !g["start_label"].is_number_integer() || !g.contains("template") || !g["template"].is_string())
-          throw UserError(bad);
-        start_templates[{g["movement"].get<std::string>(), g["start_label"].get<int>()}] = g["template"].get<std::string>();
-      }
-    } else if (p.contains("group") && p["group"] != "movement") {
-      throw UserError(bad);
     }
   }
   const SimModel sim = makeSimModel(arm, SimParams{});
@@ -382,33 +368,16 @@ void evaluate(const Args& a) {
     for (int paced = 0; paced <= (pace_method ? 1 : 0); ++paced) {
       if (paced) {
         const std::size_t mi = static_cast<std::size_t>(it - names.begin());
-        const auto templateNamed = [&](const std::string& tname) {
-          const auto t = std::find(train_of.begin(), train_of.end(), tname);
-          if (t == train_of.end())
-            throw UserError(a.autonomous_model + ": the pace template " + tname + " is not a training demonstration of " +
-                            name);
-          return train[static_cast<std::size_t>(t - train_of.begin())];
-        };
-        const std::vector<JointVector> tmpl = templateNamed(pace_templates[mi]);
+        const auto t = std::find(train_of.begin(), train_of.end(), pace_templates[mi]);
+        if (t == train_of.end())
+          throw UserError(a.autonomous_model + ": the pace template " + pace_templates[mi] +
+                          " is not a training demonstration of " + name);
+        const std::vector<JointVector> tmpl = train[static_cast<std::size_t>(t - train_of.begin())];
         if (tmpl.size() != pace_ticks[mi])
           throw UserError("the pace template " + pace_templates[mi] + " has " + std::to_string(tmpl.size()) +
                           " samples here, " + std::to_string(pace_ticks[mi]) + " in " + a.autonomous_model);
-        // Per start key pose (group "start"): the template of the key pose a trajectory starts
-        // at (its first sample is that key pose; the nearest one is taken), else the movement's.
-        std::map<int, std::vector<JointVector>> by_start;
-        for (const auto& [key, tname] : start_templates)
-          if (key.first == name) by_start[key.second] = templateNamed(tname);
-        const auto templateOf = [&](const std::vector<JointVector>& f) -> const std::vector<JointVector>& {
-          if (by_start.empty()) return tmpl;
-          int best = 0;
-          for (std::size_t k = 1; k < key_poses.size(); ++k)
-            if ((f.front() - key_poses[k]).squaredNorm() < (f.front() - key_poses[static_cast<std::size_t>(best)]).squaredNorm())
-              best = static_cast<int>(k);
-          const auto s = by_start.find(best);
-          return s == by_start.end() ? tmpl : s->second;
-        };
-        for (std::vector<JointVector>& f : train) f = pacedTrajectory(f, templateOf(f), *pace_method);
-        for (std::vector<JointVector>& f : val) f = pacedTrajectory(f, templateOf(f), *pace_method);
+        for (std::vector<JointVector>& f : train) f = pacedTrajectory(f, tmpl, *pace_method);
+        for (std::vector<JointVector>& f : val) f = pacedTrajectory(f, tmpl, *pace_method);
       }
       ArBaseline b;
       b.paced = paced != 0;
@@ -583,9 +552,7 @@ void evaluate(const Args& a) {
                                       : json{{"kind", "validation"}}},
       {"linear_ar_training_data", data_source},
       {"linear_ar_max_order", a.max_order},
-      {"linear_ar_canonical_pace", pace_method ? json{{"method", paceMethodName(*pace_method)},
-                                                      {"templates", pace_templates},
-                                                      {"group", start_templates.empty() ? "movement" : "start"}}
+      {"linear_ar_canonical_pace", pace_method ? json{{"method", paceMethodName(*pace_method)}, {"templates", pace_templates}}
                                                : json(nullptr)},
       {"blend_law_pole", pole},
       {"gain_law", gain},

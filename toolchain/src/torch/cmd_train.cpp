@@ -35,7 +35,6 @@ struct TrainArgs {
   std::string select = "val-loss";
   bool ar_residual = false;
   std::string canonical_pace = "off";
-  std::string canonical_pace_group = "movement";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
@@ -109,9 +108,6 @@ void run(const TrainArgs& a) {
   o.ar_residual = a.ar_residual;
   o.phase_ticks = a.phase_ticks;
   if (a.canonical_pace != "off") o.canonical_pace = parsePaceMethod(a.canonical_pace);
-  o.pace_group = parsePaceGroup(a.canonical_pace_group);
-  if (!o.canonical_pace && o.pace_group != PaceGroup::kMovement)
-    throw UserError("--canonical-pace-group needs --canonical-pace linear or dtw");
   o.live_progress = isatty(fileno(stdout)) != 0;
   if (a.rank >= a.world_size)
     throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
@@ -322,12 +318,6 @@ void setup(CLI::App& app) {
                   "which lines up the loops too); off: as demonstrated. Rollouts are still scored against the "
                   "demonstrations as they are (docs/policy.md)")
       ->check(CLI::IsMember({"off", "linear", "dtw"}))
-      ->capture_default_str();
-  cmd->add_option("--canonical-pace-group", args->canonical_pace_group,
-                  "With --canonical-pace: one template per movement, or per movement and start key pose (start: "
-                  "each demonstration paced onto the shortest training demonstration that starts at the same key "
-                  "pose, as an autonomous run from it does; docs/policy.md)")
-      ->check(CLI::IsMember({"movement", "start"}))
       ->capture_default_str();
   cmd->add_option("--select", args->select,
                   "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "

@@ -9,7 +9,6 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <set>
 #include <chrono>
 #include <cstddef>
 #include <cmath>
@@ -565,16 +564,12 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     for (std::size_t m = 0; m < res.pace_templates.size(); ++m)
       if (res.pace_templates[m] < 0)
         throw UserError("--canonical-pace: movement " + data.movement_names[m] + " has no training demonstration");
-    res.pace_templates_per_demo = paceTemplatesPerDemo(data, res.split.train, o.pace_group);
-    paced = pacedDataPerDemo(data, res.pace_templates_per_demo, *o.canonical_pace);
+    paced = pacedData(data, res.pace_templates, *o.canonical_pace);
     if (progress) {
-      *progress << "canonical pace (" << paceMethodName(*o.canonical_pace) << ", per " << paceGroupName(o.pace_group)
-                << "): every demonstration at the pace of its group's shortest training demonstration (";
-      std::set<int> shown;
-      for (int d : res.pace_templates_per_demo) {
-        if (!shown.insert(d).second) continue;
-        const PolicyDemo& t = data.demos[static_cast<std::size_t>(d)];
-        *progress << (shown.size() > 1 ? ", " : "") << t.name << " " << t.f.size() << " ticks";
+      *progress << "canonical pace (" << paceMethodName(*o.canonical_pace) << "): every movement at the pace of its shortest training demonstration (";
+      for (std::size_t m = 0; m < res.pace_templates.size(); ++m) {
+        const PolicyDemo& t = data.demos[static_cast<std::size_t>(res.pace_templates[m])];
+        *progress << (m ? ", " : "") << t.name << " " << t.f.size() << " ticks";
       }
       *progress << "), then held" << std::endl;
     }
@@ -879,23 +874,6 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
       names.push_back(data.demos.at(static_cast<std::size_t>(d)).name);
     }
     t["canonical_pace"] = {{"method", paceMethodName(*o.canonical_pace)}, {"ticks", ticks}, {"templates", names}};
-    if (o.pace_group == PaceGroup::kStart) {
-      // Per movement and start key pose: its template (the movement's above when the start has
-      // no training demonstration of its own).
-      std::set<std::pair<int, int>> seen;
-      nlohmann::json groups = nlohmann::json::array();
-      for (std::size_t di = 0; di < data.demos.size(); ++di) {
-        const PolicyDemo& d = data.demos[di];
-        if (!seen.insert({d.movement, d.label.front()}).second) continue;
-        const PolicyDemo& tmpl = data.demos.at(static_cast<std::size_t>(r.pace_templates_per_demo.at(di)));
-        groups.push_back({{"movement", data.movement_names.at(static_cast<std::size_t>(d.movement))},
-                          {"start_label", d.label.front()},
-                          {"template", tmpl.name},
-                          {"ticks", tmpl.f.size()}});
-      }
-      t["canonical_pace"]["group"] = paceGroupName(o.pace_group);
-      t["canonical_pace"]["start_templates"] = groups;
-    }
   }
   // Only when they change the result: single-process files keep their bytes.
   if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;
@@ -1042,9 +1020,7 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     s << "| canonical pace | " << paceMethodName(*o.canonical_pace)
       << ": every demonstration trained on with its movement "
       << (*o.canonical_pace == PaceMethod::kDtw ? "time-warped by DTW onto" : "resampled linearly to the length of")
-      << (o.pace_group == PaceGroup::kStart ? " the shortest training demonstration of its movement that starts at its key pose"
-                                            : " its movement's shortest training demonstration")
-      << ", then held at its last pose (its length unchanged); per movement:";
+      << " its movement's shortest training demonstration, then held at its last pose (its length unchanged):";
     for (std::size_t m = 0; m < r.pace_templates.size(); ++m) {
       const PolicyDemo& t = data.demos.at(static_cast<std::size_t>(r.pace_templates[m]));
       s << (m ? "," : "") << " " << t.name << " (" << t.f.size() << " ticks)";

@@ -74,9 +74,6 @@ struct TrainOptions {
   /// paceTemplates of the training split, linearly or by DTW), then held, at its own length. The
   /// rollouts are still scored against the demonstrations as they are.
   std::optional<PaceMethod> canonical_pace;
-  /// With canonical_pace: one template per movement, or per movement and start key pose
-  /// (paceTemplatesPerDemo; metadata training.canonical_pace.group and start_templates).
-  PaceGroup pace_group = PaceGroup::kMovement;
 };
 
 /// One DAgger round of a training run.
@@ -137,8 +134,6 @@ struct TrainResult {
   /// TrainOptions::canonical_pace: per movement, the template demonstration (index into the
   /// data's demos; metadata training.canonical_pace); empty when off.
   std::vector<int> pace_templates;
-  /// TrainOptions::canonical_pace: per demonstration of the data, its template (index).
-  std::vector<int> pace_templates_per_demo;
   /// select_by_rollout: the net before the first epoch, scored the same way (epoch 0; with
   /// ar_residual that is the linear AR baseline itself): reported as the bar, never exported.
   /// Epoch −1: not scored (off, or resumed).

@@ -270,25 +270,6 @@ std::vector<int> paceTemplates(const PolicyData& data, const std::vector<int>& d
 /// times and lengths unchanged. Throws UserError unless there is a valid template per movement.
 PolicyData pacedData(const PolicyData& data, const std::vector<int>& templates, PaceMethod method);
 
-/// How demonstrations share a pace template: one per movement, or one per movement and start
-/// key pose (the label of the first sample). An autonomous run starts at its demonstration's
-/// first key pose, and a movement's demonstrations start at only 2-3 of its key poses
-/// (docs/evaluate.md); warping a demonstration onto a template that starts elsewhere also warps
-/// its way from its own start into the movement.
-enum class PaceGroup { kMovement, kStart };
-const char* paceGroupName(PaceGroup group);  ///< "movement" / "start"
-/// Throws UserError for anything but "movement" or "start".
-PaceGroup parsePaceGroup(const std::string& name);
-
-/// Per demonstration of `data` (by index), its pace template: the shortest listed demonstration
-/// of its group (the first in list order among equals); with kStart, a group with no listed
-/// demonstration takes its movement's template; -1 for a movement with none listed.
-std::vector<int> paceTemplatesPerDemo(const PolicyData& data, const std::vector<int>& demos, PaceGroup group);
-
-/// `data` with every demonstration d paced onto demonstration templates[d] (as pacedData).
-/// Throws UserError unless every demonstration has a template of its own movement.
-PolicyData pacedDataPerDemo(const PolicyData& data, const std::vector<int>& templates, PaceMethod method);
-
 /// Names of the listed demonstrations.
 std::vector<std::string> demoNames(const PolicyData& data, const std::vector<int>& demos);
 
