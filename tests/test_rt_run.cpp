@@ -113,6 +113,19 @@ std::string bytes(const fs::path& p) {
   return s.str();
 }
 
+/// The key poses of movement 0 (elbow) of a model file written by writeModel.
+std::vector<JointVector> elbowKeyPoses(const std::string& model) {
+  const ModelFile file = readModelFile(model);
+  std::vector<JointVector> centroids;
+  const float* c = file.data(file.find("centroids"));
+  for (int k = 0; k < Dims::kClusters; ++k) {
+    JointVector q;
+    for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];
+    centroids.push_back(q);
+  }
+  return centroids;
+}
+
 }  // namespace
 
 TEST_CASE("ticks.csv's header is exactly the contract's columns, in order") {
@@ -457,14 +470,7 @@ TEST_CASE("--reference none rolls an autonomous model out from s_0 and reports t
 
   // The same demonstrations, regenerated, start where the run started and set its length.
   const ArmModel arm = loadArmModel(test::kUrdfPath);
-  const ModelFile file = readModelFile(model);
-  std::vector<JointVector> centroids;
-  const float* c = file.data(file.find("centroids"));
-  for (int k = 0; k < Dims::kClusters; ++k) {
-    JointVector q;
-    for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];  // movement 0 = elbow
-    centroids.push_back(q);
-  }
+  const std::vector<JointVector> centroids = elbowKeyPoses(model);
   const tools::ReferenceStream d3 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 3, centroids);
   const tools::ReferenceStream d10 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 10, centroids);
   CHECK(r.report.ticks == std::lround(static_cast<double>(d3.target.size() + d10.target.size()) / 2.0));
@@ -512,14 +518,7 @@ TEST_CASE("--start-demo rolls out from one validation demonstration's s_0 for it
 
   // It starts where elbow_010's feature-extracted trajectory starts and runs as long as it.
   const ArmModel arm = loadArmModel(test::kUrdfPath);
-  const ModelFile file = readModelFile(model);
-  std::vector<JointVector> centroids;
-  const float* c = file.data(file.find("centroids"));
-  for (int k = 0; k < Dims::kClusters; ++k) {
-    JointVector q;
-    for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];  // movement 0 = elbow
-    centroids.push_back(q);
-  }
+  const std::vector<JointVector> centroids = elbowKeyPoses(model);
   const tools::ReferenceStream d10 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 10, centroids);
   CHECK(r.report.ticks == static_cast<std::int64_t>(d10.target.size()));
   CHECK(r.out.find("elbow_010") != std::string::npos);
@@ -569,14 +568,7 @@ TEST_CASE("--test-seed rolls out from a test set the model never saw: demonstrat
   CHECK(s["ee_dtw_per_demo_m"].size() == 3);
   // It starts where that demonstration's feature-extracted trajectory starts and runs its length.
   const ArmModel arm = loadArmModel(test::kUrdfPath);
-  const ModelFile file = readModelFile(model);
-  std::vector<JointVector> centroids;
-  const float* c = file.data(file.find("centroids"));
-  for (int k = 0; k < Dims::kClusters; ++k) {
-    JointVector q;
-    for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];  // movement 0 = elbow
-    centroids.push_back(q);
-  }
+  const std::vector<JointVector> centroids = elbowKeyPoses(model);
   const tools::ReferenceStream d = tools::makeDemoReference(arm, tools::Movement::kElbow, tools::kReferenceSeedBase + 7,
                                                             2, centroids);
   CHECK(r.report.ticks == static_cast<std::int64_t>(d.target.size()));

@@ -404,9 +404,7 @@ void evaluate(const Args& a) {
                                        "--reference", "none", "--movement", name, "--start-demo", std::to_string(i),
                                        "--zero-timing", "--log", (mdir / "autonomous" / scored.names[i]).string()};
       if (test)
-        for (const std::string& x : {std::string("--test-seed"), std::to_string(a.test_seed), std::string("--test-demos"),
-                                     std::to_string(a.test_demos)})
-          argv.push_back(x);
+        argv.insert(argv.end(), {"--test-seed", std::to_string(a.test_seed), "--test-demos", std::to_string(a.test_demos)});
       jobs.push_back({name + " autonomous " + scored.names[i], argv, mdir / "autonomous" / scored.names[i]});
     }
     char pole_text[32], gain_text[32];
@@ -547,7 +545,7 @@ void evaluate(const Args& a) {
       {"reference_model", {{"path", a.reference_model}, {"checksum", "0x" + hex64(ref_model.checksum)}}},
       {"demo_set", a.test_seed >= 0 ? json{{"kind", "test"},
                                             {"test_seed", a.test_seed},
-                                            {"synth_seed", rt::testDemos("x", static_cast<std::uint64_t>(a.test_seed), 1).seed},
+                                            {"synth_seed", tools::kReferenceSeedBase + static_cast<std::uint64_t>(a.test_seed)},
                                             {"per_movement", a.test_demos}}
                                       : json{{"kind", "validation"}}},
       {"linear_ar_training_data", data_source},
