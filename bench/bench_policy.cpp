@@ -6,6 +6,9 @@
 //   BM_Policy_Int8 / _SSE / _AVX2  the same with the attention and FFN matrices in int8
 //                          (nao/quantize.hpp: quantised from the fp32 model at set-up, the bytes
 //                          nao_codegen --precision int8 compiles in)
+//   BM_Policy_Packed / _SSE / _AVX2 / _AVX512  fp32 with the attention and FFN matrices packed
+//                          in the kernels' block order (nao/quantize.hpp packModelFp32, at set-up):
+//                          the same bits (counter same_bits), read in address order
 //   BM_Policy_*_AVX512     the same with the AVX-512 kernels (skipped without AVX-512 F/BW/VNNI)
 //   BM_WeightStream        the physical limit: one read of the same weight bytes (the fastest
 //                          read found: zmm or ymm loads into 8 accumulators, each line prefetched
@@ -52,7 +55,9 @@ void evictCaches() {
 
 /// stepPolicy with `kernel` (nullptr: the runtime's choice), one inference per iteration;
 /// `cold`: the caches evicted before each one (untimed).
-void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, bool int8 = false, bool cold = false) {
+void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, WeightPrecision precision = WeightPrecision::kFp32,
+                    bool cold = false) {
+  const bool int8 = precision == WeightPrecision::kInt8;
   if (!haveModel(state)) return;
   const PolicyKernel saved = activePolicyKernel();
   if (kernel != nullptr && !selectPolicyKernel(*kernel)) {
@@ -67,6 +72,9 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, bool in
   if (int8) {
     blob = quantizeModelInt8(model);
     bindQuantizedWeights<PaperPolicyDims>(w, blob.data.get());
+  } else if (precision == WeightPrecision::kFp32Packed) {
+    blob = packModelFp32(model);
+    bindPackedWeights<PaperPolicyDims>(w, blob.data.get());
   }
   auto ws = makePolicyWorkspace<PaperPolicyDims>();
   const std::vector<PolicyInput>& inputs = benchInputs();
@@ -84,7 +92,7 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, bool in
   }
   rec.report(state);
   state.SetLabel(policyKernelName(activePolicyKernel()));
-  if (int8) {
+  if (precision != WeightPrecision::kFp32) {
     // The action difference from fp32 on the same input stream (open loop: both see the same
     // states), rad per step: max and RMS over every joint of every input.
     PolicyWeights<PaperPolicyDims> fp = w;
@@ -105,6 +113,7 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, bool in
     state.counters["max_da_mrad"] = 1e3 * max_d;
     state.counters["rms_da_mrad"] = 1e3 * std::sqrt(sum_d2 / (5.0 * static_cast<double>(inputs.size())));
     state.counters["max_a_mrad"] = 1e3 * max_a;
+    if (!int8) state.counters["same_bits"] = max_d == 0.0 ? 1 : 0;  // packed: must be 1
   }
   selectPolicyKernel(saved);
 }
@@ -382,32 +391,37 @@ void runLayout(benchmark::State& state, bool packed) {
 }
 #endif
 
-/// One row per registered benchmark: kernel forced (none: the runtime's choice), int8 weights,
+/// One row per registered benchmark: kernel forced (none: the runtime's choice), precision,
 /// caches evicted before every iteration (cold: 200 iterations, each eviction writes 128 MB).
 struct PolicyCase {
   const char* name;
   bool forced;
   PolicyKernel kernel;
-  bool int8;
+  WeightPrecision precision;
   bool cold;
 };
 
 constexpr PolicyCase kPolicyCases[] = {
-    {"BM_Policy_StaticEigen", false, PolicyKernel::kSse, false, false},
-    {"BM_Policy_StaticEigen_SSE", true, PolicyKernel::kSse, false, false},
-    {"BM_Policy_StaticEigen_AVX2", true, PolicyKernel::kAvx2, false, false},
-    {"BM_Policy_StaticEigen_AVX512", true, PolicyKernel::kAvx512, false, false},
-    {"BM_Policy_Int8", false, PolicyKernel::kSse, true, false},
-    {"BM_Policy_Int8_SSE", true, PolicyKernel::kSse, true, false},
-    {"BM_Policy_Int8_AVX2", true, PolicyKernel::kAvx2, true, false},
-    {"BM_Policy_Int8_AVX512", true, PolicyKernel::kAvx512, true, false},
+    {"BM_Policy_StaticEigen", false, PolicyKernel::kSse, WeightPrecision::kFp32, false},
+    {"BM_Policy_StaticEigen_SSE", true, PolicyKernel::kSse, WeightPrecision::kFp32, false},
+    {"BM_Policy_StaticEigen_AVX2", true, PolicyKernel::kAvx2, WeightPrecision::kFp32, false},
+    {"BM_Policy_StaticEigen_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kFp32, false},
+    {"BM_Policy_Packed", false, PolicyKernel::kSse, WeightPrecision::kFp32Packed, false},
+    {"BM_Policy_Packed_SSE", true, PolicyKernel::kSse, WeightPrecision::kFp32Packed, false},
+    {"BM_Policy_Packed_AVX2", true, PolicyKernel::kAvx2, WeightPrecision::kFp32Packed, false},
+    {"BM_Policy_Packed_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kFp32Packed, false},
+    {"BM_Policy_Int8", false, PolicyKernel::kSse, WeightPrecision::kInt8, false},
+    {"BM_Policy_Int8_SSE", true, PolicyKernel::kSse, WeightPrecision::kInt8, false},
+    {"BM_Policy_Int8_AVX2", true, PolicyKernel::kAvx2, WeightPrecision::kInt8, false},
+    {"BM_Policy_Int8_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kInt8, false},
     // Cold: every step after the caches were evicted (the 10 Hz loop's case when other work
     // runs between ticks).
-    {"BM_Policy_Cold_SSE", true, PolicyKernel::kSse, false, true},
-    {"BM_Policy_Cold_AVX2", true, PolicyKernel::kAvx2, false, true},
-    {"BM_Policy_Cold_AVX512", true, PolicyKernel::kAvx512, false, true},
-    {"BM_Policy_Int8_Cold_AVX2", true, PolicyKernel::kAvx2, true, true},
-    {"BM_Policy_Int8_Cold_AVX512", true, PolicyKernel::kAvx512, true, true},
+    {"BM_Policy_Cold_SSE", true, PolicyKernel::kSse, WeightPrecision::kFp32, true},
+    {"BM_Policy_Cold_AVX2", true, PolicyKernel::kAvx2, WeightPrecision::kFp32, true},
+    {"BM_Policy_Cold_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kFp32, true},
+    {"BM_Policy_Packed_Cold_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kFp32Packed, true},
+    {"BM_Policy_Int8_Cold_AVX2", true, PolicyKernel::kAvx2, WeightPrecision::kInt8, true},
+    {"BM_Policy_Int8_Cold_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kInt8, true},
 };
 
 /// The weight reads: the fastest (BM_WeightStream), Eigen's, and the fastest after eviction.
@@ -431,7 +445,7 @@ const bool kRegistered = [] {
       if (c.cold == cold)
         timed(benchmark::RegisterBenchmark(c.name,
                                            [c](benchmark::State& state) {
-                                             runStaticEigen(state, c.forced ? &c.kernel : nullptr, c.int8, c.cold);
+                                             runStaticEigen(state, c.forced ? &c.kernel : nullptr, c.precision, c.cold);
                                            }),
               cold);
     for (const StreamCase& c : kStreamCases)

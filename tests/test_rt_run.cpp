@@ -230,13 +230,13 @@ TEST_CASE("two runs with the same arguments give byte-identical ticks.csv (--zer
   for (std::size_t k = cells.size() - 9; k < cells.size() - 5; ++k) CHECK(cells[k] == "0");
 }
 
-TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 and is deterministic") {
+TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 and is deterministic; fp32-packed is fp32") {
   // (Dims: the small test model; the committed paper model's closed-loop figures are in
   // bench/results/int8.txt.)
-  std::string ticks[3];
-  double rmse[3] = {0, 0, 0};
+  std::string ticks[4];
+  double rmse[4] = {0, 0, 0, 0};
   int i = 0;
-  for (const char* precision : {"fp32", "int8", "int8"}) {
+  for (const char* precision : {"fp32", "int8", "int8", "fp32-packed"}) {
     const fs::path dir = tempDir(std::string("precision_") + std::to_string(i));
     rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
     o.precision = precision;
@@ -253,6 +253,7 @@ TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 a
   CHECK(ticks[1] == ticks[2]);  // int8 is as deterministic as fp32
   CHECK(ticks[0] != ticks[1]);  // and really ran (other bits)
   CHECK(std::fabs(rmse[1] - rmse[0]) < 0.5e-3);
+  CHECK(ticks[3] == ticks[0]);  // the packed copy: the same floats, the same bits
   // Default for --weights: fp32.
   const fs::path dir = tempDir("precision_default");
   REQUIRE(run(options(referenceModel(), "synthetic:elbow", dir)).report.status == 0);

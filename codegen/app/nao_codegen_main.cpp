@@ -60,6 +60,11 @@ int main(int argc, char** argv) {
       const std::string value = arg == "--precision" ? argv[++i] : arg.substr(12);
       try {
         precision = nao::parseWeightPrecision(value);
+        // The packed copy is made by nao_rt at start-up (--precision fp32-packed); no blob of it
+        // is generated yet.
+        if (precision == nao::WeightPrecision::kFp32Packed)
+          return usageError("--precision fp32-packed is chosen at run time (nao_rt --precision fp32-packed); "
+                            "generate fp32");
       } catch (const std::invalid_argument& e) {
         return usageError(e.what());
       }

@@ -26,8 +26,10 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                  "Weight precision: fp32 (the reference) or int8 (attention and FFN matrices as int8\n"
                  "with one scale per row, tokens quantised to int16 per step: docs/policy.md). Default:\n"
                  "int8 if the compiled-in model was generated with nao_codegen --precision int8 and no\n"
-                 "--weights is given, else fp32. With --weights the int8 copy is made at start-up")
-      ->check(CLI::IsMember({"fp32", "int8"}))
+                 "--weights is given, else fp32. With --weights the int8 copy is made at start-up.\n"
+                 "fp32-packed: fp32 with the attention and FFN matrices also copied at start-up into\n"
+                 "the kernels' block order (+24 MB): the same bits as fp32, read in address order")
+      ->check(CLI::IsMember({"fp32", "fp32-packed", "int8"}))
       ->type_name("P");
   app.add_option("--urdf", o.urdf_path, "Robot description (torso + right arm); the model's joints must match it")
       ->type_name("FILE")

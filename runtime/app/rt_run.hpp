@@ -407,7 +407,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
             : bindWeightFile<Dims>(p, weight_storage);
     weights.residual_gain = p.residual_gain;
     weights.linear_ar = linearArBase<Dims::kMovements>(p.linear_ar);
-    // int8: the compiled-in blob where it lies, or the same bytes made from the fp32 tensors.
+    // int8: the compiled-in blob where it lies, or the same bytes made from the fp32 tensors
+    // (int8_storage also holds an fp32-packed run's packed copy).
     AlignedBytes int8_storage;
     if (p.precision == WeightPrecision::kInt8) {
       const std::uint8_t* blob = p.int8_bytes;
@@ -422,6 +423,19 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       } else {
         throw std::runtime_error("--precision int8: this architecture has an odd or over-512 input size; int8 "
                                  "needs even input sizes up to 512");
+      }
+    }
+    // fp32-packed: the same floats in the kernels' block order, made at start-up (configure
+    // time; the compiled-in model too: nao_codegen writes no packed blob yet).
+    if (p.precision == WeightPrecision::kFp32Packed) {
+      if constexpr (packedSupported<Dims>()) {
+        int8_storage = packModelFp32(p.model);
+        if (int8_storage.size != packedPolicyBytes<Dims>())
+          throw std::logic_error("nao_rt: the packed blob of the model is not the compiled layout's size");
+        bindPackedWeights<Dims>(weights, int8_storage.data.get());
+      } else {
+        throw std::runtime_error("--precision fp32-packed: this architecture has a matrix the packed layout does "
+                                 "not take (outputs in multiples of 32, inputs of 16)");
       }
     }
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no

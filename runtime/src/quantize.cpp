@@ -10,12 +10,23 @@
 
 namespace nao {
 
-const char* weightPrecisionName(WeightPrecision p) noexcept { return p == WeightPrecision::kInt8 ? "int8" : "fp32"; }
+const char* weightPrecisionName(WeightPrecision p) noexcept {
+  switch (p) {
+    case WeightPrecision::kInt8:
+      return "int8";
+    case WeightPrecision::kFp32Packed:
+      return "fp32-packed";
+    case WeightPrecision::kFp32:
+      break;
+  }
+  return "fp32";
+}
 
 WeightPrecision parseWeightPrecision(const std::string& s) {
   if (s == "fp32") return WeightPrecision::kFp32;
   if (s == "int8") return WeightPrecision::kInt8;
-  throw std::invalid_argument("precision must be fp32 or int8, got '" + s + "'");
+  if (s == "fp32-packed") return WeightPrecision::kFp32Packed;
+  throw std::invalid_argument("precision must be fp32, fp32-packed or int8, got '" + s + "'");
 }
 
 WeightPrecision runPrecision(const std::string& asked, bool compiled_in, const ModelImage& image) {
@@ -96,6 +107,56 @@ AlignedBytes quantizeModelInt8(const ModelFile& model) {
     off += bytes;
   }
   if (off != blob.size) throw std::logic_error("quantizeModelInt8: the manifest's matrices do not fill the layout");
+  return blob;
+}
+
+void packMatrixFp32(const float* W, int out, int in, float* P) {
+  if (out <= 0 || in <= 0 || !detail::packedShape(out, in))
+    throw std::invalid_argument("packMatrixFp32: " + std::to_string(out) + " x " + std::to_string(in) +
+                                " (the packed layout takes outputs in multiples of " +
+                                std::to_string(detail::kPackBlock) + " and inputs in multiples of " +
+                                std::to_string(detail::kPackStrip) + ")");
+  constexpr int S = detail::kPackStrip, B = detail::kPackBlock;
+  std::size_t i = 0;
+  for (int k0 = 0; k0 < in; k0 += S)
+    for (int r0 = 0; r0 < out; r0 += B)
+      for (int k = k0; k < k0 + S; ++k)
+        for (int r = r0; r < r0 + B; ++r) P[i++] = W[static_cast<std::size_t>(k) * out + r];
+}
+
+std::size_t packedModelBytes(const PolicyArch& arch) {
+  const auto d = static_cast<std::size_t>(arch.d_model);
+  std::size_t ffn = 0, in = d;
+  for (const int h : arch.ffn_hidden) {
+    ffn += static_cast<std::size_t>(h) * in;
+    in = static_cast<std::size_t>(h);
+  }
+  ffn += d * in;
+  const std::size_t attention = 4 * d * d;
+  return sizeof(float) * (static_cast<std::size_t>(arch.encoder_layers) * (attention + ffn) +
+                          static_cast<std::size_t>(arch.decoder_layers) * (2 * attention + ffn));
+}
+
+AlignedBytes packModelFp32(const ModelFile& model) {
+  AlignedBytes blob;
+  blob.size = packedModelBytes(model.header.arch);
+  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
+    const TensorSpec& t = model.tensors[i].spec;
+    if (!isInt8Tensor(t.name) || t.shape.size() != 2) continue;
+    const int in = t.shape[0], out = t.shape[1];  // model.bin matrices are [in, out] row-major
+    if (!detail::packedShape(out, in))
+      throw ModelFileError("packed fp32 weights: " + t.name + " is " + std::to_string(out) + " x " +
+                           std::to_string(in) + " (the packed layout takes outputs in multiples of " +
+                           std::to_string(detail::kPackBlock) + " and inputs in multiples of " +
+                           std::to_string(detail::kPackStrip) + ")");
+    const std::size_t bytes = sizeof(float) * static_cast<std::size_t>(out) * static_cast<std::size_t>(in);
+    if (off + bytes > blob.size) throw std::logic_error("packModelFp32: the manifest's matrices exceed the layout");
+    packMatrixFp32(model.data(i), out, in, reinterpret_cast<float*>(blob.data.get() + off));
+    off += bytes;
+  }
+  if (off != blob.size) throw std::logic_error("packModelFp32: the manifest's matrices do not fill the layout");
   return blob;
 }
 

@@ -105,14 +105,17 @@ using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 3, 10, 256, 8>;
 template <int R, int C>
 using WeightView = Eigen::Map<const Eigen::Matrix<float, R, C>>;
 
-/// The int8 copy of one [Out, In] weight matrix (policy_kernels.hpp "Reduced precision"): the
-/// pair-interleaved bytes and the per-row scales, bound by bindQuantizedWeights. Null: the
-/// matrix runs in fp32 (the reference).
+/// The copy of one [Out, In] weight matrix that the step reads instead of its fp32 view, if
+/// bound: the int8 copy (policy_kernels.hpp "Reduced precision": the pair-interleaved bytes and
+/// the per-row scales, bindQuantizedWeights) or the packed fp32 copy (policy_kernels.hpp
+/// "Packed fp32": the same floats in the kernels' block order, the same bits as the view,
+/// bindPackedWeights). All null: the matrix runs from its fp32 view (the reference).
 template <int Out, int In>
 struct QuantView {
   static constexpr int kOut = Out, kIn = In;
-  const std::int8_t* w = nullptr;  ///< Out·In bytes
-  const float* scale = nullptr;    ///< Out floats
+  const std::int8_t* w = nullptr;     ///< Out·In bytes
+  const float* scale = nullptr;       ///< Out floats
+  const float* packed = nullptr;      ///< Out·In floats (packed fp32 models only)
 };
 
 template <class Dims>
@@ -450,13 +453,20 @@ void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<Ten
 /// Throws std::invalid_argument describing both architectures if they differ.
 void requireArch(const PolicyArch& compiled, const PolicyArch& given);
 
-/// Y = W X + b (ReLU if kRelu) with the matrix's int8 copy if it has one, else in fp32.
+/// Y = W X + b (ReLU if kRelu) with the matrix's int8 copy if it has one, else in fp32 from
+/// its packed copy if it has one (the same bits), else from the view.
 template <bool kRelu, int Out, int In, int J>
 inline void affine(const WeightView<Out, In>& W, const QuantView<Out, In>& Wq, const WeightView<Out, 1>& b,
                    const Eigen::Matrix<float, In, J>& X, Eigen::Matrix<float, Out, J>& Y) {
   if constexpr (In % 2 == 0 && In <= kInt8MaxIn) {  // else no int8 copy can exist (bindQuantizedWeights)
     if (Wq.w != nullptr) {
       affineTokensInt8<Out, In, J, kRelu>(Wq.w, Wq.scale, b.data(), X.data(), Y.data());
+      return;
+    }
+  }
+  if constexpr (packedShape(Out, In)) {  // else no packed copy can exist (bindPackedWeights)
+    if (Wq.packed != nullptr) {
+      affineTokensPacked<Out, In, J, kRelu>(Wq.packed, b.data(), X.data(), Y.data());
       return;
     }
   }
@@ -717,8 +727,8 @@ constexpr std::size_t quantizedPolicyBytes() {
 }
 
 /// Points the int8 views of `w` into `blob` (quantizeModelInt8's layout, 64-byte aligned, at
-/// least quantizedPolicyBytes<Dims>() bytes): from now on stepPolicy runs those matrices in int8.
-/// The fp32 views stay bound (biases, norms, embeddings and the head are fp32 in both). No
+/// least quantizedPolicyBytes<Dims>() bytes): from now on stepPolicy runs those matrices in int8
+/// (any packed copy dropped). The fp32 views stay bound (biases, norms, embeddings and the head are fp32 in both). No
 /// allocation; the blob must outlive the weights.
 template <class Dims>
 void bindQuantizedWeights(PolicyWeights<Dims>& w, const std::uint8_t* blob) noexcept {
@@ -727,13 +737,14 @@ void bindQuantizedWeights(PolicyWeights<Dims>& w, const std::uint8_t* blob) noex
   detail::visitQuantViews(w, [&](const auto&, auto& q) {
     using Q = std::remove_reference_t<decltype(q)>;
     const std::size_t out = Q::kOut, in = Q::kIn;
+    q = {};  // drops any packed copy
     q.w = reinterpret_cast<const std::int8_t*>(blob + off);
     q.scale = reinterpret_cast<const float*>(blob + off + detail::quantPad(out * in));
     off += detail::quantSectionBytes(out, in);
   });
 }
 
-/// Drops the int8 views: every matrix runs in fp32 again.
+/// Drops the int8 and packed views: every matrix runs from its fp32 view again.
 template <class Dims>
 void unbindQuantizedWeights(PolicyWeights<Dims>& w) noexcept {
   detail::visitQuantViews(w, [](const auto&, auto& q) { q = {}; });
@@ -743,6 +754,45 @@ void unbindQuantizedWeights(PolicyWeights<Dims>& w) noexcept {
 template <class Dims>
 bool usesInt8(const PolicyWeights<Dims>& w) noexcept {
   return w.enc[0].attn.wq8.w != nullptr;
+}
+
+/// True if every matrix visitQuantViews visits has a packed fp32 copy (policy_kernels.hpp
+/// packedShape: out a multiple of 32, in of 16; the paper and small configurations do).
+template <class Dims>
+constexpr bool packedSupported() {
+  using detail::packedShape;
+  constexpr int D = Dims::kDModel, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
+  return packedShape(D, D) && packedShape(F0, D) && packedShape(F1, F0) && packedShape(F2, F1) && packedShape(D, F2);
+}
+
+/// Bytes of the packed fp32 blob of a Dims model: every visitQuantViews matrix, in that order,
+/// in the packed layout (no padding: each is a multiple of 2 KB).
+template <class Dims>
+constexpr std::size_t packedPolicyBytes() {
+  constexpr std::size_t D = Dims::kDModel, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
+  constexpr std::size_t attention = 4 * D * D, ffn = F0 * D + F1 * F0 + F2 * F1 + D * F2;
+  return sizeof(float) * (Dims::kEncoderLayers * (attention + ffn) + Dims::kDecoderLayers * (2 * attention + ffn));
+}
+
+/// Points the packed views of `w` into `blob` (packModelFp32's layout, 64-byte aligned, at
+/// least packedPolicyBytes<Dims>() bytes): from now on stepPolicy reads those matrices from it,
+/// with the same bits. Drops any int8 copy. No allocation; the blob must outlive the weights.
+template <class Dims>
+void bindPackedWeights(PolicyWeights<Dims>& w, const std::uint8_t* blob) noexcept {
+  static_assert(packedSupported<Dims>(), "packed fp32 weights need out % 32 == 0 and in % 16 == 0");
+  std::size_t off = 0;
+  detail::visitQuantViews(w, [&](const auto&, auto& q) {
+    using Q = std::remove_reference_t<decltype(q)>;
+    q = {};
+    q.packed = reinterpret_cast<const float*>(blob + off);
+    off += sizeof(float) * Q::kOut * Q::kIn;
+  });
+}
+
+/// True if `w` reads its matrices from a packed fp32 copy (bindPackedWeights).
+template <class Dims>
+bool usesPacked(const PolicyWeights<Dims>& w) noexcept {
+  return w.enc[0].attn.wq8.packed != nullptr;
 }
 
 namespace detail {
@@ -759,7 +809,7 @@ inline std::size_t touchLines(const void* p, std::size_t bytes, std::uint64_t& s
 }  // namespace detail
 
 /// Loads every byte the next stepPolicy reads into the cache: each view stepPolicy uses (a
-/// matrix's int8 bytes and scales instead of its fp32 view in an int8 model) and the workspace
+/// matrix's int8 bytes and scales, or its packed copy, instead of its fp32 view) and the workspace
 /// with its key/value rings. For a caller with idle time before a step whose data the cache has
 /// lost since the last one: in the 100 ms between two 10 Hz ticks the 24 MB of fp32 weights
 /// leave it, and the step then reads them from memory (~2x its hot time here, BM_Policy_Cold_*).
@@ -777,8 +827,12 @@ std::size_t warmPolicy(const PolicyWeights<Dims>& w, const PolicyWorkspace<Dims>
   std::size_t n_skip = 0, bytes = 0;
   detail::visitQuantViews(m, [&](const auto& view, auto& q) {
     using Q = std::remove_reference_t<decltype(q)>;
-    if (q.w == nullptr || n_skip == kQuantCount) return;
+    if ((q.w == nullptr && q.packed == nullptr) || n_skip == kQuantCount) return;
     skip[n_skip++] = view.data();
+    if (q.packed != nullptr) {
+      bytes += detail::touchLines(q.packed, static_cast<std::size_t>(Q::kOut) * Q::kIn * sizeof(float), sink);
+      return;
+    }
     bytes += detail::touchLines(q.w, static_cast<std::size_t>(Q::kOut) * Q::kIn, sink);
     bytes += detail::touchLines(q.scale, static_cast<std::size_t>(Q::kOut) * sizeof(float), sink);
   });
@@ -870,6 +924,13 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
         if (C.wo8.w != nullptr) {
           detail::affineTokensInt8<D, Dh, J, false>(C.wo8.w + static_cast<std::ptrdiff_t>(hd) * Dh * D, C.wo8.scale,
                                                     nullptr, ws.v_head.data(), f.data());
+          done = true;
+        }
+      }
+      if constexpr (detail::packedShape(D, Dh)) {
+        if (!done && C.wo8.packed != nullptr) {
+          detail::affineTokensPacked<D, Dh, J, false>(C.wo8.packed + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr,
+                                                      ws.v_head.data(), f.data());
           done = true;
         }
       }

@@ -22,13 +22,16 @@
 
 namespace nao {
 
-/// fp32: the reference. int8: the matrices above in int8 (fp32 everything else).
-enum class WeightPrecision : int { kFp32 = 0, kInt8 = 1 };
+/// fp32: the reference. int8: the matrices above in int8 (fp32 everything else). fp32-packed:
+/// fp32 with the same matrices also in the kernels' block order (policy_kernels.hpp "Packed
+/// fp32"): the same bits as fp32, read in address order.
+enum class WeightPrecision : int { kFp32 = 0, kInt8 = 1, kFp32Packed = 2 };
 
-/// "fp32" or "int8".
+/// "fp32", "int8" or "fp32-packed".
 const char* weightPrecisionName(WeightPrecision p) noexcept;
 
-/// Parses "fp32" / "int8"; throws std::invalid_argument naming the accepted values otherwise.
+/// Parses "fp32" / "int8" / "fp32-packed"; throws std::invalid_argument naming the accepted
+/// values otherwise.
 WeightPrecision parseWeightPrecision(const std::string& s);
 
 /// The precision a run uses: `asked` ("fp32"/"int8") if given, else int8 only for the
@@ -81,6 +84,19 @@ AlignedBytes quantizePolicyInt8(PolicyWeights<Dims> w) {
   });
   return blob;
 }
+
+/// Packs one matrix (W column-major [out, in], model.bin's row-major [in, out]) into P
+/// (out·in floats): P[((s·out/32 + b)·16 + c)·32 + i] = W(32b + i, 16s + c). Throws
+/// std::invalid_argument unless out is a multiple of 32 and in of 16.
+void packMatrixFp32(const float* W, int out, int in, float* P);
+
+/// Bytes of the packed fp32 blob of a model with this architecture (packedPolicyBytes).
+std::size_t packedModelBytes(const PolicyArch& arch);
+
+/// The packed fp32 blob of `model`: the matrices isInt8Tensor names, in manifest order, each
+/// packed (packMatrixFp32). Configure time: allocates. Throws ModelFileError naming a matrix of a
+/// shape the layout does not take.
+AlignedBytes packModelFp32(const ModelFile& model);
 
 /// FNV-1a 64 of a blob (what the generated code states about the compiled-in one).
 std::uint64_t quantizedChecksum(const std::uint8_t* data, std::size_t size) noexcept;
