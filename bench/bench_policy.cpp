@@ -14,8 +14,9 @@
 //                          read found: zmm or ymm loads into 8 accumulators, each line prefetched
 //                          64 KB ahead; the label names it), i.e. weight bytes / single-core read
 //                          bandwidth, measured in the same run
-//   BM_Policy_Cold_* / BM_Policy_Int8_Cold_* / BM_WeightStream_Cold  the same after evicting the
-//                          caches before every iteration (untimed): the weights come from DRAM
+//   BM_Policy_Cold_* / BM_Policy_Packed_Cold_* / BM_Policy_Int8_Cold_* / BM_WeightStream_Cold
+//                          the same after evicting the caches before every iteration (untimed):
+//                          the weights come from DRAM
 //   BM_MulAddFloor         the arithmetic limit: as many separately rounded multiply-adds as a
 //                          step does (matrix weights × 5 tokens), from registers, widest width
 //   BM_WeightStream_Eigen  the same bytes read by Eigen's vectorised sum (the limit quoted before
@@ -419,6 +420,8 @@ constexpr PolicyCase kPolicyCases[] = {
     {"BM_Policy_Cold_SSE", true, PolicyKernel::kSse, WeightPrecision::kFp32, true},
     {"BM_Policy_Cold_AVX2", true, PolicyKernel::kAvx2, WeightPrecision::kFp32, true},
     {"BM_Policy_Cold_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kFp32, true},
+    {"BM_Policy_Packed_Cold_SSE", true, PolicyKernel::kSse, WeightPrecision::kFp32Packed, true},
+    {"BM_Policy_Packed_Cold_AVX2", true, PolicyKernel::kAvx2, WeightPrecision::kFp32Packed, true},
     {"BM_Policy_Packed_Cold_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kFp32Packed, true},
     {"BM_Policy_Int8_Cold_AVX2", true, PolicyKernel::kAvx2, WeightPrecision::kInt8, true},
     {"BM_Policy_Int8_Cold_AVX512", true, PolicyKernel::kAvx512, WeightPrecision::kInt8, true},

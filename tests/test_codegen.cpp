@@ -77,7 +77,7 @@ TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S 
   const fs::path out = dir / "gen";
 
   const nao::codegen::Result r = nao::codegen::generate(model_path, out.string());
-  CHECK(r.written.size() == 5);  // model.int8 too: empty for fp32
+  CHECK(r.written.size() == 6);  // model.int8 and model.packed too: empty for fp32
   CHECK(r.unchanged.empty());
   const nao::ModelFile& m = r.model;
 
@@ -101,6 +101,7 @@ TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S 
   CHECK(config.find(checksum) != std::string::npos);
   CHECK(config.find("kParameterCount = " + std::to_string(nao::parameterCount(arch)) + ";") != std::string::npos);
   CHECK(config.find("inline constexpr bool kInt8Weights = false;") != std::string::npos);
+  CHECK(config.find("inline constexpr bool kPackedWeights = false;") != std::string::npos);
 
   // Tensor names, offsets and counts: the file's table, in manifest order.
   const auto names = arrayItems(config, "kTensorNames");
@@ -149,7 +150,7 @@ TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new mo
 
   const nao::codegen::Result again = nao::codegen::generate(model_path, out.string());
   CHECK(again.written.empty());
-  CHECK(again.unchanged.size() == 5);
+  CHECK(again.unchanged.size() == 6);
   CHECK(fs::last_write_time(out / "nao_model_config.hpp") == stamp);
 
   // Other weights, same architecture: the model copy, the checksum in the config and the .S
@@ -157,9 +158,10 @@ TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new mo
   nao::writeModelFile(model_path, makeHeader(arch), nao::test::randomManifestTensors(arch, 6));
   const nao::codegen::Result changed = nao::codegen::generate(model_path, out.string());
   CHECK(changed.written.size() == 3);
-  REQUIRE(changed.unchanged.size() == 2);
+  REQUIRE(changed.unchanged.size() == 3);
   CHECK(fs::path(changed.unchanged[0]).filename() == "nao_model_dims.hpp");
-  CHECK(fs::path(changed.unchanged[1]).filename() == "model.int8");  // still empty: fp32
+  CHECK(fs::path(changed.unchanged[1]).filename() == "model.int8");    // still empty: fp32
+  CHECK(fs::path(changed.unchanged[2]).filename() == "model.packed");  // likewise
 }
 
 TEST_CASE("nao_codegen --precision int8 compiles in the int8 blob beside the model, described by the config") {
@@ -171,7 +173,7 @@ TEST_CASE("nao_codegen --precision int8 compiles in the int8 blob beside the mod
   // fp32 -> int8 over the same directory: the config, the .S and the blob change, nothing else.
   const nao::codegen::Result r = nao::codegen::generate(model_path, out.string(), nao::WeightPrecision::kInt8);
   CHECK(r.written.size() == 3);
-  CHECK(r.unchanged.size() == 2);
+  CHECK(r.unchanged.size() == 3);
   const nao::AlignedBytes want = nao::quantizeModelInt8(r.model);
   const std::string blob = nao::test::readFile((out / "model.int8").string());
   REQUIRE(blob.size() == want.size);
@@ -191,6 +193,42 @@ TEST_CASE("nao_codegen --precision int8 compiles in the int8 blob beside the mod
   const std::string abs_blob = fs::absolute(out / "model.int8").lexically_normal().string();
   const std::size_t start = s.find("nao_model_int8:\n"), incbin = s.find(".incbin \"" + abs_blob + "\"\n"),
                     end = s.find("nao_model_int8_end:\n");
+  CHECK(start != std::string::npos);
+  CHECK(incbin != std::string::npos);
+  CHECK(end != std::string::npos);
+  CHECK((start < incbin && incbin < end));
+}
+
+TEST_CASE("nao_codegen --precision fp32-packed compiles in the packed blob beside the model, described by the config") {
+  const nao::PolicyArch arch = nao::smallArch();
+  const SmallModel m = smallModel("codegen_packed", 10);
+  const fs::path& out = m.out;
+  nao::codegen::generate(m.path, out.string());
+  // fp32 -> fp32-packed: the config, the .S and the packed blob change, nothing else.
+  const nao::codegen::Result r = nao::codegen::generate(m.path, out.string(), nao::WeightPrecision::kFp32Packed);
+  CHECK(r.written.size() == 3);
+  CHECK(r.unchanged.size() == 3);
+  const nao::AlignedBytes want = nao::packModelFp32(r.model);
+  const std::string blob = nao::test::readFile((out / "model.packed").string());
+  REQUIRE(blob.size() == want.size);
+  CHECK(std::memcmp(blob.data(), want.data.get(), want.size) == 0);
+  CHECK(blob.size() == nao::packedModelBytes(arch));
+  CHECK(nao::test::readFile((out / "model.int8").string()).empty());
+
+  const std::string config = nao::test::readFile((out / "nao_model_config.hpp").string());
+  CHECK(config.find("inline constexpr bool kPackedWeights = true;") != std::string::npos);
+  CHECK(config.find("inline constexpr bool kInt8Weights = false;") != std::string::npos);
+  CHECK(config.find("inline constexpr std::size_t kPackedBytes = " + std::to_string(want.size) + ";") !=
+        std::string::npos);
+  char checksum[64];
+  std::snprintf(checksum, sizeof checksum, "kPackedChecksum = 0x%016llxull;",
+                static_cast<unsigned long long>(nao::quantizedChecksum(want.data.get(), want.size)));
+  CHECK(config.find(checksum) != std::string::npos);
+
+  const std::string s = nao::test::readFile((out / "nao_model_weights.S").string());
+  const std::string abs_blob = fs::absolute(out / "model.packed").lexically_normal().string();
+  const std::size_t start = s.find("nao_model_packed:\n"), incbin = s.find(".incbin \"" + abs_blob + "\"\n"),
+                    end = s.find("nao_model_packed_end:\n");
   CHECK(start != std::string::npos);
   CHECK(incbin != std::string::npos);
   CHECK(end != std::string::npos);

@@ -1,9 +1,11 @@
 // The compiled-in model (codegen/compiled, issue 14 item 1): the generated code is assembled and
 // linked into this test (nao_compiled_model: models/default.bin through nao_codegen), its views
 // are bound at the generated offsets with no allocation, and it computes bit for bit what the
-// --weights path computes from the same file. Built twice: test_compiled_model_alloc over the
-// build's NAO_MODEL_PRECISION, test_compiled_model_alloc_int8 over nao_codegen --precision int8
-// (the int8 blob in .rodata, bound in place, the same bytes and bits as nao_rt --precision int8).
+// --weights path computes from the same file. Built three times: test_compiled_model_alloc over
+// the build's NAO_MODEL_PRECISION, and test_compiled_model_alloc_<fp32|int8|packed> over the
+// other two nao_codegen precisions: int8 (the int8 blob in .rodata, bound in place, the same
+// bytes and bits as nao_rt --precision int8) and fp32-packed (the packed copy in .rodata, the
+// same bytes as nao_rt --precision fp32-packed makes and the same bits as fp32).
 #include "nao/compiled_model.hpp"
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
@@ -13,10 +15,13 @@
 
 #include <doctest/doctest.h>
 
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <string>
 #include <vector>
+
+#include <unistd.h>
 
 using namespace nao;
 using nao::test::CountAllocations;
@@ -115,6 +120,18 @@ TEST_CASE("binding the compiled-in model allocates nothing and points into .roda
   } else {
     CHECK(image.int8_bytes == nullptr);
   }
+  // nao_codegen --precision fp32-packed: the packed views point into the compiled-in packed blob.
+  CHECK(usesPacked(w) == compiled::kPackedWeights);
+  if constexpr (compiled::kPackedWeights) {
+    CountAllocations check_counter;
+    checkPackedImage(image, image.header->arch, origin);
+    CHECK(check_counter.count() == 0);
+    CHECK(runPrecision("", true, image) == WeightPrecision::kFp32Packed);
+    CHECK(inside(w.enc[0].attn.wq8.packed, image.packed_bytes, image.packed_bytes + image.packed_size));
+    CHECK(inside(w.dec.back().ffn.w3q.packed, image.packed_bytes, image.packed_bytes + image.packed_size));
+  } else {
+    CHECK(image.packed_bytes == nullptr);
+  }
 }
 
 TEST_CASE("the compiled-in binding and the --weights path compute the same bits over a long rollout") {
@@ -132,6 +149,14 @@ TEST_CASE("the compiled-in binding and the --weights path compute the same bits 
     REQUIRE(blob.size == image.int8_size);
     CHECK(std::memcmp(blob.data.get(), image.int8_bytes, blob.size) == 0);
     bindQuantizedWeights<Dims>(by_name, blob.data.get());
+  }
+  // Packed generated code: the same bytes as packing the file at start-up; the --weights path
+  // stays plain fp32, so the rollout below also checks that the packed copy gives fp32's bits.
+  if constexpr (compiled::kPackedWeights) {
+    const AlignedBytes packed = packModelFp32(file);
+    const ModelImage image = compiled::modelImage();
+    REQUIRE(packed.size == image.packed_size);
+    CHECK(std::memcmp(packed.data.get(), image.packed_bytes, packed.size) == 0);
   }
   const PolicyWeights<Dims> at_offsets = compiled::policyWeights();
   auto ws_a = makePolicyWorkspace<Dims>();
@@ -185,4 +210,54 @@ TEST_CASE("a damaged or mismatched image is refused with the checksum") {
     CHECK_THROWS_WITH_AS(checkInt8Image(bad, image.header->arch, "compiled-in model"),
                          doctest::Contains("the architecture needs"), ModelFileError);
   }
+  if constexpr (compiled::kPackedWeights) {
+    std::vector<std::uint8_t> q(image.packed_bytes, image.packed_bytes + image.packed_size);
+    ModelImage bad = image;
+    bad.packed_bytes = q.data();
+    CHECK_NOTHROW(checkPackedImage(bad, image.header->arch, "compiled-in model"));
+    q[q.size() / 3] ^= 0x01;
+    CHECK_THROWS_WITH_AS(checkPackedImage(bad, image.header->arch, "compiled-in model"),
+                         doctest::Contains("packed weights checksum mismatch"), ModelFileError);
+    bad.packed_size -= 64;
+    CHECK_THROWS_WITH_AS(checkPackedImage(bad, image.header->arch, "compiled-in model"),
+                         doctest::Contains("the architecture needs"), ModelFileError);
+  }
+}
+
+namespace {
+
+/// Resident pages of this process (/proc/self/statm, second field); -1 if unreadable.
+long residentPages() {
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  if (f == nullptr) return -1;
+  long size = 0, resident = -1;
+  if (std::fscanf(f, "%ld %ld", &size, &resident) != 2) resident = -1;
+  std::fclose(f);
+  return resident;
+}
+
+}  // namespace
+
+TEST_CASE("releaseImagePages takes the image out of the resident set; the next read gets the same bytes") {
+#if defined(__linux__)
+  const ModelImage image = compiled::modelImage();
+  const long page = sysconf(_SC_PAGESIZE);
+  REQUIRE(page > 0);
+  checkModelImage(image.bytes, image.size, image.checksum, "compiled-in model");  // every page resident
+  const long before = residentPages();
+  REQUIRE(before > 0);
+  const std::size_t released = releaseImagePages(image.bytes, image.size);
+  const long after = residentPages();
+  // All whole pages inside the image, and the resident set down by (nearly) as many: a page
+  // or two may come back for this process's own stack or heap meanwhile.
+  CHECK(released + 2 * static_cast<std::size_t>(page) >= image.size);
+  CHECK(static_cast<double>(before - after) * static_cast<double>(page) >= 0.95 * static_cast<double>(released));
+  // Read again from the file: the checksum still holds, and the pages are back.
+  CHECK_NOTHROW(checkModelImage(image.bytes, image.size, image.checksum, "compiled-in model"));
+  CHECK(static_cast<double>(residentPages() - after) * static_cast<double>(page) >= 0.95 * static_cast<double>(released));
+  CHECK(releaseImagePages(nullptr, 4096) == 0);
+  CHECK(releaseImagePages(image.bytes, 16) == 0);  // no whole page inside
+#else
+  MESSAGE("releaseImagePages does nothing off Linux: not checked");
+#endif
 }

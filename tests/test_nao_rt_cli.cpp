@@ -133,6 +133,14 @@ TEST_CASE("nao_rt --info describes the compiled-in model, and says when there is
   CHECK(nlohmann::json::parse(info(o).out)["precision"] == "int8");
   o.precision = "fp32";
   CHECK(nlohmann::json::parse(info(o).out)["precision"] == "fp32");
+  // Generated with --precision fp32-packed: a run defaults to fp32-packed.
+  o.precision.clear();
+  o.compiled.int8_bytes = nullptr;
+  const nao::AlignedBytes packed = nao::packModelFp32(decoded);
+  o.compiled.packed_bytes = packed.data.get();
+  o.compiled.packed_size = packed.size;
+  o.compiled.packed_checksum = nao::quantizedChecksum(packed.data.get(), packed.size);
+  CHECK(nlohmann::json::parse(info(o).out)["precision"] == "fp32-packed");
 }
 
 TEST_CASE("nao_rt --info fails with exactly one stderr line on a bad model, joints or URDF") {

@@ -14,7 +14,7 @@
 namespace {
 
 constexpr const char* kUsage =
-    "Usage: nao_codegen MODEL --out DIR [--precision fp32|int8] [--quiet]\n"
+    "Usage: nao_codegen MODEL --out DIR [--precision fp32|fp32-packed|int8] [--quiet]\n"
     "\n"
     "Checks MODEL (a model.bin: magic, version, checksum, architecture, tensor table, finite weights)\n"
     "and writes into DIR (created if missing):\n"
@@ -24,12 +24,15 @@ constexpr const char* kUsage =
     "  model.bin             a copy of MODEL\n"
     "  model.int8            --precision int8: the int8 weights (attention and FFN matrices, one\n"
     "                        scale per row, docs/policy.md), compiled in beside model.bin; nao_rt then\n"
-    "                        runs int8 by default. Empty for fp32\n"
+    "                        runs int8 by default. Empty otherwise\n"
+    "  model.packed          --precision fp32-packed: the attention and FFN matrices again, in the\n"
+    "                        kernels' block order (the same bits as fp32, read in address order);\n"
+    "                        nao_rt then runs fp32-packed by default. Empty otherwise\n"
     "Files whose content would not change are left untouched, so rebuilds stay cheap.\n"
     "\n"
     "Options:\n"
     "  --out DIR    output directory (required)\n"
-    "  --precision P  fp32 (default, the reference) or int8\n"
+    "  --precision P  fp32 (default, the reference), fp32-packed or int8\n"
     "  -q, --quiet  print nothing on success\n"
     "  -h, --help   print this help and exit\n";
 
@@ -56,15 +59,10 @@ int main(int argc, char** argv) {
       out_dir = arg == "--out" ? argv[++i] : arg.substr(6);
       if (out_dir.empty()) return usageError("--out needs a directory");
     } else if (arg == "--precision" || arg.rfind("--precision=", 0) == 0) {
-      if (arg == "--precision" && i + 1 >= argc) return usageError("--precision needs fp32 or int8");
+      if (arg == "--precision" && i + 1 >= argc) return usageError("--precision needs fp32, fp32-packed or int8");
       const std::string value = arg == "--precision" ? argv[++i] : arg.substr(12);
       try {
         precision = nao::parseWeightPrecision(value);
-        // The packed copy is made by nao_rt at start-up (--precision fp32-packed); no blob of it
-        // is generated yet.
-        if (precision == nao::WeightPrecision::kFp32Packed)
-          return usageError("--precision fp32-packed is chosen at run time (nao_rt --precision fp32-packed); "
-                            "generate fp32");
       } catch (const std::invalid_argument& e) {
         return usageError(e.what());
       }

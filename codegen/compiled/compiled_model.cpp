@@ -7,6 +7,8 @@ extern "C" const std::uint8_t nao_model_blob[];
 extern "C" const std::uint8_t nao_model_blob_end[];
 extern "C" const std::uint8_t nao_model_int8[];
 extern "C" const std::uint8_t nao_model_int8_end[];
+extern "C" const std::uint8_t nao_model_packed[];
+extern "C" const std::uint8_t nao_model_packed_end[];
 
 namespace nao::compiled {
 
@@ -42,14 +44,21 @@ ModelImage modelImage() {
     image.int8_size = static_cast<std::size_t>(nao_model_int8_end - nao_model_int8);
     image.int8_checksum = kInt8Checksum;
   }
+  if constexpr (kPackedWeights) {
+    image.packed_bytes = nao_model_packed;
+    image.packed_size = static_cast<std::size_t>(nao_model_packed_end - nao_model_packed);
+    image.packed_checksum = kPackedChecksum;
+  }
   return image;
 }
 
 static_assert(!kInt8Weights || kInt8Bytes == quantizedPolicyBytes<Dims>(), "the generated int8 blob is not the layout's");
+static_assert(!kPackedWeights || kPackedBytes == packedPolicyBytes<Dims>(), "the generated packed blob is not the layout's");
 
 PolicyWeights<Dims> policyWeights() noexcept {
   PolicyWeights<Dims> w = bindPolicyWeightsAt<Dims>(nao_model_blob, kTensorOffsets, kConditioning);
   if constexpr (kInt8Weights) bindQuantizedWeights<Dims>(w, nao_model_int8);
+  if constexpr (kPackedWeights) bindPackedWeights<Dims>(w, nao_model_packed);
   return w;
 }
 

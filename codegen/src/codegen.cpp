@@ -71,7 +71,8 @@ std::string banner(const std::string& what) {
 
 }  // namespace
 
-std::string configHeader(const ModelFile& model, const std::string& source, const AlignedBytes* int8) {
+std::string configHeader(const ModelFile& model, const std::string& source, const AlignedBytes* int8,
+                         const AlignedBytes* packed) {
   const ModelHeader& h = model.header;
   const PolicyArch& a = h.arch;
   std::ostringstream s;
@@ -88,7 +89,12 @@ std::string configHeader(const ModelFile& model, const std::string& source, cons
   s << "inline constexpr bool kInt8Weights = " << (int8 != nullptr ? "true" : "false") << ";\n";
   s << "inline constexpr std::size_t kInt8Bytes = " << (int8 != nullptr ? int8->size : 0) << ";\n";
   s << "inline constexpr std::uint64_t kInt8Checksum = "
-    << hex64(int8 != nullptr ? quantizedChecksum(int8->data.get(), int8->size) : 0) << ";\n\n";
+    << hex64(int8 != nullptr ? quantizedChecksum(int8->data.get(), int8->size) : 0) << ";\n";
+  s << "// nao_codegen --precision fp32-packed: the packed fp32 blob (nao/quantize.hpp) beside the model.\n";
+  s << "inline constexpr bool kPackedWeights = " << (packed != nullptr ? "true" : "false") << ";\n";
+  s << "inline constexpr std::size_t kPackedBytes = " << (packed != nullptr ? packed->size : 0) << ";\n";
+  s << "inline constexpr std::uint64_t kPackedChecksum = "
+    << hex64(packed != nullptr ? quantizedChecksum(packed->data.get(), packed->size) : 0) << ";\n\n";
 
   s << "// Architecture (docs/policy.md, PolicyArch).\n";
   s << "inline constexpr int kDModel = " << a.d_model << ";\n";
@@ -177,7 +183,8 @@ std::string dimsHeader(const ModelFile& model) {
   return s.str();
 }
 
-std::string weightsAsm(const ModelFile& model, const std::string& blob_path, const std::string& int8_path) {
+std::string weightsAsm(const ModelFile& model, const std::string& blob_path, const std::string& int8_path,
+                       const std::string& packed_path) {
   auto quote = [](const std::string& path) {
     std::string q;  // the assembler's string syntax: backslash-escape quotes and backslashes
     for (char c : path) {
@@ -210,6 +217,14 @@ std::string weightsAsm(const ModelFile& model, const std::string& blob_path, con
   s << "    .size " << kInt8Symbol << ", . - " << kInt8Symbol << "\n"
        "    .globl " << kInt8EndSymbol << "\n"
     << kInt8EndSymbol << ":\n"
+       "    .balign 64\n"
+       "    .globl " << kPackedSymbol << "\n"
+       "    .type " << kPackedSymbol << ", @object\n"
+    << kPackedSymbol << ":\n";
+  if (!packed_path.empty()) s << "    .incbin \"" << quote(packed_path) << "\"\n";
+  s << "    .size " << kPackedSymbol << ", . - " << kPackedSymbol << "\n"
+       "    .globl " << kPackedEndSymbol << "\n"
+    << kPackedEndSymbol << ":\n"
        "    .section .note.GNU-stack,\"\",@progbits\n";
   return s.str();
 }
@@ -250,18 +265,27 @@ Result generate(const std::string& model_path, const std::string& out_dir, Weigh
 
   const fs::path copy = dir / kModelCopy;
   const bool int8 = precision == WeightPrecision::kInt8;
-  AlignedBytes blob;
+  const bool packed = precision == WeightPrecision::kFp32Packed;
+  AlignedBytes blob, packed_blob;
   if (int8) blob = quantizeModelInt8(r.model);
+  if (packed) packed_blob = packModelFp32(r.model);
   const fs::path int8_copy = dir / kInt8Copy;
+  const fs::path packed_copy = dir / kPackedCopy;
   std::vector<std::array<std::string, 2>> files = {
       {copy.string(), std::string(r.model.bytes.begin(), r.model.bytes.end())},
-      {(dir / kConfigHeader).string(), configHeader(r.model, model_path, int8 ? &blob : nullptr)},
+      {(dir / kConfigHeader).string(),
+       configHeader(r.model, model_path, int8 ? &blob : nullptr, packed ? &packed_blob : nullptr)},
       {(dir / kDimsHeader).string(), dimsHeader(r.model)},
-      {(dir / kWeightsAsm).string(), weightsAsm(r.model, copy.string(), int8 ? int8_copy.string() : std::string())},
+      {(dir / kWeightsAsm).string(), weightsAsm(r.model, copy.string(), int8 ? int8_copy.string() : std::string(),
+                                                packed ? packed_copy.string() : std::string())},
   };
-  // fp32 leaves an empty model.int8 (the build's dependency on it stays satisfied).
-  files.push_back({int8_copy.string(), int8 ? std::string(reinterpret_cast<const char*>(blob.data.get()), blob.size)
-                                            : std::string()});
+  // The other precisions leave an empty model.int8 / model.packed (the build's dependency on
+  // them stays satisfied).
+  const auto bytesOf = [](const AlignedBytes& b) {
+    return b.data ? std::string(reinterpret_cast<const char*>(b.data.get()), b.size) : std::string();
+  };
+  files.push_back({int8_copy.string(), bytesOf(blob)});
+  files.push_back({packed_copy.string(), bytesOf(packed_blob)});
   for (const auto& f : files) (writeIfChanged(f[0], f[1]) ? r.written : r.unchanged).push_back(f[0]);
   return r;
 }

@@ -13,6 +13,7 @@
 #include <optional>
 
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -545,6 +546,25 @@ ModelFile mappedModelFile(const ModelImage& image, const std::string& origin) {
     model.tensors.push_back({manifest[i], offset});
   }
   return model;
+}
+
+std::size_t releaseImagePages(const std::uint8_t* data, std::size_t size) noexcept {
+#if defined(__linux__)
+  const long page_l = sysconf(_SC_PAGESIZE);
+  if (data == nullptr || page_l <= 0) return 0;
+  const auto page = static_cast<std::uintptr_t>(page_l);
+  const auto lo = (reinterpret_cast<std::uintptr_t>(data) + page - 1) / page * page;
+  const auto hi = (reinterpret_cast<std::uintptr_t>(data) + size) / page * page;
+  if (hi <= lo) return 0;
+  // Read-only and never written, so dropping the pages loses nothing: the next read maps the
+  // file's bytes again.
+  if (madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED) != 0) return 0;
+  return hi - lo;
+#else
+  (void)data;
+  (void)size;
+  return 0;
+#endif
 }
 
 // ---- reading --------------------------------------------------------------------------------

@@ -31,7 +31,9 @@ WeightPrecision parseWeightPrecision(const std::string& s) {
 
 WeightPrecision runPrecision(const std::string& asked, bool compiled_in, const ModelImage& image) {
   if (!asked.empty()) return parseWeightPrecision(asked);
-  return compiled_in && image.int8_bytes != nullptr ? WeightPrecision::kInt8 : WeightPrecision::kFp32;
+  if (compiled_in && image.int8_bytes != nullptr) return WeightPrecision::kInt8;
+  if (compiled_in && image.packed_bytes != nullptr) return WeightPrecision::kFp32Packed;
+  return WeightPrecision::kFp32;
 }
 
 namespace {
@@ -170,6 +172,16 @@ void checkInt8Image(const ModelImage& image, const PolicyArch& arch, const std::
                          " bytes, the architecture needs " + std::to_string(want));
   if (quantizedChecksum(image.int8_bytes, image.int8_size) != image.int8_checksum)
     throw ModelFileError(origin + ": int8 weights checksum mismatch (not the bytes its generated code describes)");
+}
+
+void checkPackedImage(const ModelImage& image, const PolicyArch& arch, const std::string& origin) {
+  if (image.packed_bytes == nullptr) throw ModelFileError(origin + ": no packed fp32 weights were compiled in");
+  const std::size_t want = packedModelBytes(arch);
+  if (image.packed_size != want)
+    throw ModelFileError(origin + ": the compiled-in packed weights are " + std::to_string(image.packed_size) +
+                         " bytes, the architecture needs " + std::to_string(want));
+  if (quantizedChecksum(image.packed_bytes, image.packed_size) != image.packed_checksum)
+    throw ModelFileError(origin + ": packed weights checksum mismatch (not the bytes its generated code describes)");
 }
 
 }  // namespace nao

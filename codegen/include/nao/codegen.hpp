@@ -22,13 +22,18 @@ inline constexpr const char* kBlobEndSymbol = "nao_model_blob_end";
 inline constexpr const char* kInt8Copy = "model.int8";  ///< --precision int8: the int8 blob
 inline constexpr const char* kInt8Symbol = "nao_model_int8";
 inline constexpr const char* kInt8EndSymbol = "nao_model_int8_end";
+inline constexpr const char* kPackedCopy = "model.packed";  ///< --precision fp32-packed: the packed blob
+inline constexpr const char* kPackedSymbol = "nao_model_packed";
+inline constexpr const char* kPackedEndSymbol = "nao_model_packed_end";
 
 /// nao_model_config.hpp for `model`: namespace nao::compiled, every dimension, the
 /// conditioning, checksum, parameter count, tensor names/offsets/counts in manifest order,
 /// joint names and limits, movement names. `source` is named in the banner comment only.
 /// `int8` (nullptr: fp32) is the model's int8 blob (quantizeModelInt8): kInt8Weights, its size
-/// and checksum.
-std::string configHeader(const ModelFile& model, const std::string& source, const AlignedBytes* int8 = nullptr);
+/// and checksum; `packed` (nullptr: none) the packed fp32 blob (packModelFp32): kPackedWeights,
+/// its size and checksum.
+std::string configHeader(const ModelFile& model, const std::string& source, const AlignedBytes* int8 = nullptr,
+                         const AlignedBytes* packed = nullptr);
 
 /// nao_model_dims.hpp: `using Dims = nao::PolicyDims<...>` (needs nao/policy.hpp and
 /// exactly three FFN widths; otherwise a header that fails with #error when included).
@@ -36,8 +41,10 @@ std::string dimsHeader(const ModelFile& model);
 
 /// nao_model_weights.S: `.incbin` of `blob_path` (absolute) into .rodata, 64-byte aligned,
 /// between kBlobSymbol and kBlobEndSymbol; `int8_path` (empty: fp32, nothing) likewise between
-/// kInt8Symbol and kInt8EndSymbol (both symbols exist either way).
-std::string weightsAsm(const ModelFile& model, const std::string& blob_path, const std::string& int8_path = {});
+/// kInt8Symbol and kInt8EndSymbol, `packed_path` between kPackedSymbol and kPackedEndSymbol (all
+/// symbols exist either way).
+std::string weightsAsm(const ModelFile& model, const std::string& blob_path, const std::string& int8_path = {},
+                       const std::string& packed_path = {});
 
 /// Writes `content` to `path` unless the file already holds exactly that (temporary file +
 /// rename). Returns whether it wrote. Throws std::runtime_error naming the path.

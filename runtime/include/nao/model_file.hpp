@@ -93,6 +93,11 @@ struct ModelImage {
   const std::uint8_t* int8_bytes = nullptr;
   std::size_t int8_size = 0;
   std::uint64_t int8_checksum = 0;
+  /// nao_codegen --precision fp32-packed: the packed fp32 blob (nao/quantize.hpp) compiled in
+  /// beside the model; nullptr: none.
+  const std::uint8_t* packed_bytes = nullptr;
+  std::size_t packed_size = 0;
+  std::uint64_t packed_checksum = 0;
 };
 
 /// `image` as a ModelFile that reads its tensors in place (`mapped`; `bytes` stays empty):
@@ -100,6 +105,14 @@ struct ModelImage {
 /// policyManifest(header->arch), the offsets, each range inside the image). Nothing is decoded
 /// and no tensor byte is copied. Throws ModelFileError "<origin>: <problem>".
 ModelFile mappedModelFile(const ModelImage& image, const std::string& origin);
+
+/// Hands the whole pages inside [data, data + size) of a read-only file-backed mapping (the
+/// compiled-in image in .rodata) back to the OS: they leave the resident set and are read again
+/// from the file (page cache) when next touched, with the same bytes. For an image whose
+/// matrices a run reads from another copy (int8, packed) once its checksum has been verified
+/// over it. Linux: madvise(MADV_DONTNEED); elsewhere it does nothing. Returns the bytes
+/// released. Configure time only (the pages are faulted back in on the next read).
+std::size_t releaseImagePages(const std::uint8_t* data, std::size_t size) noexcept;
 
 /// encodeModel + write to `path` (whole file, then rename, so a crash leaves no half file).
 /// Returns the checksum.

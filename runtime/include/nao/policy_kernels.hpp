@@ -1210,10 +1210,10 @@ inline constexpr int kPackAhead = 8192;
 /// True if a [Out, In] matrix has a packed copy.
 constexpr bool packedShape(int out, int in) { return out % kPackBlock == 0 && in % kPackStrip == 0; }
 
-/// Rows r .. r+2P−1 of one packed block (`blk`: its 32 rows × 16 columns, column stride 32),
-/// from row offset `ro` in the block, += into Y, with the Eigen packet (P lanes) of kSse.
-template <int Out, int In, int J>
-inline void accumulatePackedSse(const float* blk, const float* X, float* Y, int k0, int r, int ro) {
+/// Rows r+ro .. r+ro+2P−1 of one packed block (`blk`: its 32 rows × 16 columns, column stride
+/// 32) += into Y, with the Eigen packet (P lanes) of kSse; xs[k][t] = X(k0 + k, t) broadcast.
+template <int Out, int J>
+inline void accumulatePackedSse(const float* blk, const Packet (&xs)[kPackStrip][J], float* Y, int r, int ro) {
   using Eigen::internal::padd;
   using Eigen::internal::pmul;
   using Eigen::internal::ploadu;
@@ -1231,9 +1231,8 @@ inline void accumulatePackedSse(const float* blk, const float* X, float* Y, int 
     const Packet w1 = ploadu<Packet>(blk + kPackBlock * k + ro + P);
 #pragma GCC unroll 8
     for (int t = 0; t < J; ++t) {
-      const Packet x = Eigen::internal::pset1<Packet>(X[t * In + k0 + k]);
-      acc0[t] = padd(acc0[t], pmul(w0, x));
-      acc1[t] = padd(acc1[t], pmul(w1, x));
+      acc0[t] = padd(acc0[t], pmul(w0, xs[k][t]));
+      acc1[t] = padd(acc1[t], pmul(w1, xs[k][t]));
     }
   }
 #pragma GCC unroll 8
@@ -1244,20 +1243,24 @@ inline void accumulatePackedSse(const float* blk, const float* X, float* Y, int 
 }
 
 /// affineTokens over the packed copy P with the kSse kernel's packets: per block, 2 packets
-/// of rows at a time (the Atom's 16 xmm registers hold 2·J accumulators).
+/// of rows at a time (2·J accumulators in registers), the strip's X broadcast once.
 template <int Out, int In, int J, bool kRelu>
 inline void affineTokensPackedSse(const float* P, const float* b, const float* X, float* Y) {
   static_assert(packedShape(Out, In), "no packed copy of this shape");
   static_assert(kPackBlock % (2 * kPacketSize) == 0, "a block is whole pairs of packets");
   initTokens<Out, J>(b, Y);
   const float* blk = P;
-  for (int k0 = 0; k0 < In; k0 += kPackStrip)
+  for (int k0 = 0; k0 < In; k0 += kPackStrip) {
+    Packet xs[kPackStrip][J];
+    for (int k = 0; k < kPackStrip; ++k)
+      for (int t = 0; t < J; ++t) xs[k][t] = Eigen::internal::pset1<Packet>(X[t * In + k0 + k]);
     for (int r = 0; r < Out; r += kPackBlock, blk += kPackBlock * kPackStrip) {
 #if defined(__GNUC__)
       for (int line = 0; line < kPackBlock * kPackStrip; line += 16) __builtin_prefetch(blk + kPackAhead + line, 0, 2);
 #endif
-      for (int ro = 0; ro < kPackBlock; ro += 2 * kPacketSize) accumulatePackedSse<Out, In, J>(blk, X, Y, k0, r, ro);
+      for (int ro = 0; ro < kPackBlock; ro += 2 * kPacketSize) accumulatePackedSse<Out, J>(blk, xs, Y, r, ro);
     }
+  }
   if constexpr (kRelu) reluTokens<Out, J>(Y);
 }
 

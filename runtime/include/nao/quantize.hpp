@@ -34,9 +34,9 @@ const char* weightPrecisionName(WeightPrecision p) noexcept;
 /// values otherwise.
 WeightPrecision parseWeightPrecision(const std::string& s);
 
-/// The precision a run uses: `asked` ("fp32"/"int8") if given, else int8 only for the
-/// compiled-in model (`compiled_in`) when `image` carries an int8 blob (nao_codegen --precision
-/// int8), else fp32. nao_rt's run and --info both decide it here. Throws as parseWeightPrecision.
+/// The precision a run uses: `asked` ("fp32"/"int8"/"fp32-packed") if given, else for the
+/// compiled-in model (`compiled_in`) the blob `image` carries (int8 or fp32-packed: nao_codegen
+/// --precision), else fp32. nao_rt's run and --info both decide it here. Throws as parseWeightPrecision.
 WeightPrecision runPrecision(const std::string& asked, bool compiled_in, const ModelImage& image);
 
 /// True for the manifest tensors that have an int8 copy (the order of the blob is manifest
@@ -105,5 +105,9 @@ std::uint64_t quantizedChecksum(const std::uint8_t* data, std::size_t size) noex
 /// the architecture's size (quantizedModelBytes of `arch`), and its FNV-1a 64 equal to the
 /// generated one. Throws ModelFileError "<origin>: <problem>". No allocation unless it throws.
 void checkInt8Image(const ModelImage& image, const PolicyArch& arch, const std::string& origin);
+
+/// checkInt8Image for the compiled-in packed fp32 blob (nao_codegen --precision fp32-packed):
+/// present, packedModelBytes(arch) long, its FNV-1a 64 the generated one.
+void checkPackedImage(const ModelImage& image, const PolicyArch& arch, const std::string& origin);
 
 }  // namespace nao
