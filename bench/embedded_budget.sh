@@ -63,7 +63,7 @@ objdump -d --no-show-raw-insn "$ROBOT" >"$work/robot.dis"
 load_after="$(cut -d' ' -f1-3 /proc/loadavg)"
 
 python3 - "$ROOT" "$ROBOT" "$NATIVE" "$MODEL" "$TICKS" "$work" "$load_before" "$load_after" "$OUT" "$*" <<'PY'
-import collections, datetime, os, re, resource, subprocess, sys
+import collections, datetime, json, os, re, resource, subprocess, sys
 
 root, robot, native, model, ticks, work, load_before, load_after, out_path, args = sys.argv[1:]
 ticks = int(ticks)
@@ -95,11 +95,13 @@ say()
 
 # 1. Sizes.
 def blob_size(exe):
+    # model.bin and the copies nao_codegen compiles in beside it (int8 or packed; empty otherwise)
+    total = 0
     for l in run(["nm", "-S", exe]).splitlines():
         f = l.split()
-        if len(f) == 4 and f[3] == "nao_model_blob":
-            return int(f[1], 16)
-    return 0
+        if len(f) == 4 and f[3] in ("nao_model_blob", "nao_model_int8", "nao_model_packed"):
+            total += int(f[1], 16)
+    return total
 def sections(exe):
     s = {}
     for l in run(["size", "-A", exe]).splitlines():
@@ -116,11 +118,14 @@ for name, exe in (("robot build-nao/bin/nao_rt", robot), ("native build/bin/nao_
     sec = sections(exe)
     say("%-34s %12d %12d %12d %14d %10d %10d" % (name, os.path.getsize(exe), os.path.getsize(stripped), w,
         os.path.getsize(stripped) - w, sec.get(".text", 0), sec.get(".bss", 0)))
-say("(weights = the compiled-in model.bin, .rodata symbol nao_model_blob; the robot build is static:")
+say("(weights = the compiled-in model.bin and its int8 or packed copy, .rodata symbols nao_model_blob,")
+say(" nao_model_int8, nao_model_packed; the robot build is static (fp32):")
 say(" glibc, libstdc++, ODE and TinyXML are inside it, the native one links them as shared libraries)")
 say()
 
 # 2. Peak RSS.
+def precision_of(exe):
+    return json.loads(run([exe, "--info"]))["precision"]
 def peak_rss_kib(cmd):
     pid = os.fork()
     if pid == 0:
@@ -135,10 +140,11 @@ def peak_rss_kib(cmd):
 say("## 2. Peak resident set over a 600-tick run (--reference synthetic:whole_arm --ticks 600)")
 for name, exe, extra in (("robot, compiled-in model", robot, []),
                          ("robot, --weights models/default.bin", robot, ["--weights", model]),
-                         ("native, compiled-in model", native, []),
+                         ("native, compiled-in model (%s)" % precision_of(native), native, []),
+                         ("native, compiled-in model as fp32", native, ["--precision", "fp32"]),
                          ("native, --weights models/default.bin", native, ["--weights", model])):
     kib = peak_rss_kib([exe, "--reference", "synthetic:whole_arm", "--ticks", "600", "--zero-timing"] + extra)
-    say("%-40s %7.1f MiB  (target <= 64 MB)" % (name, kib / 1024.0))
+    say("%-46s %7.1f MiB  (target <= 64 MB)" % (name, kib / 1024.0))
 say()
 
 # 3. and 4.: counts per tick (callgrind) and the Atom estimate, for each precision.
