@@ -409,14 +409,14 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
             : bindWeightFile<Dims>(p, weight_storage);
     weights.residual_gain = p.residual_gain;
     weights.linear_ar = linearArBase<Dims::kMovements>(p.linear_ar);
-    // int8: the compiled-in blob where it lies, or the same bytes made from the fp32 tensors
-    // (int8_storage also holds an fp32-packed run's packed copy).
-    AlignedBytes int8_storage;
+    // int8: the compiled-in blob where it lies, or the same bytes made from the fp32 tensors.
+    // copy_storage: the int8 or packed copy made at start-up (none for a compiled-in one).
+    AlignedBytes copy_storage;
     if (p.precision == WeightPrecision::kInt8) {
       const std::uint8_t* blob = p.int8_bytes;
       if (blob == nullptr) {
-        int8_storage = quantizeModelInt8(p.model);
-        blob = int8_storage.data.get();
+        copy_storage = quantizeModelInt8(p.model);
+        blob = copy_storage.data.get();
       }
       if constexpr (int8Supported<Dims>()) {
         if (quantizedModelBytes(p.model.header.arch) != quantizedPolicyBytes<Dims>())
@@ -433,8 +433,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       if constexpr (packedSupported<Dims>()) {
         const std::uint8_t* blob = p.packed_bytes;
         if (blob == nullptr) {
-          int8_storage = packModelFp32(p.model);
-          blob = int8_storage.data.get();
+          copy_storage = packModelFp32(p.model);
+          blob = copy_storage.data.get();
         }
         if (packedModelBytes(p.model.header.arch) != packedPolicyBytes<Dims>())
           throw std::logic_error("nao_rt: the packed blob of the model is not the compiled layout's size");

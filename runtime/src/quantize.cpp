@@ -1,4 +1,4 @@
-// The int8 blob of a model (nao/quantize.hpp).
+// The int8 and packed fp32 blobs of a model (nao/quantize.hpp).
 #include "nao/quantize.hpp"
 
 #include "nao/policy.hpp"

@@ -728,8 +728,8 @@ constexpr std::size_t quantizedPolicyBytes() {
 
 /// Points the int8 views of `w` into `blob` (quantizeModelInt8's layout, 64-byte aligned, at
 /// least quantizedPolicyBytes<Dims>() bytes): from now on stepPolicy runs those matrices in int8
-/// (any packed copy dropped). The fp32 views stay bound (biases, norms, embeddings and the head are fp32 in both). No
-/// allocation; the blob must outlive the weights.
+/// (any packed copy dropped). The fp32 views stay bound (biases, norms, embeddings and the head
+/// are fp32 in both). No allocation; the blob must outlive the weights.
 template <class Dims>
 void bindQuantizedWeights(PolicyWeights<Dims>& w, const std::uint8_t* blob) noexcept {
   static_assert(int8Supported<Dims>(), "int8 weights need even input sizes of at most 512");
@@ -927,6 +927,8 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
           done = true;
         }
       }
+      // A head size that is not a multiple of 16 (the small configuration's 8) has no packed
+      // slice: it reads the fp32 view (warmPolicy does not load that one).
       if constexpr (detail::packedShape(D, Dh)) {
         if (!done && C.wo8.packed != nullptr) {
           detail::affineTokensPacked<D, Dh, J, false>(C.wo8.packed + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr,

@@ -6,6 +6,11 @@
 // the head, the normalisation and the centroids stay fp32. The blob is a pure function of the
 // model's fp32 tensors: nao_codegen --precision int8 writes it next to the compiled-in model and
 // nao_rt --weights FILE --precision int8 makes the same bytes at start-up.
+//
+// The packed fp32 blob (docs/policy.md "Packed fp32 weights") holds the same matrices in fp32,
+// each in the kernels' block order (policy_kernels.hpp "Packed fp32"): the same bits as the
+// model's own matrices, read in address order. nao_codegen --precision fp32-packed compiles it
+// in; nao_rt --precision fp32-packed makes it at start-up otherwise.
 #pragma once
 
 #include "nao/model_file.hpp"
