@@ -4,9 +4,11 @@
 // the committed models/default.bin. One benchmark iteration = the whole hour; per-stage
 // p50/p99/max come from the controller's own stage timings (CLOCK_MONOTONIC), plus peak RSS.
 // The label names the policy kernel in use (nao/policy_kernels.hpp; NAO_POLICY_KERNEL=sse forces
-// the SSE one).
+// the SSE one). BM_Tick_Full_Packed: the same hour with the packed fp32 weights (the native
+// build's compiled-in default, docs/policy.md "Packed fp32 weights"; the same bits).
 #include "bench_policy_common.hpp"
 #include "nao/controller.hpp"
+#include "nao/quantize.hpp"
 #include "nao/tools/reference_source.hpp"
 
 #include <sys/resource.h>
@@ -18,15 +20,19 @@ namespace {
 using namespace nao;
 using namespace nao::bench;
 
-void BM_Tick_Full(benchmark::State& state) {
+void runTickFull(benchmark::State& state, bool packed) {
   if (!haveModel(state)) return;
   const ModelFile& model = paperModel();
   const ArmModel arm = loadArmModel(NAO_DEFAULT_URDF);
   checkJointsMatch(model, arm, NAO_BENCH_MODEL);
   std::vector<const float*> p;
   for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
-  const PolicyWeights<PaperPolicyDims> w =
-      bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
+  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
+  AlignedBytes blob;
+  if (packed) {
+    blob = packModelFp32(model);
+    bindPackedWeights<PaperPolicyDims>(w, blob.data.get());
+  }
   const int movement = 1;  // whole_arm (sorted movement names)
   std::vector<JointVector> centroids;
   for (int k = 0; k < PaperPolicyDims::kClusters; ++k) centroids.push_back(centroid(w, movement, k).cast<double>());
@@ -63,9 +69,13 @@ void BM_Tick_Full(benchmark::State& state) {
   getrusage(RUSAGE_SELF, &ru);
   state.counters["rss_MB"] = static_cast<double>(ru.ru_maxrss) / 1024.0;
   state.counters["ticks"] = kTicks;
-  state.SetLabel(std::string("policy kernel ") + policyKernelName(activePolicyKernel()));
+  state.SetLabel(std::string("policy kernel ") + policyKernelName(activePolicyKernel()) + (packed ? ", packed" : ""));
 }
+
+void BM_Tick_Full(benchmark::State& state) { runTickFull(state, false); }
+void BM_Tick_Full_Packed(benchmark::State& state) { runTickFull(state, true); }
 
 }  // namespace
 
 BENCHMARK(BM_Tick_Full)->Unit(benchmark::kSecond)->Iterations(1);
+BENCHMARK(BM_Tick_Full_Packed)->Unit(benchmark::kSecond)->Iterations(1);
