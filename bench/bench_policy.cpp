@@ -298,56 +298,10 @@ void runMulAddFloor(benchmark::State& state) {
 //   _Strided: the runtime's kernel (affineTokensAvx512) on the column-major matrices of
 //             model.bin: a block of 32 rows reads 128 bytes of each of a strip's 16 columns,
 //             2 KB apart;
-//   _Packed:  the same loop order on the matrices repacked so that each (strip, block) is 2 KB
-//             in a row, read in address order with the data 32 KB ahead prefetched.
+//   _Packed:  the runtime's packed kernel (affineTokensPackedAvx512) on the same matrices packed
+//             by packMatrixFp32: each (strip, block) 2 KB in a row, read in address order.
 // Both add each row's terms in k order, multiply then add: the same bits (counter same_bits).
 constexpr int kLayoutRows = 512, kLayoutCols = 512, kLayoutTokens = 5, kLayoutMatrices = 24;
-constexpr int kLayoutStrip = 16, kLayoutBlock = 32;
-
-/// W (column-major [kLayoutRows, kLayoutCols]) as strips of kLayoutStrip columns, each as blocks of
-/// kLayoutBlock rows, each block column by column.
-std::vector<float> packLayout(const float* W) {
-  std::vector<float> p;
-  p.reserve(static_cast<std::size_t>(kLayoutRows) * kLayoutCols);
-  for (int k0 = 0; k0 < kLayoutCols; k0 += kLayoutStrip)
-    for (int r = 0; r < kLayoutRows; r += kLayoutBlock)
-      for (int k = k0; k < k0 + kLayoutStrip; ++k)
-        for (int i = 0; i < kLayoutBlock; ++i) p.push_back(W[static_cast<std::size_t>(k) * kLayoutRows + r + i]);
-  return p;
-}
-
-__attribute__((target("avx512f"), noinline)) void affinePackedAvx512(const float* P, const float* X, float* Y) {
-  constexpr int J = kLayoutTokens, R = kLayoutBlock / 16;
-  for (int i = 0; i < kLayoutRows * J; ++i) Y[i] = 0.0f;
-  const float* w = P;
-  for (int k0 = 0; k0 < kLayoutCols; k0 += kLayoutStrip) {
-    for (int r = 0; r < kLayoutRows; r += kLayoutBlock, w += kLayoutBlock * kLayoutStrip) {
-      __m512 acc[R][J];
-#pragma GCC unroll 8
-      for (int t = 0; t < J; ++t)
-#pragma GCC unroll 4
-        for (int i = 0; i < R; ++i) acc[i][t] = _mm512_loadu_ps(Y + t * kLayoutRows + r + 16 * i);
-#pragma GCC unroll 2
-      for (int k = 0; k < kLayoutStrip; ++k) {
-#pragma GCC unroll 4
-        for (int i = 0; i < R; ++i) __builtin_prefetch(w + kLayoutBlock * k + 16 * i + 8192, 0, 2);
-        __m512 wv[R];
-#pragma GCC unroll 4
-        for (int i = 0; i < R; ++i) wv[i] = _mm512_loadu_ps(w + kLayoutBlock * k + 16 * i);
-#pragma GCC unroll 8
-        for (int t = 0; t < J; ++t) {
-          const __m512 x = _mm512_set1_ps(X[t * kLayoutCols + k0 + k]);
-#pragma GCC unroll 4
-          for (int i = 0; i < R; ++i) acc[i][t] = _mm512_add_ps(acc[i][t], _mm512_mul_ps(wv[i], x));
-        }
-      }
-#pragma GCC unroll 8
-      for (int t = 0; t < J; ++t)
-#pragma GCC unroll 4
-        for (int i = 0; i < R; ++i) _mm512_storeu_ps(Y + t * kLayoutRows + r + 16 * i, acc[i][t]);
-    }
-  }
-}
 
 void runLayout(benchmark::State& state, bool packed) {
   if (!policyKernelSupported(PolicyKernel::kAvx512)) {
@@ -361,20 +315,23 @@ void runLayout(benchmark::State& state, bool packed) {
   for (int m = 0; m < kLayoutMatrices; ++m) {
     W[m].resize(kSize);
     for (float& x : W[m]) x = u(rng);
-    P[m] = packLayout(W[m].data());
+    P[m].resize(kSize);
+    packMatrixFp32(W[m].data(), kLayoutRows, kLayoutCols, P[m].data());
   }
   std::vector<float> X(static_cast<std::size_t>(kLayoutCols) * kLayoutTokens), Y(kLayoutRows * kLayoutTokens),
       Z(kLayoutRows * kLayoutTokens);
   for (float& x : X) x = u(rng);
   detail::affineTokensAvx512<kLayoutRows, kLayoutCols, kLayoutTokens, false>(W[0].data(), nullptr, X.data(), Y.data());
-  affinePackedAvx512(P[0].data(), X.data(), Z.data());
+  detail::affineTokensPackedAvx512<kLayoutRows, kLayoutCols, kLayoutTokens, false>(P[0].data(), nullptr, X.data(),
+                                                                                   Z.data());
   const bool same = std::memcmp(Y.data(), Z.data(), Y.size() * sizeof(float)) == 0;
   Percentiles rec;
   for (auto _ : state) {
     const BenchClock::time_point t0 = BenchClock::now();
     for (int m = 0; m < kLayoutMatrices; ++m) {
       if (packed)
-        affinePackedAvx512(P[m].data(), X.data(), Y.data());
+        detail::affineTokensPackedAvx512<kLayoutRows, kLayoutCols, kLayoutTokens, false>(P[m].data(), nullptr,
+                                                                                         X.data(), Y.data());
       else
         detail::affineTokensAvx512<kLayoutRows, kLayoutCols, kLayoutTokens, false>(W[m].data(), nullptr, X.data(),
                                                                                    Y.data());

@@ -164,6 +164,22 @@ TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new mo
   CHECK(fs::path(changed.unchanged[2]).filename() == "model.packed");  // likewise
 }
 
+namespace {
+
+/// out/nao_model_weights.S .incbin's out/`file` (absolute path) between `symbol` and its _end.
+void checkIncbinBetween(const fs::path& out, const std::string& file, const std::string& symbol) {
+  const std::string s = nao::test::readFile((out / "nao_model_weights.S").string());
+  const std::string abs_blob = fs::absolute(out / file).lexically_normal().string();
+  const std::size_t start = s.find(symbol + ":\n"), incbin = s.find(".incbin \"" + abs_blob + "\"\n"),
+                    end = s.find(symbol + "_end:\n");
+  CHECK(start != std::string::npos);
+  CHECK(incbin != std::string::npos);
+  CHECK(end != std::string::npos);
+  CHECK((start < incbin && incbin < end));
+}
+
+}  // namespace
+
 TEST_CASE("nao_codegen --precision int8 compiles in the int8 blob beside the model, described by the config") {
   const nao::PolicyArch arch = nao::smallArch();
   const SmallModel m = smallModel("codegen_int8", 9);
@@ -189,14 +205,7 @@ TEST_CASE("nao_codegen --precision int8 compiles in the int8 blob beside the mod
                 static_cast<unsigned long long>(nao::quantizedChecksum(want.data.get(), want.size)));
   CHECK(config.find(checksum) != std::string::npos);
 
-  const std::string s = nao::test::readFile((out / "nao_model_weights.S").string());
-  const std::string abs_blob = fs::absolute(out / "model.int8").lexically_normal().string();
-  const std::size_t start = s.find("nao_model_int8:\n"), incbin = s.find(".incbin \"" + abs_blob + "\"\n"),
-                    end = s.find("nao_model_int8_end:\n");
-  CHECK(start != std::string::npos);
-  CHECK(incbin != std::string::npos);
-  CHECK(end != std::string::npos);
-  CHECK((start < incbin && incbin < end));
+  checkIncbinBetween(out, "model.int8", "nao_model_int8");
 }
 
 TEST_CASE("nao_codegen --precision fp32-packed compiles in the packed blob beside the model, described by the config") {
@@ -225,14 +234,7 @@ TEST_CASE("nao_codegen --precision fp32-packed compiles in the packed blob besid
                 static_cast<unsigned long long>(nao::quantizedChecksum(want.data.get(), want.size)));
   CHECK(config.find(checksum) != std::string::npos);
 
-  const std::string s = nao::test::readFile((out / "nao_model_weights.S").string());
-  const std::string abs_blob = fs::absolute(out / "model.packed").lexically_normal().string();
-  const std::size_t start = s.find("nao_model_packed:\n"), incbin = s.find(".incbin \"" + abs_blob + "\"\n"),
-                    end = s.find("nao_model_packed_end:\n");
-  CHECK(start != std::string::npos);
-  CHECK(incbin != std::string::npos);
-  CHECK(end != std::string::npos);
-  CHECK((start < incbin && incbin < end));
+  checkIncbinBetween(out, "model.packed", "nao_model_packed");
 }
 
 TEST_CASE("nao_codegen refuses a bad model and writes nothing") {

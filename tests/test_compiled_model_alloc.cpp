@@ -184,6 +184,27 @@ TEST_CASE("the compiled-in binding and the --weights path compute the same bits 
   CHECK(differing == 0);
 }
 
+namespace {
+
+/// A copy of the image's int8 or packed blob (`bytes`, `size`) passes `check`; one flipped byte
+/// fails it on the checksum, and 64 bytes fewer on the size.
+using BlobCheck = void (*)(const ModelImage&, const PolicyArch&, const std::string&);
+void checkDamagedBlob(const ModelImage& image, const std::uint8_t* ModelImage::*bytes,
+                      std::size_t ModelImage::*size, BlobCheck check, const std::string& what) {
+  std::vector<std::uint8_t> q(image.*bytes, image.*bytes + image.*size);
+  ModelImage bad = image;
+  bad.*bytes = q.data();
+  CHECK_NOTHROW(check(bad, image.header->arch, "compiled-in model"));
+  q[q.size() / 3] ^= 0x01;
+  CHECK_THROWS_WITH_AS(check(bad, image.header->arch, "compiled-in model"),
+                       doctest::Contains((what + " weights checksum mismatch").c_str()), ModelFileError);
+  bad.*size -= 64;
+  CHECK_THROWS_WITH_AS(check(bad, image.header->arch, "compiled-in model"), doctest::Contains("the architecture needs"),
+                       ModelFileError);
+}
+
+}  // namespace
+
 TEST_CASE("a damaged or mismatched image is refused with the checksum") {
   const ModelImage image = compiled::modelImage();
   std::vector<std::uint8_t> copy(image.bytes, image.bytes + image.size);
@@ -198,30 +219,10 @@ TEST_CASE("a damaged or mismatched image is refused with the checksum") {
   CHECK_THROWS_WITH_AS(mappedModelFile(other, "compiled-in model"), doctest::Contains("its generated code describes"),
                        ModelFileError);
   CHECK_NOTHROW(mappedModelFile(damaged, "compiled-in model"));
-  if constexpr (compiled::kInt8Weights) {
-    std::vector<std::uint8_t> q(image.int8_bytes, image.int8_bytes + image.int8_size);
-    ModelImage bad = image;
-    bad.int8_bytes = q.data();
-    CHECK_NOTHROW(checkInt8Image(bad, image.header->arch, "compiled-in model"));
-    q[q.size() / 3] ^= 0x01;
-    CHECK_THROWS_WITH_AS(checkInt8Image(bad, image.header->arch, "compiled-in model"),
-                         doctest::Contains("int8 weights checksum mismatch"), ModelFileError);
-    bad.int8_size -= 64;
-    CHECK_THROWS_WITH_AS(checkInt8Image(bad, image.header->arch, "compiled-in model"),
-                         doctest::Contains("the architecture needs"), ModelFileError);
-  }
-  if constexpr (compiled::kPackedWeights) {
-    std::vector<std::uint8_t> q(image.packed_bytes, image.packed_bytes + image.packed_size);
-    ModelImage bad = image;
-    bad.packed_bytes = q.data();
-    CHECK_NOTHROW(checkPackedImage(bad, image.header->arch, "compiled-in model"));
-    q[q.size() / 3] ^= 0x01;
-    CHECK_THROWS_WITH_AS(checkPackedImage(bad, image.header->arch, "compiled-in model"),
-                         doctest::Contains("packed weights checksum mismatch"), ModelFileError);
-    bad.packed_size -= 64;
-    CHECK_THROWS_WITH_AS(checkPackedImage(bad, image.header->arch, "compiled-in model"),
-                         doctest::Contains("the architecture needs"), ModelFileError);
-  }
+  if constexpr (compiled::kInt8Weights)
+    checkDamagedBlob(image, &ModelImage::int8_bytes, &ModelImage::int8_size, checkInt8Image, "int8");
+  if constexpr (compiled::kPackedWeights)
+    checkDamagedBlob(image, &ModelImage::packed_bytes, &ModelImage::packed_size, checkPackedImage, "packed");
 }
 
 namespace {

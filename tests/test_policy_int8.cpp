@@ -12,6 +12,7 @@
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
 #include "nao/arm_model.hpp"
+#include "support/kernel_guard.hpp"
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
@@ -33,10 +34,7 @@ namespace {
 bool haveAvx2() { return policyKernelSupported(PolicyKernel::kAvx2); }
 bool haveAvx512() { return policyKernelSupported(PolicyKernel::kAvx512); }
 
-struct KernelGuard {
-  PolicyKernel saved = activePolicyKernel();
-  ~KernelGuard() { selectPolicyKernel(saved); }
-};
+using test::KernelGuard;
 
 std::vector<float> randomVector(std::mt19937_64& rng, std::size_t n, double lo, double hi) {
   std::vector<float> v(n);

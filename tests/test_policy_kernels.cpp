@@ -4,6 +4,7 @@
 // (actions, α, scores, cross_out) are bit-identical under every kernel. On a CPU without AVX2
 // (or AVX-512) the other checks still run and a message says which kernel was not available.
 #include "nao/policy.hpp"
+#include "support/kernel_guard.hpp"
 #include "support/random_policy.hpp"
 
 #include <doctest/doctest.h>
@@ -36,11 +37,7 @@ void noteAvx2Absent() {
     MESSAGE("AVX-512 F/BW/VNNI is not available on this CPU (or build): the avx512 kernel was not checked");
 }
 
-/// Restores the kernel in use when it goes out of scope.
-struct KernelGuard {
-  PolicyKernel saved = activePolicyKernel();
-  ~KernelGuard() { selectPolicyKernel(saved); }
-};
+using test::KernelGuard;
 
 bool sameBits(const float* a, const float* b, std::size_t n) { return std::memcmp(a, b, n * sizeof(float)) == 0; }
 

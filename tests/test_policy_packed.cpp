@@ -12,6 +12,7 @@
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
+#include "support/kernel_guard.hpp"
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
@@ -20,6 +21,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <new>
 #include <random>
 #include <stdexcept>
 #include <vector>
@@ -28,10 +30,7 @@ using namespace nao;
 
 namespace {
 
-struct KernelGuard {
-  PolicyKernel saved = activePolicyKernel();
-  ~KernelGuard() { selectPolicyKernel(saved); }
-};
+using test::KernelGuard;
 
 /// The kernels this CPU and build can run.
 std::vector<PolicyKernel> supportedKernels() {
@@ -150,6 +149,26 @@ Rollout roll(const PolicyWeights<Dims>& w, std::uint64_t seed, int ticks) {
   return r;
 }
 
+/// The bound views' matrices packed one by one (packMatrixFp32) in visitQuantViews order, in a
+/// 64-byte aligned blob as the runtime binds it: what packModelFp32 must make of their file.
+template <class Dims>
+AlignedBytes packedFromViews(PolicyWeights<Dims>& w) {
+  AlignedBytes blob;
+  blob.size = packedPolicyBytes<Dims>();
+  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
+  std::size_t off = 0;
+  detail::visitQuantViews(w, [&](const auto& view, auto&) {
+    using V = std::remove_reference_t<decltype(view)>;
+    constexpr std::size_t bytes = sizeof(float) * V::RowsAtCompileTime * V::ColsAtCompileTime;
+    REQUIRE(off + bytes <= blob.size);
+    packMatrixFp32(view.data(), V::RowsAtCompileTime, V::ColsAtCompileTime,
+                   reinterpret_cast<float*>(blob.data.get() + off));
+    off += bytes;
+  });
+  REQUIRE(off == blob.size);
+  return blob;
+}
+
 template <class Dims>
 void checkPackedStep(std::uint64_t seed, int ticks) {
   KernelGuard guard;
@@ -168,15 +187,8 @@ void checkPackedStep(std::uint64_t seed, int ticks) {
   const AlignedBytes blob = packModelFp32(file);
   REQUIRE(blob.size == packedPolicyBytes<Dims>());
   REQUIRE(blob.size == packedModelBytes(Dims::arch()));
-  std::vector<float> from_views;
-  detail::visitQuantViews(w, [&](const auto& view, auto&) {
-    using V = std::remove_reference_t<decltype(view)>;
-    std::vector<float> m(static_cast<std::size_t>(V::RowsAtCompileTime) * V::ColsAtCompileTime);
-    packMatrixFp32(view.data(), V::RowsAtCompileTime, V::ColsAtCompileTime, m.data());
-    from_views.insert(from_views.end(), m.begin(), m.end());
-  });
-  REQUIRE(from_views.size() * sizeof(float) == blob.size);
-  CHECK(std::memcmp(from_views.data(), blob.data.get(), blob.size) == 0);
+  const AlignedBytes from_views = packedFromViews(w);
+  CHECK(std::memcmp(from_views.data.get(), blob.data.get(), blob.size) == 0);
 
   bindPackedWeights<Dims>(w, blob.data.get());
   CHECK(usesPacked(w));
@@ -225,19 +237,7 @@ TEST_CASE("warmPolicy reads each matrix once: the packed copy instead of the vie
   std::uint64_t sink = 0;
   CHECK(warmPolicy(w, *ws, sink) == fp32 + sizeof(*ws));
   // The packed blob holds every matrix it replaces once: the same byte count, other addresses.
-  std::vector<float> all;
-  detail::visitQuantViews(w, [&](const auto& view, auto&) {
-    using V = std::remove_reference_t<decltype(view)>;
-    std::vector<float> m(static_cast<std::size_t>(V::RowsAtCompileTime) * V::ColsAtCompileTime);
-    packMatrixFp32(view.data(), V::RowsAtCompileTime, V::ColsAtCompileTime, m.data());
-    all.insert(all.end(), m.begin(), m.end());
-  });
-  // Not 64-byte aligned in a vector: copy into an aligned blob as the runtime binds it.
-  AlignedBytes blob;
-  blob.size = packedPolicyBytes<SmallPolicyDims>();
-  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
-  REQUIRE(all.size() * sizeof(float) == blob.size);
-  std::memcpy(blob.data.get(), all.data(), blob.size);
+  const AlignedBytes blob = packedFromViews(w);
   bindPackedWeights<SmallPolicyDims>(w, blob.data.get());
   // The blob's lines are what it reads: one byte of it changed changes the sum by as much.
   const std::uint8_t first = blob.data[0];

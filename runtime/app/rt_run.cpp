@@ -76,17 +76,16 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
   // Precision: asked for, or what the compiled-in model was generated with (fp32 for --weights).
   p.precision = runPrecision(o.precision, p.model_bytes != nullptr, o.compiled);
   // A compiled-in int8 or packed copy replaces the image's matrices: now that the checksum has
-  // been verified over the image, its pages leave the resident set, before the copy's own check
-  // brings that in (the run faults back the few it still reads: docs/embedded.md, RSS).
-  const bool int8_in = p.precision == WeightPrecision::kInt8 && o.compiled.int8_bytes != nullptr;
-  const bool packed_in = p.precision == WeightPrecision::kFp32Packed && o.compiled.packed_bytes != nullptr;
-  if (p.model_bytes != nullptr && (int8_in || packed_in)) releaseImagePages(o.compiled.bytes, o.compiled.size);
-  if (p.precision == WeightPrecision::kInt8 && p.model_bytes != nullptr && o.compiled.int8_bytes != nullptr) {
-    // The compiled-in int8 blob: checked once, like the model's bytes.
+  // been verified over the image, its pages leave the resident set before the copy's own check
+  // (checked once, like the model's bytes) brings that in; the run faults back the few it still
+  // reads (docs/embedded.md, RSS).
+  if (p.model_bytes != nullptr && p.precision == WeightPrecision::kInt8 && o.compiled.int8_bytes != nullptr) {
+    releaseImagePages(o.compiled.bytes, o.compiled.size);
     checkInt8Image(o.compiled, p.model.header.arch, origin);
     p.int8_bytes = o.compiled.int8_bytes;
-  }
-  if (p.precision == WeightPrecision::kFp32Packed && p.model_bytes != nullptr && o.compiled.packed_bytes != nullptr) {
+  } else if (p.model_bytes != nullptr && p.precision == WeightPrecision::kFp32Packed &&
+             o.compiled.packed_bytes != nullptr) {
+    releaseImagePages(o.compiled.bytes, o.compiled.size);
     checkPackedImage(o.compiled, p.model.header.arch, origin);
     p.packed_bytes = o.compiled.packed_bytes;
   }

@@ -38,6 +38,22 @@ WeightPrecision runPrecision(const std::string& asked, bool compiled_in, const M
 
 namespace {
 
+/// Σ bytes(out, in) over the matrices the int8 and packed blobs hold (attention projections and
+/// FFN weights of every layer), from the dimensions alone.
+template <class Bytes>
+std::size_t sumOverMatrices(const PolicyArch& arch, Bytes bytes) {
+  const auto d = static_cast<std::size_t>(arch.d_model);
+  std::size_t ffn = 0, in = d;
+  for (const int h : arch.ffn_hidden) {
+    ffn += bytes(static_cast<std::size_t>(h), in);
+    in = static_cast<std::size_t>(h);
+  }
+  ffn += bytes(d, in);
+  const std::size_t attention = 4 * bytes(d, d);
+  return static_cast<std::size_t>(arch.encoder_layers) * (attention + ffn) +
+         static_cast<std::size_t>(arch.decoder_layers) * (2 * attention + ffn);
+}
+
 bool endsWith(std::string_view s, std::string_view tail) {
   return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
 }
@@ -50,6 +66,45 @@ bool isInt8Tensor(std::string_view name) noexcept {
   const std::size_t f = name.find(".ffn.");
   return f != std::string_view::npos && endsWith(name, ".weight");
 }
+
+namespace {
+
+/// A blob of `size` bytes (64-byte aligned, zero where nothing is written): for each matrix
+/// isInt8Tensor names, in manifest order, `section(spec, out, in)` checks its shape and gives its
+/// bytes, and `write(W, out, in, dst)` fills them. `who` names the caller in the layout errors.
+template <class Section, class Write>
+AlignedBytes buildBlob(const ModelFile& model, std::size_t size, const char* who, Section section, Write write) {
+  AlignedBytes blob;
+  blob.size = size;
+  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
+  std::fill(blob.data.get(), blob.data.get() + blob.size, std::uint8_t{0});
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
+    const TensorSpec& t = model.tensors[i].spec;
+    if (!isInt8Tensor(t.name) || t.shape.size() != 2) continue;
+    const int in = t.shape[0], out = t.shape[1];  // model.bin matrices are [in, out] row-major
+    const std::size_t bytes = section(t, out, in);
+    if (off + bytes > blob.size) throw std::logic_error(std::string(who) + ": the manifest's matrices exceed the layout");
+    write(model.data(i), out, in, blob.data.get() + off);
+    off += bytes;
+  }
+  if (off != blob.size) throw std::logic_error(std::string(who) + ": the manifest's matrices do not fill the layout");
+  return blob;
+}
+
+/// A compiled-in blob: present, `want` bytes, its FNV-1a 64 the generated one. `what` names it in
+/// "no <what> weights were compiled in", `short_what` in the size and checksum messages.
+void checkCompiledBlob(const std::uint8_t* bytes, std::size_t size, std::uint64_t checksum, std::size_t want,
+                       const char* what, const char* short_what, const std::string& origin) {
+  if (bytes == nullptr) throw ModelFileError(origin + ": no " + what + " weights were compiled in");
+  if (size != want)
+    throw ModelFileError(origin + ": the compiled-in " + short_what + " weights are " + std::to_string(size) +
+                         " bytes, the architecture needs " + std::to_string(want));
+  if (quantizedChecksum(bytes, size) != checksum)
+    throw ModelFileError(origin + ": " + short_what + " weights checksum mismatch (not the bytes its generated code describes)");
+}
+
+}  // namespace
 
 void quantizeMatrixInt8(const float* W, int out, int in, std::uint8_t* section) {
   if (in % 2 != 0 || in > detail::kInt8MaxIn || out <= 0 || in <= 0)
@@ -72,16 +127,7 @@ void quantizeMatrixInt8(const float* W, int out, int in, std::uint8_t* section) 
 std::size_t quantizedModelBytes(const PolicyArch& arch) {
   // From the dimensions, without the manifest (no allocation: checkInt8Image runs at start-up);
   // quantizeModelInt8 walks the manifest and checks that it comes to the same size.
-  const auto d = static_cast<std::size_t>(arch.d_model);
-  std::size_t ffn = 0, in = d;
-  for (const int h : arch.ffn_hidden) {
-    ffn += detail::quantSectionBytes(static_cast<std::size_t>(h), in);
-    in = static_cast<std::size_t>(h);
-  }
-  ffn += detail::quantSectionBytes(d, in);
-  const std::size_t attention = 4 * detail::quantSectionBytes(d, d);
-  return static_cast<std::size_t>(arch.encoder_layers) * (attention + ffn) +
-         static_cast<std::size_t>(arch.decoder_layers) * (2 * attention + ffn);
+  return sumOverMatrices(arch, detail::quantSectionBytes);
 }
 
 AlignedBytes quantizeModelInt8(const ModelFile& model) {
@@ -90,26 +136,13 @@ AlignedBytes quantizeModelInt8(const ModelFile& model) {
   if (arch.heads <= 0 || (arch.d_model / arch.heads) % 2 != 0)
     throw ModelFileError("int8 weights: head size " + std::to_string(arch.heads > 0 ? arch.d_model / arch.heads : 0) +
                          " is odd (the int8 kernels take input columns in pairs)");
-  AlignedBytes blob;
-  blob.size = quantizedModelBytes(model.header.arch);
-  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
-  std::fill(blob.data.get(), blob.data.get() + blob.size, std::uint8_t{0});
-  std::size_t off = 0;
-  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
-    const TensorSpec& t = model.tensors[i].spec;
-    if (!isInt8Tensor(t.name) || t.shape.size() != 2) continue;
-    const int in = t.shape[0], out = t.shape[1];  // model.bin matrices are [in, out] row-major
+  return buildBlob(model, quantizedModelBytes(arch), "quantizeModelInt8", [](const TensorSpec& t, int out, int in) {
     if (in % 2 != 0 || in > detail::kInt8MaxIn)
       throw ModelFileError("int8 weights: " + t.name + " has " + std::to_string(in) +
                            " inputs (the int8 kernels take an even number up to " +
                            std::to_string(detail::kInt8MaxIn) + ")");
-    const std::size_t bytes = detail::quantSectionBytes(static_cast<std::size_t>(out), static_cast<std::size_t>(in));
-    if (off + bytes > blob.size) throw std::logic_error("quantizeModelInt8: the manifest's matrices exceed the layout");
-    quantizeMatrixInt8(model.data(i), out, in, blob.data.get() + off);
-    off += bytes;
-  }
-  if (off != blob.size) throw std::logic_error("quantizeModelInt8: the manifest's matrices do not fill the layout");
-  return blob;
+    return detail::quantSectionBytes(static_cast<std::size_t>(out), static_cast<std::size_t>(in));
+  }, [](const float* W, int out, int in, std::uint8_t* dst) { quantizeMatrixInt8(W, out, in, dst); });
 }
 
 void packMatrixFp32(const float* W, int out, int in, float* P) {
@@ -127,61 +160,30 @@ void packMatrixFp32(const float* W, int out, int in, float* P) {
 }
 
 std::size_t packedModelBytes(const PolicyArch& arch) {
-  const auto d = static_cast<std::size_t>(arch.d_model);
-  std::size_t ffn = 0, in = d;
-  for (const int h : arch.ffn_hidden) {
-    ffn += static_cast<std::size_t>(h) * in;
-    in = static_cast<std::size_t>(h);
-  }
-  ffn += d * in;
-  const std::size_t attention = 4 * d * d;
-  return sizeof(float) * (static_cast<std::size_t>(arch.encoder_layers) * (attention + ffn) +
-                          static_cast<std::size_t>(arch.decoder_layers) * (2 * attention + ffn));
+  return sumOverMatrices(arch, [](std::size_t out, std::size_t in) { return sizeof(float) * out * in; });
 }
 
 AlignedBytes packModelFp32(const ModelFile& model) {
-  AlignedBytes blob;
-  blob.size = packedModelBytes(model.header.arch);
-  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
-  std::size_t off = 0;
-  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
-    const TensorSpec& t = model.tensors[i].spec;
-    if (!isInt8Tensor(t.name) || t.shape.size() != 2) continue;
-    const int in = t.shape[0], out = t.shape[1];  // model.bin matrices are [in, out] row-major
+  return buildBlob(model, packedModelBytes(model.header.arch), "packModelFp32", [](const TensorSpec& t, int out, int in) {
     if (!detail::packedShape(out, in))
       throw ModelFileError("packed fp32 weights: " + t.name + " is " + std::to_string(out) + " x " +
                            std::to_string(in) + " (the packed layout takes outputs in multiples of " +
                            std::to_string(detail::kPackBlock) + " and inputs in multiples of " +
                            std::to_string(detail::kPackStrip) + ")");
-    const std::size_t bytes = sizeof(float) * static_cast<std::size_t>(out) * static_cast<std::size_t>(in);
-    if (off + bytes > blob.size) throw std::logic_error("packModelFp32: the manifest's matrices exceed the layout");
-    packMatrixFp32(model.data(i), out, in, reinterpret_cast<float*>(blob.data.get() + off));
-    off += bytes;
-  }
-  if (off != blob.size) throw std::logic_error("packModelFp32: the manifest's matrices do not fill the layout");
-  return blob;
+    return sizeof(float) * static_cast<std::size_t>(out) * static_cast<std::size_t>(in);
+  }, [](const float* W, int out, int in, std::uint8_t* dst) { packMatrixFp32(W, out, in, reinterpret_cast<float*>(dst)); });
 }
 
 std::uint64_t quantizedChecksum(const std::uint8_t* data, std::size_t size) noexcept { return fnv1a64(data, size); }
 
 void checkInt8Image(const ModelImage& image, const PolicyArch& arch, const std::string& origin) {
-  if (image.int8_bytes == nullptr) throw ModelFileError(origin + ": no int8 weights were compiled in");
-  const std::size_t want = quantizedModelBytes(arch);
-  if (image.int8_size != want)
-    throw ModelFileError(origin + ": the compiled-in int8 weights are " + std::to_string(image.int8_size) +
-                         " bytes, the architecture needs " + std::to_string(want));
-  if (quantizedChecksum(image.int8_bytes, image.int8_size) != image.int8_checksum)
-    throw ModelFileError(origin + ": int8 weights checksum mismatch (not the bytes its generated code describes)");
+  checkCompiledBlob(image.int8_bytes, image.int8_size, image.int8_checksum, quantizedModelBytes(arch), "int8", "int8",
+                    origin);
 }
 
 void checkPackedImage(const ModelImage& image, const PolicyArch& arch, const std::string& origin) {
-  if (image.packed_bytes == nullptr) throw ModelFileError(origin + ": no packed fp32 weights were compiled in");
-  const std::size_t want = packedModelBytes(arch);
-  if (image.packed_size != want)
-    throw ModelFileError(origin + ": the compiled-in packed weights are " + std::to_string(image.packed_size) +
-                         " bytes, the architecture needs " + std::to_string(want));
-  if (quantizedChecksum(image.packed_bytes, image.packed_size) != image.packed_checksum)
-    throw ModelFileError(origin + ": packed weights checksum mismatch (not the bytes its generated code describes)");
+  checkCompiledBlob(image.packed_bytes, image.packed_size, image.packed_checksum, packedModelBytes(arch),
+                    "packed fp32", "packed", origin);
 }
 
 }  // namespace nao
