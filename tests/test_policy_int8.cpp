@@ -439,8 +439,8 @@ TEST_CASE("stepPolicy with int8 weights: same bits under SSE2 and AVX2, near fp3
     max_abs = std::max(max_abs, std::fabs(static_cast<double>(fp32[i])));
   }
   MESSAGE("small random policy, 40 ticks: max |a_int8 - a_fp32| = " << max_diff << " of max |a| = " << max_abs);
-  // A coarse sanity bound for random weights (measured 1.7 %; 1.6 % with 16-bit tokens everywhere); the trained models' action
-  // differences and closed-loop hand errors are measured in bench/int8_accuracy.py.
+  // A coarse sanity bound for random weights (measured 1.7 %; 1.6 % with 16-bit tokens
+  // everywhere); the trained models' action differences and closed-loop hand errors are measured in bench/int8_accuracy.py.
   CHECK(max_diff > 0.0);
   CHECK(max_diff <= 0.02 * max_abs);
   unbindQuantizedWeights<SmallPolicyDims>(w);

@@ -489,3 +489,27 @@ TEST_CASE("headSumNorm: SSE and AVX-512 equal the 16-lane definition bit for bit
     }
   }
 }
+
+TEST_CASE("headSumNorms: J coefficient sets over the same vectors, each the bits of its own headSumNorm") {
+  constexpr int D = 128, H = 4, Q = 5;
+  std::mt19937_64 rng(92);
+  KernelGuard guard;
+  for (int draw = 0; draw < 50; ++draw) {
+    std::vector<float> fv(static_cast<std::size_t>(D) * H);
+    for (float& v : fv) v = uniform(rng, -2.0, 2.0);
+    float a[Q * H];
+    for (float& v : a) v = uniform(rng, 0.0, 1.0);
+    const float* f[H];
+    for (int h = 0; h < H; ++h) f[h] = fv.data() + h * D;
+    float want[Q];
+    for (int i = 0; i < Q; ++i) want[i] = detail::headSumNormScalar<D, H>(a + i * H, f);
+    CHECK(want[0] != want[1]);  // the sets differ, so a mixed-up index would show
+    for (PolicyKernel k : kAllKernels) {
+      if (!selectPolicyKernel(k)) continue;
+      float got[Q];
+      std::fill(got, got + Q, NAN);
+      detail::headSumNorms<D, H, Q>(a, f, got);
+      CHECK(sameBits(got, want, Q));
+    }
+  }
+}

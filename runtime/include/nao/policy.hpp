@@ -632,20 +632,23 @@ inline void crossAttentionRecord(int slot, int n, PolicyWorkspace<Dims>& ws) {
           ws.age_profile[age] += a;
         }
   // ‖Σ_h α_h f_h‖ per query, key tick and joint (detail::headSumNorm: one summation order at
-  // every lane width).
-  for (int i = 0; i < J; ++i)
-    for (int age = 0; age < n; ++age) {
-      const int base = ((slot - age + W) % W) * J;
-      for (int j = 0; j < J; ++j) {
-        float a[H];
-        const float* f[H];
-        for (int hd = 0; hd < H; ++hd) {
-          a[hd] = ws.alpha[hd][i][age * J + j];
-          f[hd] = ws.f_ring[static_cast<std::size_t>(hd)].col(base + j).data();
-        }
-        ws.score[j] += headSumNorm<Dims::kDModel, H>(a, f);
+  // every lane width), all J queries of a key at once, then summed query by query as before.
+  float norm[W][J][J];  // [age][key joint j][query i]
+  for (int age = 0; age < n; ++age) {
+    const int base = ((slot - age + W) % W) * J;
+    for (int j = 0; j < J; ++j) {
+      float a[J * H];
+      const float* f[H];
+      for (int hd = 0; hd < H; ++hd) {
+        f[hd] = ws.f_ring[static_cast<std::size_t>(hd)].col(base + j).data();
+        for (int i = 0; i < J; ++i) a[i * H + hd] = ws.alpha[hd][i][age * J + j];
       }
+      headSumNorms<Dims::kDModel, H, J>(a, f, norm[age][j]);
     }
+  }
+  for (int i = 0; i < J; ++i)
+    for (int age = 0; age < n; ++age)
+      for (int j = 0; j < J; ++j) ws.score[j] += norm[age][j][i];
 }
 
 template <class Dims>

@@ -1279,6 +1279,40 @@ __attribute__((NAO_AVX512_TARGET, noinline)) float headSumNormAvx512(const float
   x = _mm_add_ss(x, _mm_shuffle_ps(x, x, 1));
   return std::sqrt(_mm_cvtss_f32(x));
 }
+/// headSumNormAvx512 for Q coefficient sets over the same H vectors: out[i] = ‖Σ_h a[i·H + h]
+/// f_h‖. The vectors are loaded once for all Q; each norm is the single kernel's, in its order
+/// (the same bits), and the Q chains overlap instead of waiting on each other.
+template <int D, int H, int Q>
+__attribute__((NAO_AVX512_TARGET, noinline)) void headSumNormsAvx512(const float* a, const float* const* f,
+                                                                     float* out) noexcept {
+  static_assert(D % 16 == 0, "whole groups of 16 lanes");
+  __m512 part[Q];
+#pragma GCC unroll 8
+  for (int i = 0; i < Q; ++i) part[i] = _mm512_setzero_ps();
+#pragma GCC unroll 8
+  for (int d0 = 0; d0 < D; d0 += 16) {
+    __m512 fh[H];
+#pragma GCC unroll 8
+    for (int h = 0; h < H; ++h) fh[h] = _mm512_loadu_ps(f[h] + d0);
+#pragma GCC unroll 8
+    for (int i = 0; i < Q; ++i) {
+      __m512 c = _mm512_mul_ps(_mm512_set1_ps(a[i * H]), fh[0]);
+#pragma GCC unroll 8
+      for (int h = 1; h < H; ++h) c = _mm512_add_ps(c, _mm512_mul_ps(_mm512_set1_ps(a[i * H + h]), fh[h]));
+      part[i] = _mm512_add_ps(part[i], _mm512_mul_ps(c, c));
+    }
+  }
+#pragma GCC unroll 8
+  for (int i = 0; i < Q; ++i) {
+    const __m512d pd = _mm512_castps_pd(part[i]);
+    const __m256 y = _mm256_add_ps(_mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, pd, 0)),
+                                   _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, pd, 1)));
+    __m128 x = _mm_add_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
+    x = _mm_add_ps(x, _mm_movehl_ps(x, x));
+    x = _mm_add_ss(x, _mm_shuffle_ps(x, x, 1));
+    out[i] = std::sqrt(_mm_cvtss_f32(x));
+  }
+}
 #endif
 
 /// ‖Σ_h a[h] f_h‖ in the order above, with the active kernel's widest lanes.
@@ -1293,6 +1327,20 @@ inline float headSumNorm(const float* a, const float* const* f) noexcept {
 #endif
   }
   return headSumNormScalar<D, H>(a, f);
+}
+
+/// headSumNorm for Q coefficient sets (out[i] = ‖Σ_h a[i·H + h] f_h‖): the same bits as Q calls.
+template <int D, int H, int Q>
+inline void headSumNorms(const float* a, const float* const* f, float* out) noexcept {
+#if NAO_POLICY_HAVE_AVX2
+  if constexpr (D % 16 == 0) {
+    if (activePolicyKernel() == PolicyKernel::kAvx512) {
+      headSumNormsAvx512<D, H, Q>(a, f, out);
+      return;
+    }
+  }
+#endif
+  for (int i = 0; i < Q; ++i) out[i] = headSumNorm<D, H>(a + i * H, f);
 }
 
 /// windowValues for Q queries: query i's weights at a + i·a_stride, its output at
