@@ -384,7 +384,7 @@ inline void quantizePairsScalar(const float* x, std::int32_t* out, int k0, int n
 
 /// Quantises the J columns of X [In, J] (column-major) into x.pairs, x.sx and x.positive (the
 /// ranges above). A column with a non-finite entry gets xq = 0 and sx = NaN, so its outputs are
-/// NaN as in the fp32 path; an all-zero column gets sx = 0. Does not fill quads and sum.
+/// NaN as in the fp32 path; an all-zero column gets sx = 0. Does not fill quads.
 template <int In, int J>
 inline void quantizeTokensInt8(const float* X, QuantTokens<In, J>& x) {
   static_assert(In % 2 == 0, "the int8 kernels take input columns in pairs");
