@@ -23,6 +23,9 @@
 //                          2026-11-26: 10-25 % slower than the prefetched read on this machine)
 //   BM_Layout_Strided / _Packed  24 MB of 512x512 matrices x 5 tokens with the AVX-512 product in
 //                          model.bin's column-major layout and repacked block by block (below)
+//   BM_Int8Layout_Pairs / _Quads  4 MB of int8 512x512 matrices x 5 8-bit tokens with vpdpbusd:
+//                          the blob's pairs interleaved by vpermt2w (the runtime's kernel), and a
+//                          candidate layout with each row's 4 inputs side by side (below)
 // BM_Policy_Libtorch (bench_policy_torch.cpp) is libtorch eager on the same weights.
 // One inference (or one sweep) per iteration, each timed on its own; single thread.
 #include "bench_policy_common.hpp"
@@ -37,6 +40,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <string>
 
@@ -349,6 +353,108 @@ void runLayout(benchmark::State& state, bool packed) {
 }
 #endif
 
+#if NAO_POLICY_HAVE_AVX2
+// BM_Int8Layout_Pairs / BM_Int8Layout_Quads: what the int8 blob's layout costs the 8-bit
+// products (2026-11-26). 16 distinct 512x512 int8 matrices (4 MB: the FFN's w1 and w2 of the
+// paper model's 8 layers) times J = 5 non-negative tokens (the 8-bit range), one sweep per
+// iteration:
+//   _Pairs: the runtime's kernel (accumulateInt8QuadsAvx512) on quantizeMatrixInt8's blob, whose
+//           pairs of inputs are interleaved: 2 vpermt2w per 10 vpdpbusd make each lane one row's
+//           4 inputs;
+//   _Quads: a candidate kernel (here only) on the same bytes with 4 inputs of a row side by side
+//           (byte (q·Out + r)·4 + e = Wq(r, 4q + e)): vpdpbusd straight from the load.
+// Both make exact int32 sums: the same accumulators (counter same_sums).
+constexpr int kInt8LayoutRows = 512, kInt8LayoutCols = 512, kInt8LayoutTokens = 5, kInt8LayoutMatrices = 16;
+using Int8LayoutTokens = detail::QuantTokens<kInt8LayoutCols, kInt8LayoutTokens>;
+
+/// The candidate: strips of 8 quads; in each, blocks of 32 rows (two zmm loads per quad), 2·J
+/// accumulators, the next strip prefetched as in the runtime's kernel.
+__attribute__((target("avx512f,avx512bw,avx512vnni,avx2"), noinline)) void int8QuadLayoutAvx512(
+    const std::int8_t* Wq4, const Int8LayoutTokens& x, std::int32_t* acc) {
+  constexpr int Out = kInt8LayoutRows, Q = kInt8LayoutCols / 4, J = kInt8LayoutTokens, kStrip = 8;
+  for (int q0 = 0; q0 < Q; q0 += kStrip) {
+    const bool more = q0 + kStrip < Q;
+    for (int r = 0; r < Out; r += 32) {
+      const std::int8_t* share = more ? Wq4 + (static_cast<std::ptrdiff_t>(q0 + kStrip) * Out + r * kStrip) * 4 : nullptr;
+      __m512i a[2][J];
+      for (int t = 0; t < J; ++t) a[0][t] = a[1][t] = _mm512_setzero_si512();
+#pragma GCC unroll 2
+      for (int k = 0; k < kStrip; ++k) {
+        if (more) {
+          __builtin_prefetch(share + 128 * k, 0, 2);
+          __builtin_prefetch(share + 128 * k + 64, 0, 2);
+        }
+        const std::int8_t* w = Wq4 + (static_cast<std::ptrdiff_t>(q0 + k) * Out + r) * 4;
+        const __m512i v0 = _mm512_loadu_si512(w), v1 = _mm512_loadu_si512(w + 64);
+#pragma GCC unroll 8
+        for (int t = 0; t < J; ++t) {
+          const __m512i xq = _mm512_set1_epi32(x.quads[t * Q + q0 + k]);
+          a[0][t] = _mm512_dpbusd_epi32(a[0][t], xq, v0);
+          a[1][t] = _mm512_dpbusd_epi32(a[1][t], xq, v1);
+        }
+      }
+      for (int t = 0; t < J; ++t)
+        for (int i = 0; i < 2; ++i) {
+          std::int32_t* y = acc + t * Out + r + 16 * i;
+          _mm512_storeu_si512(y, q0 == 0 ? a[i][t] : _mm512_add_epi32(_mm512_loadu_si512(y), a[i][t]));
+        }
+    }
+  }
+}
+
+void runInt8Layout(benchmark::State& state, bool quads) {
+  if (!policyKernelSupported(PolicyKernel::kAvx512)) {
+    state.SkipWithError("the AVX-512 kernel is not supported here");
+    return;
+  }
+  constexpr int Out = kInt8LayoutRows, In = kInt8LayoutCols, J = kInt8LayoutTokens;
+  const std::size_t section = detail::quantSectionBytes(Out, In);
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<float> u(-0.1f, 0.1f), pos(0.0f, 1.0f);
+  std::vector<std::vector<std::uint8_t>> blob(kInt8LayoutMatrices), quad(kInt8LayoutMatrices);
+  std::vector<float> w(static_cast<std::size_t>(Out) * In);
+  for (int m = 0; m < kInt8LayoutMatrices; ++m) {
+    for (float& v : w) v = u(rng);
+    blob[m].assign(section + 64, 0);
+    std::uint8_t* sec = blob[m].data() + (64 - reinterpret_cast<std::uintptr_t>(blob[m].data()) % 64) % 64;
+    quantizeMatrixInt8(w.data(), Out, In, sec);
+    quad[m].assign(static_cast<std::size_t>(Out) * In + 64, 0);
+    std::uint8_t* q4 = quad[m].data() + (64 - reinterpret_cast<std::uintptr_t>(quad[m].data()) % 64) % 64;
+    for (int k = 0; k < In; ++k)  // pairs: byte (p·Out + r)·2 + e; quads: (q·Out + r)·4 + e
+      for (int r = 0; r < Out; ++r)
+        q4[(static_cast<std::size_t>(k / 4) * Out + r) * 4 + k % 4] = sec[(static_cast<std::size_t>(k / 2) * Out + r) * 2 + k % 2];
+  }
+  auto aligned = [](std::vector<std::uint8_t>& v) {
+    return reinterpret_cast<const std::int8_t*>(v.data() + (64 - reinterpret_cast<std::uintptr_t>(v.data()) % 64) % 64);
+  };
+  std::vector<float> X(static_cast<std::size_t>(In) * J);
+  for (float& v : X) v = pos(rng);
+  Int8LayoutTokens x;
+  detail::quantizeTokensInt8Avx512<In, J>(X.data(), x);
+  std::vector<std::int32_t> acc(static_cast<std::size_t>(Out) * J), ref(acc.size());
+  detail::accumulateInt8QuadsAvx512<Out, In, J>(aligned(blob[0]), x, ref.data());
+  int8QuadLayoutAvx512(aligned(quad[0]), x, acc.data());
+  const bool same = x.positive && acc == ref;
+  Percentiles rec;
+  for (auto _ : state) {
+    const BenchClock::time_point t0 = BenchClock::now();
+    for (int m = 0; m < kInt8LayoutMatrices; ++m) {
+      if (quads)
+        int8QuadLayoutAvx512(aligned(quad[m]), x, acc.data());
+      else
+        detail::accumulateInt8QuadsAvx512<Out, In, J>(aligned(blob[m]), x, acc.data());
+      benchmark::DoNotOptimize(acc.data());
+    }
+    const double sec = secondsSince(t0);
+    state.SetIterationTime(sec);
+    rec.add(sec);
+  }
+  rec.report(state);
+  state.counters["same_sums"] = same ? 1.0 : 0.0;
+  state.counters["GB_per_s"] = static_cast<double>(kInt8LayoutMatrices) * Out * In / 1e3 / state.counters["p50_us"];
+}
+#endif
+
 /// One row per registered benchmark: kernel forced (none: the runtime's choice), precision,
 /// caches evicted before every iteration (cold: 200 iterations, each eviction writes 128 MB).
 struct PolicyCase {
@@ -417,6 +523,10 @@ const bool kRegistered = [] {
     if (!cold) {
       timed(benchmark::RegisterBenchmark("BM_Layout_Strided", [](benchmark::State& st) { runLayout(st, false); }), true);
       timed(benchmark::RegisterBenchmark("BM_Layout_Packed", [](benchmark::State& st) { runLayout(st, true); }), true);
+      timed(benchmark::RegisterBenchmark("BM_Int8Layout_Pairs", [](benchmark::State& st) { runInt8Layout(st, false); }),
+            true);
+      timed(benchmark::RegisterBenchmark("BM_Int8Layout_Quads", [](benchmark::State& st) { runInt8Layout(st, true); }),
+            true);
     }
 #endif
   }
