@@ -177,7 +177,7 @@ TEST_CASE("int8 kernels: SSE2 and AVX2 equal exact integer sums bit for bit, and
   checkInt8Shape<128, 32, 5>(9);
   checkInt8Shape<48, 34, 5>(10);  // the AVX-512 blocks of 32 and 16 rows, a partial strip
   checkInt8Shape<40, 6, 3>(11);   // a block of 32, then 8 scalar rows
-  // Non-negative inputs: the unsigned range (vpdpbusd without the offset).
+  // Non-negative inputs: the 8-bit unsigned range (vpdpbusd on AVX-512).
   checkInt8Shape<512, 512, 5>(12, 0.0);
   checkInt8Shape<128, 512, 5>(13, 0.0);
   checkInt8Shape<48, 36, 5>(14, 0.0);
