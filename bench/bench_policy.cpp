@@ -361,14 +361,15 @@ void runLayout(benchmark::State& state, bool packed) {
 //   _Pairs: the runtime's kernel (accumulateInt8QuadsAvx512) on quantizeMatrixInt8's blob, whose
 //           pairs of inputs are interleaved: 2 vpermt2w per 10 vpdpbusd make each lane one row's
 //           4 inputs;
-//   _Quads: a candidate kernel (here only) on the same bytes with 4 inputs of a row side by side
-//           (byte (q·Out + r)·4 + e = Wq(r, 4q + e)): vpdpbusd straight from the load.
+//   _Quads: a candidate kernel (here only) on the same bytes with 4 inputs of a row side by side,
+//           each (strip of 8 quads, block of 32 rows) 1 KB in a row as the kernel reads it:
+//           vpdpbusd straight from the load, in address order.
 // Both make exact int32 sums: the same accumulators (counter same_sums).
 constexpr int kInt8LayoutRows = 512, kInt8LayoutCols = 512, kInt8LayoutTokens = 5, kInt8LayoutMatrices = 16;
 using Int8LayoutTokens = detail::QuantTokens<kInt8LayoutCols, kInt8LayoutTokens>;
 
-/// The candidate: strips of 8 quads; in each, blocks of 32 rows (two zmm loads per quad), 2·J
-/// accumulators, the next strip prefetched as in the runtime's kernel.
+/// The candidate: strips of 8 quads; in each, blocks of 32 rows (two zmm loads per quad, the
+/// block's 1 KB in a row), 2·J accumulators, the block's share of the next strip prefetched.
 __attribute__((target("avx512f,avx512bw,avx512vnni,avx2"), noinline)) void int8QuadLayoutAvx512(
     const std::int8_t* Wq4, const Int8LayoutTokens& x, std::int32_t* acc) {
   constexpr int Out = kInt8LayoutRows, Q = kInt8LayoutCols / 4, J = kInt8LayoutTokens, kStrip = 8;
@@ -376,6 +377,8 @@ __attribute__((target("avx512f,avx512bw,avx512vnni,avx2"), noinline)) void int8Q
     const bool more = q0 + kStrip < Q;
     for (int r = 0; r < Out; r += 32) {
       const std::int8_t* share = more ? Wq4 + (static_cast<std::ptrdiff_t>(q0 + kStrip) * Out + r * kStrip) * 4 : nullptr;
+      // Block-contiguous: (strip, block of 32 rows) is kStrip·128 bytes in a row.
+      const std::int8_t* blk = Wq4 + (static_cast<std::ptrdiff_t>(q0) * Out + r * kStrip) * 4;
       __m512i a[2][J];
       for (int t = 0; t < J; ++t) a[0][t] = a[1][t] = _mm512_setzero_si512();
 #pragma GCC unroll 2
@@ -384,7 +387,7 @@ __attribute__((target("avx512f,avx512bw,avx512vnni,avx2"), noinline)) void int8Q
           __builtin_prefetch(share + 128 * k, 0, 2);
           __builtin_prefetch(share + 128 * k + 64, 0, 2);
         }
-        const std::int8_t* w = Wq4 + (static_cast<std::ptrdiff_t>(q0 + k) * Out + r) * 4;
+        const std::int8_t* w = blk + 128 * k;
         const __m512i v0 = _mm512_loadu_si512(w), v1 = _mm512_loadu_si512(w + 64);
 #pragma GCC unroll 8
         for (int t = 0; t < J; ++t) {
@@ -420,9 +423,15 @@ void runInt8Layout(benchmark::State& state, bool quads) {
     quantizeMatrixInt8(w.data(), Out, In, sec);
     quad[m].assign(static_cast<std::size_t>(Out) * In + 64, 0);
     std::uint8_t* q4 = quad[m].data() + (64 - reinterpret_cast<std::uintptr_t>(quad[m].data()) % 64) % 64;
-    for (int k = 0; k < In; ++k)  // pairs: byte (p·Out + r)·2 + e; quads: (q·Out + r)·4 + e
-      for (int r = 0; r < Out; ++r)
-        q4[(static_cast<std::size_t>(k / 4) * Out + r) * 4 + k % 4] = sec[(static_cast<std::size_t>(k / 2) * Out + r) * 2 + k % 2];
+    // pairs: byte (p·Out + r)·2 + e; quads: strip s of 8 quads, block b of 32 rows, quad c of
+    // the strip, row i of the block: ((s·Out/32 + b)·8 + c)·128 + i·4 + e.
+    for (int k = 0; k < In; ++k)
+      for (int r = 0; r < Out; ++r) {
+        const std::size_t qd = static_cast<std::size_t>(k / 4), st = qd / 8, c = qd % 8;
+        const std::size_t b = static_cast<std::size_t>(r / 32), i = static_cast<std::size_t>(r % 32);
+        q4[((st * (Out / 32) + b) * 8 + c) * 128 + i * 4 + k % 4] =
+            sec[(static_cast<std::size_t>(k / 2) * Out + r) * 2 + k % 2];
+      }
   }
   auto aligned = [](std::vector<std::uint8_t>& v) {
     return reinterpret_cast<const std::int8_t*>(v.data() + (64 - reinterpret_cast<std::uintptr_t>(v.data()) % 64) % 64);
