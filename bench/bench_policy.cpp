@@ -58,6 +58,27 @@ void evictCaches() {
   benchmark::ClobberMemory();
 }
 
+/// One timed `sweep()` per iteration (manual time; `untimed()` before each, e.g. evicting the
+/// caches), then its percentiles.
+template <class Untimed, class Sweep>
+void timeSweeps(benchmark::State& state, Untimed&& untimed, Sweep&& sweep) {
+  Percentiles rec;
+  for (auto _ : state) {
+    untimed();
+    const BenchClock::time_point t0 = BenchClock::now();
+    sweep();
+    const double sec = secondsSince(t0);
+    state.SetIterationTime(sec);
+    rec.add(sec);
+  }
+  rec.report(state);
+}
+
+template <class Sweep>
+void timeSweeps(benchmark::State& state, Sweep&& sweep) {
+  timeSweeps(state, [] {}, sweep);
+}
+
 /// stepPolicy with `kernel` (nullptr: the runtime's choice), one inference per iteration;
 /// `cold`: the caches evicted before each one (untimed).
 void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, WeightPrecision precision = WeightPrecision::kFp32,
@@ -191,17 +212,15 @@ void runWeightStream(benchmark::State& state, bool best, bool cold = false) {
     how = "avx512";
   else if (best && policyKernelSupported(PolicyKernel::kAvx2))
     how = "avx2";
-  Percentiles rec;
-  for (auto _ : state) {
-    if (cold) evictCaches();
-    const BenchClock::time_point t0 = BenchClock::now();
-    float s = streamSum(how, first, last - first);
-    benchmark::DoNotOptimize(s);
-    const double sec = secondsSince(t0);
-    state.SetIterationTime(sec);
-    rec.add(sec);
-  }
-  rec.report(state);
+  timeSweeps(
+      state,
+      [&] {
+        if (cold) evictCaches();
+      },
+      [&] {
+        float s = streamSum(how, first, last - first);
+        benchmark::DoNotOptimize(s);
+      });
   state.counters["GB_per_s"] = static_cast<double>((last - first) * 4) / 1e3 / state.counters["p50_us"];
   state.SetLabel(how);
 }
@@ -329,9 +348,7 @@ void runLayout(benchmark::State& state, bool packed) {
   detail::affineTokensPackedAvx512<kLayoutRows, kLayoutCols, kLayoutTokens, false>(P[0].data(), nullptr, X.data(),
                                                                                    Z.data());
   const bool same = std::memcmp(Y.data(), Z.data(), Y.size() * sizeof(float)) == 0;
-  Percentiles rec;
-  for (auto _ : state) {
-    const BenchClock::time_point t0 = BenchClock::now();
+  timeSweeps(state, [&] {
     for (int m = 0; m < kLayoutMatrices; ++m) {
       if (packed)
         detail::affineTokensPackedAvx512<kLayoutRows, kLayoutCols, kLayoutTokens, false>(P[m].data(), nullptr,
@@ -341,11 +358,7 @@ void runLayout(benchmark::State& state, bool packed) {
                                                                                    Y.data());
       benchmark::DoNotOptimize(Y.data());
     }
-    const double sec = secondsSince(t0);
-    state.SetIterationTime(sec);
-    rec.add(sec);
-  }
-  rec.report(state);
+  });
   state.counters["same_bits"] = same ? 1.0 : 0.0;
   state.counters["GB_per_s"] = static_cast<double>(kLayoutMatrices * kSize * 4) / 1e3 / state.counters["p50_us"];
   state.counters["G_mul_add_per_s"] =
@@ -415,14 +428,18 @@ void runInt8Layout(benchmark::State& state, bool quads) {
   std::mt19937 rng(8);
   std::uniform_real_distribution<float> u(-0.1f, 0.1f), pos(0.0f, 1.0f);
   std::vector<std::vector<std::uint8_t>> blob(kInt8LayoutMatrices), quad(kInt8LayoutMatrices);
+  // The first 64-byte boundary of a buffer allocated 64 bytes long.
+  const auto aligned = [](std::vector<std::uint8_t>& v) {
+    return v.data() + (64 - reinterpret_cast<std::uintptr_t>(v.data()) % 64) % 64;
+  };
   std::vector<float> w(static_cast<std::size_t>(Out) * In);
   for (int m = 0; m < kInt8LayoutMatrices; ++m) {
     for (float& v : w) v = u(rng);
     blob[m].assign(section + 64, 0);
-    std::uint8_t* sec = blob[m].data() + (64 - reinterpret_cast<std::uintptr_t>(blob[m].data()) % 64) % 64;
+    std::uint8_t* sec = aligned(blob[m]);
     quantizeMatrixInt8(w.data(), Out, In, sec);
     quad[m].assign(static_cast<std::size_t>(Out) * In + 64, 0);
-    std::uint8_t* q4 = quad[m].data() + (64 - reinterpret_cast<std::uintptr_t>(quad[m].data()) % 64) % 64;
+    std::uint8_t* q4 = aligned(quad[m]);
     // pairs: byte (p·Out + r)·2 + e; quads: strip s of 8 quads, block b of 32 rows, quad c of
     // the strip, row i of the block: ((s·Out/32 + b)·8 + c)·128 + i·4 + e.
     for (int k = 0; k < In; ++k)
@@ -433,32 +450,24 @@ void runInt8Layout(benchmark::State& state, bool quads) {
             sec[(static_cast<std::size_t>(k / 2) * Out + r) * 2 + k % 2];
       }
   }
-  auto aligned = [](std::vector<std::uint8_t>& v) {
-    return reinterpret_cast<const std::int8_t*>(v.data() + (64 - reinterpret_cast<std::uintptr_t>(v.data()) % 64) % 64);
-  };
+  const auto weights = [&](std::vector<std::uint8_t>& v) { return reinterpret_cast<const std::int8_t*>(aligned(v)); };
   std::vector<float> X(static_cast<std::size_t>(In) * J);
   for (float& v : X) v = pos(rng);
   Int8LayoutTokens x;
   detail::quantizeTokensInt8Avx512<In, J>(X.data(), x);
   std::vector<std::int32_t> acc(static_cast<std::size_t>(Out) * J), ref(acc.size());
-  detail::accumulateInt8QuadsAvx512<Out, In, J>(aligned(blob[0]), x, ref.data());
-  int8QuadLayoutAvx512(aligned(quad[0]), x, acc.data());
+  detail::accumulateInt8QuadsAvx512<Out, In, J>(weights(blob[0]), x, ref.data());
+  int8QuadLayoutAvx512(weights(quad[0]), x, acc.data());
   const bool same = x.positive && acc == ref;
-  Percentiles rec;
-  for (auto _ : state) {
-    const BenchClock::time_point t0 = BenchClock::now();
+  timeSweeps(state, [&] {
     for (int m = 0; m < kInt8LayoutMatrices; ++m) {
       if (quads)
-        int8QuadLayoutAvx512(aligned(quad[m]), x, acc.data());
+        int8QuadLayoutAvx512(weights(quad[m]), x, acc.data());
       else
-        detail::accumulateInt8QuadsAvx512<Out, In, J>(aligned(blob[m]), x, acc.data());
+        detail::accumulateInt8QuadsAvx512<Out, In, J>(weights(blob[m]), x, acc.data());
       benchmark::DoNotOptimize(acc.data());
     }
-    const double sec = secondsSince(t0);
-    state.SetIterationTime(sec);
-    rec.add(sec);
-  }
-  rec.report(state);
+  });
   state.counters["same_sums"] = same ? 1.0 : 0.0;
   state.counters["GB_per_s"] = static_cast<double>(kInt8LayoutMatrices) * Out * In / 1e3 / state.counters["p50_us"];
 }

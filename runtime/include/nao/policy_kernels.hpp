@@ -681,6 +681,30 @@ __attribute__((target("avx2"), noinline)) void accumulateInt8Avx2(const std::int
   if constexpr (Out % 8 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, kRows);
 }
 
+/// The share of the next strip of an int8 matrix (pairs p0 + pc ..) that the block of rows from
+/// r prefetches: R·pc·32 bytes from r·2·pc (the strip's bytes split evenly among its blocks), or
+/// null after the last strip (no address outside the matrix is formed).
+template <int Out, int R>
+inline const std::int8_t* nextStripShare(const std::int8_t* Wq, int P, int p0, int pc, int r) {
+  return p0 + pc < P ? Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2 + static_cast<std::ptrdiff_t>(r) * 2 * pc
+                     : nullptr;
+}
+
+/// Stores one strip's sums a[i][t] (rows r + 16i of token t) into acc, or adds them after the
+/// first strip (the AVX-512 int8 kernels: fresh sums per strip).
+template <int Out, int J, int R>
+__attribute__((NAO_AVX512_TARGET, always_inline)) inline void storeStripSumsAvx512(const __m512i (&a)[R][J],
+                                                                                  std::int32_t* acc, int r,
+                                                                                  bool first) {
+#pragma GCC unroll 8
+  for (int t = 0; t < J; ++t)
+#pragma GCC unroll 2
+    for (int i = 0; i < R; ++i) {
+      std::int32_t* y = acc + t * Out + r + 16 * i;
+      _mm512_storeu_si512(y, first ? a[i][t] : _mm512_add_epi32(_mm512_loadu_si512(y), a[i][t]));
+    }
+}
+
 /// Rows r .. r+16R-1 of the int8 product over pairs p0 .. p0+pc-1 (one strip), for
 /// accumulateInt8Avx512.
 template <int Out, int In, int J, int R>
@@ -689,10 +713,9 @@ __attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateInt8Bloc
                                                                                       std::int32_t* acc, int p0,
                                                                                       int pc, int r) {
   constexpr int P = In / 2;
-  const bool more = p0 + pc < P;  // the next strip of this matrix, as in the SSE2 kernel
-  // The block's share of the next strip: R·pc·32 bytes from r·2·pc, one line every 2/R pairs.
-  const std::int8_t* share =
-      more ? Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2 + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr;
+  // The block's share of the next strip, one line every 2/R pairs.
+  const std::int8_t* share = nextStripShare<Out, R>(Wq, P, p0, pc, r);
+  const bool more = share != nullptr;
   __m512i a[R][J];
 #pragma GCC unroll 8
   for (int t = 0; t < J; ++t)
@@ -714,13 +737,7 @@ __attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateInt8Bloc
       for (int i = 0; i < R; ++i) a[i][t] = _mm512_dpwssd_epi32(a[i][t], v[i], x);
     }
   }
-#pragma GCC unroll 8
-  for (int t = 0; t < J; ++t)
-#pragma GCC unroll 2
-    for (int i = 0; i < R; ++i) {
-      std::int32_t* y = acc + t * Out + r + 16 * i;
-      _mm512_storeu_si512(y, p0 == 0 ? a[i][t] : _mm512_add_epi32(_mm512_loadu_si512(y), a[i][t]));
-    }
+  storeStripSumsAvx512<Out, J, R>(a, acc, r, p0 == 0);
 }
 
 /// The int8 product with AVX-512 VNNI: strips of kInt8Strip pairs; in each, blocks of 32 rows
@@ -751,10 +768,9 @@ template <int Out, int In, int J, int R>
 __attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateInt8QuadBlockAvx512(
     const std::int8_t* Wq, const QuantTokens<In, J>& x, std::int32_t* acc, int p0, int pc, int r) {
   constexpr int P = In / 2, Q = QuantTokens<In, J>::kQuads;
-  const bool more = p0 + pc < P;  // the next strip of this matrix, as in the SSE2 kernel
-  // The block's share of the next strip: R·pc·32 bytes from r·2·pc, R lines per quad.
-  const std::int8_t* share =
-      more ? Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2 + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr;
+  // The block's share of the next strip, R lines per quad.
+  const std::int8_t* share = nextStripShare<Out, R>(Wq, P, p0, pc, r);
+  const bool more = share != nullptr;
   // Word indices: lane i of the result is (row i of pair 2k, row i of pair 2k+1).
   alignas(64) static constexpr std::int16_t kLo[32] = {0, 32, 1, 33, 2, 34, 3, 35, 4, 36, 5, 37, 6, 38, 7, 39,
                                                        8, 40, 9, 41, 10, 42, 11, 43, 12, 44, 13, 45, 14, 46, 15, 47};
@@ -797,13 +813,7 @@ __attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateInt8Quad
       for (int i = 0; i < R; ++i) a[i][t] = _mm512_dpbusd_epi32(a[i][t], xq, v[i]);
     }
   }
-#pragma GCC unroll 8
-  for (int t = 0; t < J; ++t)
-#pragma GCC unroll 2
-    for (int i = 0; i < R; ++i) {
-      std::int32_t* y = acc + t * Out + r + 16 * i;
-      _mm512_storeu_si512(y, p0 == 0 ? a[i][t] : _mm512_add_epi32(_mm512_loadu_si512(y), a[i][t]));
-    }
+  storeStripSumsAvx512<Out, J, R>(a, acc, r, p0 == 0);
 }
 
 /// The int8 product of 8-bit tokens (x.positive) with AVX-512 VNNI, In % 4 == 0: strips of
