@@ -234,6 +234,7 @@ struct PolicyWorkspace {
   static constexpr int D = Dims::kDModel, J = Dims::kTokens, H = Dims::kHeads, W = Dims::kWindow;
   static constexpr int Dh = Dims::kHeadDim, LE = Dims::kEncoderLayers, LD = Dims::kDecoderLayers;
   static constexpr int N = Dims::kMemory;
+  static constexpr std::size_t kCacheLine = 64;
   using Tokens = Eigen::Matrix<float, D, J>;  ///< one column per token of the new tick
   using Ring = Eigen::Matrix<float, D, N>;    ///< column slot*J + j: token j of the tick in `slot`
   /// Rows of a key ring: N padded to whole passes of the score kernels (the extra rows are
@@ -265,15 +266,17 @@ struct PolicyWorkspace {
   Eigen::Matrix<float, Dh, J> v_head = Eigen::Matrix<float, Dh, J>::Zero();  ///< V_h, contiguous
 
   // Key/value rings: keys and values of every encoder layer's self-attention and every decoder
-  // layer's cross-attention, for the tokens of the last W ticks.
-  std::array<KeyRing, LE> enc_k{};
-  std::array<Ring, LE> enc_v{};
-  std::array<KeyRing, LD> cross_k{};
-  std::array<Ring, LD> cross_v{};
+  // layer's cross-attention, for the tokens of the last W ticks. On cache-line boundaries
+  // (kCacheLine): Eigen aligns them to 16 bytes only, and then every zmm load of the window
+  // kernels spans two lines (the paper model's scores ran at half speed).
+  alignas(kCacheLine) std::array<KeyRing, LE> enc_k{};
+  alignas(kCacheLine) std::array<Ring, LE> enc_v{};
+  alignas(kCacheLine) std::array<KeyRing, LD> cross_k{};
+  alignas(kCacheLine) std::array<Ring, LD> cross_v{};
   /// f_h(M) = Wo_h V_h of the last decoder layer's cross-attention per memory token (norm score).
-  std::array<Ring, H> f_ring{};
+  alignas(kCacheLine) std::array<Ring, H> f_ring{};
   /// α of the latest attention over the window (scratch): [h][query i][age * J + j].
-  float alpha[H][J][N] = {};
+  alignas(kCacheLine) float alpha[H][J][N] = {};
 
   /// Attention record. cross[l][h][i][j]: α of decoder layer l's cross-attention, head h,
   /// action token i (query), summed over the window's ticks for body part j; rows sum to 1.
