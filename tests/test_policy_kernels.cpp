@@ -357,6 +357,17 @@ void checkWindowKernels(std::uint64_t seed) {
               REQUIRE_MESSAGE(std::memcmp(&want, &got[key], sizeof(float)) == 0,
                               policyKernelName(k) << " Dh " << Dh << " key " << key << ": " << got[key] << " vs " << want);
             }
+            // The J queries of a head in one call: each the bits of the per-key dot too.
+            if (i == 0) {
+              alignas(64) float got_q[J][NP];
+              detail::windowScoresQueries<Dh, NP, J>(q.data() + c0, D, KT.data() + c0 * NP, rows, scale, got_q[0], NP);
+              for (int iq = 0; iq < J; ++iq)
+                for (int key = 0; key < n * J; ++key) {
+                  const float want = q.col(iq).template segment<Dh>(c0).dot(K.col(key).template segment<Dh>(c0)) * scale;
+                  REQUIRE_MESSAGE(std::memcmp(&want, &got_q[iq][key], sizeof(float)) == 0,
+                                  policyKernelName(k) << " Dh " << Dh << " query " << iq << " of " << J << " key " << key);
+                }
+            }
             Eigen::Matrix<float, Dh, 1> want_o = Eigen::Matrix<float, Dh, 1>::Zero();
             for (int age = 0; age < n; ++age)
               for (int j = 0; j < J; ++j)

@@ -577,11 +577,12 @@ inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typen
   alignas(64) float raw[J][NP];  // scores by ring row, per query
   for (int hd = 0; hd < Dims::kHeads; ++hd) {
     const int c0 = hd * Dh;
-    for (int i = 0; i < J; ++i) {
-      const float* q = ws.q.col(i).data() + c0;
-      if constexpr (kWindowKernelExact<Dh>) {
-        windowScores<Dh, NP>(q, K.data() + static_cast<std::ptrdiff_t>(c0) * NP, rows, scale, raw[i]);
-      } else {
+    if constexpr (kWindowKernelExact<Dh>) {
+      windowScoresQueries<Dh, NP, J>(ws.q.data() + c0, D, K.data() + static_cast<std::ptrdiff_t>(c0) * NP, rows, scale,
+                                     raw[0], NP);
+    } else {
+      for (int i = 0; i < J; ++i) {
+        const float* q = ws.q.col(i).data() + c0;
         for (int r = 0; r < keys; ++r) {
           float dot = 0.0f;
           for (int d = 0; d < Dh; ++d) dot += q[d] * K(r, c0 + d);

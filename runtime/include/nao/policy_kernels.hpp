@@ -998,35 +998,83 @@ __attribute__((target("avx2"), noinline)) void windowValuesAvx2(const float* a, 
   for (int p = 0; p < Dh / 8; ++p) _mm256_storeu_ps(o + p * 8, acc[p]);
 }
 
-/// windowScoresSse with 16 keys per pass (kAvx512; the same bits: the lanes are independent keys).
-template <int Dh, int NP>
-__attribute__((NAO_AVX512_TARGET, noinline)) void windowScoresAvx512(const float* q, const float* KT, int rows,
-                                                                      float scale, float* s) {
+/// One lane l of Eigen's 4-float packets for 16 keys and G queries: the pairwise tree over m of
+/// q_g[4m + l]·k[4m + l], the broadcasts qb[g][m] = q_g[4m + l] given. Each key load serves
+/// the G queries.
+template <int M, int NP, int G>
+__attribute__((NAO_AVX512_TARGET, always_inline)) inline void windowLanesAvx512(const __m512 (*qb)[M], const float* KTl,
+                                                                               __m512* x) {
+  __m512 t[G][M];
+#pragma GCC unroll 16
+  for (int m = 0; m < M; ++m) {
+    const __m512 k = _mm512_loadu_ps(KTl + m * 4 * NP);
+#pragma GCC unroll 4
+    for (int g = 0; g < G; ++g) t[g][m] = _mm512_mul_ps(qb[g][m], k);
+  }
+#pragma GCC unroll 4
+  for (int g = 0; g < G; ++g) {
+#pragma GCC unroll 4
+    for (int w = 1; w < M; w *= 2)
+#pragma GCC unroll 8
+      for (int m = 0; m + w < M; m += 2 * w) t[g][m] = _mm512_add_ps(t[g][m], t[g][m + w]);
+    x[g] = t[g][0];
+  }
+}
+
+/// windowScoresSse for G queries with 16 keys per pass (kAvx512; the same bits: the lanes are
+/// independent keys): query g at q + g·q_stride, its scores at s + g·s_stride. Lane by lane
+/// (0, 2, 1, 3) over every key block rather than block by block: a lane's G·M broadcasts stay in
+/// registers across the blocks, so a block costs M key loads for G queries instead of 2·4·M
+/// loads for one (loads, 2 per cycle here, bound the block-by-block form). The lanes meet in s
+/// and x1 as (x0 + x2) + (x1 + x3), Eigen's order. G = 2 fits the registers (GCC 12 spills the
+/// broadcasts of 3).
+template <int Dh, int NP, int G>
+__attribute__((NAO_AVX512_TARGET, noinline)) void windowScoresGroupAvx512(const float* q, int q_stride, const float* KT,
+                                                                           int rows, float scale, float* s, int s_stride) {
   static_assert(kWindowKernelExact<Dh>, "Eigen's dot order is reproduced for packets of 4 only");
   static_assert(NP % 16 == 0, "key rows padded to whole zmm registers");
   constexpr int P = 4, M = Dh / P;
-  const __m512 sc = _mm512_set1_ps(scale);
-  for (int k0 = 0; k0 < rows; k0 += 16) {
-    __m512 lane[P];
+  constexpr int kOrder[P] = {0, 2, 1, 3};
+  alignas(64) float x1[G][NP];
+  __m512 qb[G][M];
 #pragma GCC unroll 4
-    for (int l = 0; l < P; ++l) {
-      __m512 t[M];
+  for (int pass = 0; pass < P; ++pass) {
+    const int l = kOrder[pass];
+#pragma GCC unroll 4
+    for (int g = 0; g < G; ++g)
 #pragma GCC unroll 16
-      for (int m = 0; m < M; ++m)
-        t[m] = _mm512_mul_ps(_mm512_set1_ps(q[m * P + l]), _mm512_loadu_ps(KT + (m * P + l) * NP + k0));
+      for (int m = 0; m < M; ++m) qb[g][m] = _mm512_set1_ps(q[g * q_stride + m * P + l]);
+    for (int k0 = 0; k0 < rows; k0 += 16) {
+      __m512 x[G];
+      windowLanesAvx512<M, NP, G>(qb, KT + l * NP + k0, x);
 #pragma GCC unroll 4
-      for (int w = 1; w < M; w *= 2)
-#pragma GCC unroll 8
-        for (int m = 0; m + w < M; m += 2 * w) t[m] = _mm512_add_ps(t[m], t[m + w]);
-      lane[l] = t[0];
+      for (int g = 0; g < G; ++g) {
+        float* sg = s + g * s_stride + k0;
+        if (pass == 0) {
+          _mm512_storeu_ps(sg, x[g]);
+        } else if (pass == 1) {
+          _mm512_storeu_ps(sg, _mm512_add_ps(_mm512_loadu_ps(sg), x[g]));
+        } else if (pass == 2) {
+          _mm512_store_ps(x1[g] + k0, x[g]);
+        } else {
+          const __m512 x13 = _mm512_add_ps(_mm512_load_ps(x1[g] + k0), x[g]);
+          _mm512_storeu_ps(sg, _mm512_mul_ps(_mm512_add_ps(_mm512_loadu_ps(sg), x13), _mm512_set1_ps(scale)));
+        }
+      }
     }
-    _mm512_storeu_ps(s + k0, _mm512_mul_ps(_mm512_add_ps(_mm512_add_ps(lane[0], lane[2]), _mm512_add_ps(lane[1], lane[3])), sc));
   }
+}
+
+/// windowScoresSse with 16 keys per pass (kAvx512; the same bits).
+template <int Dh, int NP>
+inline void windowScoresAvx512(const float* q, const float* KT, int rows, float scale, float* s) {
+  windowScoresGroupAvx512<Dh, NP, 1>(q, 0, KT, rows, scale, s, 0);
 }
 
 /// windowValuesSse for Q queries at once (kAvx512): query i's weights at a + i·a_stride, its
 /// output at o + i·o_stride. Each query's sum runs over the keys in the same order (the same
-/// bits); the Q independent chains of adds overlap instead of waiting on each other.
+/// bits); the Q independent chains of adds overlap instead of waiting on each other. One key per
+/// iteration: unrolled over a tick's J keys, GCC kept half the Q·Dh/16 sums on the stack.
 template <int Dh, int J, int W, int Q>
 __attribute__((NAO_AVX512_TARGET, noinline)) void windowValuesAvx512(const float* a, int a_stride, const float* V, int ld,
                                                                       int slot, int n, float* o, int o_stride) {
@@ -1072,6 +1120,25 @@ inline void windowScores(const float* q, const float* KT, int rows, float scale,
   }
 #endif
   windowScoresSse<Dh, NP>(q, KT, rows, scale, s);
+}
+
+/// windowScores for Q queries: query i at q + i·q_stride, its scores at s + i·s_stride (the same
+/// bits as Q calls of windowScores). AVX-512 takes them two at a time (each key load serves both).
+template <int Dh, int NP, int Q>
+inline void windowScoresQueries(const float* q, int q_stride, const float* KT, int rows, float scale, float* s,
+                                int s_stride) {
+#if NAO_POLICY_HAVE_AVX2
+  if constexpr (NP % 16 == 0) {
+    if (activePolicyKernel() == PolicyKernel::kAvx512) {
+      int i = 0;
+      for (; i + 2 <= Q; i += 2)
+        windowScoresGroupAvx512<Dh, NP, 2>(q + i * q_stride, q_stride, KT, rows, scale, s + i * s_stride, s_stride);
+      if (i < Q) windowScoresGroupAvx512<Dh, NP, 1>(q + i * q_stride, q_stride, KT, rows, scale, s + i * s_stride, s_stride);
+      return;
+    }
+  }
+#endif
+  for (int i = 0; i < Q; ++i) windowScores<Dh, NP>(q + i * q_stride, KT, rows, scale, s + i * s_stride);
 }
 
 /// The value sum of windowValuesSse with the active kernel (the same bits with every kernel).
