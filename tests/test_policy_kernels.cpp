@@ -387,6 +387,60 @@ TEST_CASE("window attention kernels: scores and value sums equal the per-key Eig
   noteAvx2Absent();
 }
 
+/// windowSoftmax under every kernel against its scalar form under SSE (the code it was taken
+/// from), bit for bit: α of every query and key, the zeros past the window included.
+template <int J, int W>
+void checkWindowSoftmax(std::uint64_t seed) {
+  constexpr int N = W * J, NP = (N + detail::kKeyRowBlock - 1) / detail::kKeyRowBlock * detail::kKeyRowBlock;
+  std::mt19937_64 rng(seed);
+  KernelGuard guard;
+  for (int draw = 0; draw < 40; ++draw) {
+    alignas(64) float raw[J][NP];
+    float bias[W];
+    for (auto& row : raw)
+      for (float& x : row) x = uniform(rng, -6.0, 6.0);
+    for (float& b : bias) b = uniform(rng, -1.0, 1.0);
+    if (draw % 4 == 1) {  // a zero maximum: −0 then +0 (the sequential max keeps the first)
+      for (auto& row : raw)
+        for (float& x : row) x = uniform(rng, -6.0, -0.5);
+      for (float& b : bias) b = 0.0f;
+      raw[0][3] = -0.0f;
+      raw[0][7] = 0.0f;
+      raw[1][2] = 0.0f;
+    }
+    if (draw % 4 == 2) {  // non-finite scores
+      raw[0][1] = std::numeric_limits<float>::quiet_NaN();
+      raw[1][4] = -std::numeric_limits<float>::infinity();
+      for (float& x : raw[2]) x = std::numeric_limits<float>::quiet_NaN();
+    }
+    const int n = 1 + static_cast<int>(rng() % W), slot = n < W ? n - 1 : static_cast<int>(rng() % W);
+    REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
+    float want[J][N];
+    std::fill(&want[0][0], &want[0][0] + J * N, 1.0f);
+    detail::windowSoftmaxScalar<J, W, NP, N>(raw[0], bias, slot, n, want[0]);
+    for (PolicyKernel k : kAllKernels) {
+      if (!selectPolicyKernel(k)) continue;
+      float got[J][N];
+      std::fill(&got[0][0], &got[0][0] + J * N, 1.0f);
+      detail::windowSoftmax<J, W, NP, N>(raw[0], bias, slot, n, got[0]);
+      for (int i = 0; i < J; ++i)
+        for (int m = 0; m < N; ++m) {
+          INFO(policyKernelName(k), " draw ", draw, " n ", n, " query ", i, " key ", m);
+          if (std::isnan(want[i][m]))
+            CHECK(std::isnan(got[i][m]));
+          else
+            CHECK(sameBits(&got[i][m], &want[i][m], 1));
+        }
+    }
+  }
+}
+
+TEST_CASE("windowSoftmax: every kernel gives the bits of the scalar softmax (zero maxima, NaN, short windows)") {
+  checkWindowSoftmax<5, 20>(41);  // paper: 100 keys
+  checkWindowSoftmax<5, 3>(42);   // 15 keys: one partial register
+  checkWindowSoftmax<3, 7>(43);
+}
+
 TEST_CASE("the window score comparison can fail: a plain k-order dot differs from Eigen's on these inputs") {
   constexpr int Dh = 32, N = 100;
   std::mt19937_64 rng(31);

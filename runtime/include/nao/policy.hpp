@@ -591,29 +591,7 @@ inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typen
       }
     }
     float (*s)[N] = ws.alpha[hd];
-    float s_max[J], sum[J];
-    for (int i = 0; i < J; ++i) {
-      s_max[i] = -std::numeric_limits<float>::infinity();
-      sum[i] = 0.0f;
-    }
-    for (int age = 0; age < n; ++age) {
-      const int base = ((slot - age + W) % W) * J;
-      const float bias = A.age_bias(age, hd);
-      for (int j = 0; j < J; ++j)
-        for (int i = 0; i < J; ++i) {
-          const float v = raw[i][base + j] + bias;
-          s[i][age * J + j] = v;
-          s_max[i] = std::max(s_max[i], v);
-        }
-    }
-    for (int i = 0; i < J; ++i) expShifted(s[i], keys, s_max[i]);
-    for (int m = 0; m < keys; ++m)
-      for (int i = 0; i < J; ++i) sum[i] += s[i][m];
-    for (int i = 0; i < J; ++i) {
-      const float inv = 1.0f / sum[i];
-      for (int m = 0; m < keys; ++m) s[i][m] *= inv;
-      for (int m = keys; m < N; ++m) s[i][m] = 0.0f;
-    }
+    windowSoftmax<J, W, NP, N>(raw[0], A.age_bias.col(hd).data(), slot, n, s[0]);
     windowValuesQueries<Dh, J, W, J>(s[0], N, V.data() + c0, D, slot, n, ws.o.data() + c0, D);
   }
 }
