@@ -1084,15 +1084,17 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void windowValuesAvx512(const float
   for (auto& row : acc)
     for (auto& x : row) x = _mm512_setzero_ps();
   for (int age = 0; age < n; ++age) {
-    const int base = ((slot - age + W) % W) * J;
+    const float* vt = V + static_cast<std::ptrdiff_t>(((slot - age + W) % W) * J) * ld;
+    const float* at = a + age * J;
+#pragma GCC unroll 1
     for (int j = 0; j < J; ++j) {
-      const float* v = V + static_cast<std::ptrdiff_t>(base + j) * ld;
+      const float* v = vt + static_cast<std::ptrdiff_t>(j) * ld;
       __m512 vv[NV];
 #pragma GCC unroll 8
       for (int p = 0; p < NV; ++p) vv[p] = _mm512_loadu_ps(v + p * 16);
 #pragma GCC unroll 8
       for (int i = 0; i < Q; ++i) {
-        const __m512 w = _mm512_set1_ps(a[i * a_stride + age * J + j]);
+        const __m512 w = _mm512_set1_ps(at[i * a_stride + j]);
 #pragma GCC unroll 8
         for (int p = 0; p < NV; ++p) acc[i][p] = _mm512_add_ps(acc[i][p], _mm512_mul_ps(w, vv[p]));
       }
