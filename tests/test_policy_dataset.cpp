@@ -283,53 +283,6 @@ TEST_CASE("canonical pace of a data set: each movement onto its template, names,
   CHECK_THROWS_AS(pacedData(data, {tmpl[0], -1, tmpl[2]}, PaceMethod::kDtw), UserError);
 }
 
-TEST_CASE("start mean: every demonstration becomes the mean of the listed ones of its movement and start key pose") {
-  PolicyData data = standardSet(4);  // lengths 20, 23, 26, 29 per movement; every demo starts at key pose 0
-  auto index = [&](const std::string& name) {
-    for (std::size_t i = 0; i < data.demos.size(); ++i)
-      if (data.demos[i].name == name) return static_cast<int>(i);
-    FAIL("no demo " << name);
-    return -1;
-  };
-  const auto at = [&](const std::string& name) -> const PolicyDemo& { return data.demos[static_cast<std::size_t>(index(name))]; };
-  data.demos[static_cast<std::size_t>(index("whole_arm_002"))].label[0] = 1;  // a start of its own
-  // whole_arm_003 is not listed (a validation demo): it gets the mean of its group, not a part in it.
-  std::vector<int> listed;
-  for (int d : allDemos(data))
-    if (data.demos[static_cast<std::size_t>(d)].name != "whole_arm_003") listed.push_back(d);
-  const PolicyData s = startMeanData(data, listed);
-  REQUIRE(s.demos.size() == data.demos.size());
-  auto meanOf = [&](const std::vector<std::string>& group, std::size_t t) {
-    JointVector sum = JointVector::Zero();
-    for (const std::string& g : group) sum += at(g).f[std::min(t, at(g).f.size() - 1)];
-    return JointVector(sum / static_cast<double>(group.size()));
-  };
-  for (const char* name : {"whole_arm_000", "whole_arm_001", "whole_arm_003"}) {
-    CAPTURE(name);
-    const PolicyDemo& d = s.demos[static_cast<std::size_t>(index(name))];
-    REQUIRE(d.f.size() == at(name).f.size());  // its own length
-    // Group (whole_arm, 0): 000 (20 samples) and 001 (23); past 23 samples the mean is held.
-    for (std::size_t t = 0; t < d.f.size(); ++t) {
-      CAPTURE(t);
-      CHECK((d.f[t] - meanOf({"whole_arm_000", "whole_arm_001"}, std::min<std::size_t>(t, 22))).cwiseAbs().maxCoeff() < 1e-15);
-    }
-    CHECK(d.label == at(name).label);
-    CHECK(d.t_s == at(name).t_s);
-  }
-  // Alone at its start: unchanged. Another movement: its own four.
-  CHECK(s.demos[static_cast<std::size_t>(index("whole_arm_002"))].f == at("whole_arm_002").f);
-  const std::vector<std::string> elbow = {"elbow_000", "elbow_001", "elbow_002", "elbow_003"};
-  for (std::size_t t = 0; t < 20; ++t)
-    CHECK((s.demos[static_cast<std::size_t>(index("elbow_000"))].f[t] - meanOf(elbow, t)).cwiseAbs().maxCoeff() < 1e-15);
-  // The mean is not any demonstration's own trajectory.
-  CHECK(s.demos[static_cast<std::size_t>(index("elbow_000"))].f != at("elbow_000").f);
-  // A start no listed demonstration has: refused, naming the demonstration.
-  std::vector<int> without;
-  for (int d : listed)
-    if (data.demos[static_cast<std::size_t>(d)].name != "whole_arm_002") without.push_back(d);
-  CHECK_THROWS_WITH_AS(startMeanData(data, without), doctest::Contains("whole_arm_002"), UserError);
-}
-
 TEST_CASE("the split is by demonstration: every demo in exactly one part, round(0.2 n) validation per movement") {
   const PolicyData data = standardSet(10);
   const PolicySplit split = splitByDemonstration(data, 0.2, 7);

@@ -10,7 +10,6 @@
 #include <atomic>
 #include <exception>
 #include <mutex>
-#include <map>
 #include <optional>
 #include <thread>
 #include <cmath>
@@ -929,36 +928,6 @@ PolicyData pacedData(const PolicyData& data, const std::vector<int>& templates, 
       d.label[t] = orig.label[i];
       d.measured[t] = orig.measured[i];
     }
-  }
-  return out;
-}
-
-PolicyData startMeanData(const PolicyData& data, const std::vector<int>& demos) {
-  // Sums per (movement, start label), in the order of `demos`.
-  std::map<std::pair<int, int>, std::vector<const PolicyDemo*>> groups;
-  for (int d : demos) {
-    const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
-    if (demo.f.empty()) continue;
-    groups[{demo.movement, demo.label.front()}].push_back(&demo);
-  }
-  std::map<std::pair<int, int>, std::vector<JointVector>> means;
-  for (const auto& [key, g] : groups) {
-    std::size_t longest = 0;
-    for (const PolicyDemo* d : g) longest = std::max(longest, d->f.size());
-    std::vector<JointVector> mean(longest, JointVector::Zero());
-    for (const PolicyDemo* d : g)
-      for (std::size_t t = 0; t < longest; ++t) mean[t] += d->f[std::min(t, d->f.size() - 1)];
-    for (JointVector& x : mean) x /= static_cast<double>(g.size());
-    means[key] = std::move(mean);
-  }
-  PolicyData out = data;
-  for (PolicyDemo& d : out.demos) {
-    if (d.f.empty()) continue;
-    const auto it = means.find({d.movement, d.label.front()});
-    if (it == means.end())
-      throw UserError("a start mean needs a training demonstration of movement " + data.movement_names.at(static_cast<std::size_t>(d.movement)) +
-                      " from key pose " + std::to_string(d.label.front()) + " (" + d.name + " starts there)");
-    for (std::size_t t = 0; t < d.f.size(); ++t) d.f[t] = it->second[std::min(t, it->second.size() - 1)];
   }
   return out;
 }

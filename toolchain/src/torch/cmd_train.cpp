@@ -35,7 +35,6 @@ struct TrainArgs {
   std::string select = "val-loss";
   bool ar_residual = false;
   std::string canonical_pace = "off";
-  bool pace_mean = false;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
@@ -109,7 +108,6 @@ void run(const TrainArgs& a) {
   o.ar_residual = a.ar_residual;
   o.phase_ticks = a.phase_ticks;
   if (a.canonical_pace != "off") o.canonical_pace = parsePaceMethod(a.canonical_pace);
-  o.pace_mean = a.pace_mean;
   o.live_progress = isatty(fileno(stdout)) != 0;
   if (a.rank >= a.world_size)
     throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
@@ -321,10 +319,6 @@ void setup(CLI::App& app) {
                   "demonstrations as they are (docs/policy.md)")
       ->check(CLI::IsMember({"off", "linear", "dtw"}))
       ->capture_default_str();
-  cmd->add_flag("--pace-mean", args->pace_mean,
-                "With --canonical-pace: train on the mean of the paced training demonstrations of each "
-                "movement and start key pose instead of on each demonstration (one trajectory per start, the "
-                "target a regression tends to; docs/evaluate.md \"What a fixed trajectory could score\")");
   cmd->add_option("--select", args->select,
                   "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "
                   "or rollout-dtw (after every epoch the net is rolled out on the simulated arm from each "

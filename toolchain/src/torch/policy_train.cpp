@@ -289,8 +289,6 @@ void check(const PolicyData& data, const TrainOptions& o) {
     throw UserError("phase steps (--phase-steps) cannot take DAgger's cut rollouts (--dagger-max-drift): their length is not the demonstration's");
   if (o.canonical_pace && o.conditioning != Conditioning::kAutonomous)
     throw UserError("a canonical pace (--canonical-pace) is for autonomous mode (reference mode follows the human's own pace)");
-  if (o.pace_mean && !o.canonical_pace)
-    throw UserError("--pace-mean averages paced demonstrations: it needs --canonical-pace linear|dtw");
   if (o.canonical_pace && o.phase_ticks > 0)
     throw UserError("a canonical pace (--canonical-pace) and phase steps (--phase-steps) are two answers to one question: take one");
   if (o.select_by_rollout && o.arch != PaperPolicyDims::arch() && o.arch != SmallPolicyDims::arch())
@@ -356,7 +354,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   if (o.select_by_rollout) k << "; select rollout";
   if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) k << "; ar residual";
   if (o.phase_ticks > 0) k << "; phase " << o.phase_ticks;
-  if (o.canonical_pace) k << "; canonical pace " << paceMethodName(*o.canonical_pace) << (o.pace_mean ? " start mean" : "");
+  if (o.canonical_pace) k << "; canonical pace " << paceMethodName(*o.canonical_pace);
   return k.str();
 }
 
@@ -567,7 +565,6 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       if (res.pace_templates[m] < 0)
         throw UserError("--canonical-pace: movement " + data.movement_names[m] + " has no training demonstration");
     paced = pacedData(data, res.pace_templates, *o.canonical_pace);
-    if (o.pace_mean) paced = startMeanData(paced, res.split.train);
     if (progress) {
       *progress << "canonical pace (" << paceMethodName(*o.canonical_pace) << "): every movement at the pace of its shortest training demonstration (";
       for (std::size_t m = 0; m < res.pace_templates.size(); ++m) {
@@ -877,7 +874,6 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
       names.push_back(data.demos.at(static_cast<std::size_t>(d)).name);
     }
     t["canonical_pace"] = {{"method", paceMethodName(*o.canonical_pace)}, {"ticks", ticks}, {"templates", names}};
-    if (o.pace_mean) t["canonical_pace"]["start_mean"] = true;
   }
   // Only when they change the result: single-process files keep their bytes.
   if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;

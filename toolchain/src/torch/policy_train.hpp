@@ -74,9 +74,6 @@ struct TrainOptions {
   /// paceTemplates of the training split, linearly or by DTW), then held, at its own length. The
   /// rollouts are still scored against the demonstrations as they are.
   std::optional<PaceMethod> canonical_pace;
-  /// With canonical_pace: every paced demonstration replaced by the mean of the paced training
-  /// demonstrations of its movement and start key pose (startMeanData).
-  bool pace_mean = false;
 };
 
 /// One DAgger round of a training run.

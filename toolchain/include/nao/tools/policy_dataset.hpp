@@ -270,13 +270,6 @@ std::vector<int> paceTemplates(const PolicyData& data, const std::vector<int>& d
 /// times and lengths unchanged. Throws UserError unless there is a valid template per movement.
 PolicyData pacedData(const PolicyData& data, const std::vector<int>& templates, PaceMethod method);
 
-/// Every demonstration's f replaced by the mean of the f of the demonstrations in `demos` (the
-/// training split) of its movement and start key pose (label[0]), each of those held at its last
-/// sample up to the longest; the result cut to (or held up to) the demonstration's own length.
-/// Labels and measured flags stay. Throws UserError if a movement and start of the data has no
-/// demonstration in `demos`.
-PolicyData startMeanData(const PolicyData& data, const std::vector<int>& demos);
-
 /// Names of the listed demonstrations.
 std::vector<std::string> demoNames(const PolicyData& data, const std::vector<int>& demos);
 
