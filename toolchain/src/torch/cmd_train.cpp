@@ -27,7 +27,6 @@ struct TrainArgs {
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
   double residual_gain = -1.0;
   int dagger_rounds = 0, dagger_start = TrainOptions{}.dagger_start;
-  double ema = 0.0;
   double dagger_beta = ExecutionOptions{}.dagger_beta, dagger_max_drift = ExecutionOptions{}.dagger_max_drift_rad;
   int dagger_align_band = ExecutionOptions{}.dagger_align_band;
   double dagger_return = ExecutionOptions{}.dagger_return;
@@ -98,7 +97,6 @@ void run(const TrainArgs& a) {
   o.resume = a.resume;
   o.max_batches = a.max_batches;
   o.dagger_rounds = a.dagger_rounds;
-  o.ema = a.ema;
   o.dagger_start = a.dagger_start;
   o.execution.dagger_beta = a.dagger_beta;
   o.execution.dagger_max_drift_rad = a.dagger_max_drift;
@@ -269,12 +267,6 @@ void setup(CLI::App& app) {
   cmd->add_option("--max-batches", args->max_batches,
                   "Stop every epoch after this many global batches (timing runs; recorded in the model)")
       ->check(CLI::Range(0, 1 << 30))
-      ->capture_default_str();
-  cmd->add_option("--ema", args->ema,
-                  "Polyak averaging of the weights: after every optimiser step the average moves toward them by "
-                  "(1 - EMA); each epoch is validated, scored by rollout, selected and exported by the average. "
-                  "0: off")
-      ->check(CLI::Range(0.0, 0.9999))
       ->capture_default_str();
   cmd->add_option("--dagger-rounds", args->dagger_rounds,
                   "DAgger: after each of this many epochs (from --dagger-start on) the current policy is rolled "

@@ -276,8 +276,6 @@ void check(const PolicyData& data, const TrainOptions& o) {
     if (o.dagger_start < 1) throw UserError("the first DAgger round must follow an epoch (start at least 1)");
     // Unsupported, not silently wrong: a checkpoint would need the rollouts.
     if (!o.resume.empty()) throw UserError("DAgger (--dagger-rounds) cannot --resume a checkpoint");
-  if (o.ema != 0.0 && !o.resume.empty()) throw UserError("an averaged run (--ema) cannot --resume a checkpoint");
-  if (!(o.ema >= 0.0 && o.ema < 1.0)) throw UserError("--ema must be in [0, 1), not " + std::to_string(o.ema));
     if (!(o.execution.dagger_beta >= 0.0 && o.execution.dagger_beta < 1.0))
       throw UserError("DAgger's beta must be in [0, 1): 1 would never execute the policy");
     // The rollouts run the runtime's streaming inference, compiled for these two only.
@@ -357,7 +355,6 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   if (o.ar_residual && o.conditioning == Conditioning::kAutonomous) k << "; ar residual";
   if (o.phase_ticks > 0) k << "; phase " << o.phase_ticks;
   if (o.canonical_pace) k << "; canonical pace " << paceMethodName(*o.canonical_pace);
-  if (o.ema > 0.0) k << "; ema " << o.ema;
   return k.str();
 }
 
@@ -648,24 +645,6 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   std::vector<torch::Tensor> params = net->trainableParameters();
   torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
   std::vector<torch::Tensor> best;
-  // Polyak average of the weights (--ema), from the initial ones; `swapped` holds the weights
-  // themselves while the average stands in for them.
-  std::vector<torch::Tensor> average, swapped;
-  if (o.ema > 0.0)
-    for (const torch::Tensor& p : params) average.push_back(p.detach().clone());
-  auto swapAverage = [&](bool in) {
-    if (average.empty()) return;
-    torch::NoGradGuard no_grad;
-    if (in) {
-      swapped.clear();
-      for (std::size_t i = 0; i < params.size(); ++i) {
-        swapped.push_back(params[i].detach().clone());
-        params[i].copy_(average[i]);
-      }
-    } else {
-      for (std::size_t i = 0; i < params.size(); ++i) params[i].copy_(swapped[i]);
-    }
-  };
   double best_val = std::numeric_limits<double>::infinity();
   double epoch_seconds_sum = 0.0;
   int first_epoch = 1;
@@ -746,10 +725,6 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       }
       if (group) group->sumGradients(params);
       optimiser.step();
-      if (!average.empty()) {
-        torch::NoGradGuard no_grad;
-        for (std::size_t i = 0; i < params.size(); ++i) average[i].mul_(o.ema).add_(params[i].detach(), 1.0 - o.ema);
-      }
       seen += global_ticks;
       if (live && secondsSince(t_live) >= 0.5) {
         t_live = Clock::now();
@@ -767,7 +742,6 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       loss_sum = total.item<double>();
     }
     net->eval();
-    swapAverage(true);  // the epoch is scored, selected and exported by its average (--ema)
     EpochStats st;
     st.epoch = epoch;
     st.samples = static_cast<std::size_t>(seen);
@@ -786,7 +760,6 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       best.clear();
       for (const torch::Tensor& p : params) best.push_back(p.detach().clone());
     }
-    swapAverage(false);
     // Every rank applied the same summed gradients: a difference is a bug or a mixed group.
     if (group) group->checkInSync(params);
     st.seconds = secondsSince(t_epoch);
@@ -894,7 +867,6 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["loss"] = "mse of normalised actions";
   if (r.residual_gain != 0.0) t["residual_gain"] = r.residual_gain;  // absent: none (older files)
   if (o.phase_ticks > 0) t["phase_ticks"] = o.phase_ticks;
-  if (o.ema > 0.0) t["ema"] = o.ema;
   if (o.canonical_pace && !r.pace_templates.empty()) {
     nlohmann::json ticks = nlohmann::json::array(), names = nlohmann::json::array();
     for (int d : r.pace_templates) {

@@ -50,10 +50,6 @@ struct TrainOptions {
   /// validation set unchanged). 0: off. Only the paper and small architectures (the runtime's
   /// compiled Dims), no resume; any world size (each rank rolls out its share).
   int dagger_rounds = 0;
-  /// Polyak averaging of the weights (0: off): after every optimiser step the average moves
-  /// toward the weights by (1 − ema); validation, rollout selection and the export use the
-  /// average (the weights themselves keep training).
-  double ema = 0.0;
   int dagger_start = 2;  ///< 1-based epoch after which the first round runs
   /// Model selection on rollouts (autonomous mode, paper §4.1; docs/policy.md): after every epoch
   /// the net is rolled out on the simulated arm from each validation demonstration's start (as
