@@ -153,6 +153,11 @@ def held(f, n):
     return np.vstack([f, np.repeat(f[-1:], n - len(f), axis=0)])
 
 
+# The fixed trajectories scored per run, and their keys in the report.
+KEYS = {"mean": "mean_m", "warped mean": "warped_mean_m", "warped mean, shortest": "warped_mean_shortest_m",
+        "medoid": "medoid_m"}
+
+
 def movement_ceiling(arm, demos, movement, heldout, replays=True):
     """The scores of one movement's fixed trajectories (module docstring) for the held-out
     demonstrations `heldout` (names in demos); every other demonstration of the movement is a
@@ -218,10 +223,6 @@ def movement_ceiling(arm, demos, movement, heldout, replays=True):
             best_runs += list(per[:, int(np.argmin(np.median(per, axis=0)))])
     row["best_replay_m"] = float(np.median(best_runs))
     return row
-
-
-KEYS = {"mean": "mean_m", "warped mean": "warped_mean_m", "warped mean, shortest": "warped_mean_shortest_m",
-        "medoid": "medoid_m"}
 
 
 def main(argv):

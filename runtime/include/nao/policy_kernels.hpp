@@ -1340,16 +1340,25 @@ inline void windowSoftmaxScalar(const float* raw, const float* bias, int slot, i
 }
 
 #if NAO_POLICY_HAVE_AVX2
-/// The largest of 16 lanes, none NaN (max is exact: any order gives its value).
-__attribute__((NAO_AVX512_TARGET, always_inline)) inline float reduceMaxAvx512(__m512 v) noexcept {
+/// The 16 lanes of v folded in halves: lane l with l + 8, then l + 4, l + 2, l + 1, by max
+/// (kMax; exact in any order, none NaN) or by add (that order is part of headSumNorm's bits).
+template <bool kMax>
+__attribute__((NAO_AVX512_TARGET, always_inline)) inline float foldLanesAvx512(__m512 v) noexcept {
   // Zero-masked extracts (GCC 12 warns on the unmasked ones, see kAll).
   const __m512d vd = _mm512_castps_pd(v);
-  const __m256 y = _mm256_max_ps(_mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, vd, 0)),
-                                 _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, vd, 1)));
-  __m128 x = _mm_max_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
-  x = _mm_max_ps(x, _mm_movehl_ps(x, x));
-  x = _mm_max_ss(x, _mm_shuffle_ps(x, x, 1));
-  return _mm_cvtss_f32(x);
+  const __m256 lo = _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, vd, 0));
+  const __m256 hi = _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, vd, 1));
+  if constexpr (kMax) {
+    const __m256 y = _mm256_max_ps(lo, hi);
+    __m128 x = _mm_max_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
+    x = _mm_max_ps(x, _mm_movehl_ps(x, x));
+    return _mm_cvtss_f32(_mm_max_ss(x, _mm_shuffle_ps(x, x, 1)));
+  } else {
+    const __m256 y = _mm256_add_ps(lo, hi);
+    __m128 x = _mm_add_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
+    x = _mm_add_ps(x, _mm_movehl_ps(x, x));
+    return _mm_cvtss_f32(_mm_add_ss(x, _mm_shuffle_ps(x, x, 1)));
+  }
 }
 
 /// windowSoftmax in zmm registers (kAvx512; J <= 16): a tick's J keys of a query in one masked
@@ -1381,7 +1390,7 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void windowSoftmaxAvx512(const floa
   float s_max[J];
 #pragma GCC unroll 16
   for (int i = 0; i < J; ++i) {
-    s_max[i] = reduceMaxAvx512(mx[i]);
+    s_max[i] = foldLanesAvx512<true>(mx[i]);
     if (s_max[i] == 0.0f) {  // the sign of a zero maximum is the first zero's in key order
       float m = -std::numeric_limits<float>::infinity();
       for (int k = 0; k < keys; ++k) m = std::max(m, s[i * N + k]);
@@ -1495,15 +1504,7 @@ __attribute__((NAO_AVX512_TARGET, noinline)) float headSumNormAvx512(const float
     for (int h = 1; h < H; ++h) c = _mm512_add_ps(c, _mm512_mul_ps(ah[h], _mm512_loadu_ps(f[h] + d0)));
     part = _mm512_add_ps(part, _mm512_mul_ps(c, c));
   }
-  // Lanes l + 8 (the two halves), l + 4, l + 2, l + 1.
-  // (Zero-masked extracts of both halves: GCC 12 warns on the unmasked forms, see kAll.)
-  const __m512d pd = _mm512_castps_pd(part);
-  const __m256 y = _mm256_add_ps(_mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, pd, 0)),
-                                 _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, pd, 1)));
-  __m128 x = _mm_add_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
-  x = _mm_add_ps(x, _mm_movehl_ps(x, x));
-  x = _mm_add_ss(x, _mm_shuffle_ps(x, x, 1));
-  return std::sqrt(_mm_cvtss_f32(x));
+  return std::sqrt(foldLanesAvx512<false>(part));  // lanes l + 8, l + 4, l + 2, l + 1
 }
 /// headSumNormAvx512 for Q coefficient sets over the same H vectors: out[i] = ‖Σ_h a[i·H + h]
 /// f_h‖. The vectors are loaded once for all Q; each norm is the single kernel's, in its order
@@ -1529,15 +1530,7 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void headSumNormsAvx512(const float
     }
   }
 #pragma GCC unroll 8
-  for (int i = 0; i < Q; ++i) {
-    const __m512d pd = _mm512_castps_pd(part[i]);
-    const __m256 y = _mm256_add_ps(_mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, pd, 0)),
-                                   _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, pd, 1)));
-    __m128 x = _mm_add_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
-    x = _mm_add_ps(x, _mm_movehl_ps(x, x));
-    x = _mm_add_ss(x, _mm_shuffle_ps(x, x, 1));
-    out[i] = std::sqrt(_mm_cvtss_f32(x));
-  }
+  for (int i = 0; i < Q; ++i) out[i] = std::sqrt(foldLanesAvx512<false>(part[i]));
 }
 #endif
 
