@@ -280,6 +280,27 @@ __attribute__((target("avx2"), noinline)) void affineTokensAvx2(const float* W, 
 // and kAvx2. Nothing here may run unless policyKernelSupported(PolicyKernel::kAvx512).
 #define NAO_AVX512_TARGET target("avx512f,avx512bw,avx512vnni,avx2")
 
+/// The 16 lanes of v folded in halves: lane l with l + 8, then l + 4, l + 2, l + 1, by max
+/// (kMax; exact in any order, none NaN) or by add (that order is part of headSumNorm's bits).
+template <bool kMax>
+__attribute__((NAO_AVX512_TARGET, always_inline)) inline float foldLanesAvx512(__m512 v) noexcept {
+  // Zero-masked extracts (GCC 12 warns on the unmasked ones, see kAll).
+  const __m512d vd = _mm512_castps_pd(v);
+  const __m256 lo = _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, vd, 0));
+  const __m256 hi = _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, vd, 1));
+  if constexpr (kMax) {
+    const __m256 y = _mm256_max_ps(lo, hi);
+    __m128 x = _mm_max_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
+    x = _mm_max_ps(x, _mm_movehl_ps(x, x));
+    return _mm_cvtss_f32(_mm_max_ss(x, _mm_shuffle_ps(x, x, 1)));
+  } else {
+    const __m256 y = _mm256_add_ps(lo, hi);
+    __m128 x = _mm_add_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
+    x = _mm_add_ps(x, _mm_movehl_ps(x, x));
+    return _mm_cvtss_f32(_mm_add_ss(x, _mm_shuffle_ps(x, x, 1)));
+  }
+}
+
 /// Rows r .. r+16R-1 of Y(:, t) += W(:, k0 .. k0+kc-1) X(k0 .. k0+kc-1, t), all t, in k order.
 template <int Out, int In, int J, int R>
 __attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateStripAvx512(const float* W, const float* X,
@@ -474,8 +495,7 @@ inline int quantToken(const QuantTokens<In, J>& x, int k, int t) {
 /// quantizeTokensInt8 with 16 lanes (kAvx512): the same maxima, tests, products, roundings and
 /// clamps, so the same pairs and scales; also the byte quads of an 8-bit product.
 template <int In, int J>
-__attribute__((target("avx512f,avx512bw"), noinline)) void quantizeTokensInt8Avx512(const float* X,
-                                                                                     QuantTokens<In, J>& x) {
+__attribute__((NAO_AVX512_TARGET, noinline)) void quantizeTokensInt8Avx512(const float* X, QuantTokens<In, J>& x) {
   static_assert(In % 2 == 0, "the int8 kernels take input columns in pairs");
   constexpr int kVec = In / 16 * 16;
   // The zero-masked forms with every lane selected: GCC 12's unmasked ones pass an undefined
@@ -496,13 +516,10 @@ __attribute__((target("avx512f,avx512bw"), noinline)) void quantizeTokensInt8Avx
         vp = _mm512_add_ps(vp, _mm512_mul_ps(v, zero));
         neg = static_cast<__mmask16>(neg | _mm512_cmp_ps_mask(v, zero, _CMP_LT_OQ));
       }
-      alignas(64) float lm[16], lp[16];
-      _mm512_store_ps(lm, vm);
-      _mm512_store_ps(lp, vp);
-      for (int i = 0; i < 16; ++i) {
-        m = std::max(m, lm[i]);
-        p += lp[i];
-      }
+      // Folded in lanes, not one by one: a maximum is exact in any order, and a lane of vp is
+      // ±0 unless one of its entries was ±inf or NaN, so "some lane NaN" is the sum's test.
+      m = foldLanesAvx512<true>(vm);
+      p = _mm512_cmp_ps_mask(vp, zero, _CMP_EQ_OQ) == kAll ? 0.0f : std::numeric_limits<float>::quiet_NaN();
       negative = negative || neg != 0;
     }
     for (int k = kVec; k < In; ++k) {
@@ -574,6 +591,32 @@ inline void dequantizeTokens(const std::int32_t* acc, const float* sw, const flo
     }
   }
 }
+
+#if NAO_POLICY_HAVE_AVX2
+/// dequantizeTokens with 16 lanes (kAvx512): the same operations on every element in the same
+/// order, so the same bits.
+template <int Out, int J, bool kRelu>
+__attribute__((NAO_AVX512_TARGET, noinline)) void dequantizeTokensAvx512(const std::int32_t* acc, const float* sw,
+                                                                          const float* sx, const float* b, float* Y) {
+  constexpr int kVec = Out / 16 * 16;
+  constexpr __mmask16 kAll = 0xffff;  // zero-masked forms, as in quantizeTokensInt8Avx512
+  for (int t = 0; t < J; ++t) {
+    const __m512 s = _mm512_set1_ps(sx[t]), zero = _mm512_setzero_ps();
+    for (int r = 0; r < kVec; r += 16) {
+      __m512 y = _mm512_mul_ps(_mm512_maskz_cvtepi32_ps(kAll, _mm512_loadu_si512(acc + t * Out + r)),
+                               _mm512_mul_ps(_mm512_loadu_ps(sw + r), s));
+      if (b != nullptr) y = _mm512_add_ps(_mm512_loadu_ps(b + r), y);
+      if constexpr (kRelu) y = _mm512_maskz_max_ps(kAll, zero, y);  // NaN and -0 as MAXPS above
+      _mm512_storeu_ps(Y + t * Out + r, y);
+    }
+    for (int r = kVec; r < Out; ++r) {
+      float y = static_cast<float>(acc[t * Out + r]) * (sw[r] * sx[t]);
+      if (b != nullptr) y = b[r] + y;
+      Y[t * Out + r] = kRelu ? std::max(y, 0.0f) : y;
+    }
+  }
+}
+#endif
 
 /// Rows left over by the vector blocks (Out not a multiple of the block): exact int32 sums.
 template <int Out, int In, int J>
@@ -863,6 +906,8 @@ inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float
     } else {
       accumulateInt8Avx512<Out, In, J>(Wq, x.pairs, acc);
     }
+    dequantizeTokensAvx512<Out, J, kRelu>(acc, sw, x.sx, b, Y);
+    return;
   } else if (kernel == PolicyKernel::kAvx2) {
     quantizeTokensInt8<In, J>(X, x);
     accumulateInt8Avx2<Out, In, J>(Wq, x.pairs, acc);
@@ -1340,26 +1385,6 @@ inline void windowSoftmaxScalar(const float* raw, const float* bias, int slot, i
 }
 
 #if NAO_POLICY_HAVE_AVX2
-/// The 16 lanes of v folded in halves: lane l with l + 8, then l + 4, l + 2, l + 1, by max
-/// (kMax; exact in any order, none NaN) or by add (that order is part of headSumNorm's bits).
-template <bool kMax>
-__attribute__((NAO_AVX512_TARGET, always_inline)) inline float foldLanesAvx512(__m512 v) noexcept {
-  // Zero-masked extracts (GCC 12 warns on the unmasked ones, see kAll).
-  const __m512d vd = _mm512_castps_pd(v);
-  const __m256 lo = _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, vd, 0));
-  const __m256 hi = _mm256_castpd_ps(_mm512_maskz_extractf64x4_pd(0xff, vd, 1));
-  if constexpr (kMax) {
-    const __m256 y = _mm256_max_ps(lo, hi);
-    __m128 x = _mm_max_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
-    x = _mm_max_ps(x, _mm_movehl_ps(x, x));
-    return _mm_cvtss_f32(_mm_max_ss(x, _mm_shuffle_ps(x, x, 1)));
-  } else {
-    const __m256 y = _mm256_add_ps(lo, hi);
-    __m128 x = _mm_add_ps(_mm256_castps256_ps128(y), _mm256_extractf128_ps(y, 1));
-    x = _mm_add_ps(x, _mm_movehl_ps(x, x));
-    return _mm_cvtss_f32(_mm_add_ss(x, _mm_shuffle_ps(x, x, 1)));
-  }
-}
 
 /// windowSoftmax in zmm registers (kAvx512; J <= 16): a tick's J keys of a query in one masked
 /// register for the bias and the maximum, the exponentials of all J rows in one loop with the
