@@ -149,26 +149,6 @@ Rollout roll(const PolicyWeights<Dims>& w, std::uint64_t seed, int ticks) {
   return r;
 }
 
-/// The bound views' matrices packed one by one (packMatrixFp32) in visitQuantViews order, in a
-/// 64-byte aligned blob as the runtime binds it: what packModelFp32 must make of their file.
-template <class Dims>
-AlignedBytes packedFromViews(PolicyWeights<Dims>& w) {
-  AlignedBytes blob;
-  blob.size = packedPolicyBytes<Dims>();
-  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
-  std::size_t off = 0;
-  detail::visitQuantViews(w, [&](const auto& view, auto&) {
-    using V = std::remove_reference_t<decltype(view)>;
-    constexpr std::size_t bytes = sizeof(float) * V::RowsAtCompileTime * V::ColsAtCompileTime;
-    REQUIRE(off + bytes <= blob.size);
-    packMatrixFp32(view.data(), V::RowsAtCompileTime, V::ColsAtCompileTime,
-                   reinterpret_cast<float*>(blob.data.get() + off));
-    off += bytes;
-  });
-  REQUIRE(off == blob.size);
-  return blob;
-}
-
 template <class Dims>
 void checkPackedStep(std::uint64_t seed, int ticks) {
   KernelGuard guard;
@@ -187,7 +167,7 @@ void checkPackedStep(std::uint64_t seed, int ticks) {
   const AlignedBytes blob = packModelFp32(file);
   REQUIRE(blob.size == packedPolicyBytes<Dims>());
   REQUIRE(blob.size == packedModelBytes(Dims::arch()));
-  const AlignedBytes from_views = packedFromViews(w);
+  const AlignedBytes from_views = packPolicyFp32(w);  // what nao_rt --weights makes
   CHECK(std::memcmp(from_views.data.get(), blob.data.get(), blob.size) == 0);
 
   bindPackedWeights<Dims>(w, blob.data.get());
@@ -237,7 +217,7 @@ TEST_CASE("warmPolicy reads each matrix once: the packed copy instead of the vie
   std::uint64_t sink = 0;
   CHECK(warmPolicy(w, *ws, sink) == fp32 + sizeof(*ws));
   // The packed blob holds every matrix it replaces once: the same byte count, other addresses.
-  const AlignedBytes blob = packedFromViews(w);
+  const AlignedBytes blob = packPolicyFp32(w);
   bindPackedWeights<SmallPolicyDims>(w, blob.data.get());
   // The blob's lines are what it reads: one byte of it changed changes the sum by as much.
   const std::uint8_t first = blob.data[0];

@@ -409,16 +409,20 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
             : bindWeightFile<Dims>(p, weight_storage);
     weights.residual_gain = p.residual_gain;
     weights.linear_ar = linearArBase<Dims::kMovements>(p.linear_ar);
-    // int8: the compiled-in blob where it lies, or the same bytes made from the fp32 tensors.
+    // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
+    // longer read, so its memory goes back now, before an int8 or packed copy is made from the
+    // views (one fp32 copy resident at a time: docs/embedded.md, RSS).
+    std::vector<std::uint8_t>().swap(p.model.bytes);
+    // int8: the compiled-in blob where it lies, or the same bytes made from the fp32 views.
     // copy_storage: the int8 or packed copy made at start-up (none for a compiled-in one).
     AlignedBytes copy_storage;
     if (p.precision == WeightPrecision::kInt8) {
-      const std::uint8_t* blob = p.int8_bytes;
-      if (blob == nullptr) {
-        copy_storage = quantizeModelInt8(p.model);
-        blob = copy_storage.data.get();
-      }
       if constexpr (int8Supported<Dims>()) {
+        const std::uint8_t* blob = p.int8_bytes;
+        if (blob == nullptr) {
+          copy_storage = quantizePolicyInt8<Dims>(weights);
+          blob = copy_storage.data.get();
+        }
         if (quantizedModelBytes(p.model.header.arch) != quantizedPolicyBytes<Dims>())
           throw std::logic_error("nao_rt: the int8 blob of the model is not the compiled layout's size");
         bindQuantizedWeights<Dims>(weights, blob);
@@ -433,7 +437,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       if constexpr (packedSupported<Dims>()) {
         const std::uint8_t* blob = p.packed_bytes;
         if (blob == nullptr) {
-          copy_storage = packModelFp32(p.model);
+          copy_storage = packPolicyFp32<Dims>(weights);
           blob = copy_storage.data.get();
         }
         if (packedModelBytes(p.model.header.arch) != packedPolicyBytes<Dims>())
@@ -444,9 +448,6 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
                                  "not take (outputs in multiples of 32, inputs of 16)");
       }
     }
-    // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
-    // longer read, so its memory goes back before the loop (resident set, docs/embedded.md).
-    std::vector<std::uint8_t>().swap(p.model.bytes);
     ControllerParams controller_params = options.controller;
     controller_params.phase_ticks = p.phase_ticks;  // the run's length sets the pace of a phase model
     controller_params.run_ticks = p.ticks;

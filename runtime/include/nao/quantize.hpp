@@ -103,6 +103,25 @@ std::size_t packedModelBytes(const PolicyArch& arch);
 /// shape the layout does not take.
 AlignedBytes packModelFp32(const ModelFile& model);
 
+/// The packed fp32 blob made from bound fp32 views (packMatrixFp32 on each, visitQuantViews
+/// order): the same bytes as packModelFp32 of the file the views came from
+/// (tests/test_policy_packed.cpp). Configure time: allocates.
+template <class Dims>
+AlignedBytes packPolicyFp32(PolicyWeights<Dims> w) {
+  static_assert(packedSupported<Dims>(), "packPolicyFp32: a matrix of this architecture has no packed layout");
+  AlignedBytes blob;
+  blob.size = packedPolicyBytes<Dims>();
+  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
+  std::size_t off = 0;
+  detail::visitQuantViews(w, [&](const auto& view, auto&) {
+    using V = std::remove_reference_t<decltype(view)>;
+    constexpr int out = V::RowsAtCompileTime, in = V::ColsAtCompileTime;
+    packMatrixFp32(view.data(), out, in, reinterpret_cast<float*>(blob.data.get() + off));
+    off += sizeof(float) * static_cast<std::size_t>(out) * in;
+  });
+  return blob;
+}
+
 /// FNV-1a 64 of a blob (what the generated code states about the compiled-in one).
 std::uint64_t quantizedChecksum(const std::uint8_t* data, std::size_t size) noexcept;
 
