@@ -281,7 +281,8 @@ __attribute__((target("avx2"), noinline)) void affineTokensAvx2(const float* W, 
 #define NAO_AVX512_TARGET target("avx512f,avx512bw,avx512vnni,avx2")
 
 /// The 16 lanes of v folded in halves: lane l with l + 8, then l + 4, l + 2, l + 1, by max
-/// (kMax; exact in any order, none NaN) or by add (that order is part of headSumNorm's bits).
+/// (kMax; exact in any order when no lane is NaN) or by add (that order is part of
+/// headSumNorm's bits).
 template <bool kMax>
 __attribute__((NAO_AVX512_TARGET, always_inline)) inline float foldLanesAvx512(__m512 v) noexcept {
   // Zero-masked extracts (GCC 12 warns on the unmasked ones, see kAll).
@@ -1385,7 +1386,6 @@ inline void windowSoftmaxScalar(const float* raw, const float* bias, int slot, i
 }
 
 #if NAO_POLICY_HAVE_AVX2
-
 /// windowSoftmax in zmm registers (kAvx512; J <= 16): a tick's J keys of a query in one masked
 /// register for the bias and the maximum, the exponentials of all J rows in one loop with the
 /// tail masked. The maximum runs in lanes: it is exact, so only a zero maximum could come out

@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <memory>
 #include <new>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <type_traits>
@@ -119,6 +120,7 @@ AlignedBytes packPolicyFp32(PolicyWeights<Dims> w) {
     packMatrixFp32(view.data(), out, in, reinterpret_cast<float*>(blob.data.get() + off));
     off += sizeof(float) * static_cast<std::size_t>(out) * in;
   });
+  if (off != blob.size) throw std::logic_error("packPolicyFp32: the views do not fill packedPolicyBytes");
   return blob;
 }
 
