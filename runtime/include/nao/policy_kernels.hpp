@@ -302,6 +302,12 @@ __attribute__((NAO_AVX512_TARGET, always_inline)) inline float foldLanesAvx512(_
   }
 }
 
+/// The first min(max(count, 0), 16) lanes of a zmm register: the mask of a row's tail.
+constexpr __mmask16 laneMask16(int count) noexcept {
+  return count >= 16 ? static_cast<__mmask16>(0xffff)
+                     : static_cast<__mmask16>((1u << (count > 0 ? count : 0)) - 1u);
+}
+
 /// Rows r .. r+16R-1 of Y(:, t) += W(:, k0 .. k0+kc-1) X(k0 .. k0+kc-1, t), all t, in k order.
 template <int Out, int In, int J, int R>
 __attribute__((NAO_AVX512_TARGET, always_inline)) inline void accumulateStripAvx512(const float* W, const float* X,
@@ -1300,7 +1306,7 @@ inline __m128 expSoftmaxSse(__m128 x) noexcept {
 __attribute__((NAO_AVX512_TARGET, always_inline)) inline __m512 expSoftmaxAvx512(__m512 x) noexcept {
   using namespace expconst;
   const __m512 low = _mm512_set1_ps(kLow);
-  // Zero-masked forms with every lane selected, as in quantizeTokensInt16Avx512 (GCC 12 warns
+  // Zero-masked forms with every lane selected, as in quantizeTokensInt8Avx512 (GCC 12 warns
   // on the unmasked ones).
   constexpr __mmask16 kAll = 0xffff;
   const __mmask16 keep = _mm512_cmp_ps_mask(x, low, _CMP_NLT_UQ);  // not (x < low): true for NaN
@@ -1327,7 +1333,7 @@ __attribute__((NAO_AVX512_TARGET, noinline)) inline void expShiftedAvx512(float*
   // The tail in masked lanes too (the scalar form, with its nearbyintf call, cost as much as
   // the rest: 100 keys leave 4).
   if (m < count) {
-    const __mmask16 k = static_cast<__mmask16>((1u << (count - m)) - 1u);
+    const __mmask16 k = laneMask16(count - m);
     _mm512_mask_storeu_ps(s + m, k, expSoftmaxAvx512(_mm512_sub_ps(_mm512_maskz_loadu_ps(k, s + m), sh)));
   }
 }
@@ -1397,7 +1403,7 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void windowSoftmaxAvx512(const floa
                                                                        int n, float* s) noexcept {
   static_assert(J <= 16, "a tick's keys in one zmm register");
   const int keys = n * J;
-  constexpr __mmask16 kTick = static_cast<__mmask16>((1u << J) - 1u);
+  constexpr __mmask16 kTick = laneMask16(J);
   const __m512 ninf = _mm512_set1_ps(-std::numeric_limits<float>::infinity());
   __m512 mx[J];
 #pragma GCC unroll 16
@@ -1428,7 +1434,7 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void windowSoftmaxAvx512(const floa
 #pragma GCC unroll 16
   for (int i = 0; i < J; ++i) sh[i] = _mm512_set1_ps(s_max[i]);
   for (int m = 0; m < keys; m += 16) {
-    const __mmask16 k = keys - m >= 16 ? static_cast<__mmask16>(0xffff) : static_cast<__mmask16>((1u << (keys - m)) - 1u);
+    const __mmask16 k = laneMask16(keys - m);
 #pragma GCC unroll 16
     for (int i = 0; i < J; ++i)
       _mm512_mask_storeu_ps(s + i * N + m, k, expSoftmaxAvx512(_mm512_sub_ps(_mm512_maskz_loadu_ps(k, s + i * N + m), sh[i])));
@@ -1445,9 +1451,8 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void windowSoftmaxAvx512(const floa
 #pragma GCC unroll 16
   for (int i = 0; i < J; ++i) inv[i] = _mm512_set1_ps(1.0f / sum[i]);
   for (int m = 0; m < N; m += 16) {
-    const int live = keys - m < 0 ? 0 : keys - m;  // α past the window's keys is 0
-    const __mmask16 k = live >= 16 ? static_cast<__mmask16>(0xffff) : static_cast<__mmask16>((1u << live) - 1u);
-    const __mmask16 in_row = N - m >= 16 ? static_cast<__mmask16>(0xffff) : static_cast<__mmask16>((1u << (N - m)) - 1u);
+    const __mmask16 k = laneMask16(keys - m);  // α past the window's keys is 0
+    const __mmask16 in_row = laneMask16(N - m);
 #pragma GCC unroll 16
     for (int i = 0; i < J; ++i)
       _mm512_mask_storeu_ps(s + i * N + m, in_row, _mm512_maskz_mul_ps(k, _mm512_maskz_loadu_ps(k, s + i * N + m), inv[i]));
