@@ -11,6 +11,8 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdint>
+#include <memory>
+#include <new>
 #include <random>
 #include <string>
 #include <vector>
@@ -31,6 +33,48 @@ inline bool haveModel(benchmark::State& state) {
 inline const ModelFile& paperModel() {
   static const ModelFile model = readModelFile(NAO_BENCH_MODEL);
   return model;
+}
+
+/// The paper model's tensors in 64-byte aligned storage, each padded to 16 floats, as nao_rt
+/// --weights holds them (rt_run.hpp, bindWeightFile). The file's bytes are a std::vector, which
+/// malloc places 16 bytes off a cache line here, so model.data(i) is too: every 64-byte load
+/// from it spans two lines, and the fastest read of it measured ~1.3x slower than of an aligned copy
+/// (bench/results/policy.txt, 2026-11-27). Benchmarks read the weights from here.
+struct AlignedWeights {
+  struct Free {
+    void operator()(float* f) const noexcept { ::operator delete[](f, std::align_val_t{kModelAlignment}); }
+  };
+  std::unique_ptr<float[], Free> floats;
+  std::size_t n_floats = 0;
+  std::vector<const float*> tensors;  ///< manifest order, each 64-byte aligned
+  const float* begin() const { return floats.get(); }
+  const float* end() const { return floats.get() + n_floats; }
+};
+
+/// `n` zero floats, 64-byte aligned.
+inline std::unique_ptr<float[], AlignedWeights::Free> alignedFloats(std::size_t n) {
+  std::unique_ptr<float[], AlignedWeights::Free> f(
+      static_cast<float*>(::operator new[](n * sizeof(float), std::align_val_t{kModelAlignment})));
+  std::fill(f.get(), f.get() + n, 0.0f);
+  return f;
+}
+
+inline const AlignedWeights& paperWeights() {
+  static const AlignedWeights w = [] {
+    const ModelFile& model = paperModel();
+    AlignedWeights a;
+    for (const TensorEntry& t : model.tensors) a.n_floats += (t.spec.count() + 15) / 16 * 16;
+    a.floats = alignedFloats(a.n_floats);
+    std::size_t used = 0;
+    for (std::size_t i = 0; i < model.tensors.size(); ++i) {
+      const std::size_t n = model.tensors[i].spec.count();
+      std::copy(model.data(i), model.data(i) + n, a.floats.get() + used);
+      a.tensors.push_back(a.floats.get() + used);
+      used += (n + 15) / 16 * 16;
+    }
+    return a;
+  }();
+  return w;
 }
 
 /// Bytes of weight data one inference streams: every manifest tensor's floats.

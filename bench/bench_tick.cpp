@@ -25,8 +25,7 @@ void runTickFull(benchmark::State& state, bool packed) {
   const ModelFile& model = paperModel();
   const ArmModel arm = loadArmModel(NAO_DEFAULT_URDF);
   checkJointsMatch(model, arm, NAO_BENCH_MODEL);
-  std::vector<const float*> p;
-  for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
+  const std::vector<const float*>& p = paperWeights().tensors;  // aligned, as nao_rt --weights
   PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
   AlignedBytes blob;
   if (packed) {
