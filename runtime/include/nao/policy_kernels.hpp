@@ -1649,6 +1649,10 @@ inline constexpr int kPackBlock = 32;  ///< rows per block (the AVX-512 kernel's
 /// Floats ahead of the block being computed that each block prefetches (32 KB: measured on the
 /// 512x512 product, BM_Layout_Packed; 1-4 strips ahead of the strided kernel gained nothing).
 inline constexpr int kPackAhead = 8192;
+/// Floats ahead that the AVX-512 kernel also prefetches into L1 (4 KB: two blocks), on top of the
+/// L2 prefetch kPackAhead: BM_Policy_Packed p50 median 471 against 497 us, faster in 7 of 8
+/// alternated pairs (bench/results/policy.txt, 2026-11-27; 8 KB was not clearly better).
+inline constexpr int kPackNear = 1024;
 
 /// True if a [Out, In] matrix has a packed copy.
 constexpr bool packedShape(int out, int in) { return out % kPackBlock == 0 && in % kPackStrip == 0; }
@@ -1765,6 +1769,8 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void affineTokensPackedAvx512(const
       for (int k = 0; k < kPackStrip; ++k) {
 #pragma GCC unroll 2
         for (int i = 0; i < 2; ++i) __builtin_prefetch(blk + kPackAhead + kPackBlock * k + 16 * i, 0, 2);
+#pragma GCC unroll 2
+        for (int i = 0; i < 2; ++i) __builtin_prefetch(blk + kPackNear + kPackBlock * k + 16 * i, 0, 3);
         __m512 w[2];
 #pragma GCC unroll 2
         for (int i = 0; i < 2; ++i) w[i] = _mm512_loadu_ps(blk + kPackBlock * k + 16 * i);
