@@ -10,19 +10,20 @@
 //                          in the kernels' block order (nao/quantize.hpp packModelFp32, at set-up):
 //                          the same bits (counter same_bits), read in address order
 //   BM_Policy_*_AVX512     the same with the AVX-512 kernels (skipped without AVX-512 F/BW/VNNI)
-//   BM_WeightStream        the physical limit: one read of the same weight bytes (the fastest
-//                          read found: zmm or ymm loads into 8 accumulators, each line prefetched
-//                          64 KB ahead; the label names it), i.e. weight bytes / single-core read
-//                          bandwidth, measured in the same run
+//   BM_WeightStream        the physical limit: one read of the same weight bytes, 64-byte
+//                          aligned as nao_rt holds them (paperWeights), by the fastest of the
+//                          candidate reads timed in the same run (fastestRead; the label names
+//                          it), i.e. weight bytes / single-core read bandwidth
 //   BM_Policy_Cold_* / BM_Policy_Packed_Cold_* / BM_Policy_Int8_Cold_* / BM_WeightStream_Cold
 //                          the same after evicting the caches before every iteration (untimed):
 //                          the weights come from DRAM
 //   BM_MulAddFloor         the arithmetic limit: as many separately rounded multiply-adds as a
 //                          step does (matrix weights × 5 tokens), from registers, widest width
 //   BM_WeightStream_Eigen  the same bytes read by Eigen's vectorised sum (the limit quoted before
-//                          2026-11-26: 10-25 % slower than the prefetched read on this machine)
+//                          2026-11-26: ~2-2.5x the fastest aligned read on this machine)
 //   BM_Layout_Strided / _Packed  24 MB of 512x512 matrices x 5 tokens with the AVX-512 product in
-//                          model.bin's column-major layout and repacked block by block (below)
+//                          model.bin's column-major layout and repacked block by block (below),
+//                          each layout's matrices one aligned block
 //   BM_Int8Layout_Pairs / _Quads  4 MB of int8 512x512 matrices x 5 8-bit tokens with vpdpbusd:
 //                          the blob's pairs interleaved by vpermt2w (the runtime's kernel), and a
 //                          candidate layout with each row's 4 inputs side by side (below)
