@@ -152,55 +152,47 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, WeightP
 // unprefetched); from the aligned copy the unprefetched 32-load pass wins (bench/results/
 // policy.txt). So BM_WeightStream times every candidate the CPU has and measures the fastest
 // (fastestRead) instead of naming one in the source.
-#if NAO_POLICY_HAVE_AVX2
-template <int kPasses, std::ptrdiff_t kPrefetch>
-__attribute__((target("avx512f"), noinline)) float streamSumAvx512(const float* p, std::ptrdiff_t n) {
-  __m512 a[8];
-  for (auto& x : a) x = _mm512_setzero_ps();
-  constexpr std::ptrdiff_t kStep = 128 * kPasses;
+typedef float Float4 __attribute__((vector_size(16)));
+typedef float Float8 __attribute__((vector_size(32)));
+typedef float Float16 __attribute__((vector_size(64)));
+
+/// The read of L-lane vectors V: 8 accumulators, `kPasses`×8 loads a pass, each line prefetched
+/// kPrefetch floats ahead (0: none). Inlined into a wrapper compiled for the width's instruction set.
+template <class V, int L, int kPasses, std::ptrdiff_t kPrefetch>
+__attribute__((always_inline)) inline float streamSumLanes(const float* p, std::ptrdiff_t n) {
+  V a[8] = {};
+  constexpr std::ptrdiff_t kPass = 8 * L, kStep = kPass * kPasses;
   std::ptrdiff_t i = 0;
   for (; i + kStep <= n; i += kStep)
 #pragma GCC unroll 8
     for (int u = 0; u < kPasses; ++u) {
-      const float* q = p + i + 128 * u;
+      const float* q = p + i + kPass * u;
       if constexpr (kPrefetch > 0)
 #pragma GCC unroll 8
-        for (int k = 0; k < 8; ++k) __builtin_prefetch(q + kPrefetch + 16 * k, 0, 2);
+        for (int b = 0; b < kPass; b += 16) __builtin_prefetch(q + kPrefetch + b, 0, 2);  // one per line
 #pragma GCC unroll 8
-      for (int k = 0; k < 8; ++k) a[k] = _mm512_add_ps(a[k], _mm512_loadu_ps(q + 16 * k));
+      for (int k = 0; k < 8; ++k) {
+        V x;
+        std::memcpy(&x, q + L * k, sizeof x);  // an unaligned load
+        a[k] += x;
+      }
     }
-  for (int k = 1; k < 8; ++k) a[0] = _mm512_add_ps(a[0], a[k]);
-  alignas(64) float lanes[16];
-  _mm512_store_ps(lanes, a[0]);
+  for (int k = 1; k < 8; ++k) a[0] += a[k];
   float s = 0.0f;
-  for (float x : lanes) s += x;
+  for (int l = 0; l < L; ++l) s += a[0][l];
   for (; i < n; ++i) s += p[i];
   return s;
 }
 
+#if NAO_POLICY_HAVE_AVX2
+template <int kPasses, std::ptrdiff_t kPrefetch>
+__attribute__((target("avx512f"), noinline)) float streamSumAvx512(const float* p, std::ptrdiff_t n) {
+  return streamSumLanes<Float16, 16, kPasses, kPrefetch>(p, n);
+}
+
 template <int kPasses, std::ptrdiff_t kPrefetch>
 __attribute__((target("avx2"), noinline)) float streamSumAvx2(const float* p, std::ptrdiff_t n) {
-  __m256 a[8];
-  for (auto& x : a) x = _mm256_setzero_ps();
-  constexpr std::ptrdiff_t kStep = 64 * kPasses;
-  std::ptrdiff_t i = 0;
-  for (; i + kStep <= n; i += kStep)
-#pragma GCC unroll 8
-    for (int u = 0; u < kPasses; ++u) {
-      const float* q = p + i + 64 * u;
-      if constexpr (kPrefetch > 0)
-#pragma GCC unroll 4
-        for (int k = 0; k < 8; k += 2) __builtin_prefetch(q + kPrefetch + 8 * k, 0, 2);
-#pragma GCC unroll 8
-      for (int k = 0; k < 8; ++k) a[k] = _mm256_add_ps(a[k], _mm256_loadu_ps(q + 8 * k));
-    }
-  for (int k = 1; k < 8; ++k) a[0] = _mm256_add_ps(a[0], a[k]);
-  alignas(32) float lanes[8];
-  _mm256_store_ps(lanes, a[0]);
-  float s = 0.0f;
-  for (float x : lanes) s += x;
-  for (; i < n; ++i) s += p[i];
-  return s;
+  return streamSumLanes<Float8, 8, kPasses, kPrefetch>(p, n);
 }
 #endif
 
@@ -278,10 +270,6 @@ void runWeightStream(benchmark::State& state, bool best, bool cold = false) {
 /// Independent chains a = a + x·y per width: more than latency × pipes of the multiply and of the
 /// add, so the issue rate limits, not a chain.
 constexpr int kMulAddChains = 12;
-
-typedef float Float4 __attribute__((vector_size(16)));
-typedef float Float8 __attribute__((vector_size(32)));
-typedef float Float16 __attribute__((vector_size(64)));
 
 /// `iters` rounds of kMulAddChains chains of L lanes (V: a GCC vector of L floats), the multiply
 /// and the add separately rounded (as every policy kernel computes: -ffp-contract=off, no FMA),
