@@ -4,6 +4,7 @@
 
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
+#include "rt_run.hpp"
 
 #include <benchmark/benchmark.h>
 
@@ -35,25 +36,21 @@ inline const ModelFile& paperModel() {
   return model;
 }
 
-/// The paper model's tensors in 64-byte aligned storage, each padded to 16 floats, as nao_rt
-/// --weights holds them (rt_run.hpp, bindWeightFile). The file's bytes are a std::vector, which
-/// malloc places 16 bytes off a cache line here, so model.data(i) is too: every 64-byte load
-/// from it spans two lines, and the fastest read of it measured ~1.3x slower than of an aligned copy
+/// The paper model's tensors as nao_rt --weights holds them (rt_run.hpp, copyWeightFile: 64-byte
+/// aligned, each padded to 16 floats). The file's bytes are a std::vector, which malloc places 16
+/// bytes off a cache line here, so model.data(i) is too: every 64-byte load from it spans two
+/// lines, and the fastest read of it measured ~1.3x slower than of the aligned copy
 /// (bench/results/policy.txt, 2026-11-27). Benchmarks read the weights from here.
 struct AlignedWeights {
-  struct Free {
-    void operator()(float* f) const noexcept { ::operator delete[](f, std::align_val_t{kModelAlignment}); }
-  };
-  std::unique_ptr<float[], Free> floats;
-  std::size_t n_floats = 0;
+  rt::WeightStorage storage;
   std::vector<const float*> tensors;  ///< manifest order, each 64-byte aligned
-  const float* begin() const { return floats.get(); }
-  const float* end() const { return floats.get() + n_floats; }
+  const float* begin() const { return storage.floats.get(); }
+  const float* end() const { return tensors.back() + paperModel().tensors.back().spec.count(); }
 };
 
 /// `n` zero floats, 64-byte aligned.
-inline std::unique_ptr<float[], AlignedWeights::Free> alignedFloats(std::size_t n) {
-  std::unique_ptr<float[], AlignedWeights::Free> f(
+inline std::unique_ptr<float[], rt::WeightStorage::Free> alignedFloats(std::size_t n) {
+  std::unique_ptr<float[], rt::WeightStorage::Free> f(
       static_cast<float*>(::operator new[](n * sizeof(float), std::align_val_t{kModelAlignment})));
   std::fill(f.get(), f.get() + n, 0.0f);
   return f;
@@ -61,17 +58,8 @@ inline std::unique_ptr<float[], AlignedWeights::Free> alignedFloats(std::size_t 
 
 inline const AlignedWeights& paperWeights() {
   static const AlignedWeights w = [] {
-    const ModelFile& model = paperModel();
     AlignedWeights a;
-    for (const TensorEntry& t : model.tensors) a.n_floats += (t.spec.count() + 15) / 16 * 16;
-    a.floats = alignedFloats(a.n_floats);
-    std::size_t used = 0;
-    for (std::size_t i = 0; i < model.tensors.size(); ++i) {
-      const std::size_t n = model.tensors[i].spec.count();
-      std::copy(model.data(i), model.data(i) + n, a.floats.get() + used);
-      a.tensors.push_back(a.floats.get() + used);
-      used += (n + 15) / 16 * 16;
-    }
+    a.tensors = rt::copyWeightFile<PaperPolicyDims>(paperModel(), a.storage);
     return a;
   }();
   return w;

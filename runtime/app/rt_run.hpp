@@ -317,28 +317,36 @@ struct WeightStorage {
   std::size_t n_floats = 0;
 };
 
-/// The weights of a --weights model: allocates `storage` (policyStorageFloats<Dims>, 64-byte
-/// aligned, zero-filled: the padding between tensors reads as zeros), copies each tensor into it
-/// and binds the views by name. Configure time: allocates; throws std::bad_alloc, or
+/// Copies the tensors of `model` into `storage` (allocated here: policyStorageFloats<Dims>,
+/// 64-byte aligned, zero-filled, so the padding between tensors reads as zeros) and returns where
+/// each one starts, in manifest order. Configure time: allocates; throws std::bad_alloc, or
 /// std::logic_error if the storage is too small (a programming error in policyStorageFloats).
+/// nao_bench reads its weights from here too, so it times what nao_rt reads.
 template <class Dims>
-PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
+std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& storage) {
   std::vector<const float*> pointers;
-  pointers.reserve(p.model.tensors.size());
+  pointers.reserve(model.tensors.size());
   storage.n_floats = policyStorageFloats<Dims>();
   storage.floats.reset(static_cast<float*>(
       ::operator new[](storage.n_floats * sizeof(float), std::align_val_t{kModelAlignment})));
   float* floats = storage.floats.get();
   std::fill(floats, floats + storage.n_floats, 0.0f);
   std::size_t used = 0;
-  for (std::size_t i = 0; i < p.model.tensors.size(); ++i) {
-    const std::size_t n = p.model.tensors[i].spec.count();
+  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
+    const std::size_t n = model.tensors[i].spec.count();
     if (used + n > storage.n_floats)
       throw std::logic_error("nao_rt: the weight storage is smaller than the model's manifest");
-    std::memcpy(floats + used, p.model.data(i), n * sizeof(float));
+    std::memcpy(floats + used, model.data(i), n * sizeof(float));
     pointers.push_back(floats + used);
     used += (n + 15) / 16 * 16;
   }
+  return pointers;
+}
+
+/// The weights of a --weights model: copyWeightFile, the views bound by name.
+template <class Dims>
+PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
+  const std::vector<const float*> pointers = copyWeightFile<Dims>(p.model, storage);
   return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.conditioning);
 }
 
