@@ -37,7 +37,8 @@ void runTickFull(benchmark::State& state, bool packed) {
   for (int k = 0; k < PaperPolicyDims::kClusters; ++k) centroids.push_back(centroid(w, movement, k).cast<double>());
   const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, tools::Movement::kWholeArm, 1, 0, centroids);
   const ControllerModel<PaperPolicyDims> cm = configureController(arm, w, ControllerParams{});
-  ControllerData<PaperPolicyDims> data(cm.sim, ref.target.front());
+  OdeArmBackend robot(cm.arm, SimParams{}, ref.target.front());
+  ControllerData<PaperPolicyDims> data(robot);
   SteadyClock clock;
   constexpr int kTicks = 36000;
   std::vector<double> tick_us(kTicks), retarget_us(kTicks), policy_us(kTicks), sim_us(kTicks);

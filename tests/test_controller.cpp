@@ -61,7 +61,8 @@ template <class Drop, class Corrupt>
 Run run(const ControllerParams& params, FakeClock& clock, Drop drop, Corrupt corrupt, int n_ticks = -1) {
   Fixture& f = fixture();
   const ControllerModel<Dims> model = configureController(f.arm, f.weights, params);
-  ControllerData<Dims> data(model.sim, f.ref.target.front());
+  OdeArmBackend robot(model.arm, SimParams{}, f.ref.target.front());
+  ControllerData<Dims> data(robot);
   activateController(model, data, f.ref.target.front(), 0, clock);
   Run r;
   const int n = n_ticks > 0 ? n_ticks : static_cast<int>(f.ref.frames.size());
@@ -274,7 +275,8 @@ TEST_CASE("the reference-mode policy is fed the feature-extracted target f(t+1) 
   Fixture& f = fixture();
   FakeClock clock;
   const ControllerModel<Dims> model = configureController(f.arm, f.weights, ControllerParams{});
-  ControllerData<Dims> data(model.sim, f.ref.target.front());
+  OdeArmBackend robot(model.arm, SimParams{}, f.ref.target.front());
+  ControllerData<Dims> data(robot);
   activateController(model, data, f.ref.target.front(), 0, clock);
   std::vector<JointVector> online, keys;
   std::vector<double> t_s;

@@ -28,7 +28,8 @@ void checkNoAllocation(std::uint64_t seed) {
   params.inject_policy_nan_first = 100;  // exercise the fault paths too
   params.inject_policy_nan_last = 102;
   const ControllerModel<Dims> model = configureController(arm, weights, params);
-  ControllerData<Dims> data(model.sim, ref.target.front());
+  OdeArmBackend robot(model.arm, SimParams{}, ref.target.front());
+  ControllerData<Dims> data(robot);
   SteadyClock clock;
   // Frames prepared before counting: dropouts of 5 s every 60 s (home-return path), NaN
   // keypoints every 97th tick.

@@ -1,6 +1,8 @@
 #include "nao/tools/linear_ar.hpp"
 
 #include "nao/kinematics.hpp"
+#include "nao/robot_backend.hpp"
+#include "nao/rollout.hpp"
 
 #include <Eigen/Dense>
 
@@ -124,41 +126,23 @@ JointVector linearArAction(const LinearArModel& m, const JointVector& q, const s
   return a;
 }
 
-JointVector limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
-                         bool& limited) {
-  // The same arithmetic, in the same order, as controller.hpp's step 4.
-  JointVector q_cmd = q + a;
-  limited = false;
-  for (int j = 0; j < kNumJoints; ++j) {
-    const double step = arm.v_max[j] * period_s;
-    const double lo = std::max(arm.q_min[j], q[j] - step);
-    const double hi = std::min(arm.q_max[j], q[j] + step);
-    const double c = std::clamp(q_cmd[j], std::min(lo, hi), std::max(lo, hi));
-    if (c != q_cmd[j]) limited = true;
-    q_cmd[j] = c;
-  }
-  return q_cmd;
-}
-
 Rollout rolloutOnSim(const SimModel& sim, SimData& data, double period_s, const JointVector& q0, int ticks,
                      const ActionLaw& law) {
   const ArmModel& arm = sim.arm;
   Rollout r;
   ArmData kin;
+  OdeArmBackend robot(sim, data);
   const JointVector start = clampToLimits(arm, q0);
-  resetSim(sim, data, start);
+  robot.activate(start);
   r.hand.push_back(forwardKinematics(arm, kin, start));
   std::vector<JointVector> a_past;  // newest first
+  RolloutStep step;
   for (int t = 0; t < ticks; ++t) {
-    const JointVector q = data.q;
-    JointVector a = law(q, a_past);
-    if (!a.allFinite()) a.setZero();  // as the controller does with a non-finite policy output
-    bool limited = false;
-    const JointVector q_cmd = limitCommand(arm, period_s, q, a, limited);
-    if (limited) ++r.limited_ticks;
-    a_past.insert(a_past.begin(), q_cmd - q);
+    const JointVector a = law(robot.measured(), a_past);
+    r.q.push_back(rolloutStep(arm, period_s, robot, a, step));
+    if (step.limit & kCommandClamped) ++r.limited_ticks;
+    a_past.insert(a_past.begin(), step.a_applied);
     if (a_past.size() > static_cast<std::size_t>(kMaxLinearArOrder)) a_past.pop_back();
-    r.q.push_back(stepSim(sim, data, q_cmd));
     r.hand.push_back(forwardKinematics(arm, kin, r.q.back()));
   }
   return r;

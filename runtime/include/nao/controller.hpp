@@ -1,7 +1,8 @@
 // The 10 Hz imitation controller (DESIGN §9): human frame -> human kinematics + scaling ->
 // fixed-size LM retargeting (Algorithm 1) -> snap to the model's key pose -> policy ->
-// command q_t + a_t within the position and velocity limits -> robot backend (the ODE arm,
-// 100 x 1 ms, by default; robot_backend.hpp) -> record.
+// rolloutStep (rollout.hpp: command q_t + a_t within the position and velocity limits -> robot
+// backend -> measured q) -> record. The robot backend (robot_backend.hpp: the ODE arm or LoLA)
+// is built by the caller and owns its hardware; the controller only drives it.
 //
 // Lifecycle (STYLE 6): configureController builds everything that allocates (ControllerModel,
 // ControllerData); activateController puts the arm at its start pose; updateController runs one
@@ -12,12 +13,13 @@
 
 #include "nao/arm_model.hpp"
 #include "nao/body25.hpp"
+#include "nao/feature_trajectory.hpp"
 #include "nao/human_kinematics.hpp"
 #include "nao/kinematics.hpp"
 #include "nao/policy.hpp"
 #include "nao/retarget.hpp"
 #include "nao/robot_backend.hpp"
-#include "nao/sim_arm.hpp"
+#include "nao/rollout.hpp"
 
 #include <Eigen/Core>
 
@@ -27,11 +29,6 @@
 #include <memory>
 
 namespace nao {
-
-/// The pole of the key-pose blend that makes the feature-extracted trajectory (DESIGN §6;
-/// toolchain KeyPoseBlend uses this value): f(t+1) = f(t) + v(t),
-/// v(t) = pole² v(t−1) + (1 − pole)² (c(t) − f(t)), f(0) = c(0), v(−1) = 0.
-inline constexpr double kFeatureBlendPole = 0.7;
 
 /// Fault bits of a tick (ticks.csv column `fault`). Bits 0-7 and 14 come from the tick itself and
 /// never stop the loop; bits 8-13 come from the robot backend (LoLA; the ODE arm raises none).
@@ -48,7 +45,8 @@ enum ControllerFault : std::uint32_t {
   /// Algorithm 1 hit an iteration cap: the reference is its best feasible pose (see
   /// kFaultRetargetFallback), never worse than the clamped human angles.
   kFaultIkNotConverged = 1u << 3,
-  /// The policy produced a NaN/Inf action: the arm holds its position (a = 0).
+  /// The tick's action (the policy's, or a baseline law's) had a NaN/Inf: the command limiter
+  /// holds the arm where it is (a = 0; rollout.hpp).
   kFaultPolicyNonFinite = 1u << 4,
   /// The tick's work took longer than the period (counted; the loop stays on the grid).
   kFaultOverrun = 1u << 5,
@@ -116,7 +114,7 @@ struct ControllerParams {
   int inject_policy_nan_first = -1;
   int inject_policy_nan_last = -1;
   /// Baseline: > 0 replaces the policy by the key-pose blend law its training labels follow,
-  /// a = pole^2 a(t-1) + (1 - pole)^2 (r - q) (toolchain KeyPoseBlend), driving the same arm,
+  /// a = pole^2 a(t-1) + (1 - pole)^2 (r - q) (KeyPoseBlend), driving the same arm,
   /// so a test can measure what the servos alone cost. 0: the policy. Reference mode only.
   double blend_law_pole = 0.0;
   /// Baseline: > 0 replaces the policy by a fixed-gain inversion of a first-order servo,
@@ -162,25 +160,24 @@ struct TickRecord {
   double tick_us = 0.0, retarget_us = 0.0, policy_us = 0.0, sim_us = 0.0;
 };
 
-/// The immutable part: arm, simulation, policy views, parameters.
+/// The immutable part: arm, policy views, parameters.
 template <class Dims>
 struct ControllerModel {
   ArmModel arm;
-  SimModel sim;
   PolicyWeights<Dims> policy;
   ControllerParams params;
   double d_r_m = 0.0;             ///< robot scale (paper eq. 1)
   JointVector home = JointVector::Zero();  ///< params.home clamped
 };
 
-/// Everything a tick writes. Built once by configureController.
+/// Everything a tick writes. Built at configure time, beside the robot backend it drives.
 template <class Dims>
 struct ControllerData {
-  ControllerData(const SimModel& sim_model, const JointVector& q0) : sim(sim_model, q0), ode(sim_model, sim) {}
+  /// `robot` (not owned) must outlive the data.
+  explicit ControllerData(RobotBackend& robot_backend) : robot(&robot_backend) {}
 
-  SimData sim;
-  OdeArmBackend ode;              ///< the in-process arm over `sim`
-  RobotBackend* robot = &ode;     ///< the robot the ticks drive (replace before activate)
+  RobotBackend* robot;            ///< the robot the ticks drive (the ODE arm or LoLA; not owned)
+  RolloutStep step;               ///< what the last tick's rolloutStep applied
   ArmData kin;
   HumanArmData human;
   RetargetData retarget;
@@ -205,15 +202,19 @@ struct ControllerData {
 /// against.
 template <class Dims>
 ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeights<Dims>& policy,
-                                          const ControllerParams& params, const SimParams& sim_params = {}) {
+                                          const ControllerParams& params) {
   if (!(params.period_s > 0.0)) throw std::invalid_argument("controller: period must be positive");
   if (!(params.no_human_timeout_s >= 0.0)) throw std::invalid_argument("controller: negative no-human timeout");
   if (params.human_bridge_ticks < 0) throw std::invalid_argument("controller: negative human bridge");
-  if (std::abs(sim_params.dt_s * sim_params.substeps_per_tick - params.period_s) > 1e-9)
-    throw std::invalid_argument("controller: physics substeps do not add up to the control period");
-  ControllerModel<Dims> m{arm, makeSimModel(arm, sim_params), policy, params, robotScale(arm),
-                          clampToLimits(arm, params.home)};
+  ControllerModel<Dims> m{arm, policy, params, robotScale(arm), clampToLimits(arm, params.home)};
   return m;
+}
+
+/// The simulated arm's physics steps must make up exactly one control period (the ODE backend
+/// runs SimParams::substeps_per_tick steps per command). Throws std::invalid_argument.
+inline void checkSimPeriod(const SimParams& sim, double period_s) {
+  if (std::abs(sim.dt_s * sim.substeps_per_tick - period_s) > 1e-9)
+    throw std::invalid_argument("controller: physics substeps do not add up to the control period");
 }
 
 namespace detail {
@@ -305,7 +306,7 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   rec.key_pose = snapToCentroid(model.policy, data.movement, data.q_ref);
   rec.r = centroid(model.policy, data.movement, rec.key_pose).template cast<double>();
   // The feature-extracted target of this tick, f(t+1): the blend toward the key pose in force,
-  // started at rest on the first key pose (as the toolchain's featureTrajectory).
+  // started at rest on the first key pose (as featureTrajectory).
   if (!data.feature_started) {
     data.feature_f = rec.r;
     data.feature_v.setZero();
@@ -338,10 +339,6 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
     a = stepPolicy(model.policy, *data.policy, in).template cast<double>();
     if (data.tick >= p.inject_policy_nan_first && data.tick <= p.inject_policy_nan_last)
       a[0] = std::nan("");
-    if (!a.allFinite()) {
-      rec.fault |= kFaultPolicyNonFinite;
-      a.setZero();
-    }
     for (int j = 0; j < kNumJoints; ++j) {
       rec.att[static_cast<std::size_t>(j)] = data.policy->score[j];
       rec.attm[static_cast<std::size_t>(j)] = data.policy->mass[j];
@@ -349,23 +346,19 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   }
   const std::int64_t t2 = data.clock->nowNs();
 
-  // 4. Command q + a inside the position limits and what the servos can do in one period.
-  JointVector q_cmd = q + a;
-  for (int j = 0; j < kNumJoints; ++j) {
-    const double step = model.arm.v_max[j] * p.period_s;
-    const double lo = std::max(model.arm.q_min[j], q[j] - step);
-    const double hi = std::min(model.arm.q_max[j], q[j] + step);
-    const double c = std::clamp(q_cmd[j], std::min(lo, hi), std::max(lo, hi));
-    if (c != q_cmd[j]) rec.fault |= kFaultCommandLimited;
-    q_cmd[j] = c;
+  // 4. Command q + a inside the position limits and what the servos can do in one period (a
+  // non-finite action holds), 5. the arm advances one period.
+  rec.q = rolloutStep(model.arm, p.period_s, *data.robot, a, data.step);
+  const RolloutStep& step = data.step;
+  if (step.limit & kCommandNonFinite) {
+    rec.fault |= kFaultPolicyNonFinite;
+    a.setZero();
   }
+  if (step.limit & kCommandClamped) rec.fault |= kFaultCommandLimited;
   rec.a = a;
-  rec.q_cmd = q_cmd;
+  rec.q_cmd = step.q_cmd;
   rec.q_ref = data.q_ref;
-  data.a_prev = q_cmd - q;  // the action as applied is the next tick's a(t-1)
-
-  // 5. The arm advances one period.
-  rec.q = data.robot->command(q_cmd);
+  data.a_prev = step.a_applied;  // the action as applied is the next tick's a(t-1)
   rec.fault |= data.robot->faults();
   rec.ee = forwardKinematics(model.arm, data.kin, rec.q);
   const std::int64_t t3 = data.clock->nowNs();

@@ -12,6 +12,7 @@
 #include "nao/sim_arm.hpp"
 
 #include <cstdint>
+#include <memory>
 
 namespace nao {
 
@@ -56,10 +57,21 @@ struct RobotBackend {
 };
 
 /// The in-process ODE arm as a backend: one command is one stepSim (SimParams::substeps_per_tick
-/// physics steps). Holds references to its model and data, which must outlive it.
+/// physics steps). Either it owns its simulation (nao_rt --robot ode: the backend is the
+/// hardware, nothing else holds an ODE world) or it drives one its caller owns (the toolchain's
+/// rollouts, which snapshot and restore the SimData between ticks).
 class OdeArmBackend final : public RobotBackend {
  public:
+  /// Drives `data` of `model`, both owned by the caller, which must outlive the backend.
   OdeArmBackend(const SimModel& model, SimData& data) : model_(model), data_(data) {}
+  /// Builds and owns the simulation of `arm` (makeSimModel(arm, params)), at rest at q0 (SimData's
+  /// constructor: configure time, allocates; throws like makeSimModel).
+  OdeArmBackend(const ArmModel& arm, const SimParams& params, const JointVector& q0)
+      : own_model_(std::make_unique<SimModel>(makeSimModel(arm, params))),
+        own_data_(std::make_unique<SimData>(*own_model_, q0)),
+        model_(*own_model_),
+        data_(*own_data_) {}
+
   const JointVector& activate(const JointVector& q0) override {
     resetSim(model_, data_, q0);
     q0_ = q0;
@@ -72,7 +84,12 @@ class OdeArmBackend final : public RobotBackend {
   RobotStop stopReason() const override { return RobotStop::kNone; }
   void deactivate() override { data_.q_cmd = data_.q; }
 
+  const SimModel& model() const { return model_; }
+  const SimData& data() const { return data_; }
+
  private:
+  std::unique_ptr<SimModel> own_model_;  ///< set when the backend owns its simulation
+  std::unique_ptr<SimData> own_data_;
   const SimModel& model_;
   SimData& data_;
   JointVector q0_ = JointVector::Zero();  ///< the pose activate placed the arm at

@@ -15,6 +15,7 @@
 #pragma once
 
 #include "nao/arm_model.hpp"
+#include "nao/rollout.hpp"  // limitCommand, rolloutStep: the rule every rollout here follows
 #include "nao/sim_arm.hpp"
 
 #include <Eigen/Core>
@@ -60,11 +61,6 @@ LinearArModel fitLinearAr(const std::vector<std::vector<JointVector>>& train,
 /// (a_past[0] = a(t−1); entries beyond its size count as 0).
 JointVector linearArAction(const LinearArModel& m, const JointVector& q, const std::vector<JointVector>& a_past);
 
-/// Controller step 4 (controller.hpp): q + a cut to the position limits and to what the servos
-/// can move in one period (v_max · period). Sets `limited` when anything was cut.
-JointVector limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
-                         bool& limited);
-
 /// A rollout's record: the hand path (the start pose's hand point, then one per tick), joint
 /// angles after each tick, and the ticks whose command was limited.
 struct Rollout {
@@ -77,8 +73,9 @@ struct Rollout {
 using ActionLaw = std::function<JointVector(const JointVector&, const std::vector<JointVector>&)>;
 
 /// Rolls `law` out for `ticks` ticks on the simulated arm from rest at q0 (clamped to the
-/// limits), as nao_rt's loop does: measured q -> action -> limitCommand -> stepSim; the applied
-/// action (command − q) is the next tick's a(t−1). `data` is reused (reset to q0).
+/// limits) with the runtime's own rollout step (nao/rollout.hpp: measured q -> action ->
+/// limitCommand -> one period of the arm, a non-finite action held); the applied action
+/// (command − q) is the next tick's a(t−1). `data` is reused (reset to q0).
 Rollout rolloutOnSim(const SimModel& sim, SimData& data, double period_s, const JointVector& q0, int ticks,
                      const ActionLaw& law);
 

@@ -1,0 +1,55 @@
+// The command limiter and the rollout step: what every tick of every rollout does between an
+// action and the arm's next measured pose (DESIGN §9, STYLE 19). The controller calls them once
+// per tick; the toolchain's rollouts (training data execution, evaluation baselines) call the
+// same functions with their own action laws, so a baseline never re-spells the controller.
+//
+//   q_cmd = limitCommand(q, a):   q + a inside the position limits and inside what the servos
+//                                 can reach in one period (v_max · T); a non-finite action holds
+//   rolloutStep(robot, a):        limitCommand at the robot's measured q, then one period of the
+//                                 robot backend; returns the measured q at its end
+//
+// All real-time safe: no allocation, no exception, no I/O.
+#pragma once
+
+#include "nao/arm_model.hpp"
+#include "nao/robot_backend.hpp"
+
+#include <cstdint>
+
+namespace nao {
+
+/// What limitCommand changed (bits).
+enum CommandLimitFlags : std::uint32_t {
+  kCommandClamped = 1u << 0,    ///< a joint was cut to its position limit or to one period's reach
+  kCommandNonFinite = 1u << 1,  ///< the action had a NaN/Inf: replaced by 0 (hold where the arm is)
+};
+
+/// The command interval of joint j at q: [lo_j, hi_j] = [q_min_j, q_max_j] ∩ [q_j − v_max_j T,
+/// q_j + v_max_j T] (T = period_s; the ends swapped when the arm is outside its limits by more
+/// than a period's reach, so the interval pulls it back). Rad.
+void commandBounds(const ArmModel& arm, double period_s, const JointVector& q, JointVector& lo, JointVector& hi);
+
+/// q + a clamped into commandBounds(q), written to q_cmd (rad). A non-finite a (any joint) is
+/// taken as a = 0: the arm holds (still inside the bounds). Returns CommandLimitFlags.
+std::uint32_t limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
+                           JointVector& q_cmd);
+
+/// The same, returning q_cmd; `limited` is true when the command differs from q + a.
+JointVector limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
+                         bool& limited);
+
+/// What one rollout step applied.
+struct RolloutStep {
+  JointVector q = JointVector::Zero();          ///< measured angles the step started from, rad
+  JointVector q_cmd = JointVector::Zero();      ///< the command sent (limitCommand), rad
+  JointVector a_applied = JointVector::Zero();  ///< q_cmd − q: the action as applied (the next a(t−1))
+  std::uint32_t limit = 0;                      ///< CommandLimitFlags
+};
+
+/// One control period of a rollout: from the robot's measured q, limitCommand(q, a), then
+/// robot.command(q_cmd) for one period. Fills `step` and returns the measured angles at the end
+/// of the period (the robot's, valid until its next command).
+const JointVector& rolloutStep(const ArmModel& arm, double period_s, RobotBackend& robot, const JointVector& a,
+                               RolloutStep& step);
+
+}  // namespace nao

@@ -1,0 +1,53 @@
+// The command limiter and the rollout step (nao/rollout.hpp).
+#include "nao/rollout.hpp"
+
+#include <algorithm>
+#include <utility>
+
+namespace nao {
+
+void commandBounds(const ArmModel& arm, double period_s, const JointVector& q, JointVector& lo, JointVector& hi) {
+  for (int j = 0; j < kNumJoints; ++j) {
+    const double step = arm.v_max[j] * period_s;
+    lo[j] = std::max(arm.q_min[j], q[j] - step);
+    hi[j] = std::min(arm.q_max[j], q[j] + step);
+    if (lo[j] > hi[j]) std::swap(lo[j], hi[j]);
+  }
+}
+
+std::uint32_t limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
+                           JointVector& q_cmd) {
+  std::uint32_t flags = 0;
+  // A NaN would pass std::clamp unchanged: hold instead.
+  if (!a.allFinite()) {
+    flags |= kCommandNonFinite;
+    q_cmd = q;
+  } else {
+    q_cmd = q + a;
+  }
+  JointVector lo, hi;
+  commandBounds(arm, period_s, q, lo, hi);
+  for (int j = 0; j < kNumJoints; ++j) {
+    const double c = std::clamp(q_cmd[j], lo[j], hi[j]);
+    if (c != q_cmd[j]) flags |= kCommandClamped;
+    q_cmd[j] = c;
+  }
+  return flags;
+}
+
+JointVector limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
+                         bool& limited) {
+  JointVector q_cmd;
+  limited = limitCommand(arm, period_s, q, a, q_cmd) != 0;
+  return q_cmd;
+}
+
+const JointVector& rolloutStep(const ArmModel& arm, double period_s, RobotBackend& robot, const JointVector& a,
+                               RolloutStep& step) {
+  step.q = robot.measured();
+  step.limit = limitCommand(arm, period_s, step.q, a, step.q_cmd);
+  step.a_applied = step.q_cmd - step.q;
+  return robot.command(step.q_cmd);
+}
+
+}  // namespace nao
