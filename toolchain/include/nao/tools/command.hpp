@@ -8,6 +8,8 @@
 // user can act on; main prints it after "nao_toolchain <command>: " and exits 1.
 #pragma once
 
+#include "nao/input_error.hpp"
+
 #include <CLI/CLI.hpp>
 
 #include <stdexcept>
@@ -16,10 +18,9 @@
 
 namespace nao::tools {
 
-class UserError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
+/// A problem with the user's input or work: the runtime's InputError, so an error from a parser the
+/// toolchain shares with the runtime (skeleton CSV, ...) is the same kind as its own.
+using UserError = nao::InputError;
 
 using CommandSetup = void (*)(CLI::App& app);
 

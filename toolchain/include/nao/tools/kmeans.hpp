@@ -2,9 +2,8 @@
 // feature-extracted trajectories built from them (DESIGN §6).
 #pragma once
 
-#include "nao/controller.hpp"  // kFeatureBlendPole: the runtime feeds the policy the same blend
-
 #include "nao/arm_model.hpp"
+#include "nao/feature_trajectory.hpp"
 
 #include <cstdint>
 #include <string>
@@ -32,9 +31,6 @@ struct KMeansResult {
   bool converged = false;              ///< true: a round changed no assignment (false: cap hit)
 };
 
-/// Index of the centroid nearest to q (Euclidean in joint space; ties go to the lower index).
-int nearestCentroid(const std::vector<JointVector>& centroids, const JointVector& q);
-
 /// k-means++ seeding (first centre uniform, then each with probability D(q)^2 / sum D^2) from a
 /// local generator seeded with options.seed, then rounds of "assign to nearest, update each
 /// centroid" until a round changes no assignment or max_iterations. A centroid left without
@@ -42,42 +38,11 @@ int nearestCentroid(const std::vector<JointVector>& centroids, const JointVector
 /// Throws UserError for k < 1 or fewer points than k.
 KMeansResult kmeansPlusPlus(const std::vector<JointVector>& points, const KMeansOptions& options);
 
-/// How a feature-extracted trajectory moves between key poses (DESIGN §6): once per 10 Hz tick,
-///   v(t) = (1 − γ) v(t−1) + κ (c(t) − f(t)),   f(t+1) = f(t) + v(t),   v(−1) = 0,
-/// with c(t) the key pose of the segment tick t is in. A critically damped second-order approach
-/// with both poles at `pole` (γ = 1 − pole², κ = (1 − pole)²): smooth, no overshoot, and
-/// causal — f(t+1) − f(t) is a function of (f(t), v(t−1), c(t)) alone, which are exactly the
-/// policy's inputs (q, a(t−1), r), so the reference-conditioned policy can follow it.
-/// After a key-pose change f(t) − c = e0 (1 + (1 − pole) n) poleⁿ (n ticks later).
-struct KeyPoseBlend {
-  double pole = kFeatureBlendPole;  ///< 0.7 per tick: 1 % of a step left after 19 ticks (1.9 s)
-  double gamma() const { return 1.0 - pole * pole; }
-  double kappa() const { return (1.0 - pole) * (1.0 - pole); }
-  /// v(t) from v(t−1), f(t) and c(t).
-  JointVector velocity(const JointVector& v_prev, const JointVector& f, const JointVector& c) const {
-    return (1.0 - gamma()) * v_prev + kappa() * (c - f);
-  }
-};
-
-/// Feature-extracted trajectory (DESIGN §6): the measured samples are labelled by nearest
-/// centroid; each run of equal labels is a segment whose key pose is its centroid, in force from
-/// the segment's first sample (the original segment timing); the trajectory starts at the first
-/// key pose at rest and follows `blend` toward the key pose in force, one step per output
-/// sample. One output pose per input sample (the samples are taken as consecutive ticks).
-std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
-                                           const std::vector<JointVector>& q, const KeyPoseBlend& blend = {});
-
-/// As above, with the segments taken from the measured samples (t_s, q) and the trajectory
-/// evaluated on the tick grid t_eval (increasing; e.g. the whole 10 Hz grid, including samples
-/// where no human was measured, which keep the key pose of the last measured sample): one output
-/// pose per entry of t_eval. Throws UserError for mismatched lengths, no measured sample or a
-/// decreasing grid.
-std::vector<JointVector> featureTrajectory(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
-                                           const std::vector<JointVector>& q, const std::vector<double>& t_eval,
-                                           const KeyPoseBlend& blend = {});
-
-/// The key pose in force at each tick of t_eval (index into centroids), by the rule above.
-std::vector<int> keyPoseLabels(const std::vector<JointVector>& centroids, const std::vector<double>& t_s,
-                               const std::vector<JointVector>& q, const std::vector<double>& t_eval);
+// Key-pose snapping and the feature-extracted trajectory are the runtime's
+// (nao/feature_trajectory.hpp): nao_rt scores a recorded reference against it.
+using nao::featureTrajectory;
+using nao::KeyPoseBlend;
+using nao::keyPoseLabels;
+using nao::nearestCentroid;
 
 }  // namespace nao::tools

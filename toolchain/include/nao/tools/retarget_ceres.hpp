@@ -18,6 +18,7 @@
 #pragma once
 
 #include "nao/retarget.hpp"
+#include "nao/retarget_sequence.hpp"
 
 #include <Eigen/Core>
 
@@ -49,13 +50,8 @@ const RetargetResult& solveRetargetCeres(const ArmModel& model, const RetargetPa
                                          CeresRetargetData& data, const Eigen::Vector3d& p_target_TH,
                                          const JointVector& q_target, const Eigen::Vector3d* u_target_TH = nullptr);
 
-/// One frame's targets.
-struct RetargetFrame {
-  Eigen::Vector3d p_target_TH = Eigen::Vector3d::Zero();  ///< x_target, torso frame, m
-  JointVector q_target = JointVector::Zero();             ///< human joint angles in NAO's order, rad
-  bool has_pointing = false;                              ///< whether u_target_TH is used
-  Eigen::Vector3d u_target_TH = Eigen::Vector3d::UnitX(); ///< hand pointing direction, torso frame
-};
+/// One frame's targets (the runtime's, nao/retarget_sequence.hpp).
+using nao::RetargetFrame;
 
 /// A whole sequence with the online fixed-size LM, warm-started frame to frame from a fresh
 /// start (first frame from its q_target clamped). One result per frame.

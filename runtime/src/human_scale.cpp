@@ -1,10 +1,11 @@
-#include "nao/tools/human_scale.hpp"
-#include "nao/tools/stats.hpp"
+// The human scale of a whole demonstration (nao/human_scale.hpp).
+#include "nao/human_scale.hpp"
 
-#include <algorithm>
+#include "nao/median.hpp"
+
 #include <vector>
 
-namespace nao::tools {
+namespace nao {
 
 HumanArmLengths estimateHumanArmLengths(const Skeleton& frames, const HumanKinematicsConfig& config) {
   HumanKinematicsConfig per_frame = config;
@@ -38,4 +39,4 @@ HumanKinematicsConfig withDemoScale(HumanKinematicsConfig config, const HumanArm
   return config;
 }
 
-}  // namespace nao::tools
+}  // namespace nao

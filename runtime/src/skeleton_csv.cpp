@@ -1,13 +1,13 @@
-#include "nao/tools/skeleton_csv.hpp"
+#include "nao/skeleton_csv.hpp"
 
+#include "nao/csv_reader.hpp"
 #include "nao/file_io.hpp"
-#include "nao/tools/command.hpp"
-#include "nao/tools/csv.hpp"
+#include "nao/input_error.hpp"
 
 #include <cmath>
 #include <sstream>
 
-namespace nao::tools {
+namespace nao {
 
 std::string skeletonCsvHeader() {
   std::string h = "t_s";
@@ -27,9 +27,9 @@ void writeSkeletonColumns(std::ostream& out, const SkeletonFrame& frame) {
   }
 }
 
-void writeSkeletonCsv(const std::string& path, const Skeleton& frames, bool with_views) {
+void writeSkeletonCsv(const std::string& path, const Skeleton& frames, bool with_views, int digits) {
   std::ostringstream out;
-  out.precision(10);
+  out.precision(digits);
   out << skeletonCsvHeader();
   if (with_views) {
     for (const char* name : kSkeletonPointNames) out << ',' << name << "_cams";
@@ -47,7 +47,7 @@ void writeSkeletonCsv(const std::string& path, const Skeleton& frames, bool with
   // Whole or not at all: a reader never sees half a skeleton.
   const std::string text = out.str();
   if (const std::string problem = writeFileAtomically(path, text.data(), text.size()); !problem.empty())
-    throw UserError("cannot write " + path + ": " + problem);
+    throw InputError("cannot write " + path + ": " + problem);
 }
 
 Skeleton readSkeletonCsv(const std::string& path) {
@@ -61,12 +61,12 @@ Skeleton readSkeletonCsv(const std::string& path) {
   Skeleton frames;
   while (csv.next()) {
     if (csv.cells() < csv.columns())
-      throw UserError(csv.where() + ": " + std::to_string(csv.cells()) + " values, expected " +
+      throw InputError(csv.where() + ": " + std::to_string(csv.cells()) + " values, expected " +
                       std::to_string(csv.columns()));
     SkeletonFrame f;
     f.t_s = csv.number(c_t);
     if (!frames.empty() && f.t_s <= frames.back().t_s)
-      throw UserError(csv.where() + ": time t_s=" + std::to_string(f.t_s) + " does not increase");
+      throw InputError(csv.where() + ": time t_s=" + std::to_string(f.t_s) + " does not increase");
     for (int i = 0; i < kNumSkeletonPoints; ++i) {
       const double ok = csv.number(c_pt[i][3]);
       f.ok[i] = ok != 0.0;
@@ -79,4 +79,4 @@ Skeleton readSkeletonCsv(const std::string& path) {
   return frames;
 }
 
-}  // namespace nao::tools
+}  // namespace nao
