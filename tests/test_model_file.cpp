@@ -518,3 +518,72 @@ TEST_CASE("an empty file, unordered joint limits and non-positive velocity limit
   CHECK_THROWS_WITH_AS(nao::encodeModel(h, nao::test::randomManifestTensors(nao::smallArch(), 1)),
                        doctest::Contains("joint 'RShoulderRoll' has lower limit"), ModelFileError);
 }
+
+TEST_CASE("autonomous starts round-trip through the metadata: one list per movement, other keys kept in place") {
+  const std::vector<std::string> movements = {"elbow", "whole_arm", "wrist"};
+  nao::ModelStarts starts(3);
+  nao::ModelStart a;
+  a.name = "elbow_003";
+  a.ticks = 117;
+  a.q << 1.25, -0.3, 1.0 / 3.0, 0.6, -1e-17;  // not short decimals: the JSON must keep every bit
+  nao::ModelStart b = a;
+  b.name = "elbow_010";
+  b.ticks = 1;
+  b.q *= -0.5;
+  starts[0] = {a, b};
+  starts[2] = {a};
+  const std::string meta = R"({"format":"nao-rt policy metadata 1","split":{"val":["elbow_003"]},"z":1})";
+  const std::string with = nao::withModelStarts(meta, movements, starts);
+  // Keys before stay where they were; "starts" is added at the end, movements in order.
+  CHECK(with.rfind(R"({"format":"nao-rt policy metadata 1","split":{"val":["elbow_003"]},"z":1,"starts":{"elbow":)", 0) == 0);
+  CHECK(with.find(R"("whole_arm":[])") != std::string::npos);
+  const nao::ModelStarts back = nao::modelStarts(with, movements, kOrigin);
+  REQUIRE(back.size() == 3);
+  REQUIRE(back[0].size() == 2);
+  CHECK(back[0][0].name == "elbow_003");
+  CHECK(back[0][0].ticks == 117);
+  CHECK(back[0][0].q == a.q);  // bit for bit
+  CHECK(back[0][1].q == b.q);
+  CHECK(back[1].empty());
+  REQUIRE(back[2].size() == 1);
+  CHECK(back[2][0].name == "elbow_003");
+  // Replacing them again gives the same text (a second model-starts run changes nothing).
+  CHECK(nao::withModelStarts(with, movements, starts) == with);
+  // No key: no starts, one empty list per movement.
+  const nao::ModelStarts none = nao::modelStarts(meta, movements, kOrigin);
+  CHECK(none.size() == 3);
+  CHECK(std::all_of(none.begin(), none.end(), [](const auto& l) { return l.empty(); }));
+  CHECK(nao::modelStarts("not json", movements, kOrigin).size() == 3);
+}
+
+TEST_CASE("unusable autonomous starts are refused with the origin and what is wrong") {
+  const std::vector<std::string> movements = {"elbow", "whole_arm", "wrist"};
+  const std::string ok_entry = R"({"name":"e_1","ticks":5,"q":[0,0,0,0,0]})";
+  const auto meta = [&](const std::string& elbow, const std::string& extra = "") {
+    return R"({"starts":{"elbow":)" + elbow + R"(,"whole_arm":[],"wrist":[])" + extra + "}}";
+  };
+  CHECK(nao::modelStarts(meta("[" + ok_entry + "]"), movements, kOrigin)[0].size() == 1);
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {R"({"starts":[1]})", "not an object"},
+      {R"({"starts":{"elbow":[],"whole_arm":[]}})", "no entry for movement 'wrist'"},
+      {meta("[]", R"(,"wave":[])"), "'wave'"},
+      {meta("{}"), "not a list"},
+      {meta("[1]"), "not an object"},
+      {meta(R"([{"ticks":5,"q":[0,0,0,0,0]}])"), "no name"},
+      {meta(R"([{"name":"","ticks":5,"q":[0,0,0,0,0]}])"), "no name"},
+      {meta(R"([{"name":"e","ticks":0,"q":[0,0,0,0,0]}])"), "no ticks"},
+      {meta(R"([{"name":"e","ticks":36001,"q":[0,0,0,0,0]}])"), "no ticks"},
+      {meta(R"([{"name":"e","ticks":2.5,"q":[0,0,0,0,0]}])"), "no ticks"},
+      {meta(R"([{"name":"e","ticks":5,"q":[0,0,0,0]}])"), "no q"},
+      {meta(R"([{"name":"e","ticks":5,"q":[0,0,"x",0,0]}])"), "not finite numbers"},
+  };
+  for (const auto& [text, says] : bad) {
+    CAPTURE(text);
+    CHECK_THROWS_WITH_AS(nao::modelStarts(text, movements, kOrigin), doctest::Contains(says.c_str()), ModelFileError);
+    CHECK_THROWS_WITH_AS(nao::modelStarts(text, movements, kOrigin), doctest::Contains("x.bin: metadata \"starts\""),
+                         ModelFileError);
+  }
+  nao::ModelStarts wrong(2);
+  CHECK_THROWS_AS(nao::withModelStarts("{}", movements, wrong), ModelFileError);
+  CHECK_THROWS_AS(nao::withModelStarts("[1]", movements, nao::ModelStarts(3)), ModelFileError);
+}

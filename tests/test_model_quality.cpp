@@ -10,7 +10,7 @@
 #include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/test_util.hpp"
-#include "rt_run.hpp"
+#include "nao/model_metadata.hpp"
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
@@ -41,9 +41,9 @@ Scores score(const std::string& path) {
   for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
   PolicyWeights<PaperPolicyDims> w =
       bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
-  w.residual_gain = rt::modelResidualGain(model.header.metadata_json, path);
-  w.linear_ar = rt::linearArBase<PaperPolicyDims::kMovements>(
-      rt::modelLinearAr(model.header.metadata_json, model.header.arch.movements, path));
+  w.residual_gain = modelResidualGain(model.header.metadata_json, path);
+  w.linear_ar = linearArBase<PaperPolicyDims::kMovements>(
+      modelLinearAr(model.header.metadata_json, model.header.arch.movements, path));
   auto ws = makePolicyWorkspace<PaperPolicyDims>();
 
   const nlohmann::json meta = nlohmann::json::parse(model.header.metadata_json);

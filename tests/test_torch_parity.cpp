@@ -12,7 +12,7 @@
 #include "nao/tools/reference_source.hpp"
 #include "policy_torch.hpp"
 #include "policy_train.hpp"
-#include "rt_run.hpp"
+#include "nao/model_metadata.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -179,7 +179,7 @@ void loadInto(tools::PolicyNet& net, const ModelFile& model) {
 }
 
 // The metadata's linear AR base as the trainer holds it (per movement; empty: none).
-std::vector<tools::LinearArModel> linearArModels(const rt::LinearArCoefficients& k) {
+std::vector<tools::LinearArModel> linearArModels(const LinearArCoefficients& k) {
   std::vector<tools::LinearArModel> out;
   for (std::size_t m = 0; m < k.c.size(); ++m) {
     tools::LinearArModel model;
@@ -264,7 +264,7 @@ TEST_CASE("small configuration: streaming runtime inference equals libtorch's wh
           for (int k = 0; k < x.order; ++k) x.alpha.push_back(uniform(rng, -0.9, 0.9) / static_cast<float>(1 + k));
         }
       net->setLinearAr(ar);
-      weights.linear_ar = rt::linearArBase<SmallPolicyDims::kMovements>(tools::linearArCoefficients(ar));
+      weights.linear_ar = linearArBase<SmallPolicyDims::kMovements>(tools::linearArCoefficients(ar));
       REQUIRE(weights.linear_ar.on);
     }
     const std::string mode = conditioningName(c);
@@ -291,10 +291,10 @@ TEST_CASE("paper configuration: the committed models agree with libtorch within 
     for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
     PolicyWeights<PaperPolicyDims> weights =
         bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
-    weights.residual_gain = rt::modelResidualGain(model.header.metadata_json, path.string());
+    weights.residual_gain = modelResidualGain(model.header.metadata_json, path.string());
     net->residual_gain = weights.residual_gain;
-    const rt::LinearArCoefficients ar = rt::modelLinearAr(model.header.metadata_json, 3, path.string());
-    weights.linear_ar = rt::linearArBase<PaperPolicyDims::kMovements>(ar);
+    const LinearArCoefficients ar = modelLinearAr(model.header.metadata_json, 3, path.string());
+    weights.linear_ar = linearArBase<PaperPolicyDims::kMovements>(ar);
     net->setLinearAr(linearArModels(ar));
     std::vector<std::vector<JointVector>> centroids(3);
     for (int m = 0; m < 3; ++m)

@@ -142,4 +142,40 @@ std::vector<JointVector> modelKeyPoses(const ModelFile& model, int m);
 /// The joints of `arm` as model.bin stores them.
 std::vector<TrainedJoint> trainedJoints(const ArmModel& arm);
 
+// ---------------------------------------------------------------------------------------------
+// Autonomous starts (DESIGN §7-8): the start states an autonomous run begins from, carried in
+// the metadata JSON under "starts" so that the runtime never regenerates a demonstration:
+//   "starts": {"<movement>": [{"name": "<demo>", "ticks": N, "q": [q0, q1, q2, q3, q4]}, ...], ...}
+// one key per movement in movement-index order, each list the held-out demonstrations (the
+// model's split.val of that movement, in that order): their names, lengths in 10 Hz ticks and
+// start poses (rad, joint order). Code: model_starts.cpp.
+
+/// One autonomous start: a held-out demonstration's start state.
+struct ModelStart {
+  std::string name;                     ///< the demonstration, e.g. "elbow_003"
+  std::int64_t ticks = 0;               ///< its length, 10 Hz ticks (>= 1)
+  JointVector q = JointVector::Zero();  ///< its start pose, rad (the arm starts there at rest, a(−1) = 0)
+};
+
+/// Starts per movement, outer index = movement index (ModelHeader::movement_names order).
+using ModelStarts = std::vector<std::vector<ModelStart>>;
+
+/// Largest `ticks` a start may give (one hour at 10 Hz: a run's own cap).
+inline constexpr std::int64_t kMaxStartTicks = 36000;
+
+/// The "starts" of a model's metadata, one list per movement of `movement_names` (empty lists
+/// when the key is absent). Throws ModelFileError "<origin>: ..." when it is present but
+/// unusable: not an object, a key that is not one of the movements or a movement without a key,
+/// an entry that is not {"name": non-empty string, "ticks": integer in 1..kMaxStartTicks,
+/// "q": 5 finite numbers}.
+ModelStarts modelStarts(const std::string& metadata_json, const std::vector<std::string>& movement_names,
+                        const std::string& origin);
+
+/// `metadata_json` (an object, or empty for {}) with "starts" set to `starts` (one list per
+/// movement of `movement_names`, keys in that order); every other key kept in place. The
+/// serialiser the trainer and nao_toolchain model-starts write with. Throws ModelFileError when
+/// the metadata is not a JSON object or the lists do not match the movements.
+std::string withModelStarts(const std::string& metadata_json, const std::vector<std::string>& movement_names,
+                            const ModelStarts& starts);
+
 }  // namespace nao

@@ -1,10 +1,10 @@
 #include "policy_train.hpp"
 
 #include "nao/controller.hpp"
+#include "nao/model_metadata.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
-#include "rt_run.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -21,8 +21,8 @@
 
 namespace nao::tools {
 
-rt::LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models) {
-  rt::LinearArCoefficients k;
+LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models) {
+  LinearArCoefficients k;
   for (const LinearArModel& m : models) {
     std::array<double, 5> c{}, beta{};
     std::array<std::array<double, 5>, kPolicyArMaxOrder> alpha{};
@@ -310,10 +310,10 @@ std::vector<PolicySequence> rolloutsOf(const PolicyData& data, const std::vector
   for (const std::vector<float>& f : floats) pointers.push_back(f.data());
   PolicyWeights<Dims> weights = bindPolicyWeights<Dims>(pointers.data(), pointers.size(), net->conditioning());
   weights.residual_gain = static_cast<float>(net->residual_gain);
-  weights.linear_ar = rt::linearArBase<Dims::kMovements>(linearArCoefficients(net->linearAr()));
+  weights.linear_ar = linearArBase<Dims::kMovements>(linearArCoefficients(net->linearAr()));
   const auto ws = makePolicyWorkspace<Dims>();
   std::size_t rollout = static_cast<std::size_t>(-1);  // which of `demos` is being rolled out
-  // The step row as the controller computes it for a run as long as the demonstration (nao_rt --start-demo).
+  // The step row as the controller computes it for a run as long as the demonstration (nao_rt --reference none --start I).
   ControllerParams pace;
   pace.phase_ticks = net->phase_ticks;
   const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,

@@ -17,8 +17,8 @@
 #include <string>
 #include <vector>
 
-namespace nao::rt {
-struct LinearArCoefficients;  // runtime/app/rt_run.hpp
+namespace nao {
+struct LinearArCoefficients;  // nao/model_metadata.hpp
 }
 
 namespace nao::tools {
@@ -174,8 +174,8 @@ std::vector<PolicySequence> daggerRollouts(const PolicyData& data, const std::ve
 std::vector<PolicySequence> gatherSequences(ProcessGroup& group, std::vector<PolicySequence> mine);
 
 /// Per-movement linear AR models as nao_rt reads them from the metadata (training.linear_ar,
-/// doubles; rt::linearArBase makes the runtime's float base of them).
-rt::LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models);
+/// doubles; linearArBase makes the runtime's float base of them).
+LinearArCoefficients linearArCoefficients(const std::vector<LinearArModel>& models);
 
 /// Normalised and rad^2 MSE of `net` on `sequences` (evaluation mode, no gradients).
 SplitLoss evaluatePolicy(const PolicyNet& net, const std::vector<PolicySequence>& sequences);
