@@ -101,6 +101,7 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(j["weights"] == "file");
   CHECK(j["precision"] == "fp32");
   CHECK(j["kernel"] == nao::policyKernelName(nao::defaultPolicyKernel()));
+  CHECK(j["starts"] == nlohmann::json::parse(R"({"elbow":[],"whole_arm":[],"wrist":[]})"));  // none in this model
   nao::rt::InfoOptions o8 = withWeights(path);
   o8.precision = "int8";
   CHECK(nlohmann::json::parse(info(o8).out)["precision"] == "int8");
@@ -196,4 +197,31 @@ TEST_CASE("nao_rt --info shows metadata that is not JSON as a string") {
   const Run r = info(withWeights(path));
   REQUIRE(r.status == 0);
   CHECK(nlohmann::json::parse(r.out)["metadata"].is_string());
+}
+
+TEST_CASE("nao_rt --info lists the autonomous starts per movement (name, ticks), and refuses unusable ones in one line") {
+  nao::ModelHeader h = makeHeader();
+  nao::ModelStart a, b;
+  a.name = "elbow_003";
+  a.ticks = 117;
+  a.q << 1.2, -0.3, 1.0, 0.6, 0.1;
+  b.name = "wrist_002";
+  b.ticks = 98;
+  h.metadata_json = nao::withModelStarts(h.metadata_json, h.movement_names, {{a}, {}, {b}});
+  const std::string path = modelPath("with_starts.bin");
+  nao::writeModelFile(path, h, randomTensors(1));
+  const Run r = info(withWeights(path));
+  REQUIRE(r.status == 0);
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  CHECK(j["starts"] == nlohmann::json::parse(
+                           R"({"elbow":[{"name":"elbow_003","ticks":117}],"whole_arm":[],"wrist":[{"name":"wrist_002","ticks":98}]})"));
+  CHECK(j["metadata"]["starts"]["elbow"][0]["q"][0] == 1.2);
+
+  h.metadata_json = R"({"starts":{"elbow":[{"name":"x","ticks":5}],"whole_arm":[],"wrist":[]}})";
+  const std::string bad = modelPath("bad_starts.bin");
+  nao::writeModelFile(bad, h, randomTensors(1));
+  const Run rb = info(withWeights(bad));
+  CHECK(rb.status == 1);
+  CHECK(oneLine(rb.err));
+  CHECK(rb.err.find("has no q") != std::string::npos);
 }

@@ -1,6 +1,8 @@
-// nao_rt runs in process (rt_run, rt_cli): the run directory's contract, determinism, and the
-// one-line errors for bad inputs. The policy is a small random model written to a temporary
-// model.bin and loaded with --weights, so the run is compiled with SmallPolicyDims.
+// nao_rt runs in process (rt_config, rt_run, rt_rundir, rt_cli): the run directory's contract,
+// determinism, the autonomous starts, and the one-line errors for bad inputs. The policy is a
+// small random model written to a temporary model.bin and loaded with --weights, so the run is
+// compiled with SmallPolicyDims. References are recorded skeleton CSVs of held-out synthetic
+// demonstrations (support/reference_files.hpp).
 #include "rt_cli.hpp"
 #include "rt_run.hpp"
 
@@ -9,6 +11,7 @@
 #include "nao/controller.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/random_policy.hpp"
+#include "support/reference_files.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -106,6 +109,14 @@ rt::RunOptions options(const std::string& weights, const std::string& reference,
   return o;
 }
 
+/// --reference file: of held-out demonstration 0 of run seed 1000000 + seed of `movement`.
+rt::RunOptions recorded(const std::string& weights, const std::string& movement, const fs::path& log = {},
+                        std::uint64_t seed = 1) {
+  rt::RunOptions o = options(weights, "file:" + test::syntheticReferenceCsv(movement, seed, suiteDir() / "references"), log);
+  o.movement = movement;
+  return o;
+}
+
 std::string bytes(const fs::path& p) {
   std::ifstream f(p, std::ios::binary);
   std::ostringstream s;
@@ -148,7 +159,7 @@ TEST_CASE("the static weight storage holds exactly the 64-byte padded manifest")
 
 TEST_CASE("a run writes ticks.csv, attention.bin and summary.json as the contract says") {
   const fs::path dir = tempDir("contract");
-  const Outcome r = run(options(referenceModel(), "synthetic:elbow", dir));
+  const Outcome r = run(recorded(referenceModel(), "elbow", dir));
   REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
   CHECK(r.err.empty());
 
@@ -180,12 +191,12 @@ TEST_CASE("a run writes ticks.csv, attention.bin and summary.json as the contrac
   CHECK(s["ee_rmse_m"].is_number());
   CHECK(s["model"]["path"] == referenceModel());
   CHECK(s["model"]["checksum"].get<std::string>().size() == 18);
-  CHECK(s["reference"].get<std::string>().find("synthetic:elbow (seed 1000001") == 0);
+  CHECK(s["reference"] == "file:" + (suiteDir() / "references" / "elbow_1.csv").string());
+  CHECK(s["start_q"].size() == 5);
   CHECK(s["movement"] == "elbow");
-  CHECK(s["seed"] == 1);
   CHECK(s["realtime"] == false);
   CHECK(s["attention"]["records_written"] == r.report.ticks);
-  MESSAGE("random small policy on synthetic:elbow: ee RMSE " << r.report.ee_rmse_m * 1e3 << " mm over "
+  MESSAGE("random small policy on a recorded elbow: ee RMSE " << r.report.ee_rmse_m * 1e3 << " mm over "
                                                              << r.report.ticks << " ticks");
 
   // attention.bin: the header says what it holds.
@@ -207,8 +218,7 @@ TEST_CASE("a run writes ticks.csv, attention.bin and summary.json as the contrac
 TEST_CASE("two runs with the same arguments give byte-identical ticks.csv (--zero-timing) and attention.bin") {
   const fs::path a = tempDir("det_a"), b = tempDir("det_b");
   for (const fs::path& dir : {a, b}) {
-    rt::RunOptions o = options(referenceModel(), "synthetic:wrist", dir);
-    o.seed = 3;
+    rt::RunOptions o = recorded(referenceModel(), "wrist", dir, 3);
     o.zero_timing = true;
     o.ticks = 150;  // past the reference's end too (no human: hold, then home)
     const Outcome r = run(o);
@@ -238,7 +248,7 @@ TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 a
   int i = 0;
   for (const char* precision : {"fp32", "int8", "int8", "fp32-packed"}) {
     const fs::path dir = tempDir(std::string("precision_") + std::to_string(i));
-    rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
+    rt::RunOptions o = recorded(referenceModel(), "elbow", dir);
     o.precision = precision;
     o.zero_timing = true;
     const Outcome r = run(o);
@@ -256,13 +266,13 @@ TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 a
   CHECK(ticks[3] == ticks[0]);  // the packed copy: the same floats, the same bits
   // Default for --weights: fp32.
   const fs::path dir = tempDir("precision_default");
-  REQUIRE(run(options(referenceModel(), "synthetic:elbow", dir)).report.status == 0);
+  REQUIRE(run(recorded(referenceModel(), "elbow", dir)).report.status == 0);
   CHECK(nlohmann::json::parse(bytes(dir / "summary.json"))["model"]["precision"] == "fp32");
 }
 
 TEST_CASE("without --zero-timing the timing columns hold the measured stage times") {
   const fs::path dir = tempDir("timing");
-  rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
+  rt::RunOptions o = recorded(referenceModel(), "elbow", dir);
   o.ticks = 5;
   REQUIRE(run(o).report.status == 0);
   std::istringstream rows(bytes(dir / "ticks.csv"));
@@ -299,20 +309,31 @@ TEST_CASE("bad inputs end the run with a non-zero status and one clear line") {
     const char* says;
   };
   std::vector<Case> cases;
-  cases.push_back({"truncated weights", options(variant("truncated.bin", data.substr(0, data.size() / 2)), "synthetic:elbow"),
+  cases.push_back({"truncated weights", recorded(variant("truncated.bin", data.substr(0, data.size() / 2)), "elbow"),
                    1, "truncated"});
-  cases.push_back({"a flipped byte", options(variant("flipped.bin", flipped), "synthetic:elbow"), 1, "checksum"});
+  cases.push_back({"a flipped byte", recorded(variant("flipped.bin", flipped), "elbow"), 1, "checksum"});
   cases.push_back({"weights of another architecture",
-                   options(writeModel("other.bin", Conditioning::kReference, "{}", other), "synthetic:elbow"), 1,
+                   recorded(writeModel("other.bin", Conditioning::kReference, "{}", other), "elbow"), 1,
                    "differs from the compiled one"});
-  cases.push_back({"a missing weights file", options((dir / "missing.bin").string(), "synthetic:elbow"), 1, "missing.bin"});
+  cases.push_back({"a missing weights file", recorded((dir / "missing.bin").string(), "elbow"), 1, "missing.bin"});
   {
-    rt::RunOptions o = options(good, "synthetic:elbow");
+    rt::RunOptions o = recorded(good, "elbow");
     o.urdf_path = (dir / "missing.urdf").string();
     cases.push_back({"a missing URDF", o, 1, "missing.urdf"});
   }
   cases.push_back({"an unknown reference", options(good, "camera:0"), 2, "unknown reference 'camera:0'"});
-  cases.push_back({"an unknown synthetic movement", options(good, "synthetic:wave"), 2, "wave"});
+  {
+    rt::RunOptions o = options(good, "synthetic:elbow");
+    o.movement = "elbow";
+    cases.push_back({"a synthetic reference (the runtime never synthesises one)", o, 2,
+                     "unknown reference 'synthetic:elbow'"});
+  }
+  cases.push_back({"no reference", options(good, ""), 2, "--reference is required"});
+  {
+    rt::RunOptions o = recorded(good, "elbow");
+    o.movement = "wave";
+    cases.push_back({"a movement the model does not have", o, 1, "no movement 'wave'"});
+  }
   {
     rt::RunOptions o = options(good, "file:/nonexistent/skeleton.csv");
     o.movement = "elbow";
@@ -324,15 +345,10 @@ TEST_CASE("bad inputs end the run with a non-zero status and one clear line") {
     o.movement = "elbow";
     cases.push_back({"none with a reference-conditioned model", o, 1, "autonomous"});
   }
-  {
-    rt::RunOptions o = options(good, "synthetic:elbow");
-    o.movement = "wrist";
-    cases.push_back({"a --movement that contradicts the reference", o, 2, "contradicts"});
-  }
-  cases.push_back({"no model at all", options("", "synthetic:elbow"), 1, "--weights"});
+  cases.push_back({"no model at all", recorded("", "elbow"), 1, "--weights"});
   {
     const std::string blocker = variant("not_a_dir", "x");
-    cases.push_back({"a run directory that cannot be made", options(good, "synthetic:elbow", fs::path(blocker) / "run"),
+    cases.push_back({"a run directory that cannot be made", recorded(good, "elbow", fs::path(blocker) / "run"),
                      1, "run directory"});
   }
   for (const Case& c : cases) {
@@ -359,13 +375,15 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   rt::CommandLine cl;
   std::string out, err;
   CHECK(parse({"--help"}, cl, out, err) == 0);
-  for (const char* flag : {"--weights", "--urdf", "--reference", "--movement", "--seed", "--ticks", "--seconds",
+  for (const char* flag : {"--weights", "--urdf", "--reference", "--movement", "--start", "--start-pose", "--ticks", "--seconds",
                            "--realtime", "--log", "--attention-shm", "--info", "--zero-timing", "--precision",
                            "--lola-io-thread", "--lola-io-wait-ms", "--emulate-tick-ms"})
     CHECK_MESSAGE(out.find(flag) != std::string::npos, flag);
 
   for (std::vector<const char*> bad : {std::vector<const char*>{"--bogus"}, {"--ticks", "-3"}, {"--ticks", "ten"},
-                                       {"--ticks", "5", "--seconds", "2"}, {"--seed"}, {"--precision", "fp16"},
+                                       {"--ticks", "5", "--seconds", "2"}, {"--seed", "1"}, {"--start-demo", "0"},
+                                       {"--test-seed", "1"}, {"--start", "-1"}, {"--start-pose", "0,1,2"},
+                                       {"--precision", "fp16"},
                                        {"--emulate-tick-ms", "-1"}, {"--lola-io-wait-ms", "12"}}) {
     rt::CommandLine c;
     CAPTURE(bad[0]);
@@ -375,13 +393,14 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   }
 
   rt::CommandLine c;
-  REQUIRE(parse({"--weights", "m.bin", "--reference", "file:x.csv", "--movement", "elbow", "--seed", "4", "--ticks",
+  REQUIRE(parse({"--weights", "m.bin", "--reference", "file:x.csv", "--movement", "elbow", "--ticks",
                  "20", "--realtime", "--log", "out", "--attention-shm", "nao_x", "--zero-timing", "--precision", "int8"},
                 c, out, err) == -1);
   CHECK(c.run.weights_path == "m.bin");
   CHECK(c.run.reference == "file:x.csv");
   CHECK(c.run.movement == "elbow");
-  CHECK(c.run.seed == 4);
+  CHECK(c.run.start_index == -1);
+  CHECK(c.run.start_pose.empty());
   CHECK(c.run.ticks == 20);
   CHECK(c.run.realtime);
   CHECK(c.run.log_dir == "out");
@@ -406,7 +425,7 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
 
 TEST_CASE("--realtime paces the ticks on 100 ms deadlines and gives the same records as back to back") {
   const fs::path a = tempDir("rt_a"), b = tempDir("rt_b");
-  rt::RunOptions o = options(referenceModel(), "synthetic:elbow", a);
+  rt::RunOptions o = recorded(referenceModel(), "elbow", a);
   o.ticks = 5;
   o.zero_timing = true;
   o.realtime = true;
@@ -432,7 +451,7 @@ TEST_CASE("--realtime paces the ticks on 100 ms deadlines and gives the same rec
 }
 
 TEST_CASE("--attention-shm puts the ring into shared memory for the run") {
-  rt::RunOptions o = options(referenceModel(), "synthetic:elbow");
+  rt::RunOptions o = recorded(referenceModel(), "elbow");
   o.ticks = 3;
   o.attention_shm = "nao_rt_test_run_" + std::to_string(::getpid());
   const Outcome r = run(o);
@@ -449,45 +468,173 @@ TEST_CASE("--attention-shm puts the ring into shared memory for the run") {
   CHECK(status == 1);
 }
 
-TEST_CASE("--reference none rolls an autonomous model out from s_0 and reports the DTW to the validation demos") {
-  const std::string model = writeModel(
-      "autonomous.bin", Conditioning::kAutonomous,
-      R"({"split":{"train":["elbow_000"],"val":["elbow_003","whole_arm_001","elbow_010","wrist_003"]}})");
-  const fs::path dir = tempDir("none");
-  rt::RunOptions o = options(model, "none", dir);
-  o.movement = "elbow";
-  const Outcome r = run(o);
-  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
-  const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
-  CHECK(s["validation_demos"] == nlohmann::json::array({"elbow_003", "elbow_010"}));
-  CHECK(s["validation_seed"] == 1);
-  CHECK(s["validation_seed_assumed"] == true);
-  CHECK(s["ee_dtw_m"].is_number());
-  CHECK(s["ee_dtw_m"].get<double>() > 0.0);
-  CHECK(s["ee_rmse_m"].is_null());
-  CHECK(s["faults"]["no_human"] == 0);  // an autonomous model needs no human
-  MESSAGE("random autonomous small policy, elbow: ee DTW " << r.report.ee_dtw_m * 1e3 << " mm over "
-                                                           << r.report.ticks << " ticks");
+namespace {
 
-  // The same demonstrations, regenerated, start where the run started and set its length.
-  const ArmModel arm = loadArmModel(test::kUrdfPath);
-  const std::vector<JointVector> centroids = elbowKeyPoses(model);
-  const tools::ReferenceStream d3 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 3, centroids);
-  const tools::ReferenceStream d10 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 10, centroids);
-  CHECK(r.report.ticks == std::lround(static_cast<double>(d3.target.size() + d10.target.size()) / 2.0));
-  CHECK(d3.description.find("seed 1,") != std::string::npos);
+// Starts of a test model: elbow has two, whole_arm one, wrist none.
+const JointVector kStartA = (JointVector() << 1.2, -0.3, 1.0, 0.6, 0.1).finished();
+const JointVector kStartB = (JointVector() << 0.9, -0.5, 0.8, 0.9, -0.2).finished();
+const JointVector kStartC = (JointVector() << 1.4, -0.2, 1.2, 0.5, 0.0).finished();
 
-  // A model without validation demonstrations cannot be rolled out.
-  rt::RunOptions no_val = options(writeModel("autonomous_noval.bin", Conditioning::kAutonomous), "none");
-  no_val.movement = "elbow";
-  int status = 0;
-  const std::string err = errorLine(no_val, status);
-  CHECK(status == 1);
-  CHECK(err.find("split.val") != std::string::npos);
+// The model's movements are elbow, whole_arm, wrist (writeModel): starts in that order.
+std::string startsMetadata(const std::string& metadata = "{}") {
+  const ModelStarts starts = {{{"elbow_003", 40, kStartA}, {"elbow_010", 25, kStartB}},
+                              {{"whole_arm_001", 30, kStartC}},
+                              {}};
+  return withModelStarts(metadata, {"elbow", "whole_arm", "wrist"}, starts);
+}
+
+const std::string& autonomousModel() {
+  static const std::string path = writeModel("autonomous.bin", Conditioning::kAutonomous, startsMetadata());
+  return path;
+}
+
+rt::RunOptions rollout(const std::string& movement, const fs::path& log = {}) {
+  rt::RunOptions o = options(autonomousModel(), "none", log);
+  o.movement = movement;
+  o.zero_timing = true;
+  return o;
+}
+
+}  // namespace
+
+TEST_CASE("--reference none rolls an autonomous model out from its I-th start of the movement, at rest, for that start's length") {
+  const fs::path d0 = tempDir("start_0"), d1 = tempDir("start_1");
+  const Outcome r0 = run(rollout("elbow", d0));  // --start absent: start 0
+  REQUIRE_MESSAGE(r0.report.status == 0, r0.report.error);
+  rt::RunOptions o1 = rollout("elbow", d1);
+  o1.start_index = 1;
+  const Outcome r1 = run(o1);
+  REQUIRE_MESSAGE(r1.report.status == 0, r1.report.error);
+
+  const nlohmann::json s0 = nlohmann::json::parse(bytes(d0 / "summary.json"));
+  const nlohmann::json s1 = nlohmann::json::parse(bytes(d1 / "summary.json"));
+  CHECK(r0.report.ticks == 40);
+  CHECK(r1.report.ticks == 25);
+  CHECK(s0["start_name"] == "elbow_003");
+  CHECK(s0["start_index"] == 0);
+  CHECK(s1["start_name"] == "elbow_010");
+  CHECK(s1["start_index"] == 1);
+  for (int j = 0; j < kNumJoints; ++j) {
+    CHECK(s0["start_q"][static_cast<std::size_t>(j)].get<double>() == kStartA[j]);
+    CHECK(s1["start_q"][static_cast<std::size_t>(j)].get<double>() == kStartB[j]);
+  }
+  CHECK(s0["ee_rmse_m"].is_null());  // nothing to be scored against: no recorded reference
+  CHECK(s0["faults"]["no_human"] == 0);  // an autonomous model needs no human
+  CHECK(r0.out.find("elbow_003") != std::string::npos);
+  CHECK(bytes(d0 / "ticks.csv") != bytes(d1 / "ticks.csv"));
+
+  // The start is a pose at rest with a(-1) = 0: --start-pose of the same pose for the same
+  // length is the same run, byte for byte.
+  const fs::path dp = tempDir("start_pose_a");
+  rt::RunOptions pose = rollout("elbow", dp);
+  pose.start_pose.assign(kStartA.data(), kStartA.data() + kNumJoints);
+  pose.ticks = 40;
+  const Outcome rp = run(pose);
+  REQUIRE_MESSAGE(rp.report.status == 0, rp.report.error);
+  CHECK(bytes(dp / "ticks.csv") == bytes(d0 / "ticks.csv"));
+  const nlohmann::json sp = nlohmann::json::parse(bytes(dp / "summary.json"));
+  CHECK(sp["start_name"].is_null());
+  CHECK(sp["start_index"].is_null());
+  CHECK(sp["start_q"] == s0["start_q"]);
+
+  // Without --ticks, --start-pose runs the mean length of the movement's starts: (40 + 25) / 2.
+  rt::RunOptions mean = rollout("elbow");
+  mean.start_pose.assign(kStartB.data(), kStartB.data() + kNumJoints);
+  const Outcome rm = run(mean);
+  REQUIRE_MESSAGE(rm.report.status == 0, rm.report.error);
+  CHECK(rm.report.ticks == 33);
+
+  // A movement with its own single start.
+  const Outcome rw = run(rollout("whole_arm"));
+  REQUIRE_MESSAGE(rw.report.status == 0, rw.report.error);
+  CHECK(rw.report.ticks == 30);
+}
+
+TEST_CASE("--reference none without a usable start, or --start/--start-pose without it, is refused with one line") {
+  struct Case {
+    const char* what;
+    rt::RunOptions o;
+    int status;
+    const char* says;
+  };
+  std::vector<Case> cases;
+  {
+    rt::RunOptions o = rollout("elbow");
+    o.start_index = 2;
+    cases.push_back({"a start past the movement's last", o, 2, "(0..1)"});
+  }
+  cases.push_back({"a movement without starts", rollout("wrist"), 2, "--start-pose"});
+  {
+    rt::RunOptions o = rollout("wrist");
+    o.start_pose = {1.0, -0.2, 1.0, 0.5, 0.0};
+    cases.push_back({"--start-pose of a movement without starts, without --ticks", o, 2, "--ticks"});
+  }
+  {
+    rt::RunOptions o = options(writeModel("autonomous_nostarts.bin", Conditioning::kAutonomous), "none");
+    o.movement = "elbow";
+    cases.push_back({"a model without starts", o, 2, "model-starts"});
+  }
+  {
+    rt::RunOptions o = options(writeModel("autonomous_badstarts.bin", Conditioning::kAutonomous,
+                                          R"({"starts":{"elbow":[{"name":"e","ticks":0,"q":[0,0,0,0,0]}],"whole_arm":[],"wrist":[]}})"),
+                               "none");
+    o.movement = "elbow";
+    cases.push_back({"unusable starts", o, 1, "\"starts\""});
+  }
+  {
+    rt::RunOptions o = rollout("elbow");
+    o.start_index = 0;
+    o.start_pose = {1.0, -0.2, 1.0, 0.5, 0.0};
+    cases.push_back({"--start with --start-pose", o, 2, "exclude"});
+  }
+  {
+    rt::RunOptions o = rollout("elbow");
+    o.start_pose = {1.0, -0.2, std::nan(""), 0.5, 0.0};
+    cases.push_back({"a non-finite --start-pose", o, 2, "finite"});
+  }
+  {
+    rt::RunOptions o = rollout("elbow");
+    o.start_pose = {1.0, -0.2, 1.0};
+    cases.push_back({"a --start-pose of 3 angles", o, 2, "--start-pose needs 5"});
+  }
+  {
+    rt::RunOptions o = recorded(referenceModel(), "elbow");
+    o.start_index = 0;
+    cases.push_back({"--start with a recorded reference", o, 2, "--start needs --reference none"});
+  }
+  {
+    rt::RunOptions o = recorded(referenceModel(), "elbow");
+    o.start_pose = {1.0, -0.2, 1.0, 0.5, 0.0};
+    cases.push_back({"--start-pose with a recorded reference", o, 2, "--start-pose needs --reference none"});
+  }
+  {
+    rt::RunOptions o = options(referenceModel(), "none");
+    o.movement = "elbow";
+    cases.push_back({"none with a reference-conditioned model", o, 1, "autonomous"});
+  }
+  for (const Case& c : cases) {
+    const std::string what = c.what;
+    CAPTURE(what);
+    int status = 0;
+    const std::string err = errorLine(c.o, status);
+    CHECK(status == c.status);
+    CHECK(oneLine(err));
+    CHECK_MESSAGE(err.find(c.says) != std::string::npos, "expected '" << std::string(c.says) << "' in: " << err);
+  }
+
+  rt::CommandLine cl;
+  std::ostringstream out, err;
+  const char* argv[] = {"nao_rt", "--reference", "none", "--movement", "elbow", "--start-pose", "0.1,-0.2,0.3,0.4,-0.5"};
+  REQUIRE(rt::parseCommandLine(7, argv, cl, out, err) == -1);
+  CHECK(cl.run.start_pose == std::vector<double>{0.1, -0.2, 0.3, 0.4, -0.5});
+  const char* argv2[] = {"nao_rt", "--start", "4"};
+  rt::CommandLine cl2;
+  REQUIRE(rt::parseCommandLine(3, argv2, cl2, out, err) == -1);
+  CHECK(cl2.run.start_index == 4);
 }
 
 TEST_CASE("an autonomous model may run against a reference, which then only serves for evaluation") {
-  rt::RunOptions o = options(writeModel("autonomous_ref.bin", Conditioning::kAutonomous), "synthetic:whole_arm");
+  rt::RunOptions o = recorded(writeModel("autonomous_ref.bin", Conditioning::kAutonomous), "whole_arm");
   o.ticks = 40;
   const Outcome r = run(o);
   REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
@@ -495,126 +642,18 @@ TEST_CASE("an autonomous model may run against a reference, which then only serv
   CHECK(r.report.faults[0] == 0);  // no_human: the reference is not an input
 }
 
-TEST_CASE("--start-demo rolls out from one validation demonstration's s_0 for its length and names the nearest demonstration") {
-  const std::string model = writeModel(
-      "autonomous_start.bin", Conditioning::kAutonomous,
-      R"({"split":{"train":["elbow_000"],"val":["elbow_003","whole_arm_001","elbow_010","wrist_003"]}})");
-  const fs::path dir = tempDir("start_demo");
-  rt::RunOptions o = options(model, "none", dir);
-  o.movement = "elbow";
-  o.start_demo = 1;
-  const Outcome r = run(o);
-  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
-  const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
-  CHECK(s["start_demo"] == "elbow_010");
-  CHECK(s["start_demo_index"] == 1);
-  const std::vector<double> per_demo = s["ee_dtw_per_demo_m"].get<std::vector<double>>();
-  REQUIRE(per_demo.size() == 2);
-  CHECK(s["ee_dtw_m"].get<double>() == (per_demo[0] + per_demo[1]) / 2.0);
-  const std::size_t nearest = per_demo[1] < per_demo[0] ? 1 : 0;
-  CHECK(s["ee_dtw_nearest_m"].get<double>() == per_demo[nearest]);
-  CHECK(s["ee_dtw_nearest_index"] == nearest);
-  CHECK(s["ee_dtw_nearest_demo"] == (nearest == 1 ? "elbow_010" : "elbow_003"));
-  CHECK(r.report.ee_dtw_nearest_m == per_demo[nearest]);
-
-  // It starts where elbow_010's feature-extracted trajectory starts and runs as long as it.
-  const ArmModel arm = loadArmModel(test::kUrdfPath);
-  const std::vector<JointVector> centroids = elbowKeyPoses(model);
-  const tools::ReferenceStream d10 = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 10, centroids);
-  CHECK(r.report.ticks == static_cast<std::int64_t>(d10.target.size()));
-  CHECK(r.out.find("elbow_010") != std::string::npos);
-
-  // Without the flag the run is the mean-s_0 rollout and says so.
-  rt::RunOptions mean = options(model, "none", tempDir("start_demo_mean"));
-  mean.movement = "elbow";
-  REQUIRE(run(mean).report.status == 0);
-  const nlohmann::json sm = nlohmann::json::parse(bytes(fs::path(mean.log_dir) / "summary.json"));
-  CHECK(sm["start_demo"].is_null());
-
-  int status = 0;
-  rt::RunOptions beyond = options(model, "none");
-  beyond.movement = "elbow";
-  beyond.start_demo = 2;  // elbow has 2 validation demonstrations
-  CHECK(oneLine(errorLine(beyond, status)));
-  CHECK(status == 2);
-  rt::RunOptions with_reference = options(referenceModel(), "synthetic:elbow");
-  with_reference.start_demo = 0;
-  CHECK(errorLine(with_reference, status).find("--start-demo") != std::string::npos);
-  CHECK(status == 2);
-}
-
-TEST_CASE("--test-seed rolls out from a test set the model never saw: demonstrations 0..N-1 of run seed 1000000 + S") {
-  const rt::ValidationSet t = rt::testDemos("wrist", 7, 3);
-  CHECK(t.seed == tools::kReferenceSeedBase + 7);
-  CHECK_FALSE(t.seed_assumed);
-  CHECK(t.names == std::vector<std::string>{"wrist_test7_000", "wrist_test7_001", "wrist_test7_002"});
-  CHECK(t.indices == std::vector<int>{0, 1, 2});
-  CHECK_THROWS_AS(rt::testDemos("wrist", 7, 0), std::invalid_argument);
-
-  const std::string model = writeModel("autonomous_test_set.bin", Conditioning::kAutonomous,
-                                       R"({"split":{"train":["elbow_000"],"val":["elbow_003","elbow_010"]}})");
-  const fs::path dir = tempDir("test_set");
-  rt::RunOptions o = options(model, "none", dir);
-  o.movement = "elbow";
-  o.test_seed = 7;
-  o.test_demos = 3;
-  o.start_demo = 2;
-  const Outcome r = run(o);
-  REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
-  const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
-  CHECK(s["demo_set"] == "test");
-  CHECK(s["validation_demos"] == nlohmann::json{"elbow_test7_000", "elbow_test7_001", "elbow_test7_002"});
-  CHECK(s["validation_seed"] == tools::kReferenceSeedBase + 7);
-  CHECK(s["start_demo"] == "elbow_test7_002");
-  CHECK(s["ee_dtw_per_demo_m"].size() == 3);
-  // It starts where that demonstration's feature-extracted trajectory starts and runs its length.
-  const ArmModel arm = loadArmModel(test::kUrdfPath);
-  const std::vector<JointVector> centroids = elbowKeyPoses(model);
-  const tools::ReferenceStream d = tools::makeDemoReference(arm, tools::Movement::kElbow, tools::kReferenceSeedBase + 7,
-                                                            2, centroids);
-  CHECK(r.report.ticks == static_cast<std::int64_t>(d.target.size()));
-  // Another demonstration than the validation one at the same index (seed 1, index 2): both
-  // start at rest, snapped to the same key pose, but their trajectories differ.
-  const tools::ReferenceStream v = tools::makeDemoReference(arm, tools::Movement::kElbow, 1, 2, centroids);
-  bool differ = d.target.size() != v.target.size();
-  for (std::size_t i = 0; !differ && i < d.target.size(); ++i) differ = d.target[i] != v.target[i];
-  CHECK(differ);
-
-  // The validation set stays the default and is named so.
-  const fs::path vdir = tempDir("test_set_default");
-  rt::RunOptions dflt = options(model, "none", vdir);
-  dflt.movement = "elbow";
-  dflt.ticks = 5;
-  REQUIRE(run(dflt).report.status == 0);
-  CHECK(nlohmann::json::parse(bytes(vdir / "summary.json"))["demo_set"] == "validation");
-
-  int status = 0;
-  rt::RunOptions with_reference = options(referenceModel(), "synthetic:elbow");
-  with_reference.test_seed = 7;
-  CHECK(errorLine(with_reference, status).find("--test-seed") != std::string::npos);
-  CHECK(status == 2);
-  rt::CommandLine cl;
-  std::ostringstream out, err;
-  const char* argv[] = {"nao_rt", "--test-seed", "100", "--test-demos", "16"};
-  REQUIRE(rt::parseCommandLine(5, argv, cl, out, err) == -1);
-  CHECK(cl.run.test_seed == 100);
-  CHECK(cl.run.test_demos == 16);
-  const char* bad[] = {"nao_rt", "--test-demos", "0"};
-  CHECK(rt::parseCommandLine(3, bad, cl, out, err) == 2);
-}
-
 TEST_CASE("--blend-law-pole runs the blend-law baseline on a reference model, is refused for an autonomous one, and is recorded") {
   rt::CommandLine cl;
   std::ostringstream out, err;
-  const char* argv[] = {"nao_rt", "--start-demo", "3", "--blend-law-pole", "0.7"};
+  const char* argv[] = {"nao_rt", "--start", "3", "--blend-law-pole", "0.7"};
   REQUIRE(rt::parseCommandLine(5, argv, cl, out, err) == -1);
-  CHECK(cl.run.start_demo == 3);
+  CHECK(cl.run.start_index == 3);
   CHECK(cl.run.controller.blend_law_pole == 0.7);
   const char* bad[] = {"nao_rt", "--blend-law-pole", "1.5"};
   CHECK(rt::parseCommandLine(3, bad, cl, out, err) == 2);
 
   const fs::path dir = tempDir("blend_law");
-  rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
+  rt::RunOptions o = recorded(referenceModel(), "elbow", dir);
   o.ticks = 30;
   o.controller.blend_law_pole = 0.7;
   const Outcome r = run(o);
@@ -622,12 +661,12 @@ TEST_CASE("--blend-law-pole runs the blend-law baseline on a reference model, is
   const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
   CHECK(s["blend_law_pole"] == 0.7);
   // Without the flag: no such key.
-  rt::RunOptions policy = options(referenceModel(), "synthetic:elbow", tempDir("blend_law_policy"));
+  rt::RunOptions policy = recorded(referenceModel(), "elbow", tempDir("blend_law_policy"));
   policy.ticks = 30;
   REQUIRE(run(policy).report.status == 0);
   CHECK_FALSE(nlohmann::json::parse(bytes(fs::path(policy.log_dir) / "summary.json")).contains("blend_law_pole"));
 
-  rt::RunOptions autonomous = options(writeModel("autonomous_law.bin", Conditioning::kAutonomous), "synthetic:elbow");
+  rt::RunOptions autonomous = recorded(writeModel("autonomous_law.bin", Conditioning::kAutonomous), "elbow");
   autonomous.controller.blend_law_pole = 0.7;
   int status = 0;
   CHECK(errorLine(autonomous, status).find("autonomous") != std::string::npos);
@@ -646,7 +685,7 @@ TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature targ
 
   const double gain = 1.0894;
   const fs::path dir = tempDir("gain_law");
-  rt::RunOptions o = options(referenceModel(), "synthetic:elbow", dir);
+  rt::RunOptions o = recorded(referenceModel(), "elbow", dir);
   o.ticks = 60;
   o.controller.gain_law = gain;
   const Outcome r = run(o);
@@ -691,40 +730,40 @@ TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature targ
   int status = 0;
   CHECK(errorLine(both, status).find("exclude") != std::string::npos);
   CHECK(status == 2);
-  rt::RunOptions autonomous = options(writeModel("autonomous_gain.bin", Conditioning::kAutonomous), "synthetic:elbow");
+  rt::RunOptions autonomous = recorded(writeModel("autonomous_gain.bin", Conditioning::kAutonomous), "elbow");
   autonomous.controller.gain_law = gain;
   CHECK(errorLine(autonomous, status).find("autonomous") != std::string::npos);
   CHECK(status == 2);
 }
 
 TEST_CASE("an autonomous model's phase grid (metadata training.phase_ticks) is read or refused with the key's name") {
-  CHECK(rt::modelPhaseTicks("{}", "m") == 0);
-  CHECK(rt::modelPhaseTicks(R"({"training":{"seed":1}})", "m") == 0);
-  CHECK(rt::modelPhaseTicks(R"({"training":{"phase_ticks":150}})", "m") == 150);
+  CHECK(modelPhaseTicks("{}", "m") == 0);
+  CHECK(modelPhaseTicks(R"({"training":{"seed":1}})", "m") == 0);
+  CHECK(modelPhaseTicks(R"({"training":{"phase_ticks":150}})", "m") == 150);
   for (const char* bad : {R"({"training":{"phase_ticks":0}})", R"({"training":{"phase_ticks":1.5}})",
                           R"({"training":{"phase_ticks":"150"}})", R"({"training":{"phase_ticks":1000000}})"})
-    CHECK_THROWS_WITH_AS(rt::modelPhaseTicks(bad, "model.bin"), doctest::Contains("training.phase_ticks"),
+    CHECK_THROWS_WITH_AS(modelPhaseTicks(bad, "model.bin"), doctest::Contains("training.phase_ticks"),
                          std::runtime_error);
 }
 
 TEST_CASE("a reference model's residual gain (metadata training.residual_gain) adds G r to the policy's action") {
-  CHECK(rt::modelResidualGain("{}", "m") == 0.0f);
-  CHECK(rt::modelResidualGain(R"({"training":{"seed":1}})", "m") == 0.0f);
-  CHECK(rt::modelResidualGain(R"({"training":{"residual_gain":1.5}})", "m") == 1.5f);
+  CHECK(modelResidualGain("{}", "m") == 0.0f);
+  CHECK(modelResidualGain(R"({"training":{"seed":1}})", "m") == 0.0f);
+  CHECK(modelResidualGain(R"({"training":{"residual_gain":1.5}})", "m") == 1.5f);
   for (const char* bad : {R"({"training":{"residual_gain":-1}})", R"({"training":{"residual_gain":"1"}})",
                           R"({"training":{"residual_gain":1e9}})"})
-    CHECK_THROWS_WITH_AS(rt::modelResidualGain(bad, "model.bin"), doctest::Contains("training.residual_gain"),
+    CHECK_THROWS_WITH_AS(modelResidualGain(bad, "model.bin"), doctest::Contains("training.residual_gain"),
                          std::runtime_error);
 
   // nao_rt binds it (PolicyWeights::residual_gain; what it adds is checked in test_policy) and
   // records it in summary.json.
   const std::string with = writeModel("residual.bin", Conditioning::kReference, R"({"training":{"residual_gain":1.5}})");
   const fs::path d1 = tempDir("residual");
-  rt::RunOptions o1 = options(with, "synthetic:wrist", d1);
+  rt::RunOptions o1 = recorded(with, "wrist", d1);
   o1.ticks = 3;
   REQUIRE(run(o1).report.status == 0);
   CHECK(nlohmann::json::parse(bytes(d1 / "summary.json"))["model"]["residual_gain"] == 1.5);
-  rt::RunOptions o0 = options(referenceModel(), "synthetic:wrist", tempDir("residual_none"));
+  rt::RunOptions o0 = recorded(referenceModel(), "wrist", tempDir("residual_none"));
   o0.ticks = 3;
   REQUIRE(run(o0).report.status == 0);
   CHECK(nlohmann::json::parse(bytes(fs::path(o0.log_dir) / "summary.json"))["model"]["residual_gain"] == 0.0);
@@ -739,8 +778,8 @@ TEST_CASE("the online reference is the offline one: nao_rt retargets with the de
   for (const std::string movement : {"whole_arm", "wrist"}) {
     CAPTURE(movement);
     const fs::path dir = tempDir("online_offline_" + movement);
-    rt::RunOptions o = options(referenceModel(), "synthetic:" + movement, dir);
-    o.seed = 3;
+    // The recorded skeleton of the same frames makeSyntheticReference prepares in memory.
+    rt::RunOptions o = recorded(referenceModel(), movement, dir, 3);
     const Outcome r = run(o);
     REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
     const auto& names = model.header.movement_names;
@@ -796,28 +835,25 @@ TEST_CASE("an autonomous model's linear AR base (metadata training.linear_ar) is
     }
     return nlohmann::json{{"training", {{"linear_ar", ar}}}}.dump();
   };
-  CHECK(rt::modelLinearAr("{}", 3, "m").empty());
-  const rt::LinearArCoefficients k = rt::modelLinearAr(base(3, 0), 3, "m");
+  CHECK(modelLinearAr("{}", 3, "m").empty());
+  const LinearArCoefficients k = modelLinearAr(base(3, 0), 3, "m");
   REQUIRE(k.c.size() == 3);
   CHECK(k.beta[2][4] == -0.06);
   CHECK(k.c[0][3] == 0.003);
   CHECK(k.alpha[1][2][3] == 0.1 + 0.03);  // movement 1, k = 3, joint 3 (order 4)
   CHECK(k.alpha[1][4][3] == 0.0);         // past joint 3's order
-  const LinearArBase<3> b = rt::linearArBase<3>(k);
+  const LinearArBase<3> b = linearArBase<3>(k);
   CHECK(b.on);
   CHECK(b.alpha[1][2][3] == static_cast<float>(0.13));
-  CHECK_FALSE(rt::linearArBase<3>(rt::LinearArCoefficients{}).on);
+  CHECK_FALSE(linearArBase<3>(LinearArCoefficients{}).on);
   for (const std::string& bad : {base(2, 0), base(3, 13), std::string(R"({"training":{"linear_ar":[1,2,3]}})")})
-    CHECK_THROWS_WITH_AS(rt::modelLinearAr(bad, 3, "model.bin"), doctest::Contains("model.bin: the model's metadata has an unusable training.linear_ar"),
+    CHECK_THROWS_WITH_AS(modelLinearAr(bad, 3, "model.bin"), doctest::Contains("model.bin: the model's metadata has an unusable training.linear_ar"),
                          std::runtime_error);
 
   // nao_rt adds it under the net's output (stepPolicy; libtorch parity in test_torch_parity) and
   // records it: the same random net with and without the base gives other commands.
-  const std::string split = R"("split":{"train":["elbow_000"],"val":["elbow_003","elbow_010"]})";
-  std::string with_meta = base(3, 0);
-  with_meta.insert(with_meta.size() - 1, "," + split);
-  const std::string with = writeModel("autonomous_ar.bin", Conditioning::kAutonomous, with_meta);
-  const std::string without = writeModel("autonomous_no_ar.bin", Conditioning::kAutonomous, "{" + split + "}");
+  const std::string with = writeModel("autonomous_ar.bin", Conditioning::kAutonomous, startsMetadata(base(3, 0)));
+  const std::string without = writeModel("autonomous_no_ar.bin", Conditioning::kAutonomous, startsMetadata());
   std::vector<std::vector<double>> commands;
   for (const std::string& model : {with, without}) {
     const fs::path dir = tempDir(fs::path(model).stem().string());

@@ -7,6 +7,7 @@
 #include "nao/model_file.hpp"
 #include "support/alloc_counter.hpp"
 #include "support/random_policy.hpp"
+#include "support/reference_files.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -50,8 +51,8 @@ TEST_CASE("a 6,000-tick nao_rt run allocates nothing after activate, and summary
 
   rt::RunOptions o;
   o.weights_path = model;
-  o.reference = "synthetic:whole_arm";
-  o.seed = 2;
+  o.reference = "file:" + test::syntheticReferenceCsv("whole_arm", 2, dir);
+  o.movement = "whole_arm";
   o.ticks = 6000;
   o.log_dir = (dir / "run").string();
   o.controller.inject_policy_nan_first = 100;  // the non-finite policy path too

@@ -11,7 +11,8 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
   double emulate_tick_ms = 0.0;
   CLI::App app{
       "nao_rt: the NAO V6 right-arm imitation controller (DESIGN section 9) on the ODE-simulated arm\n"
-      "(default) or on a NAO V6 through LoLA (--robot lola, docs/lola.md).\n"
+      "(default) or on a NAO V6 through LoLA (--robot lola, docs/lola.md). It runs any model of its\n"
+      "compiled architecture (--weights); toolchain/nao build --model FILE builds one for another.\n"
       "Configures everything (URDF, policy, reference, attention ring, run buffers), then runs the\n"
       "deterministic 10 Hz loop - human frame -> retarget -> snap to key pose -> policy -> command ->\n"
       "100 x 1 ms of physics - with no heap allocation, and writes the run directory (docs/nao_rt.md).",
@@ -35,32 +36,23 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
       ->type_name("FILE")
       ->capture_default_str();
   app.add_option("--reference", o.reference,
-                 "synthetic:whole_arm|elbow|wrist  a fresh synthesised demonstration (run seed\n"
-                 "                                 1000000 + --seed: never a training demonstration)\n"
-                 "file:PATH  a 10 Hz triangulated BODY25 skeleton CSV (nao_toolchain triangulate)\n"
-                 "none       autonomous-mode models: rollout from s_0 (the mean start of the\n"
-                 "           model's validation demonstrations of --movement)")
-      ->type_name("SRC")
-      ->capture_default_str();
-  app.add_option("--movement", o.movement,
-                 "Movement as named in model.bin: required for file: and none, implied by synthetic:")
+                 "file:PATH  a recorded human: a 10 Hz skeleton CSV (nao_toolchain triangulate --rate 10)\n"
+                 "none       autonomous-mode models: a rollout from one of the model's starts (--start)\n"
+                 "           or from --start-pose")
+      ->type_name("SRC");
+  app.add_option("--movement", o.movement, "Movement as named in model.bin (what the reference shows, or what to roll out)")
       ->type_name("M");
-  app.add_option("--start-demo", o.start_demo,
-                 "none only: start at s_0 of this held-out demonstration (index into the model's\n"
-                 "validation demonstrations of --movement, split.val order) and run its length\n"
-                 "(default: the mean s_0 and mean length of all of them)")
+  app.add_option("--start", o.start_index,
+                 "none only: roll out from the model's I-th start of --movement (0-based, default 0; nao_rt\n"
+                 "--info lists them), at rest, a(-1) = 0, for that start's length")
       ->type_name("I")
       ->check(CLI::NonNegativeNumber);
-  app.add_option("--test-seed", o.test_seed,
-                 "none only: instead of the model's validation demonstrations, start from (and score\n"
-                 "the run against) a test set the trainer never saw, neither to fit nor to select:\n"
-                 "demonstrations 0..N-1 of synthesiser run seed 1000000 + S (N: --test-demos)")
-      ->type_name("S")
-      ->check(CLI::NonNegativeNumber);
-  app.add_option("--test-demos", o.test_demos, "Size N of the --test-seed set per movement")
-      ->type_name("N")
-      ->check(CLI::Range(1, 1000))
-      ->capture_default_str();
+  app.add_option("--start-pose", o.start_pose,
+                 "none only: roll out from this pose instead, q0,q1,q2,q3,q4 (rad, joint order), for the\n"
+                 "mean length of the movement's starts")
+      ->type_name("Q")
+      ->delimiter(',')
+      ->expected(5);
   app.add_option("--blend-law-pole", o.controller.blend_law_pole,
                  "Baseline, reference-conditioned models only: replace the policy by the key-pose\n"
                  "blend law its labels follow, a = p^2 a(t-1) + (1-p)^2 (r - q), with pole p in\n"
@@ -74,10 +66,9 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                  "exactly (default 0: the policy)")
       ->type_name("G")
       ->check(CLI::Range(0.0, 100.0));
-  app.add_option("--seed", o.seed, "Seed of the synthetic reference")->type_name("N")->capture_default_str();
   auto* ticks = app.add_option("--ticks", o.ticks,
-                               "Ticks (100 ms each) to run (default: the reference's length; none: the mean\n"
-                               "length of the validation demonstrations). Past a reference's end no human is seen")
+                               "Ticks (100 ms each) to run (default: the reference's length; none: the start's\n"
+                               "length). Past a reference's end no human is seen")
                     ->type_name("N")
                     ->check(CLI::PositiveNumber);
   app.add_option("--seconds", o.seconds, "Run time in seconds, rounded to whole ticks (instead of --ticks)")
@@ -132,7 +123,8 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                "give byte-identical files");
   app.add_flag("--info", cl.info,
                "Check the model (compiled-in, or --weights) against the URDF, print it as one JSON\n"
-               "object (architecture, tensor count, checksum, trained-for joints) and exit");
+               "object (architecture, tensor count, checksum, trained-for joints, autonomous starts per\n"
+               "movement) and exit");
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

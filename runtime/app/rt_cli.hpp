@@ -1,8 +1,8 @@
-// nao_rt's command line (CLI11), parsed into RunOptions (rt_run.hpp). A library function so
+// nao_rt's command line (CLI11), parsed into RunOptions (rt_config.hpp). A library function so
 // the tests check the flags and their errors in process. Configure-time code.
 #pragma once
 
-#include "rt_run.hpp"
+#include "rt_config.hpp"
 
 #include <iosfwd>
 

@@ -56,6 +56,15 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source, con
   for (const TrainedJoint& t : h.joints)
     joints.push_back({{"name", t.name}, {"lower", t.lower}, {"upper", t.upper}, {"velocity", t.velocity}});
   j["joints"] = std::move(joints);
+  // The autonomous starts per movement (nao_rt --reference none --start I): name and length.
+  const ModelStarts starts = modelStarts(h.metadata_json, h.movement_names, source);
+  ordered_json by_movement = ordered_json::object();
+  for (std::size_t m = 0; m < starts.size(); ++m) {
+    ordered_json list = ordered_json::array();
+    for (const ModelStart& s : starts[m]) list.push_back({{"name", s.name}, {"ticks", s.ticks}});
+    by_movement[h.movement_names[m]] = std::move(list);
+  }
+  j["starts"] = std::move(by_movement);
   ordered_json metadata = ordered_json::parse(h.metadata_json, nullptr, /*allow_exceptions=*/false);
   j["metadata"] = metadata.is_discarded() ? ordered_json(h.metadata_json) : std::move(metadata);
   j["source"] = source;

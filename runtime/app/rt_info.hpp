@@ -22,7 +22,9 @@ struct InfoOptions {
 /// The JSON description of a checked model (pretty-printed, no trailing newline): format_version,
 /// dimensions, conditioning, movements, parameters, checksum ("0x%016x"), weights ("compiled" or
 /// "file"), precision ("fp32", "fp32-packed" or "int8": what a run with the same options uses), tensors,
-/// joints, metadata (parsed JSON if it parses, else the string), source.
+/// joints, starts (per movement, the autonomous starts' name and ticks; empty lists without
+/// any), metadata (parsed JSON if it parses, else the string), source. Throws ModelFileError for
+/// unusable starts.
 std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision = "fp32");
 
 /// Checks the model and prints modelInfoJson + newline on `out`: returns 0. On any problem

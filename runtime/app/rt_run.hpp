@@ -1,251 +1,43 @@
-// One nao_rt run (DESIGN §9, issue 5): configure everything (URDF, model, reference, controller,
-// attention ring, run buffers), activate, run the 10 Hz loop, deactivate, then write the run
-// directory (ticks.csv, attention.bin, summary.json; docs/nao_rt.md) and print a summary.
+// One nao_rt run (DESIGN §9): configure (rt_config.hpp: URDF, model, reference, robot), activate,
+// the 10 Hz loop, deactivate, then the run directory and the printed summary (rt_rundir.hpp).
 //
 // A library (nao_rt_run) so that tests run it in process. runController is a template on the
 // policy's compiled dimensions: nao_rt instantiates it with the compiled-in model's Dims
-// (PaperPolicyDims when the build has no model), tests with SmallPolicyDims. Everything that
-// does not depend on Dims lives in rt_run.cpp.
+// (PaperPolicyDims when the build has no model), tests with SmallPolicyDims.
 //
 // Threads and time: configure and the file output run before and after the loop; between
-// activate and deactivate the control thread only calls updateController, forward kinematics,
-// and pushFromRT into preallocated memory — no allocation (counted through AllocationProbe),
-// no file I/O, no lock. With --robot lola the robot backend's socket I/O is on this thread
-// (the robot's packets are the clock), or with --lola-io-thread on the backend's own thread
-// (lola_backend.hpp says why and when).
+// activate and deactivate the control thread only calls the human source, updateController,
+// forward kinematics, and pushFromRT into preallocated memory — no allocation (counted through
+// AllocationProbe), no file I/O, no lock. With --robot lola the robot backend's socket I/O is on
+// this thread (the robot's packets are the clock), or with --lola-io-thread on the backend's own
+// thread (lola_backend.hpp says why and when).
 #pragma once
+
+#include "rt_config.hpp"
+#include "rt_rundir.hpp"
 
 #include "nao/arm_model.hpp"
 #include "nao/attention_ring.hpp"
 #include "nao/controller.hpp"
 #include "nao/kinematics.hpp"
 #include "nao/lola_backend.hpp"
-#include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
-#include "nao/tools/reference_source.hpp"
-#include "rt_metrics.hpp"
+#include "nao/robot_backend.hpp"
 
 #include <Eigen/Core>
 
 #include <algorithm>
-#include <array>
 #include <cstdint>
 #include <cstring>
 #include <iosfwd>
 #include <limits>
 #include <memory>
-#include <new>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 namespace nao::rt {
-
-/// Everything a run is told (the nao_rt command line, rt_cli.hpp).
-struct RunOptions {
-  std::string weights_path;                ///< model.bin; empty: the compiled-in model
-  ModelImage compiled;                     ///< the compiled-in model (bytes nullptr if the build has none)
-  /// fp32 or int8 (nao/quantize.hpp); empty: int8 if the compiled-in model was generated so and
-  /// no --weights is given, else fp32.
-  std::string precision;
-  std::string urdf_path = NAO_DEFAULT_URDF;
-  /// synthetic:whole_arm|elbow|wrist, file:PATH or none.
-  std::string reference = "synthetic:whole_arm";
-  std::string movement;        ///< required for file: and none; implied by synthetic:
-  std::uint64_t seed = 1;      ///< synthetic reference: run seed kReferenceSeedBase + seed
-  /// none only: >= 0 starts the rollout at s_0 of this validation demonstration (index into
-  /// the movement's held-out demonstrations, in split.val order) and runs its length; -1: the
-  /// mean s_0 and mean length of all of them (--start-demo).
-  int start_demo = -1;
-  /// none only: >= 0 replaces the model's validation demonstrations by a test set, demonstrations
-  /// 0 .. test_demos-1 of synthesiser run seed kReferenceSeedBase + test_seed (never a training or
-  /// validation demonstration, and not selected on: the trainer never saw them), for --start-demo
-  /// and the summary's nearest-demonstration DTW (--test-seed, --test-demos).
-  std::int64_t test_seed = -1;
-  int test_demos = 16;
-  std::int64_t ticks = 0;      ///< > 0: run this many ticks
-  double seconds = 0.0;        ///< > 0: run this long (rounded to whole ticks); else the default length
-  bool realtime = false;       ///< absolute 10 Hz deadlines (clock_nanosleep), SCHED_FIFO + mlockall if permitted
-  std::string log_dir;         ///< run directory; empty: no files
-  std::string attention_shm;   ///< POSIX shared-memory name of the attention ring; empty: in process
-  bool zero_timing = false;    ///< write the *_us columns of ticks.csv as 0 (byte-comparable files)
-  ControllerParams controller; ///< fault timeouts, home pose, retargeting (defaults: DESIGN §9)
-  SimParams sim;
-  /// ode (the in-process arm, default) or lola[:SOCKET] (LoLA, default socket /tmp/robocup).
-  std::string robot = "ode";
-  LolaParams lola;             ///< LoLA safety parameters (socket_path from `robot`)
-  /// LoLA on one thread: load the policy's weights and workspace into the cache in the cycle
-  /// before each tick's packet (warmPolicy; --lola-no-warm turns it off, docs/lola.md).
-  bool lola_warm = true;
-  /// > 0: busy-wait this long before every tick's work, as a slower CPU would take (tests and
-  /// benchmarks of the LoLA timing; not in tick_us).
-  std::int64_t emulate_tick_ns = 0;
-  ControllerClock* clock = nullptr;  ///< stage timings; nullptr: CLOCK_MONOTONIC (tests inject)
-};
-
-/// A command-line problem (unknown reference, missing --movement, ...): exit status 2.
-class UsageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
-/// Counts heap allocations on the calling thread between start and stop (nao_rt and the
-/// *_alloc tests back it with CountAllocations; without one the summary says null). The LoLA
-/// backend's I/O thread (--lola-io-thread) is counted by the probe's companion(), started and
-/// stopped on that thread.
-using nao::AllocationProbe;
-
-/// What a run produced (also in summary.json).
-/// Exit statuses of a run that the robot backend ended early (after its safe stop; the run
-/// directory is still written).
-inline constexpr int kExitRobotLinkLost = 3;  ///< LoLA socket closed or silent
-inline constexpr int kExitStopSignal = 4;     ///< SIGINT/SIGTERM
-
-struct RunReport {
-  int status = 1;              ///< exit status: 0 done, 1 configure/load/output error, 2 usage error,
-                               ///< kExitRobotLinkLost, kExitStopSignal
-  std::string error;           ///< one line (without "nao_rt: ") when status != 0
-  std::int64_t ticks = 0;
-  std::int64_t overruns = 0;   ///< ticks that missed their deadline (--realtime only)
-  std::array<std::int64_t, kNumControllerFaults> faults{};  ///< ticks with each fault bit
-  std::int64_t allocations_after_activate = -1;            ///< -1: not counted
-  double ee_rmse_m = std::numeric_limits<double>::quiet_NaN();
-  double ee_dtw_m = std::numeric_limits<double>::quiet_NaN();
-  /// none only: DTW to the nearest validation demonstration, and its index (-1: none).
-  double ee_dtw_nearest_m = std::numeric_limits<double>::quiet_NaN();
-  int ee_dtw_nearest_index = -1;
-  LatencyStats tick_us, retarget_us, policy_us, sim_us;
-  std::string summary_json;    ///< the text of summary.json (also without --log)
-};
-
-// ---------------------------------------------------------------------------------------------
-// Configure-time pieces that do not depend on the compiled dimensions (rt_run.cpp).
-
-enum class ReferenceKind { kSynthetic, kFile, kNone };
-
-struct ReferenceSpec {
-  ReferenceKind kind = ReferenceKind::kSynthetic;
-  std::string movement;  ///< movement name as in model.bin
-  std::string path;      ///< file: only
-};
-
-/// The robot backend a run drives (--robot).
-struct RobotSpec {
-  bool lola = false;
-  std::string socket_path;  ///< lola only
-};
-
-/// Parses --robot: ode, lola, lola:PATH. Throws UsageError otherwise.
-RobotSpec parseRobotSpec(const std::string& robot, const std::string& default_socket);
-
-/// Parses --reference / --movement. Throws UsageError: unknown source, unknown movement,
-/// --movement missing for file: and none, or contradicting synthetic:<movement>.
-ReferenceSpec parseReferenceSpec(const std::string& reference, const std::string& movement);
-
-/// The validation demonstrations of one movement named in a model's metadata (split.val,
-/// written by nao_toolchain train), to be regenerated with the synthesiser.
-struct ValidationSet {
-  std::uint64_t seed = 1;      ///< synthesiser run seed of the data set
-  bool seed_assumed = true;    ///< the metadata does not say it: the training set's seed 1 assumed
-  std::vector<std::string> names;  ///< e.g. "elbow_003"
-  std::vector<int> indices;        ///< demonstration index within the movement
-};
-
-/// Reads split.val (and data.synth_seed when present) from a model's metadata JSON and keeps the
-/// demonstrations of `movement`. Throws std::runtime_error naming `origin` when there are none.
-ValidationSet validationDemos(const std::string& metadata_json, const std::string& movement, const std::string& origin);
-
-/// A test set of `movement`: demonstrations 0 .. count-1 of run seed kReferenceSeedBase +
-/// test_seed (the seeds nao_rt's synthetic references come from, never a training seed), named
-/// <movement>_test<seed>_<index>. Throws std::invalid_argument if count < 1.
-ValidationSet testDemos(const std::string& movement, std::uint64_t test_seed, int count);
-
-/// The linear AR base an autonomous model was trained over (metadata training.linear_ar: per
-/// movement, per joint {"order", "c", "beta", "alpha"}; PolicyWeights::linear_ar), as doubles.
-struct LinearArCoefficients {
-  std::vector<std::array<double, 5>> c, beta;                                    ///< [movement][joint]
-  std::vector<std::array<std::array<double, 5>, kPolicyArMaxOrder>> alpha;       ///< [movement][k − 1][joint]
-  bool empty() const { return c.empty(); }
-};
-
-/// Everything configured before the policy is bound.
-struct PreparedRun {
-  ArmModel arm;
-  ModelFile model;                     ///< validated, joints checked against `arm`
-  std::string model_source;            ///< "compiled-in" or the --weights path
-  const std::uint8_t* model_bytes = nullptr;  ///< compiled-in: the embedded bytes to bind to; else nullptr
-  const std::uint64_t* model_offsets = nullptr;  ///< compiled-in: the generated tensor offsets
-  WeightPrecision precision = WeightPrecision::kFp32;
-  /// int8: the compiled-in blob (checked) to bind to; nullptr: quantise the model at start-up.
-  const std::uint8_t* int8_bytes = nullptr;
-  /// fp32-packed: the compiled-in packed blob (checked); nullptr: pack the model at start-up.
-  const std::uint8_t* packed_bytes = nullptr;
-  LinearArCoefficients linear_ar;       ///< autonomous models over the linear AR base (metadata)
-  ReferenceSpec spec;
-  int movement_index = 0;              ///< into model.header.movement_names
-  std::vector<JointVector> centroids;  ///< the movement's key poses, rad
-  RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
-  float residual_gain = 0.0f;          ///< the model's training.residual_gain (PolicyWeights)
-  std::int64_t phase_ticks = 0;        ///< the model's training.phase_ticks (ControllerParams)
-  tools::ReferenceStream reference;    ///< synthetic/file (empty for none)
-  ValidationSet validation;            ///< none only
-  std::vector<tools::ReferenceStream> validation_demos;  ///< none only
-  JointVector q_start = JointVector::Zero();  ///< activate pose
-  std::int64_t ticks = 0;
-  bool has_targets = false;            ///< the reference has a feature-extracted target per tick
-};
-
-/// `defaults` with the retargeting setting a model's metadata records (data.retarget: priority,
-/// lambda_q, posture_weights) applied; unchanged when the metadata has none. Throws
-/// std::runtime_error naming `origin` for a setting that is present but unusable.
-RetargetParams modelRetargetSetting(const std::string& metadata_json, const RetargetParams& defaults,
-                                    const std::string& origin);
-
-/// The residual gain a reference-mode model was trained with (metadata training.residual_gain,
-/// PolicyWeights::residual_gain); 0 when the metadata has none. Throws std::runtime_error naming
-/// `origin` for a value that is present but not a finite number >= 0.
-float modelResidualGain(const std::string& metadata_json, const std::string& origin);
-
-/// Empty when the metadata has none. Throws std::runtime_error naming `origin` for one that is
-/// present but unusable (not `movements` movements of 5 joints, an order outside 1..12, a
-/// coefficient that is not a finite number).
-LinearArCoefficients modelLinearAr(const std::string& metadata_json, int movements, const std::string& origin);
-
-/// The phase grid an autonomous model's step embedding was trained on (metadata
-/// training.phase_ticks, ControllerParams::phase_ticks); 0 when the metadata has none. Throws
-/// std::runtime_error naming `origin` for a value that is present but not an integer in [1, 1e5].
-std::int64_t modelPhaseTicks(const std::string& metadata_json, const std::string& origin);
-
-/// `k` as the runtime's float base (on = !k.empty()).
-template <int M>
-LinearArBase<M> linearArBase(const LinearArCoefficients& k) {
-  LinearArBase<M> b;
-  b.on = !k.empty() && k.c.size() == static_cast<std::size_t>(M);
-  if (!b.on) return b;
-  for (std::size_t m = 0; m < static_cast<std::size_t>(M); ++m)
-    for (std::size_t j = 0; j < 5; ++j) {
-      b.c[m][j] = static_cast<float>(k.c[m][j]);
-      b.beta[m][j] = static_cast<float>(k.beta[m][j]);
-      for (std::size_t i = 0; i < static_cast<std::size_t>(kPolicyArMaxOrder); ++i)
-        b.alpha[m][i][j] = static_cast<float>(k.alpha[m][i][j]);
-    }
-  return b;
-}
-
-/// Configure-time checks and preparation, in the order that fails fastest: reference syntax,
-/// URDF, model (file checks, joints against the URDF, architecture against `compiled_arch`),
-/// movement, conditioning, then the reference stream or the validation demonstrations, the
-/// tick count and the run directory. Throws UsageError or another std::exception with a
-/// one-line message.
-PreparedRun prepareRun(const RunOptions& options, const PolicyArch& compiled_arch);
-
-/// ticks.csv's header line (no newline): the issue's columns in order.
-std::string ticksCsvHeader();
-
-/// One ticks.csv row (no newline): doubles in shortest round-trip form, `_us` columns 0 when
-/// zero_timing.
-std::string ticksCsvRow(const TickRecord& r, bool zero_timing);
 
 /// Result of trying real-time scheduling (SCHED_FIFO + mlockall).
 struct RealtimeScheduling {
@@ -262,93 +54,6 @@ void leaveRealtime(const RealtimeScheduling& s);
 void sleepUntilNs(std::int64_t t_ns);
 /// Busy-waits ns nanoseconds (RunOptions::emulate_tick_ns): no syscall but the clock read.
 void spinForNs(std::int64_t ns);
-
-/// What the loop measured beyond the records.
-struct LoopTotals {
-  std::int64_t allocations = -1;
-  std::int64_t skipped_periods = 0;  ///< --realtime: whole periods skipped after overruns
-  double wall_s = 0.0;
-  std::string realtime_scheduling;   ///< "SCHED_FIFO + mlockall", or what was not permitted
-  bool lola = false;                 ///< the robot was LoLA (summary.json "robot", "lola")
-  std::string lola_socket;
-  LolaCounters lola_counters;
-  std::vector<std::int64_t> lola_latency_ns;  ///< per answered cycle
-  RobotStop stop = RobotStop::kNone;          ///< the backend ended the run early
-};
-
-/// After the loop: metrics, summary.json, ticks.csv, attention.bin (from `ring`), the printed
-/// summary on `out`. Throws std::runtime_error on output errors.
-void finishRun(const RunOptions& options, const PreparedRun& prepared, const std::vector<TickRecord>& records,
-               const AttentionRingView& ring, const LoopTotals& totals, std::ostream& out, RunReport& report);
-
-/// Replaces line breaks so a message stays one line.
-std::string oneLine(std::string s);
-
-// ---------------------------------------------------------------------------------------------
-// Weights of a --weights file (DESIGN §8): copied at configure time into 64-byte aligned storage
-// that exists only when a file is loaded. The compiled-in model is bound in place and costs
-// nothing here (this replaced a 24 MB static array in .bss; issue 14).
-
-/// Floats of weight storage for every manifest tensor of Dims, each padded to 64 bytes (the
-/// manifest of policy_config.cpp, counted at compile time; prepareRun's binder checks it).
-template <class Dims>
-constexpr std::size_t policyStorageFloats() {
-  constexpr std::size_t D = Dims::kDModel, J = Dims::kTokens, M = Dims::kMovements, K = Dims::kClusters;
-  constexpr std::size_t S = Dims::kMaxSteps, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
-  constexpr auto pad = [](std::size_t n) { return (n + 15) / 16 * 16; };
-  const std::size_t norm = 2 * pad(D);
-  const std::size_t attention = 4 * (pad(D * D) + pad(D));
-  const std::size_t ffn = pad(D * F0) + pad(F0) + pad(F0 * F1) + pad(F1) + pad(F1 * F2) + pad(F2) + pad(F2 * D) + pad(D);
-  std::size_t n = pad(Dims::kFeatures * D) + pad(D) + pad(J * D) + pad(M * D) + pad(S * D) + pad(D) + pad(D) + pad(J * D);
-  const std::size_t age_bias = pad(static_cast<std::size_t>(Dims::kHeads) * Dims::kWindow);  // window attention only
-  n += Dims::kEncoderLayers * (norm + attention + age_bias + norm + ffn) + norm;
-  n += Dims::kDecoderLayers * (norm + attention + norm + attention + age_bias + norm + ffn) + norm;
-  n += pad(D) + pad(1) + 6 * pad(J) + pad(M * K * J);
-  return n;
-}
-
-/// The aligned floats a --weights model's tensors are copied into; empty (no memory) for the
-/// compiled-in model. Owned by the run, alive until the loop has ended.
-struct WeightStorage {
-  struct Free {
-    void operator()(float* f) const noexcept { ::operator delete[](f, std::align_val_t{kModelAlignment}); }
-  };
-  std::unique_ptr<float[], Free> floats;
-  std::size_t n_floats = 0;
-};
-
-/// Copies the tensors of `model` into `storage` (allocated here: policyStorageFloats<Dims>,
-/// 64-byte aligned, zero-filled, so the padding between tensors reads as zeros) and returns where
-/// each one starts, in manifest order. Configure time: allocates; throws std::bad_alloc, or
-/// std::logic_error if the storage is too small (a programming error in policyStorageFloats).
-/// nao_bench reads its weights from here too, so it times what nao_rt reads.
-template <class Dims>
-std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& storage) {
-  std::vector<const float*> pointers;
-  pointers.reserve(model.tensors.size());
-  storage.n_floats = policyStorageFloats<Dims>();
-  storage.floats.reset(static_cast<float*>(
-      ::operator new[](storage.n_floats * sizeof(float), std::align_val_t{kModelAlignment})));
-  float* floats = storage.floats.get();
-  std::fill(floats, floats + storage.n_floats, 0.0f);
-  std::size_t used = 0;
-  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
-    const std::size_t n = model.tensors[i].spec.count();
-    if (used + n > storage.n_floats)
-      throw std::logic_error("nao_rt: the weight storage is smaller than the model's manifest");
-    std::memcpy(floats + used, model.data(i), n * sizeof(float));
-    pointers.push_back(floats + used);
-    used += (n + 15) / 16 * 16;
-  }
-  return pointers;
-}
-
-/// The weights of a --weights model: copyWeightFile, the views bound by name.
-template <class Dims>
-PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
-  const std::vector<const float*> pointers = copyWeightFile<Dims>(p.model, storage);
-  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.conditioning);
-}
 
 // ---------------------------------------------------------------------------------------------
 // The run.
@@ -462,20 +167,21 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     controller_params.retarget = p.retarget;
     // The human's scale d_h is calibrated once per reference, as the training data and the
     // evaluation target were retargeted (one scale per demonstration from all its frames:
-    // toolchain retargetTargets), not re-estimated per frame: per-frame link lengths jitter with
+    // retargetTargets), not re-estimated per frame: per-frame link lengths jitter with
     // the keypoint noise, which moved the hand target, flipped key-pose snaps and left the
     // controller tracking another trajectory than the one it is scored against.
-    if (controller_params.human.scale_m <= 0.0 && p.reference.human.scale_m > 0.0)
-      controller_params.human = p.reference.human;
-    const ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, options.sim);
-    auto data = std::make_unique<ControllerData<Dims>>(model.sim, p.q_start);
-    std::unique_ptr<LolaBackend> lola;
+    if (controller_params.human.scale_m <= 0.0 && p.reference != nullptr && p.reference->human.scale_m > 0.0)
+      controller_params.human = p.reference->human;
+    const ControllerModel<Dims> model = configureController(p.arm, weights, controller_params);
+    // The robot backend owns its hardware (STYLE 18): the in-process ODE arm, or LoLA's socket.
+    std::unique_ptr<RobotBackend> robot_backend;
+    LolaBackend* lola = nullptr;
     // What the cycle before a tick's packet warms (LolaParams::before_tick).
     struct WarmContext {
       const PolicyWeights<Dims>* weights;
       const PolicyWorkspace<Dims>* workspace;
       std::uint64_t sink;
-    } warm{&model.policy, data->policy.get(), 0};
+    } warm{&model.policy, nullptr, 0};
     if (robot.lola) {
       // The socket is opened here, before activate.
       LolaParams lola_params = options.lola;
@@ -489,9 +195,14 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
         lola_params.before_tick_context = &warm;
       }
       installLolaStopSignals();
-      lola = std::make_unique<LolaBackend>(p.arm, lola_params);
-      data->robot = lola.get();
+      auto backend = std::make_unique<LolaBackend>(p.arm, lola_params);
+      lola = backend.get();
+      robot_backend = std::move(backend);
+    } else {
+      robot_backend = std::make_unique<OdeArmBackend>(p.arm, options.sim, clampToLimits(p.arm, p.q_start));
     }
+    auto data = std::make_unique<ControllerData<Dims>>(*robot_backend);
+    warm.workspace = data->policy.get();
     detail::RingHolder<RunRing<Dims>> rings;
     const AttentionDescriptor descriptor = attentionPayloadDescriptor<RunPayload<Dims>>();
     if (options.attention_shm.empty())
@@ -504,7 +215,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     ArmData kin_ref;
     SteadyClock steady;
     ControllerClock& clock = options.clock != nullptr ? *options.clock : steady;
-    const std::size_t n_frames = p.reference.frames.size();
+    // The evaluation target of a recorded reference (its feature-extracted trajectory).
+    const std::vector<JointVector>* target = p.has_targets ? &p.reference->target : nullptr;
+    const std::size_t n_targets = target != nullptr ? target->size() : 0;
     const std::int64_t period_ns = static_cast<std::int64_t>(options.controller.period_s * 1e9 + 0.5);
 
     LoopTotals totals;
@@ -514,7 +227,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       if (!rt.warning.empty()) err << "nao_rt: warning: " << rt.warning << "\n";
       totals.realtime_scheduling = rt.warning.empty() ? "SCHED_FIFO + mlockall" : rt.warning;
     }
-    out << "nao_rt: " << p.reference.description << " -> movement " << p.spec.movement << ", model " << p.model_source << ", " << p.ticks << " ticks ("
+    out << "nao_rt: " << p.description << " -> movement " << p.spec.movement << ", model " << p.model_source << ", " << p.ticks << " ticks ("
         << static_cast<double>(p.ticks) * options.controller.period_s << " s), "
         << (robot.lola ? "on LoLA " + robot.socket_path : options.realtime ? "real time" : "back to back") << "\n";
     out.flush();
@@ -536,13 +249,13 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       if (options.realtime) sleepUntilNs(next_ns);
       if (options.emulate_tick_ns > 0) spinForNs(options.emulate_tick_ns);
       const std::size_t i = static_cast<std::size_t>(t);
-      const SkeletonFrame* frame = i < n_frames && p.reference.present[i] ? &p.reference.frames[i] : nullptr;
+      const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
       TickRecord& rec = records[i];
       rec = updateController(model, *data, frame);
       // Where the arm should be at the end of the tick: the reference's feature-extracted pose
       // of the next sample (the last one held at the end).
-      if (p.has_targets && i < n_frames)
-        rec.ee_ref = forwardKinematics(p.arm, kin_ref, p.reference.target[std::min(i + 1, n_frames - 1)]);
+      if (i < n_targets)
+        rec.ee_ref = forwardKinematics(p.arm, kin_ref, (*target)[std::min(i + 1, n_targets - 1)]);
       else
         rec.ee_ref.setConstant(std::numeric_limits<double>::quiet_NaN());
       if (options.realtime) {

@@ -43,6 +43,10 @@ class Hostile(unittest.TestCase):
         cls.demo = os.path.join(cls.tmp, "synth", "elbow_000")
         with open(os.path.join(cls.demo, "calibration.json")) as f:
             cls.calibration = json.load(f)
+        # Its 10 Hz skeleton: the recorded reference of the nao_rt runs below.
+        cls.skeleton = os.path.join(cls.demo, "skeleton.csv")
+        code, _, err = run([NAO_TOOLCHAIN, "triangulate", "--demo", cls.demo, "--max-gap", "0", "--out", cls.skeleton])
+        assert code == 0, err
 
     @classmethod
     def tearDownClass(cls):
@@ -154,7 +158,7 @@ class Hostile(unittest.TestCase):
             return f.read()
 
     def nao_rt(self, *args):
-        return [NAO_RT, "--reference", "synthetic:elbow", "--ticks", "2"] + list(args)
+        return [NAO_RT, "--reference", "file:" + self.skeleton, "--movement", "elbow", "--ticks", "2"] + list(args)
 
     def test_urdf_nested_60000_deep(self):
         p = self.write("deep.urdf", '<?xml version="1.0"?>\n<robot name="x">' + "<a>" * 60000 + "</a>" * 60000 + "</robot>")

@@ -10,13 +10,15 @@
 #      beside their SSE2 versions and which its IFUNC resolvers pick only on CPUs that have the
 #      extension - never on the Atom. Each such function must be defined by libc.a/libm.a and
 #      carry the extension in its name; their number is printed;
-#   3. it runs the three demo movements (--reference synthetic:M) with the closed-loop RMSE of
-#      the native build within +-0.1 mm (and with no heap allocation after activate).
-#   usage: check_nao_build.sh NAO_RT_ROBOT NAO_RT_NATIVE WORK_DIR
+#   3. it runs the three demo movements (the demo's recorded references: demonstration 0 of run
+#      seed 1000001, synthesised and triangulated by NAO_TOOLCHAIN into WORK_DIR, --reference
+#      file:PATH) with the closed-loop RMSE of the native build within +-0.1 mm (and with no heap
+#      allocation after activate).
+#   usage: check_nao_build.sh NAO_RT_ROBOT NAO_RT_NATIVE WORK_DIR NAO_TOOLCHAIN
 # Exit 0 pass, 1 fail, 77 skipped (the robot build does not exist; toolchain/nao test builds it).
 set -euo pipefail
-[[ $# -eq 3 ]] || { echo "usage: $0 NAO_RT_ROBOT NAO_RT_NATIVE WORK_DIR" >&2; exit 2; }
-robot="$1" native="$2" work="$3"
+[[ $# -eq 4 ]] || { echo "usage: $0 NAO_RT_ROBOT NAO_RT_NATIVE WORK_DIR NAO_TOOLCHAIN" >&2; exit 2; }
+robot="$1" native="$2" work="$3" tc="$4"
 if [[ ! -x "$robot" ]]; then
   echo "SKIP: $robot does not exist: build the robot build first (cmake --preset nao && cmake --build build-nao --target nao_rt, or toolchain/nao test, which does)"
   exit 77
@@ -59,16 +61,22 @@ done <<<"$offenders"
 n_ymm=$(objdump -d --no-show-raw-insn "$robot" | grep -cE '%[yz]mm' || true)
 echo "ok: no AVX/FMA instruction in our code, ODE, TinyXML or libstdc++; glibc's CPU-dispatched variants with them: $n_avx functions ($n_ymm ymm/zmm operands), never selected on the Atom (no AVX)"
 
-# 3. The three demo movements, robot build against native build.
+# 3. The three demo movements, robot build against native build, on the same recorded references.
 mkdir -p "$work"
+rm -rf "$work/references"
+"$tc" synth --movement all --per-movement 1 --seed 1000001 --out "$work/references" >"$work/synth.log" 2>&1 ||
+  fail "$tc synth failed: $(tail -n 3 "$work/synth.log")"
 status=0
 for m in whole_arm elbow wrist; do
+  skeleton="$work/references/${m}_000/skeleton.csv"
+  "$tc" triangulate --demo "$work/references/${m}_000" --max-gap 0 --out "$skeleton" >"$work/triangulate-$m.log" 2>&1 ||
+    fail "$tc triangulate failed on $m: $(tail -n 3 "$work/triangulate-$m.log")"
   for build in robot native; do
     exe="$robot"
     [[ $build == native ]] && exe="$native"
     rm -rf "$work/$build-$m"
-    "$exe" --reference "synthetic:$m" --zero-timing --log "$work/$build-$m" >"$work/$build-$m.log" 2>&1 ||
-      fail "$exe --reference synthetic:$m failed: $(tail -n 3 "$work/$build-$m.log")"
+    "$exe" --reference "file:$skeleton" --movement "$m" --zero-timing --log "$work/$build-$m" >"$work/$build-$m.log" 2>&1 ||
+      fail "$exe --reference file:$skeleton failed: $(tail -n 3 "$work/$build-$m.log")"
   done
   python3 - "$work/robot-$m/summary.json" "$work/native-$m/summary.json" "$m" <<'PY' || status=1
 import json, sys

@@ -1,11 +1,14 @@
 #!/usr/bin/python3
 """Hardware-in-the-loop tests of nao_rt's LoLA backend (docs/lola.md), one CTest test per case.
 
-    lola_hil.py --nao-rt BIN --sim BIN CASE
+    lola_hil.py --nao-rt BIN --sim BIN --toolchain BIN CASE
+
+The human references are recorded ones: demonstration 0 of run seed 1000001 (toolchain/nao demo's),
+synthesised and triangulated by nao_toolchain into the case's temporary directory.
 
 CASE:
-  movement:M   nao_lola_sim + `nao_rt --robot lola:PATH --reference synthetic:M` against the
-               in-process run of the same reference: hand RMSE, allocations, answers within the
+  movement:M   nao_lola_sim + `nao_rt --robot lola:PATH --reference file:SKELETON --movement M` against
+               the in-process run of the same reference: hand RMSE, allocations, answers within the
                cycle, the stiffness ramps, no joint but the right arm's commanded away from start.
   fault:F      one injected fault (drop, delay, garbage, bad_length, heat, misread, close, silence,
                sigterm, no_robot): it ends as docs/lola.md specifies, never a crash or a hang.
@@ -89,6 +92,20 @@ class Sim:
         return summary, rows
 
 
+def reference(a, tmp, movement):
+    """nao_rt's arguments for the recorded reference of `movement` (made once per case)."""
+    demo = os.path.join(tmp, "references", movement + "_000")
+    skeleton = os.path.join(demo, "skeleton.csv")
+    if not os.path.exists(skeleton):
+        for cmd in ([a.toolchain, "synth", "--movement", movement, "--per-movement", "1", "--seed", "1000001", "--out",
+                     os.path.join(tmp, "references")],
+                    [a.toolchain, "triangulate", "--demo", demo, "--max-gap", "0", "--out", skeleton]):
+            p = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+            if p.returncode != 0:
+                raise SystemExit("reference of %s: %s failed: %s" % (movement, " ".join(cmd), p.stderr[-1000:]))
+    return ["--reference", "file:" + skeleton, "--movement", movement]
+
+
 def run_rt(exe, args, timeout):
     t0 = time.monotonic()
     p = subprocess.run([exe, *args], capture_output=True, text=True, timeout=timeout)
@@ -148,12 +165,12 @@ def check_start_and_stop(rows, label, expect_stop_ramp=True):
 
 def case_movement(a, movement, tmp, flags=()):
     ode_dir, hil_dir = os.path.join(tmp, "ode"), os.path.join(tmp, "hil")
-    rc, _ = run_rt(a.nao_rt, ["--reference", "synthetic:" + movement, "--log", ode_dir], 300)
+    rc, _ = run_rt(a.nao_rt, [*reference(a, tmp, movement), "--log", ode_dir], 300)
     check(rc == 0, f"in-process run exits 0 (got {rc})")
     ode = summary_of(ode_dir)
     ticks = ode["ticks"]
     sim = Sim(a.sim, tmp)
-    rc, wall = run_rt(a.nao_rt, ["--robot", "lola:" + sim.path, "--reference", "synthetic:" + movement,
+    rc, wall = run_rt(a.nao_rt, ["--robot", "lola:" + sim.path, *reference(a, tmp, movement),
                                  "--ticks", str(ticks), "--log", hil_dir, *flags], ticks * 0.1 + 60)
     ss, rows = sim.stop()
     check(rc == 0, f"LoLA run exits 0 (got {rc})")
@@ -221,7 +238,7 @@ FAULTS = {
 
 def case_fault(a, name, tmp, extra=()):
     log = os.path.join(tmp, "run")
-    base = ["--reference", "synthetic:elbow", "--ticks", "70", "--log", log, *extra]
+    base = [*reference(a, tmp, "elbow"), "--ticks", "70", "--log", log, *extra]
     if name == "no_robot":
         rc, wall = run_rt(a.nao_rt, ["--robot", "lola:" + os.path.join(tmp, "nobody.sock"), *base], 60)
         check(rc == 1 and wall < 30, f"no LoLA socket: configure error, exit 1 (got {rc} after {wall:.1f} s)")
@@ -325,7 +342,7 @@ def case_peer_client(a, tmp):
     srv.bind(path)
     srv.listen(1)
     log = os.path.join(tmp, "run")
-    p = subprocess.Popen([a.nao_rt, "--robot", "lola:" + path, "--reference", "synthetic:elbow", "--ticks", "10",
+    p = subprocess.Popen([a.nao_rt, "--robot", "lola:" + path, *reference(a, tmp, "elbow"), "--ticks", "10",
                           "--log", log])
     srv.settimeout(60)
     c, _ = srv.accept()
@@ -397,7 +414,7 @@ def case_slow(a, tmp):
         d = os.path.join(tmp, mode.replace(" ", "_"))
         os.makedirs(d)
         sim = Sim(a.sim, d)
-        rc, _ = run_rt(a.nao_rt, ["--robot", "lola:" + sim.path, "--reference", "synthetic:elbow", "--ticks", "60",
+        rc, _ = run_rt(a.nao_rt, ["--robot", "lola:" + sim.path, *reference(a, tmp, "elbow"), "--ticks", "60",
                                   "--emulate-tick-ms", str(SLOW_TICK_MS), "--log", os.path.join(d, "run"), *flags], 80)
         ss, rows = sim.stop()
         check(rc == 0, f"{mode}: exits 0 (got {rc})")
@@ -430,6 +447,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--nao-rt", required=True)
     ap.add_argument("--sim", required=True)
+    ap.add_argument("--toolchain", required=True, help="nao_toolchain (synth, triangulate: the references)")
     ap.add_argument("case")
     a = ap.parse_args()
     kind, _, arg = a.case.partition(":")

@@ -1,27 +1,34 @@
 // nao_toolchain evaluate: issue 13's scores per movement into OUT/summary.json (docs/evaluate.md).
 //
 //   autonomous_dtw_m   median over the held-out demonstrations d of nao_rt's rollout of the
-//                      autonomous model from d's s_0 (--start-demo): DTW of its hand path to
-//                      the nearest held-out demonstration (summary.json ee_dtw_nearest_m)
+//                      autonomous model from d's s_0 for d's length (--reference none
+//                      --start-pose s_0 --ticks N): DTW of its hand path (ticks.csv) to the
+//                      nearest held-out demonstration
 //   demo_nn_dtw_m      median over d of the DTW from d to its nearest other held-out demonstration
 //   linear_ar_dtw_m    the per-joint linear AR baseline (linear_ar.hpp), fitted on the model's
 //                      training split, rolled out from the same s_0 on the same simulated arm
-//   reference_rmse_m   median over --seeds of nao_rt's hand RMSE in reference mode
-//                      (--reference synthetic:M --seed s) with the reference model
+//   reference_rmse_m   median over --seeds of nao_rt's hand RMSE in reference mode with the
+//                      reference model, on the held-out demonstration of synthesiser run seed
+//                      1000000 + s, written as a skeleton CSV (--reference file:PATH)
 //   blend_law_rmse_m   the same run with the blend law instead of the policy (--blend-law-pole)
 //   gain_law_rmse_m    the same run with the fixed-gain first-order servo inversion (--gain-law):
 //                      the closed form the execution labels would follow on an exactly
 //                      first-order arm, i.e. the bar for what the policy learns beyond a formula
+#include "nao/controller.hpp"
+#include "nao/csv_reader.hpp"
 #include "nao/kinematics.hpp"
 #include "nao/model_file.hpp"
+#include "nao/model_metadata.hpp"
 #include "nao/sim_arm.hpp"
+#include "nao/skeleton_csv.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
+#include "nao/tools/heldout.hpp"
 #include "nao/tools/linear_ar.hpp"
 #include "nao/tools/policy_dataset.hpp"
+#include "nao/tools/reference_source.hpp"
 #include "nao/tools/synth.hpp"
 #include "rt_metrics.hpp"
-#include "rt_run.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -62,7 +69,7 @@ struct Args {
   int jobs = 2;
   int max_order = 12;
   int min_demos = 16;
-  std::int64_t test_seed = -1;  ///< >= 0: score on the test set of this seed (rt::testDemos), not on validation
+  std::int64_t test_seed = -1;  ///< >= 0: score on the test set of this seed (testDemos), not on validation
   int test_demos = 16;
   bool data_given = false;
 };
@@ -191,6 +198,22 @@ std::string millimetres(double m) {
 
 json numberOrNull(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
+std::string exactNumber(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  return buf;
+}
+
+// The hand path of a nao_rt run: the start pose's hand point (at rest, clamped to the limits),
+// then every tick's hand point (ticks.csv ee_x, ee_y, ee_z: exact doubles).
+HandPath runHandPath(const ArmModel& arm, const JointVector& q_start, const fs::path& ticks_csv) {
+  HandPath path = handPath(arm, {clampToLimits(arm, q_start)});
+  CsvReader csv(ticks_csv.string(), "ticks.csv");
+  const std::size_t x = csv.column("ee_x"), y = csv.column("ee_y"), z = csv.column("ee_z");
+  while (csv.next()) path.emplace_back(csv.number(x), csv.number(y), csv.number(z));
+  return path;
+}
+
 json arJson(const LinearArModel& m) {
   json joints = json::array();
   for (const LinearArJoint& j : m.joints)
@@ -221,8 +244,8 @@ void evaluate(const Args& a) {
     throw UserError(a.reference_model + " is not a reference-conditioned model (--reference-model)");
   const json meta = metadataOf(auto_model);
   const json ref_meta = metadataOf(ref_model);
-  const RetargetParams retarget = rt::modelRetargetSetting(auto_model.header.metadata_json, RetargetParams{},
-                                                           a.autonomous_model);
+  const RetargetParams retarget = modelRetargetSetting(auto_model.header.metadata_json, RetargetParams{},
+                                                       a.autonomous_model);
   double pole = KeyPoseBlend{}.pole;
   if (ref_meta.is_object() && ref_meta.contains("training") && ref_meta["training"].contains("perturbation") &&
       ref_meta["training"]["perturbation"].contains("blend_pole") &&
@@ -316,9 +339,9 @@ void evaluate(const Args& a) {
     w.name = name;
     // v: the model's validation demonstrations (the AR order is chosen on them); scored: the ones
     // scored, v itself, or with --test-seed a test set that neither training nor selection saw.
-    const rt::ValidationSet v = rt::validationDemos(auto_model.header.metadata_json, name, a.autonomous_model);
+    const ValidationSet v = validationDemos(auto_model.header.metadata_json, name, a.autonomous_model);
     const bool test = a.test_seed >= 0;
-    const rt::ValidationSet scored = test ? rt::testDemos(name, static_cast<std::uint64_t>(a.test_seed), a.test_demos) : v;
+    const ValidationSet scored = test ? testDemos(name, static_cast<std::uint64_t>(a.test_seed), a.test_demos) : v;
     if (!test && static_cast<int>(v.names.size()) < a.min_demos)
       throw UserError(a.autonomous_model + " holds out " + std::to_string(v.names.size()) + " demonstration(s) of " +
                       name + "; the protocol needs at least " + std::to_string(a.min_demos) +
@@ -397,14 +420,18 @@ void evaluate(const Args& a) {
 
     // nao_rt runs: one autonomous rollout per held-out demonstration, reference mode per seed.
     const fs::path mdir = out / name;
-    for (const char* sub : {"autonomous", "reference", "blend_law", "gain_law"}) fs::remove_all(mdir / sub, ec);
+    for (const char* sub : {"autonomous", "reference", "blend_law", "gain_law", "references"})
+      fs::remove_all(mdir / sub, ec);
     for (std::size_t i = 0; i < scored.names.size(); ++i) {
+      // From the demonstration's s_0 (its feature-extracted start, at rest) for its length.
       w.auto_jobs.push_back(jobs.size());
+      const JointVector& s0 = w.held.target[i].front();
+      std::string pose;
+      for (int j = 0; j < kNumJoints; ++j) pose += (j > 0 ? "," : "") + exactNumber(s0[j]);
       std::vector<std::string> argv = {nao_rt.string(), "--weights", a.autonomous_model, "--urdf", a.urdf,
-                                       "--reference", "none", "--movement", name, "--start-demo", std::to_string(i),
+                                       "--reference", "none", "--movement", name, "--start-pose", pose,
+                                       "--ticks", std::to_string(w.held.target[i].size()),
                                        "--zero-timing", "--log", (mdir / "autonomous" / scored.names[i]).string()};
-      if (test)
-        argv.insert(argv.end(), {"--test-seed", std::to_string(a.test_seed), "--test-demos", std::to_string(a.test_demos)});
       jobs.push_back({name + " autonomous " + scored.names[i], argv, mdir / "autonomous" / scored.names[i]});
     }
     char pole_text[32], gain_text[32];
@@ -412,11 +439,17 @@ void evaluate(const Args& a) {
     std::snprintf(gain_text, sizeof gain_text, "%.17g", gain);
     for (std::uint64_t s : a.seeds) {
       const std::string seed = std::to_string(s);
+      // The reference: demonstration 0 of run seed 1000000 + s (never a training seed) as the
+      // two cameras and the triangulation see it, written exactly (17 digits).
+      const fs::path skeleton = mdir / "references" / ("seed_" + seed + ".csv");
+      fs::create_directories(skeleton.parent_path(), ec);
+      writeSkeletonCsv(skeleton.string(),
+                       observeDemo(generateDemo(parseMovement(name), 0, kReferenceSeedBase + s, false)), false, 17);
       // One reference-mode run of the model (no extra flags) or of a baseline replacing it.
       const auto referenceRun = [&](const std::string& label, const char* sub, std::vector<std::string> extra) {
         const fs::path dir = mdir / sub / ("seed_" + seed);
         std::vector<std::string> argv = {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf,
-                                         "--reference", "synthetic:" + name, "--seed", seed};
+                                         "--reference", "file:" + skeleton.string(), "--movement", name};
         argv.insert(argv.end(), extra.begin(), extra.end());
         for (const char* x : {"--zero-timing", "--log"}) argv.push_back(x);
         argv.push_back(dir.string());
@@ -444,17 +477,23 @@ void evaluate(const Args& a) {
     for (std::size_t i = 0; i < w.auto_jobs.size(); ++i) {
       const Job& job = jobs[w.auto_jobs[i]];
       const json s = readSummary(job);
-      if (!s.contains("start_demo") || s["start_demo"] != w.held.names[i])
+      if (numberAt(s, "ticks", job) != static_cast<double>(w.held.target[i].size()))
         throw UserError((job.dir / "summary.json").string() + ": not the rollout from " + w.held.names[i] +
-                        " (a nao_rt without --start-demo?)");
-      const double d = numberAt(s, "ee_dtw_nearest_m", job);
+                        " (another length)");
+      // The hand path from s_0 against every held-out demonstration's: the nearest (the paper
+      // protocol's score) and the mean.
+      const HandPath path = runHandPath(arm, w.held.target[i].front(), job.dir / "ticks.csv");
+      const NearestDemo nearest = nearestDemo(path, w.held.hand);
+      double sum = 0.0;
+      for (const HandPath& demo : w.held.hand) sum += rt::dtwMeanDistance(path, demo);
+      const double d = nearest.dtw_m;
       auto_dtw.push_back(d);
       auto_runs.push_back({{"start_demo", w.held.names[i]},
                            {"run_dir", fs::relative(job.dir, out).string()},
                            {"ticks", s["ticks"]},
                            {"dtw_nearest_m", d},
-                           {"nearest_demo", s["ee_dtw_nearest_demo"]},
-                           {"dtw_mean_m", s["ee_dtw_m"]},
+                           {"nearest_demo", w.held.names[static_cast<std::size_t>(nearest.index)]},
+                           {"dtw_mean_m", sum / static_cast<double>(w.held.hand.size())},
                            {"command_limited_ticks", s["faults"]["command_limited"]}});
     }
     for (std::size_t i = 0; i < w.demo_nn.size(); ++i) {

@@ -1,8 +1,8 @@
 // `nao_toolchain evaluate` (issue 13, docs/evaluate.md): the paper's autonomous protocol and the
 // reference-mode bar, scored the way nao_rt scores a run. The helpers here are the pieces the
 // tests check on their own: hand paths, nearest-demonstration DTW (rt::dtwMeanDistance, the
-// runtime's), medians, and the held-out demonstrations as nao_rt regenerates them.
-// Offline code (nao_eval_lib, links nao_rt_run): allocates, may throw.
+// runtime's), medians, and the held-out demonstrations regenerated (heldout.hpp names them).
+// Offline code (nao_eval_lib, links nao_rt_metrics): allocates, may throw.
 #pragma once
 
 #include "nao/arm_model.hpp"
@@ -34,8 +34,8 @@ struct NearestDemo {
 NearestDemo nearestDemo(const HandPath& path, const std::vector<HandPath>& demos, int exclude = -1);
 
 /// The held-out demonstrations of one movement: the autonomous model's split.val entries of the
-/// movement, regenerated as nao_rt --reference none regenerates them (synthesiser, cameras,
-/// triangulation, the runtime's retargeting with the model's setting, the model's key poses).
+/// movement, regenerated (synthesiser, cameras, triangulation, the runtime's retargeting with the
+/// model's setting, the model's key poses).
 struct HeldOutDemos {
   std::string movement;
   std::uint64_t seed = 1;
@@ -46,7 +46,8 @@ struct HeldOutDemos {
   std::vector<HandPath> hand;                    ///< its hand path
 };
 
-/// Regenerates demonstrations `indices` of `movement` (synth run seed `seed`) like nao_rt does.
+/// Regenerates demonstrations `indices` of `movement` (synth run seed `seed`): their
+/// feature-extracted trajectories.
 std::vector<std::vector<JointVector>> regenerateTargets(const ArmModel& arm, const std::string& movement,
                                                         std::uint64_t seed, const std::vector<int>& indices,
                                                         const std::vector<JointVector>& key_poses,

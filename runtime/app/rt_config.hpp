@@ -1,0 +1,237 @@
+// What a nao_rt run is told and everything configured before its loop (DESIGN §9, docs/nao_rt.md):
+// the options (rt_cli.hpp fills them), the model (compiled-in or --weights, checked; its weights
+// bound), the robot spec, and the human reference the ticks see.
+//
+// References (--reference): where a run's human frames come from, one per tick.
+//   file:PATH  a recorded 10 Hz skeleton CSV (nao_toolchain triangulate writes it), prepared at
+//              configure time into fixed buffers (nao/reference_stream.hpp) with its evaluation
+//              target, the demonstration's feature-extracted trajectory;
+//   none       an autonomous-mode rollout from one of the model's starts (model.bin metadata
+//              "starts", nao/model_file.hpp) or from --start-pose.
+// A kind is a ReferenceKind, parsed by parseReferenceSpec and turned into a HumanSource by
+// prepareRun: a live source (cameras) is one more kind with its own HumanSource.
+//
+// Configure-time code: allocates, reads files, throws UsageError (exit 2) or another
+// std::exception (exit 1) with a one-line message.
+#pragma once
+
+#include "nao/arm_model.hpp"
+#include "nao/body25.hpp"
+#include "nao/controller.hpp"
+#include "nao/lola_backend.hpp"
+#include "nao/model_file.hpp"
+#include "nao/model_metadata.hpp"
+#include "nao/policy.hpp"
+#include "nao/quantize.hpp"
+#include "nao/reference_stream.hpp"
+#include "nao/sim_arm.hpp"
+
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace nao::rt {
+
+/// Everything a run is told (the nao_rt command line, rt_cli.hpp).
+struct RunOptions {
+  std::string weights_path;                ///< model.bin; empty: the compiled-in model
+  ModelImage compiled;                     ///< the compiled-in model (bytes nullptr if the build has none)
+  /// fp32, fp32-packed or int8 (nao/quantize.hpp); empty: what the compiled-in model was
+  /// generated with when no --weights is given, else fp32.
+  std::string precision;
+  std::string urdf_path = NAO_DEFAULT_URDF;
+  std::string reference;       ///< file:PATH or none
+  std::string movement;        ///< the movement, as named in model.bin (required)
+  /// none only: the model's start of `movement` to roll out from (index into its "starts", 0-based);
+  /// -1: not given (start 0 unless start_pose is).
+  int start_index = -1;
+  /// none only: 5 joint angles (rad) to start from instead of a model start; empty: none given.
+  std::vector<double> start_pose;
+  std::int64_t ticks = 0;      ///< > 0: run this many ticks
+  double seconds = 0.0;        ///< > 0: run this long (rounded to whole ticks); else the default length
+  bool realtime = false;       ///< absolute 10 Hz deadlines (clock_nanosleep), SCHED_FIFO + mlockall if permitted
+  std::string log_dir;         ///< run directory; empty: no files
+  std::string attention_shm;   ///< POSIX shared-memory name of the attention ring; empty: in process
+  bool zero_timing = false;    ///< write the *_us columns of ticks.csv as 0 (byte-comparable files)
+  ControllerParams controller; ///< fault timeouts, home pose, retargeting (defaults: DESIGN §9)
+  SimParams sim;               ///< the in-process ODE arm (--robot ode)
+  /// ode (the in-process arm, default) or lola[:SOCKET] (LoLA, default socket /tmp/robocup).
+  std::string robot = "ode";
+  LolaParams lola;             ///< LoLA safety parameters (socket_path from `robot`)
+  /// LoLA on one thread: load the policy's weights and workspace into the cache in the cycle
+  /// before each tick's packet (warmPolicy; --lola-no-warm turns it off, docs/lola.md).
+  bool lola_warm = true;
+  /// > 0: busy-wait this long before every tick's work, as a slower CPU would take (tests and
+  /// benchmarks of the LoLA timing; not in tick_us).
+  std::int64_t emulate_tick_ns = 0;
+  ControllerClock* clock = nullptr;  ///< stage timings; nullptr: CLOCK_MONOTONIC (tests inject)
+};
+
+/// A command-line problem (unknown reference, missing --movement, ...): exit status 2.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Counts heap allocations on the calling thread between start and stop (nao_rt and the
+/// *_alloc tests back it with CountAllocations; without one the summary says null). The LoLA
+/// backend's I/O thread (--lola-io-thread) is counted by the probe's companion(), started and
+/// stopped on that thread.
+using nao::AllocationProbe;
+
+/// Longest run: one hour of ticks (NAO's battery lasts about that). The run buffers are sized
+/// by it before the loop, so a larger count would only allocate until the machine gives up.
+inline constexpr std::int64_t kMaxRunTicks = kMaxStartTicks;
+
+/// Replaces line breaks so a message stays one line.
+std::string oneLine(std::string s);
+
+// ---------------------------------------------------------------------------------------------
+// References and robots.
+
+enum class ReferenceKind {
+  kFile,  ///< file:PATH, a recorded skeleton CSV
+  kNone,  ///< none, an autonomous rollout from a start
+};
+
+struct ReferenceSpec {
+  ReferenceKind kind = ReferenceKind::kFile;
+  std::string movement;  ///< movement name as in model.bin
+  std::string path;      ///< file: only
+};
+
+/// Parses --reference / --movement. Throws UsageError: no or an unknown reference, an empty
+/// file: path, no --movement.
+ReferenceSpec parseReferenceSpec(const std::string& reference, const std::string& movement);
+
+/// The human frames a run's ticks see. Built at configure time; frameAt runs on the control
+/// thread once per tick: real-time safe (no allocation, no lock, no I/O).
+class HumanSource {
+ public:
+  virtual ~HumanSource() = default;
+  /// The human of tick `tick` (world frame), or nullptr when nobody is seen in it.
+  virtual const SkeletonFrame* frameAt(std::int64_t tick) = 0;
+};
+
+/// The robot backend a run drives (--robot).
+struct RobotSpec {
+  bool lola = false;
+  std::string socket_path;  ///< lola only
+};
+
+/// Parses --robot: ode, lola, lola:PATH. Throws UsageError otherwise.
+RobotSpec parseRobotSpec(const std::string& robot, const std::string& default_socket);
+
+// ---------------------------------------------------------------------------------------------
+// The prepared run.
+
+/// Everything configured before the policy is bound.
+struct PreparedRun {
+  ArmModel arm;
+  ModelFile model;                     ///< validated, joints checked against `arm`
+  std::string model_source;            ///< "compiled-in" or the --weights path
+  const std::uint8_t* model_bytes = nullptr;  ///< compiled-in: the embedded bytes to bind to; else nullptr
+  const std::uint64_t* model_offsets = nullptr;  ///< compiled-in: the generated tensor offsets
+  WeightPrecision precision = WeightPrecision::kFp32;
+  /// int8: the compiled-in blob (checked) to bind to; nullptr: quantise the model at start-up.
+  const std::uint8_t* int8_bytes = nullptr;
+  /// fp32-packed: the compiled-in packed blob (checked); nullptr: pack the model at start-up.
+  const std::uint8_t* packed_bytes = nullptr;
+  LinearArCoefficients linear_ar;       ///< autonomous models over the linear AR base (metadata)
+  ReferenceSpec spec;
+  int movement_index = 0;              ///< into model.header.movement_names
+  std::vector<JointVector> centroids;  ///< the movement's key poses, rad
+  RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
+  float residual_gain = 0.0f;          ///< the model's training.residual_gain (PolicyWeights)
+  std::int64_t phase_ticks = 0;        ///< the model's training.phase_ticks (ControllerParams)
+  std::unique_ptr<HumanSource> human;  ///< the frames the ticks see; nullptr: none (autonomous)
+  /// file: the recorded reference (owned by `human`, so it stays put when the run is moved);
+  /// nullptr for none.
+  const ReferenceStream* reference = nullptr;
+  std::string description;             ///< what the ticks see, e.g. "file:x.csv" or "none (start 2 ...)"
+  /// none: the model start the run begins from (its name and index) or "" / -1 for --start-pose.
+  std::string start_name;
+  int start_index = -1;
+  JointVector q_start = JointVector::Zero();  ///< activate pose (the arm starts there at rest, a(−1) = 0)
+  std::int64_t ticks = 0;
+  bool has_targets = false;            ///< the reference has a feature-extracted target per tick
+};
+
+/// Configure-time checks and preparation, in the order that fails fastest: options, URDF, model
+/// (file checks, joints against the URDF, architecture against `compiled_arch`), movement,
+/// conditioning, then the reference (the file, or the start), the tick count and the run
+/// directory. Throws UsageError or another std::exception with a one-line message.
+PreparedRun prepareRun(const RunOptions& options, const PolicyArch& compiled_arch);
+
+// ---------------------------------------------------------------------------------------------
+// Weights of a --weights file (DESIGN §8): copied at configure time into 64-byte aligned storage
+// that exists only when a file is loaded. The compiled-in model is bound in place and costs
+// nothing here.
+
+/// Floats of weight storage for every manifest tensor of Dims, each padded to 64 bytes (the
+/// manifest of policy_config.cpp, counted at compile time; copyWeightFile checks it).
+template <class Dims>
+constexpr std::size_t policyStorageFloats() {
+  constexpr std::size_t D = Dims::kDModel, J = Dims::kTokens, M = Dims::kMovements, K = Dims::kClusters;
+  constexpr std::size_t S = Dims::kMaxSteps, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
+  constexpr auto pad = [](std::size_t n) { return (n + 15) / 16 * 16; };
+  const std::size_t norm = 2 * pad(D);
+  const std::size_t attention = 4 * (pad(D * D) + pad(D));
+  const std::size_t ffn = pad(D * F0) + pad(F0) + pad(F0 * F1) + pad(F1) + pad(F1 * F2) + pad(F2) + pad(F2 * D) + pad(D);
+  std::size_t n = pad(Dims::kFeatures * D) + pad(D) + pad(J * D) + pad(M * D) + pad(S * D) + pad(D) + pad(D) + pad(J * D);
+  const std::size_t age_bias = pad(static_cast<std::size_t>(Dims::kHeads) * Dims::kWindow);  // window attention only
+  n += Dims::kEncoderLayers * (norm + attention + age_bias + norm + ffn) + norm;
+  n += Dims::kDecoderLayers * (norm + attention + norm + attention + age_bias + norm + ffn) + norm;
+  n += pad(D) + pad(1) + 6 * pad(J) + pad(M * K * J);
+  return n;
+}
+
+/// The aligned floats a --weights model's tensors are copied into; empty (no memory) for the
+/// compiled-in model. Owned by the run, alive until the loop has ended.
+struct WeightStorage {
+  struct Free {
+    void operator()(float* f) const noexcept { ::operator delete[](f, std::align_val_t{kModelAlignment}); }
+  };
+  std::unique_ptr<float[], Free> floats;
+  std::size_t n_floats = 0;
+};
+
+/// Copies the tensors of `model` into `storage` (allocated here: policyStorageFloats<Dims>,
+/// 64-byte aligned, zero-filled, so the padding between tensors reads as zeros) and returns where
+/// each one starts, in manifest order. Configure time: allocates; throws std::bad_alloc, or
+/// std::logic_error if the storage is too small (a programming error in policyStorageFloats).
+/// nao_bench reads its weights from here too, so it times what nao_rt reads.
+template <class Dims>
+std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& storage) {
+  std::vector<const float*> pointers;
+  pointers.reserve(model.tensors.size());
+  storage.n_floats = policyStorageFloats<Dims>();
+  storage.floats.reset(static_cast<float*>(
+      ::operator new[](storage.n_floats * sizeof(float), std::align_val_t{kModelAlignment})));
+  float* floats = storage.floats.get();
+  std::fill(floats, floats + storage.n_floats, 0.0f);
+  std::size_t used = 0;
+  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
+    const std::size_t n = model.tensors[i].spec.count();
+    if (used + n > storage.n_floats)
+      throw std::logic_error("nao_rt: the weight storage is smaller than the model's manifest");
+    std::memcpy(floats + used, model.data(i), n * sizeof(float));
+    pointers.push_back(floats + used);
+    used += (n + 15) / 16 * 16;
+  }
+  return pointers;
+}
+
+/// The weights of a --weights model: copyWeightFile, the views bound by name.
+template <class Dims>
+PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
+  const std::vector<const float*> pointers = copyWeightFile<Dims>(p.model, storage);
+  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.conditioning);
+}
+
+}  // namespace nao::rt

@@ -1,0 +1,274 @@
+// The run directory and the printed summary of a nao_rt run (rt_rundir.hpp).
+#include "rt_rundir.hpp"
+
+#include "nao/policy_kernels.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <ostream>
+#include <sstream>
+
+namespace nao::rt {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string hex64(std::uint64_t v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "0x%016llx", static_cast<unsigned long long>(v));
+  return buf;
+}
+
+void appendNumber(std::string& s, double v) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  s.append(buf, r.ptr);
+}
+
+void appendNumber(std::string& s, float v) {
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  s.append(buf, r.ptr);
+}
+
+template <class Int>
+void appendInt(std::string& s, Int v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  s.append(buf, r.ptr);
+}
+
+nlohmann::ordered_json statsJson(const LatencyStats& s) {
+  return {{"p50", s.p50}, {"p99", s.p99}, {"max", s.max}};
+}
+
+// NaN has no JSON spelling: null.
+nlohmann::ordered_json numberOrNull(double v) {
+  return std::isfinite(v) ? nlohmann::ordered_json(v) : nlohmann::ordered_json(nullptr);
+}
+
+void writeText(const fs::path& path, const std::string& text) {
+  std::ofstream f(path, std::ios::binary | std::ios::trunc);
+  if (!f) throw std::runtime_error("cannot write " + path.string());
+  f.write(text.data(), static_cast<std::streamsize>(text.size()));
+  f.close();
+  if (!f) throw std::runtime_error("error while writing " + path.string());
+}
+
+std::string millis(double us) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f ms", us * 1e-3);
+  return buf;
+}
+
+}  // namespace
+
+std::string ticksCsvHeader() {
+  std::string s = "tick,t_s";
+  for (const char* name : {"q_ref", "r", "a", "q_cmd", "q"})
+    for (int j = 0; j < kNumJoints; ++j) s += std::string(",") + name + "_" + std::to_string(j);
+  s += ",ee_x,ee_y,ee_z,ee_ref_x,ee_ref_y,ee_ref_z";
+  for (int j = 0; j < kNumJoints; ++j) s += ",att_" + std::to_string(j);
+  s += ",fault,tick_us,retarget_us,policy_us,sim_us";
+  // Appended (the columns before keep their positions): the raw attention mass.
+  for (int j = 0; j < kNumJoints; ++j) s += ",attm_" + std::to_string(j);
+  return s;
+}
+
+std::string ticksCsvRow(const TickRecord& r, bool zero_timing) {
+  std::string s;
+  s.reserve(1024);
+  appendInt(s, r.tick);
+  s += ',';
+  appendNumber(s, r.t_s);
+  for (const JointVector* v : {&r.q_ref, &r.r, &r.a, &r.q_cmd, &r.q})
+    for (int j = 0; j < kNumJoints; ++j) {
+      s += ',';
+      appendNumber(s, (*v)[j]);
+    }
+  for (const Eigen::Vector3d* p : {&r.ee, &r.ee_ref})
+    for (int k = 0; k < 3; ++k) {
+      s += ',';
+      appendNumber(s, (*p)[k]);
+    }
+  for (float a : r.att) {
+    s += ',';
+    appendNumber(s, a);
+  }
+  s += ',';
+  appendInt(s, r.fault);
+  for (double us : {r.tick_us, r.retarget_us, r.policy_us, r.sim_us}) {
+    s += ',';
+    appendNumber(s, zero_timing ? 0.0 : us);
+  }
+  for (float a : r.attm) {
+    s += ',';
+    appendNumber(s, a);
+  }
+  return s;
+}
+
+void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<TickRecord>& records,
+               const AttentionRingView& ring, const LoopTotals& totals, std::ostream& out, RunReport& report) {
+  using nlohmann::ordered_json;
+  report.ticks = static_cast<std::int64_t>(records.size());
+  report.allocations_after_activate = totals.allocations;
+  report.faults.fill(0);
+  std::vector<double> tick_us, retarget_us, policy_us, sim_us;
+  double sum_sq = 0.0;
+  std::int64_t n_ref = 0, slow = 0;
+  for (const TickRecord& r : records) {
+    for (int b = 0; b < kNumControllerFaults; ++b)
+      if (r.fault & (1u << b)) ++report.faults[static_cast<std::size_t>(b)];
+    tick_us.push_back(r.tick_us);
+    retarget_us.push_back(r.retarget_us);
+    policy_us.push_back(r.policy_us);
+    sim_us.push_back(r.sim_us);
+    if (r.tick_us > o.controller.period_s * 1e6) ++slow;
+    if (r.ee_ref.allFinite()) {
+      sum_sq += (r.ee - r.ee_ref).squaredNorm();
+      ++n_ref;
+    }
+  }
+  report.overruns = report.faults[5];
+  static_assert(kFaultOverrun == 1u << 5, "overrun is fault bit 5");
+  report.ee_rmse_m = n_ref > 0 ? std::sqrt(sum_sq / static_cast<double>(n_ref)) : std::nan("");
+  report.tick_us = latencyStats(tick_us);
+  report.retarget_us = latencyStats(retarget_us);
+  report.policy_us = latencyStats(policy_us);
+  report.sim_us = latencyStats(sim_us);
+
+  const bool logging = !o.log_dir.empty();
+  const fs::path dir(o.log_dir);
+  AttentionFileSummary attention;
+  attention.records_written = recordsWritten(*ring.header);
+  if (logging) {
+    std::string csv = ticksCsvHeader() + "\n";
+    for (const TickRecord& r : records) csv += ticksCsvRow(r, o.zero_timing) + "\n";
+    writeText(dir / "ticks.csv", csv);
+    attention = writeAttentionFile((dir / "attention.bin").string(), ring);
+  }
+
+  ordered_json j;
+  j["ticks"] = report.ticks;
+  j["period_s"] = o.controller.period_s;
+  j["duration_s"] = static_cast<double>(report.ticks) * o.controller.period_s;
+  j["overruns"] = report.overruns;
+  ordered_json faults = ordered_json::object();
+  for (int b = 0; b < kNumControllerFaults; ++b)
+    faults[kControllerFaultNames[static_cast<std::size_t>(b)]] = report.faults[static_cast<std::size_t>(b)];
+  j["faults"] = faults;
+  j["allocations_after_activate"] =
+      totals.allocations >= 0 ? ordered_json(totals.allocations) : ordered_json(nullptr);
+  j["tick_us"] = statsJson(report.tick_us);
+  j["retarget_us"] = statsJson(report.retarget_us);
+  j["policy_us"] = statsJson(report.policy_us);
+  j["sim_us"] = statsJson(report.sim_us);
+  j["slow_ticks"] = slow;
+  j["ee_rmse_m"] = numberOrNull(report.ee_rmse_m);
+  j["ee_rmse_ticks"] = n_ref;
+  // The pose the arm started from at rest (a(−1) = 0): a model start, --start-pose, or a recorded
+  // reference's first target pose.
+  j["start_q"] = std::vector<double>(p.q_start.data(), p.q_start.data() + kNumJoints);
+  if (p.spec.kind == ReferenceKind::kNone) {
+    j["start_name"] = p.start_index >= 0 ? ordered_json(p.start_name) : ordered_json(nullptr);
+    j["start_index"] = p.start_index >= 0 ? ordered_json(p.start_index) : ordered_json(nullptr);
+  }
+  if (o.controller.blend_law_pole > 0.0) j["blend_law_pole"] = o.controller.blend_law_pole;
+  if (o.controller.gain_law > 0.0) j["gain_law"] = o.controller.gain_law;
+  j["model"] = {{"path", p.model_source},
+                {"checksum", hex64(p.model.checksum)},
+                {"conditioning", conditioningName(p.model.header.conditioning)},
+                {"residual_gain", p.residual_gain},
+                {"linear_ar_base", !p.linear_ar.empty()},
+                {"phase_ticks", p.phase_ticks},
+                {"precision", weightPrecisionName(p.precision)},
+                {"kernel", policyKernelName(activePolicyKernel())}};
+  j["reference"] = p.description;
+  j["retarget"] = {{"priority", retargetPriorityName(p.retarget.priority)},
+                   {"lambda_q", p.retarget.lambda_q},
+                   {"posture_weights", std::vector<double>(p.retarget.posture_weights.data(),
+                                                           p.retarget.posture_weights.data() + kNumJoints)}};
+  j["movement"] = p.spec.movement;
+  j["realtime"] = o.realtime;
+  if (o.realtime) {
+    j["realtime_scheduling"] = totals.realtime_scheduling;
+    j["skipped_periods"] = totals.skipped_periods;
+  }
+  j["zero_timing"] = o.zero_timing;
+  j["robot"] = totals.lola ? "lola" : "ode";
+  if (totals.lola) {
+    const LolaCounters& c = totals.lola_counters;
+    std::vector<double> rtt_us;
+    rtt_us.reserve(totals.lola_latency_ns.size());
+    for (std::int64_t ns : totals.lola_latency_ns) rtt_us.push_back(static_cast<double>(ns) * 1e-3);
+    j["lola"] = {{"socket", totals.lola_socket},
+                 {"cycles", c.cycles},
+                 {"late", c.late},
+                 {"malformed", c.malformed},
+                 {"gaps", c.gaps},
+                 {"hot_cycles", c.hot_cycles},
+                 {"tracking_cycles", c.tracking_cycles},
+                 {"io_thread", o.lola.io_thread},
+                 {"overrun_ticks", c.overrun_ticks},
+                 {"warm", c.before_tick_calls > 0},
+                 {"warm_skipped", c.before_tick_skipped},
+                 {"warm_us_mean", c.before_tick_calls > 0 ? ordered_json(1e-3 * static_cast<double>(c.before_tick_ns) /
+                                                                         static_cast<double>(c.before_tick_calls))
+                                                          : ordered_json(nullptr)},
+                 {"io_allocations", c.io_allocations >= 0 ? ordered_json(c.io_allocations) : ordered_json(nullptr)},
+                 {"round_trip_us", statsJson(latencyStats(rtt_us))},
+                 {"stop", totals.stop == RobotStop::kLinkLost ? "link_lost"
+                          : totals.stop == RobotStop::kSignal ? "signal"
+                                                              : "end_of_run"}};
+  } else {
+    j["lola"] = nullptr;
+  }
+  j["wall_s"] = totals.wall_s;
+  j["attention"] = {{"file", logging ? ordered_json("attention.bin") : ordered_json(nullptr)},
+                    {"shm", o.attention_shm.empty() ? ordered_json(nullptr) : ordered_json(o.attention_shm)},
+                    {"records_written", attention.records_written},
+                    {"first_record", attention.first_record},
+                    {"record_count", attention.record_count}};
+  report.summary_json = j.dump(2) + "\n";
+  if (logging) writeText(dir / "summary.json", report.summary_json);
+
+  // The human summary.
+  std::ostringstream s;
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "  ticks        %lld (%.1f s simulated, %.2f s wall, %s)\n",
+                static_cast<long long>(report.ticks), static_cast<double>(report.ticks) * o.controller.period_s,
+                totals.wall_s, o.realtime ? "real time" : "back to back");
+  s << buf;
+  std::string fault_text;
+  for (int b = 0; b < kNumControllerFaults; ++b)
+    if (report.faults[static_cast<std::size_t>(b)] > 0)
+      fault_text += (fault_text.empty() ? "" : ", ") + std::string(kControllerFaultNames[static_cast<std::size_t>(b)]) +
+                    " " + std::to_string(report.faults[static_cast<std::size_t>(b)]);
+  s << "  faults       " << (fault_text.empty() ? "none" : fault_text) << "\n";
+  if (n_ref > 0) {
+    std::snprintf(buf, sizeof buf, "  ee RMSE      %.2f mm against the reference's feature-extracted trajectory (%lld ticks)\n",
+                  report.ee_rmse_m * 1e3, static_cast<long long>(n_ref));
+    s << buf;
+  }
+  s << "  tick         p50 " << millis(report.tick_us.p50) << ", p99 " << millis(report.tick_us.p99) << ", max "
+    << millis(report.tick_us.max) << " (policy p99 " << millis(report.policy_us.p99) << ", overruns "
+    << report.overruns << ")\n";
+  s << "  allocations  "
+    << (totals.allocations >= 0 ? std::to_string(totals.allocations) + " after activate" : std::string("not counted"))
+    << "\n";
+  if (logging)
+    s << "  files        " << (dir / "ticks.csv").string() << ", " << (dir / "attention.bin").string() << " ("
+      << attention.record_count << " records), " << (dir / "summary.json").string() << "\n";
+  else
+    s << "  files        none (--log DIR writes ticks.csv, attention.bin and summary.json)\n";
+  out << s.str();
+  out.flush();
+}
+
+}  // namespace nao::rt
