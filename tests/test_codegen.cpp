@@ -1,6 +1,7 @@
 // nao_codegen: the generated sources describe exactly the model they embed, and an
 // unchanged model rewrites nothing (cheap rebuilds).
 #include "nao/codegen.hpp"
+#include "nao/policy.hpp"
 #include "nao/quantize.hpp"
 
 #include "support/random_policy.hpp"
@@ -253,4 +254,44 @@ TEST_CASE("the dims header refuses an FFN depth nao::PolicyDims cannot express")
   const std::string dims = nao::codegen::dimsHeader(m);
   CHECK(dims.find("#error \"nao::PolicyDims supports exactly 3 FFN hidden layers; this model has 2\"") != std::string::npos);
   CHECK(dims.find("using Dims") == std::string::npos);
+}
+
+TEST_CASE("archConstants is the one table of compile-time dimensions: the config states each, the Dims alias passes the marked ones in PolicyDims' order") {
+  // The template arguments of the compiled dimensions, in PolicyDims' parameter order.
+  const auto arguments = [](const nao::PolicyArch& a) {
+    std::vector<int> v;
+    for (const nao::codegen::ArchConstant& c : nao::codegen::archConstants(a))
+      if (c.policy_dims_argument) v.push_back(c.value);
+    return v;
+  };
+  // SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 3, 10, 256, 8> (nao/policy.hpp).
+  CHECK(arguments(nao::smallArch()) == std::vector<int>{32, 4, 2, 2, 64, 64, 64, 3, 10, 256, 8});
+  CHECK(arguments(nao::paperArch()) == std::vector<int>{128, 4, 4, 4, 512, 512, 512, 3, 10, 256, 20});
+  CHECK(nao::SmallPolicyDims::arch() == nao::smallArch());
+  CHECK(nao::PaperPolicyDims::arch() == nao::paperArch());
+
+  nao::PolicyArch arch = nao::smallArch();
+  arch.movements = 5;
+  arch.clusters = 7;
+  arch.window = 12;
+  arch.max_steps = 100;
+  nao::ModelHeader header = makeHeader(arch);
+  header.movement_names = {"a", "b", "c", "d", "e"};
+  const nao::ModelFile m =
+      nao::decodeModel(nao::encodeModel(header, nao::test::randomManifestTensors(arch, 1)), "five.bin");
+  const std::string config = nao::codegen::configHeader(m, "five.bin");
+  const std::string dims = nao::codegen::dimsHeader(m);
+  std::string expected_alias = "using Dims = nao::PolicyDims<";
+  bool first = true;
+  for (const nao::codegen::ArchConstant& c : nao::codegen::archConstants(arch)) {
+    const std::string line = "inline constexpr int " + c.name + " = " + std::to_string(c.value) + ";";
+    CHECK_MESSAGE(config.find(line) != std::string::npos, line);
+    if (c.policy_dims_argument) {
+      expected_alias += (first ? "" : ", ") + c.name;
+      first = false;
+    }
+  }
+  CHECK(config.find("inline constexpr int kMovements = 5;") != std::string::npos);
+  CHECK(config.find("inline constexpr int kWindow = 12;") != std::string::npos);
+  CHECK(dims.find(expected_alias + ">;") != std::string::npos);
 }

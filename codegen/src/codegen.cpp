@@ -71,6 +71,27 @@ std::string banner(const std::string& what) {
 
 }  // namespace
 
+std::vector<ArchConstant> archConstants(const PolicyArch& a) {
+  // Config order; the entries marked true are nao::PolicyDims' template arguments, in this order.
+  std::vector<ArchConstant> c = {
+      {"kDModel", a.d_model, true},
+      {"kHeads", a.heads, true},
+      {"kHeadDim", a.heads > 0 ? a.d_model / a.heads : 0, false},
+      {"kEncoderLayers", a.encoder_layers, true},
+      {"kDecoderLayers", a.decoder_layers, true},
+      {"kFfnCount", static_cast<int>(a.ffn_hidden.size()), false},
+  };
+  for (std::size_t k = 0; k < a.ffn_hidden.size(); ++k)
+    c.push_back({"kFfn" + std::to_string(k), a.ffn_hidden[k], true});
+  c.push_back({"kTokens", a.tokens, false});
+  c.push_back({"kFeatures", a.features, false});
+  c.push_back({"kMovements", a.movements, true});
+  c.push_back({"kClusters", a.clusters, true});
+  c.push_back({"kMaxSteps", a.max_steps, true});
+  c.push_back({"kWindow", a.window, true});
+  return c;
+}
+
 std::string configHeader(const ModelFile& model, const std::string& source, const AlignedBytes* int8,
                          const AlignedBytes* packed) {
   const ModelHeader& h = model.header;
@@ -97,24 +118,10 @@ std::string configHeader(const ModelFile& model, const std::string& source, cons
     << hex64(packed != nullptr ? quantizedChecksum(packed->data.get(), packed->size) : 0) << ";\n\n";
 
   s << "// Architecture (docs/policy.md, PolicyArch).\n";
-  s << "inline constexpr int kDModel = " << a.d_model << ";\n";
-  s << "inline constexpr int kHeads = " << a.heads << ";\n";
-  s << "inline constexpr int kHeadDim = " << a.d_model / a.heads << ";\n";
-  s << "inline constexpr int kEncoderLayers = " << a.encoder_layers << ";\n";
-  s << "inline constexpr int kDecoderLayers = " << a.decoder_layers << ";\n";
-  s << "inline constexpr int kFfnCount = " << a.ffn_hidden.size() << ";\n";
+  for (const ArchConstant& c : archConstants(a)) s << "inline constexpr int " << c.name << " = " << c.value << ";\n";
   std::vector<std::string> widths;
-  for (std::size_t k = 0; k < a.ffn_hidden.size(); ++k) {
-    s << "inline constexpr int kFfn" << k << " = " << a.ffn_hidden[k] << ";\n";
-    widths.push_back(std::to_string(a.ffn_hidden[k]));
-  }
+  for (int w : a.ffn_hidden) widths.push_back(std::to_string(w));
   s << array("int", "kFfnHidden", widths, 8);
-  s << "inline constexpr int kTokens = " << a.tokens << ";\n";
-  s << "inline constexpr int kFeatures = " << a.features << ";\n";
-  s << "inline constexpr int kMovements = " << a.movements << ";\n";
-  s << "inline constexpr int kClusters = " << a.clusters << ";\n";
-  s << "inline constexpr int kMaxSteps = " << a.max_steps << ";\n";
-  s << "inline constexpr int kWindow = " << a.window << ";\n";
   s << "inline constexpr Conditioning kConditioning = Conditioning::"
     << (h.conditioning == Conditioning::kReference ? "kReference" : "kAutonomous") << ";\n\n";
 
@@ -164,6 +171,9 @@ std::string configHeader(const ModelFile& model, const std::string& source, cons
 
 std::string dimsHeader(const ModelFile& model) {
   const PolicyArch& a = model.header.arch;
+  std::string arguments;
+  for (const ArchConstant& c : archConstants(a))
+    if (c.policy_dims_argument) arguments += (arguments.empty() ? "" : ", ") + c.name;
   std::ostringstream s;
   s << banner("The compiled-in policy's dimensions as nao::PolicyDims.");
   s << "#pragma once\n\n#include \"nao_model_config.hpp\"\n\n";
@@ -177,8 +187,7 @@ std::string dimsHeader(const ModelFile& model) {
        "#endif\n"
        "#include \"nao/policy.hpp\"\n\n"
        "namespace nao::compiled {\n\n"
-       "using Dims = nao::PolicyDims<kDModel, kHeads, kEncoderLayers, kDecoderLayers, kFfn0, kFfn1, kFfn2, kMovements,\n"
-       "                             kClusters, kMaxSteps, kWindow>;\n\n"
+       "using Dims = nao::PolicyDims<" << arguments << ">;\n\n"
        "}  // namespace nao::compiled\n";
   return s.str();
 }

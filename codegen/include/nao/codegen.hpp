@@ -26,6 +26,19 @@ inline constexpr const char* kPackedCopy = "model.packed";  ///< --precision fp3
 inline constexpr const char* kPackedSymbol = "nao_model_packed";
 inline constexpr const char* kPackedEndSymbol = "nao_model_packed_end";
 
+/// One compile-time dimension of the policy as the generated code states it.
+struct ArchConstant {
+  std::string name;                   ///< the constant in namespace nao::compiled, e.g. "kWindow"
+  int value = 0;
+  bool policy_dims_argument = false;  ///< passed to nao::PolicyDims (in archConstants' order)
+};
+
+/// Every compile-time dimension of `arch`, in the generated config's order: the one place that
+/// says how a PolicyArch becomes code. configHeader emits each as `inline constexpr int`, and
+/// dimsHeader passes the marked ones, in this order, as nao::PolicyDims' template arguments
+/// (which follow PolicyDims' own parameter order). A new PolicyArch field is one entry here.
+std::vector<ArchConstant> archConstants(const PolicyArch& arch);
+
 /// nao_model_config.hpp for `model`: namespace nao::compiled, every dimension, the
 /// conditioning, checksum, parameter count, tensor names/offsets/counts in manifest order,
 /// joint names and limits, movement names. `source` is named in the banner comment only.
