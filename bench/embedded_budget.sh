@@ -9,6 +9,8 @@
 #   1. binary sizes: file, stripped, the compiled-in weights, stripped without the weights;
 #   2. peak resident set (VmHWM, getrusage of the child) over a 600-tick run, compiled-in model
 #      and --weights models/default.bin;
+# every run on the same recorded reference: demonstration 0 of whole_arm, run seed 1000001 (the
+# demo's), synthesised and triangulated into a skeleton CSV by build/bin/nao_toolchain;
 #   3. per tick of the robot build (valgrind callgrind, collecting inside updateController only,
 #      caches simulated with the Atom E3845's geometry): instructions, data reads/writes, L1
 #      and last-level (the Atom's L2) misses, and the executed instruction mix; once with the
@@ -33,12 +35,20 @@ done
 [[ "$TICKS" =~ ^[1-9][0-9]*$ ]] || { echo "embedded_budget.sh: --ticks must be a positive integer" >&2; exit 2; }
 die() { echo "embedded_budget.sh: $*" >&2; exit 1; }
 ROBOT="$ROOT/build-nao/bin/nao_rt" NATIVE="$ROOT/build/bin/nao_rt" MODEL="$ROOT/models/default.bin"
+TC="$ROOT/build/bin/nao_toolchain"
 [[ -x "$ROBOT" ]] || die "no robot build: run 'toolchain/nao build --preset nao' first"
-[[ -x "$NATIVE" ]] || die "no native build: run 'toolchain/nao build' first"
+[[ -x "$NATIVE" && -x "$TC" ]] || die "no native build: run 'toolchain/nao build' first"
 [[ -f "$MODEL" ]] || die "no $MODEL (toolchain/nao train default)"
 command -v valgrind >/dev/null || die "valgrind not found: apt-get install valgrind"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
+
+"$TC" synth --movement whole_arm --per-movement 1 --seed 1000001 --out "$work/references" >/dev/null ||
+  die "nao_toolchain synth failed"
+SKELETON="$work/references/whole_arm_000/skeleton.csv"
+"$TC" triangulate --demo "$work/references/whole_arm_000" --max-gap 0 --out "$SKELETON" >/dev/null ||
+  die "nao_toolchain triangulate failed"
+REFERENCE=(--reference "file:$SKELETON" --movement whole_arm)
 
 load_before="$(cut -d' ' -f1-3 /proc/loadavg)"
 # One tick under callgrind: only updateController (the whole tick: retarget, snap, policy,
@@ -55,17 +65,17 @@ for precision in fp32 int8; do
       --compress-pos=no --compress-strings=no --cache-sim=yes \
       --I1=32768,8,64 --D1=24576,6,64 --LL=1048576,16,64 \
       --collect-atstart=no "${toggles[@]}" \
-      "$ROBOT" --reference synthetic:whole_arm --ticks "$TICKS" --zero-timing --precision "$precision" \
+      "$ROBOT" "${REFERENCE[@]}" --ticks "$TICKS" --zero-timing --precision "$precision" \
       >"$work/callgrind.log" 2>&1 || { cat "$work/callgrind.log" >&2; die "valgrind failed ($precision, $variant)"; }
   done
 done
 objdump -d --no-show-raw-insn "$ROBOT" >"$work/robot.dis"
 load_after="$(cut -d' ' -f1-3 /proc/loadavg)"
 
-python3 - "$ROOT" "$ROBOT" "$NATIVE" "$MODEL" "$TICKS" "$work" "$load_before" "$load_after" "$OUT" "$*" <<'PY'
+python3 - "$ROOT" "$ROBOT" "$NATIVE" "$MODEL" "$TICKS" "$work" "$load_before" "$load_after" "$OUT" "$*" "$SKELETON" <<'PY'
 import collections, datetime, json, os, re, resource, subprocess, sys
 
-root, robot, native, model, ticks, work, load_before, load_after, out_path, args = sys.argv[1:]
+root, robot, native, model, ticks, work, load_before, load_after, out_path, args, skeleton = sys.argv[1:]
 ticks = int(ticks)
 lines = []
 def say(s=""):
@@ -137,13 +147,14 @@ def peak_rss_kib(cmd):
     if os.waitstatus_to_exitcode(status) != 0:
         raise SystemExit("embedded_budget.sh: %s failed (exit %d)" % (" ".join(cmd), os.waitstatus_to_exitcode(status)))
     return usage.ru_maxrss
-say("## 2. Peak resident set over a 600-tick run (--reference synthetic:whole_arm --ticks 600)")
+say("## 2. Peak resident set over a 600-tick run (--reference file:<whole_arm skeleton> --ticks 600)")
 for name, exe, extra in (("robot, compiled-in model", robot, []),
                          ("robot, --weights models/default.bin", robot, ["--weights", model]),
                          ("native, compiled-in model (%s)" % precision_of(native), native, []),
                          ("native, compiled-in model as fp32", native, ["--precision", "fp32"]),
                          ("native, --weights models/default.bin", native, ["--weights", model])):
-    kib = peak_rss_kib([exe, "--reference", "synthetic:whole_arm", "--ticks", "600", "--zero-timing"] + extra)
+    kib = peak_rss_kib([exe, "--reference", "file:" + skeleton, "--movement", "whole_arm", "--ticks", "600",
+                        "--zero-timing"] + extra)
     say("%-46s %7.1f MiB  (target <= 64 MB)" % (name, kib / 1024.0))
 say()
 

@@ -4,6 +4,7 @@
 #include "nao/tools/command.hpp"
 #include "nao/tools/skeleton_csv.hpp"
 #include "nao/tools/synth.hpp"
+#include "nao/tools/triangulate.hpp"
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
@@ -204,6 +205,9 @@ void writeDemo(const SynthDemo& demo, const std::string& out_dir) {
   }
   writeText(dir / "calibration.json", calibrationJson(demo.cameras));
   writeText(dir / "truth.csv", truthCsv(demo));
+  // The truth as nao_rt reads a recorded human (a 10 Hz skeleton CSV, --reference file:): the
+  // noise-free skeleton a perfect detector would have given, for comparison with the cameras'.
+  writeSkeletonCsv((dir / "truth_skeleton.csv").string(), resampleSkeleton(demo.truth, 10.0, demo.fps));
   writeText(dir / "meta.json", metaJson(demo));
 }
 

@@ -123,7 +123,8 @@ HumanArmPoints humanArmForward(const Anthropometrics& body, const Eigen::Matrix3
 /// (none of these when demo.noise_free). Points outside the image or behind the camera are 0,0,0.
 std::vector<OpenPoseFrame> renderCamera(const SynthDemo& demo, int camera_index);
 
-/// Writes `demo` into DIR/<demo.name>/ (cam0/, cam1/, calibration.json, truth.csv, meta.json).
+/// Writes `demo` into DIR/<demo.name>/ (cam0/, cam1/, calibration.json, truth.csv,
+/// truth_skeleton.csv, meta.json).
 /// Throws UserError when a file cannot be written.
 void writeDemo(const SynthDemo& demo, const std::string& out_dir);
 
