@@ -238,14 +238,15 @@ FAULTS = {
 
 def case_fault(a, name, tmp, extra=()):
     log = os.path.join(tmp, "run")
-    base = [*reference(a, tmp, "elbow"), "--ticks", "70", "--log", log, *extra]
+    ref = reference(a, tmp, "elbow")
+    base = [*ref, "--ticks", "70", "--log", log, *extra]
     if name == "no_robot":
         rc, wall = run_rt(a.nao_rt, ["--robot", "lola:" + os.path.join(tmp, "nobody.sock"), *base], 60)
         check(rc == 1 and wall < 30, f"no LoLA socket: configure error, exit 1 (got {rc} after {wall:.1f} s)")
         return
     if name == "sigterm":
         sim = Sim(a.sim, tmp)
-        p = subprocess.Popen([a.nao_rt, "--robot", "lola:" + sim.path, *base[:3], "600", *base[4:]])
+        p = subprocess.Popen([a.nao_rt, "--robot", "lola:" + sim.path, *ref, "--ticks", "600", "--log", log, *extra])
         time.sleep(6.0)
         p.send_signal(signal.SIGTERM)
         rc = p.wait(timeout=30)
