@@ -92,15 +92,17 @@ std::optional<PoseFormat> poseFormatFromName(std::string_view name) {
 
 const char* poseFormatName(PoseFormat format) { return format == PoseFormat::kBody25 ? "body25" : "body25b"; }
 
-// The two namings, as the regular expressions ^.*_([0-9]{12})_keypoints\.json$ and
+// The namings, as the regular expressions ^(.*_)?([0-9]{12})_keypoints\.json$ and
 // ^.*\.([0-9]+)\.json$ (whose '.' matches no line break) read them; by hand, because the reader
-// thread checks every file name a folder event carries.
+// thread checks every file name a folder event carries. OpenPose names a frame of a video
+// <video>_<frame>_keypoints.json and one of a camera <frame>_keypoints.json.
 std::optional<long long> openPoseFrameIndex(std::string_view name) {
   if (name.find_first_of("\n\r") != std::string_view::npos) return std::nullopt;
   constexpr std::string_view kOpenPoseSuffix = "_keypoints.json";
-  if (endsWith(name, kOpenPoseSuffix) && name.size() >= kOpenPoseSuffix.size() + 13) {
-    const std::string_view digits = name.substr(name.size() - kOpenPoseSuffix.size() - 12, 12);
-    if (std::all_of(digits.begin(), digits.end(), isDigit) && name[name.size() - kOpenPoseSuffix.size() - 13] == '_')
+  if (endsWith(name, kOpenPoseSuffix) && name.size() >= kOpenPoseSuffix.size() + 12) {
+    const std::size_t first = name.size() - kOpenPoseSuffix.size() - 12;
+    const std::string_view digits = name.substr(first, 12);
+    if (std::all_of(digits.begin(), digits.end(), isDigit) && (first == 0 || name[first - 1] == '_'))
       return digitsValue(digits);
   }
   constexpr std::string_view kDottedSuffix = ".json";

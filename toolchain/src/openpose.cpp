@@ -56,7 +56,7 @@ CameraKeypoints readOpenPoseFolder(const std::string& dir, PoseFormat format) {
     }
   }
   if (files.empty())
-    throw UserError(dir + ": no OpenPose frame files (<name>_<12 digits>_keypoints.json or <name>.<digits>.json)");
+    throw UserError(dir + ": no OpenPose frame files ([<name>_]<12 digits>_keypoints.json or <name>.<digits>.json)");
   CameraKeypoints cam;
   cam.dir = dir;
   cam.frames.reserve(files.size());

@@ -48,7 +48,8 @@ struct Person2d {
   bool detected(int i) const { return confidence[i] > 0.0; }
 };
 
-/// Frame index of an OpenPose file name (`<name>_<12 digits>_keypoints.json` or
+/// Frame index of an OpenPose file name (`<name>_<12 digits>_keypoints.json`, as OpenPose names
+/// a video's frames, `<12 digits>_keypoints.json`, as it names a camera's, or
 /// `<name>.<digits>.json`, at most 18 digits); nullopt for any other name.
 std::optional<long long> openPoseFrameIndex(std::string_view file_name);
 
