@@ -345,7 +345,9 @@ struct LiveCamera::Reader {
     const double t_s = static_cast<double>(index - first_index) / cfg.fps;
     const FrameTriangulation done = triangulateFrame(cfg.cameras, people, t_s, cfg.triangulation, triangulation, frame);
     if (!done.subject.found) bump(counts.frames_no_person);
-    const LiveSkeletonStep skeleton_step = advanceLiveSkeleton(cfg.skeleton, skeleton, frame);
+    const FrameObservations observations{&cfg.cameras, &people, &done.subject.person};
+    const LiveSkeletonStep skeleton_step =
+        advanceLiveSkeleton(cfg.skeleton, skeleton, frame, done.subject.found ? &observations : nullptr);
     bump(counts.points_bridged, static_cast<std::uint64_t>(skeleton_step.n_bridged));
 
     record.frame_index = index;

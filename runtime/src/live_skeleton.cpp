@@ -55,7 +55,8 @@ void resetLiveSkeleton(const LiveSkeletonParams& params, double fps, LiveSkeleto
   state.hand_length_m = 0.0;
 }
 
-LiveSkeletonStep advanceLiveSkeleton(const LiveSkeletonParams& params, LiveSkeletonState& state, SkeletonFrame& frame) {
+LiveSkeletonStep advanceLiveSkeleton(const LiveSkeletonParams& params, LiveSkeletonState& state, SkeletonFrame& frame,
+                                     const FrameObservations* observations) {
   LiveSkeletonStep step;
   const double t = frame.t_s;
 
@@ -71,6 +72,8 @@ LiveSkeletonStep advanceLiveSkeleton(const LiveSkeletonParams& params, LiveSkele
     references_changed = true;
   }
   if (references_changed) updateBoneReferences(state);
+  if (observations != nullptr)
+    step.bone_fit = fitArmBoneLengths(*observations, state.bones, params.bone_fit_px_per_m, params.bone_fit_iterations, frame);
 
   // 2. Causal low-pass of the measured points.
   lowPassSkeleton(params.low_pass, state.low_pass, frame);

@@ -514,4 +514,92 @@ int rejectBoneOutliers(SkeletonFrame& f, const BoneLengths& bones, double tolera
   return n_marked;
 }
 
+namespace {
+
+constexpr std::array<int, 3> kArmPoints = {kRShoulder, kRElbow, kRWrist};
+constexpr std::size_t kUpperArmBone = 4, kForearmBone = 5;  // indices into kSkeletonBones
+static_assert(kSkeletonBones[kUpperArmBone].first == kRShoulder && kSkeletonBones[kUpperArmBone].second == kRElbow);
+static_assert(kSkeletonBones[kForearmBone].first == kRElbow && kSkeletonBones[kForearmBone].second == kRWrist);
+
+// Reprojection residuals of the three arm points (as ReprojectionCost) and the two bone
+// residuals; parameters: shoulder, elbow, wrist (world, m).
+struct ArmBoneCost {
+  const CameraSet* cameras;
+  const std::array<std::vector<Observation>, 3>* obs;
+  double upper_m, forearm_m, px_per_m;
+  int NumResiduals() const {
+    return 2 * static_cast<int>((*obs)[0].size() + (*obs)[1].size() + (*obs)[2].size()) + 2;
+  }
+  template <typename T>
+  bool operator()(const T* p, T* residual) const {
+    int r = 0;
+    for (std::size_t a = 0; a < 3; ++a)
+      for (const Observation& o : (*obs)[a]) {
+        const double w = std::sqrt(o.confidence);
+        T px[2];
+        if (projectT((*cameras)[static_cast<std::size_t>(o.camera)], p + 3 * a, px)) {
+          residual[r++] = T(w) * (px[0] - T(o.px.x()));
+          residual[r++] = T(w) * (px[1] - T(o.px.y()));
+        } else {
+          residual[r++] = T(w * kBehindCameraPx);
+          residual[r++] = T(w * kBehindCameraPx);
+        }
+      }
+    const auto length = [](const T* a, const T* b) {
+      using std::sqrt;
+      return sqrt((b[0] - a[0]) * (b[0] - a[0]) + (b[1] - a[1]) * (b[1] - a[1]) + (b[2] - a[2]) * (b[2] - a[2]));
+    };
+    residual[r++] = T(px_per_m) * (length(p, p + 3) - T(upper_m));
+    residual[r++] = T(px_per_m) * (length(p + 3, p + 6) - T(forearm_m));
+    return true;
+  }
+};
+
+}  // namespace
+
+bool fitArmBoneLengths(const FrameObservations& observations, const BoneLengths& bones, double px_per_m,
+                       int max_iterations, SkeletonFrame& frame) {
+  if (!(px_per_m > 0.0) || !bones.checked[kUpperArmBone] || !bones.checked[kForearmBone]) return false;
+  if (observations.cameras == nullptr || observations.people == nullptr || observations.subject_person == nullptr)
+    return false;
+  const CameraSet& cameras = *observations.cameras;
+  std::array<std::vector<Observation>, 3> obs;
+  Eigen::Matrix<double, 9, 1> p;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const int i = kArmPoints[a];
+    if (!frame.ok[i] || frame.interpolated[i]) return false;
+    p.segment<3>(static_cast<Eigen::Index>(3 * a)) = frame.p_W[i];
+    for (std::size_t c = 0; c < cameras.size() && c < 32; ++c) {
+      const int person = (*observations.subject_person)[c];
+      if (((frame.views[i] >> c) & 1u) == 0u || person < 0) continue;
+      const Person2d& q = (*(*observations.people)[c])[static_cast<std::size_t>(person)];
+      obs[a].push_back({static_cast<int>(c), q.px[i], q.confidence[i]});
+    }
+    if (obs[a].size() < 2) return false;
+  }
+  const ArmBoneCost cost{&cameras, &obs, bones.median_m[kUpperArmBone], bones.median_m[kForearmBone], px_per_m};
+  using Function = ceres::TinySolverAutoDiffFunction<ArmBoneCost, Eigen::Dynamic, 9>;
+  const Function function(cost);
+  const auto total = [&](const Eigen::Matrix<double, 9, 1>& x) {
+    Eigen::VectorXd residual(cost.NumResiduals());
+    cost(x.data(), residual.data());
+    return residual.squaredNorm();
+  };
+  ceres::TinySolver<Function> solver;
+  solver.options.max_num_iterations = max_iterations;
+  solver.options.gradient_tolerance = 1e-12;
+  solver.options.parameter_tolerance = 1e-12;
+  solver.options.function_tolerance = 1e-12;
+  Eigen::Matrix<double, 9, 1> fitted = p;
+  solver.Solve(function, &fitted);
+  if (!fitted.allFinite() || !(total(fitted) < total(p))) return false;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const Eigen::Vector3d p_W = fitted.segment<3>(static_cast<Eigen::Index>(3 * a));
+    for (const Observation& o : obs[a])
+      if (toCamera(cameras[static_cast<std::size_t>(o.camera)], p_W).z() <= 1e-9) return false;
+  }
+  for (std::size_t a = 0; a < 3; ++a) frame.p_W[kArmPoints[a]] = fitted.segment<3>(static_cast<Eigen::Index>(3 * a));
+  return true;
+}
+
 }  // namespace nao

@@ -84,9 +84,10 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
   Skeleton frames(n_frames);
   std::vector<double> rms;
   TriangulationState state;
+  std::vector<std::vector<const std::vector<Person2d>*>> frame_people(n_frames);
   std::size_t k = 0;
   for (const auto& [index, files] : by_index) {
-    std::vector<const std::vector<Person2d>*> people;
+    std::vector<const std::vector<Person2d>*>& people = frame_people[k];
     for (const KeypointFrame* f : files) people.push_back(f != nullptr ? &f->people : &nobody);
     if (std::find(files.begin(), files.end(), nullptr) != files.end()) ++rep.n_frames_incomplete;
     // Time from the file index, so frames absent from every folder keep their gap.
@@ -102,6 +103,14 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
     if (opt.progress) opt.progress(static_cast<int>(k), static_cast<int>(n_frames));
   }
   if (opt.check_bone_lengths) rep.n_bone_rejections = rejectBoneLengthOutliers(frames, opt.bone_tolerance);
+  if (opt.bone_fit_px_per_m > 0.0) {
+    const BoneLengths bones = medianBoneLengths(frames.data(), frames.size());
+    for (std::size_t f = 0; f < frames.size(); ++f) {
+      const FrameObservations observations{&cameras, &frame_people[f], &rep.subject_person[f]};
+      rep.n_arm_bone_fits +=
+          fitArmBoneLengths(observations, bones, opt.bone_fit_px_per_m, opt.max_refine_iterations, frames[f]) ? 1 : 0;
+    }
+  }
   smoothSkeletonZeroLag(frames, opt.zero_lag_sigma_s, opt.fps);
   for (SkeletonFrame& f : frames)
     for (int i = 0; i < kNumSkeletonPoints; ++i)

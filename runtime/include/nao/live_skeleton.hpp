@@ -4,7 +4,9 @@
 //     over the subject's first reference_window_s (from its first frame with the bone seen);
 //     within that window the medians of the frames so far. Offline the reference is the whole
 //     capture's median; live it cannot be.
-//  2. Causal low-pass of each measured point (filter_cutoff_hz; see SkeletonLowPass).
+//     Then the arm's bone-length consistency against those references (fitArmBoneLengths),
+//     when the frame's observations are given.
+//  2. Causal low-pass of each measured point (SkeletonLowPass).
 //  3. Gap bridge: a point missing for at most max_gap_s since its last measurement keeps that
 //     last (filtered) position, flagged interpolated; longer gaps stay missing. Offline, gaps
 //     are interpolated between both ends instead, which a live source cannot do.
@@ -39,7 +41,10 @@ struct LiveSkeletonParams {
   double bone_tolerance = 0.25;        ///< relative bone-length deviation marked bad
   double reference_window_s = 3.0;     ///< bone references and d_h from the subject's first seconds, s
   double human_scale_m = 0.0;          ///< > 0: d_h given (no estimate)
-  SkeletonLowPassParams low_pass;      ///< step 2
+  double bone_fit_px_per_m = 300.0;    ///< step 1's arm bone-length fit (1 cm off costs 3 px); 0: none
+  int bone_fit_iterations = 30;        ///< its iteration cap
+  /// Step 2: One Euro at 4 Hz at rest, +2 Hz per m/s (bench/results/triangulation_accuracy.txt).
+  SkeletonLowPassParams low_pass{4.0, 2.0, 1.0, 0.2};
 };
 
 /// Everything the steps carry from frame to frame. One per capture (resetLiveSkeleton).
@@ -68,11 +73,13 @@ void resetLiveSkeleton(const LiveSkeletonParams& params, double fps, LiveSkeleto
 struct LiveSkeletonStep {
   int n_bone_rejections = 0;  ///< points the bone-length rule marked missing
   int n_bridged = 0;          ///< points held across a gap
+  bool bone_fit = false;      ///< the arm was refitted to its bone lengths
   bool scale_fixed = false;   ///< d_h was fixed by this frame
 };
 
 /// Steps 1-5 of the file comment on `frame` (triangulated, time frame.t_s later than the last
-/// one), in place.
-LiveSkeletonStep advanceLiveSkeleton(const LiveSkeletonParams& params, LiveSkeletonState& state, SkeletonFrame& frame);
+/// one), in place. `observations` (what the frame was triangulated from) enables the bone fit.
+LiveSkeletonStep advanceLiveSkeleton(const LiveSkeletonParams& params, LiveSkeletonState& state, SkeletonFrame& frame,
+                                     const FrameObservations* observations = nullptr);
 
 }  // namespace nao

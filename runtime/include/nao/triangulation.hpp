@@ -191,4 +191,24 @@ BoneLengths medianBoneLengths(const SkeletonFrame* frames, std::size_t n);
 /// moved along its epipolar line). Returns how many points it marked missing.
 int rejectBoneOutliers(SkeletonFrame& frame, const BoneLengths& bones, double tolerance);
 
+/// What a frame's points were triangulated from: the cameras, each camera's people and the
+/// subject's index in them (FrameTriangulation::subject.person). Borrowed, not owned.
+struct FrameObservations {
+  const CameraSet* cameras = nullptr;
+  const std::vector<const std::vector<Person2d>*>* people = nullptr;
+  const std::vector<int>* subject_person = nullptr;  ///< per camera, -1: none
+};
+
+/// Bone-length consistency of the right arm. Shoulder, elbow and wrist are refitted together
+/// (TinySolver, autodiff, iteration cap) on the confidence-weighted pixel reprojection error of
+/// the cameras each was triangulated from (SkeletonFrame::views), plus, per arm bone (upper
+/// arm, forearm), px_per_m * (its length - its reference length): a bone 1 cm off the
+/// reference costs as much as px_per_m / 100 px of reprojection error. With two cameras a
+/// point is least certain along the cameras' common depth, and that is where the bone
+/// residual moves it. Runs when the three points are measured (ok, not interpolated), both
+/// bones have a checked reference, and px_per_m > 0; the fit replaces them only if every
+/// point stays in front of its cameras and the total cost fell. Returns true if it did.
+bool fitArmBoneLengths(const FrameObservations& observations, const BoneLengths& bones, double px_per_m,
+                       int max_iterations, SkeletonFrame& frame);
+
 }  // namespace nao

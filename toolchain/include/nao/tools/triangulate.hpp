@@ -39,6 +39,7 @@ struct TriangulateOptions : TriangulationParams {
   double max_gap_s = 0.2;           ///< longest gap of a point that is interpolated (flagged), s; 0: none
   bool check_bone_lengths = true;   ///< apply the bone-length rule over the sequence
   double bone_tolerance = 0.25;     ///< relative bone-length deviation marked bad
+  double bone_fit_px_per_m = 0.0;   ///< arm bone-length consistency (nao::fitArmBoneLengths) against the capture's medians; 0: none
   double zero_lag_sigma_s = 0.0;    ///< zero-lag smoothing of the measured points (smoothSkeletonZeroLag), s; 0: none
   std::function<void(int done, int total)> progress;  ///< after each frame read; total = frames read
 };
@@ -54,6 +55,7 @@ struct TriangulationReport {
   int n_points_inconsistent = 0;    ///< >= 2 views that never agreed -> missing
   int n_observations_rejected = 0;  ///< camera observations dropped as outliers
   int n_bone_rejections = 0;        ///< points marked missing by the bone-length rule
+  int n_arm_bone_fits = 0;          ///< frames whose arm was refitted to its bone lengths (bone_fit_px_per_m)
   int n_points_interpolated = 0;    ///< missing points bridged by the gap policy (not in n_points_valid/missing)
   double median_reprojection_px = 0.0;  ///< over valid points, RMS over their cameras
   /// Per output frame of triangulateCapture (sorted present indices): per camera the index of
