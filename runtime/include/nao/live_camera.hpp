@@ -13,8 +13,9 @@
 //    retry_s until file_wait_s after it appeared; then it is dropped and counted malformed;
 //  - pairs the cameras by frame index: an index is complete when every live camera's file for
 //    it has parsed, or when a newer index is complete (its missing cameras then see nobody). A
-//    camera is live while its folder exists and it wrote a frame within camera_stopped_s of the
-//    newest frame of any camera; a stopped camera is left out until it writes again;
+//    camera is live from its first parsed file while its folder exists; one whose last parsed
+//    file is more than camera_stopped_s older than any camera's newest is stopped and left out
+//    until it parses a file again;
 //  - triangulates each complete index with the shared per-frame core (nao/triangulation.hpp:
 //    the same subject choice and camera consensus as `nao_toolchain triangulate`), then the
 //    causal steps of nao/live_skeleton.hpp (bone-length rule, low-pass, gap bridge, d_h);
@@ -77,7 +78,7 @@ struct LiveCameraConfig {
   double stale_s = 0.3;                ///< takeNewestFromRT: a skeleton older than this is "no human", s
   double file_wait_s = 0.5;            ///< a file that does not parse is dropped this long after it appeared, s
   double retry_s = 0.005;              ///< interval between parse attempts of an unclosed file, s
-  double camera_stopped_s = 0.5;       ///< a camera this far behind the newest frame is stopped, s
+  double camera_stopped_s = 0.5;       ///< a camera whose last parsed file is this much older than the newest is stopped, s
   int max_catch_up_frames = 8;         ///< complete frames processed at once; older ones are skipped
   std::size_t latency_capacity = 36000;  ///< latency samples kept (1 h of 10 Hz takes)
   /// Called first on the reader thread (e.g. to attach a counting allocator's ThreadAllocations).
