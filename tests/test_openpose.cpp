@@ -71,6 +71,8 @@ void expectError(const std::string& text, const std::string& expected) {
 TEST_CASE("frame index is parsed from both OpenPose namings and nothing else") {
   CHECK(openPoseFrameIndex("video_000000000042_keypoints.json") == 42);
   CHECK(openPoseFrameIndex("cam_left_000000001234_keypoints.json") == 1234);
+  CHECK(openPoseFrameIndex("000000000042_keypoints.json") == 42);  // a camera's frames have no name part
+  CHECK_FALSE(openPoseFrameIndex("x000000000042_keypoints.json"));
   CHECK(openPoseFrameIndex("demo.17.json") == 17);
   CHECK(openPoseFrameIndex("a.b.0007.json") == 7);
   CHECK_FALSE(openPoseFrameIndex("video_42_keypoints.json"));  // not 12 digits

@@ -26,9 +26,11 @@ namespace {
 // Plain thread-local integers: reading them allocates nothing and needs no constructor.
 thread_local int t_armed = 0;
 thread_local std::int64_t t_count = 0;
+thread_local nao::ThreadAllocations* t_sink = nullptr;
 
 inline void note() {
   if (t_armed) ++t_count;
+  if (t_sink != nullptr) t_sink->count.fetch_add(1, std::memory_order_relaxed);
 }
 
 void* newImpl(std::size_t n) {
@@ -103,5 +105,6 @@ namespace nao {
 CountAllocations::CountAllocations() : start_(t_count) { ++t_armed; }
 CountAllocations::~CountAllocations() { --t_armed; }
 std::int64_t CountAllocations::count() const { return t_count - start_; }
+void countThreadAllocationsInto(ThreadAllocations* sink) { t_sink = sink; }
 
 }  // namespace nao

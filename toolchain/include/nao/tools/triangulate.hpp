@@ -1,44 +1,11 @@
 // Multi-camera triangulation of OpenPose keypoints into a 3D skeleton (DESIGN section 4).
 //
-// Per capture frame:
-//  1. Subject selection by multi-view consistency. For every pair of cameras and every pair of
-//     people in them, the upper-body points (Nose, Neck, shoulders, elbows, wrists, hips) seen
-//     by both are triangulated; a pairing is a candidate when >= 3 points agree (reprojection
-//     error <= outlier_px) and their median reprojection error is <= subject_px. Each further
-//     camera contributes the person whose points reproject best (median <= subject_px, >= 3
-//     points), else the person with the most agreeing points (>= 3 and >= 40 % of those
-//     compared: the same body with a limb swapped), or nobody. Among candidates, those whose 3D centre (torso points) lies within
-//     subject_max_jump_m of the last frame's subject are preferred (continuity). The score of a
-//     candidate is its number of consistent (camera, point) detections; among the candidates
-//     scoring >= 3/4 of the best, the winner is the one whose centre appears closest to the
-//     image centres (cameras frame their subject), then the higher score, then lower indices.
-//     No candidate -> the whole frame is missing. People order and person_id play no role.
-//  2. Per keypoint, the chosen people's detections with confidence >= min_confidence are
-//     triangulated: confidence-weighted DLT on undistorted points, then Ceres (TinySolver,
-//     autodiff, iteration cap) on the confidence-weighted pixel reprojection error; the refined
-//     point replaces the DLT point only if it is in front of every camera and that error is
-//     not higher.
-//  3. Camera selection by consensus. A fit is consistent when every used camera sees the point
-//     in front of it and reprojects it within its tolerance: outlier_px, given for a 1920 x 1080
-//     image and scaled by the image diagonal for larger images (never below outlier_px). When
-//     the fit of all n >= 3 cameras is inconsistent, every pair of cameras (n <= 8) proposes
-//     the point of its two rays; the proposal that the most cameras agree with (within their
-//     tolerance; ties: the one nearest the point's latest estimate of the last 0.25 s, else
-//     the lower sum of squared errors; then the lower pair) wins, and its
-//     consensus set is refitted and re-checked against all cameras until it no longer changes.
-//     While that fit (or, above 8 cameras, the fit of all) is still inconsistent and >= 3
-//     cameras remain, the camera whose removal gives the smallest worst-case reprojection error
-//     of the others is dropped. Cameras not in the final fit count as rejected. A fit of 2
-//     cameras that is inconsistent (the two rays do not meet: a wrong keypoint off the
-//     epipolar line) makes the point missing: with two views one cannot tell which camera is
-//     wrong, so no point is invented. Fewer than 2 usable views -> missing. The cameras used
-//     (SkeletonFrame::views) and their RMS reprojection error are kept per point.
-//  4. BODY_25B: MidHip = mean of the two 3D hips when both are valid.
-// Over the sequence (capture rate), the bone-length rule catches what geometry cannot with two
-// cameras (a wrong keypoint moved along its epipolar line): a bone whose length differs from
-// its sequence median by more than max(bone_tolerance * median, 5 cm) is bad; greedily, the
-// point with the most bad bones (all of its checked bones bad) is marked missing, until no
-// point has all its bones bad. Bones need >= 5 valid samples and a median >= 5 cm.
+// The per-frame core (subject selection, DLT + Ceres refinement, camera consensus, MidHip of
+// BODY_25B) is the runtime's (nao/triangulation.hpp), shared with nao_rt's live camera source;
+// its file comment states the rules. This adds what needs the whole recording.
+// Over the sequence (capture rate), the bone-length rule (nao::rejectBoneOutliers) catches what
+// geometry cannot with two cameras (a wrong keypoint moved along its epipolar line), with each
+// bone's median over the whole capture as its reference length.
 // Gap policy (max_gap_s): a point missing for at most max_gap_s between two valid samples of
 // it is interpolated linearly and flagged (SkeletonFrame::interpolated, CSV `_ok` = 2); longer
 // gaps, and gaps that contain frame indices absent from every folder, stay missing.
@@ -47,6 +14,7 @@
 #pragma once
 
 #include "nao/body25.hpp"
+#include "nao/triangulation.hpp"
 #include "nao/tools/camera.hpp"
 #include "nao/tools/openpose.hpp"
 #include "nao/tools/skeleton_csv.hpp"
@@ -61,18 +29,18 @@
 
 namespace nao::tools {
 
-struct TriangulateOptions {
+/// Settings of the offline triangulation: the per-frame ones (nao::TriangulationParams:
+/// min_confidence, outlier_px, subject_px, subject_max_jump_m, max_refine_iterations) and the
+/// sequence ones.
+struct TriangulateOptions : TriangulationParams {
   PoseFormat format = PoseFormat::kBody25;
   double fps = 30.0;                ///< capture rate of the keypoint files, Hz
   double rate_hz = 10.0;            ///< output rate, Hz
-  double min_confidence = 0.05;     ///< detections below are not used
-  double outlier_px = 10.0;         ///< max reprojection error of an accepted observation, px (1080p; scaled up with the image)
-  double subject_px = 15.0;         ///< max median reprojection error of a person match, px (1080p; scaled likewise)
   double max_gap_s = 0.2;           ///< longest gap of a point that is interpolated (flagged), s; 0: none
-  double subject_max_jump_m = 0.5;  ///< continuity gate for the subject's torso centre, m
   bool check_bone_lengths = true;   ///< apply the bone-length rule over the sequence
   double bone_tolerance = 0.25;     ///< relative bone-length deviation marked bad
-  int max_refine_iterations = 30;   ///< Ceres iteration cap per point
+  double bone_fit_px_per_m = 0.0;   ///< arm bone-length consistency (nao::fitArmBoneLengths) against the capture's medians; 0: none
+  double zero_lag_sigma_s = 0.0;    ///< zero-lag smoothing of the measured points (smoothSkeletonZeroLag), s; 0: none
   std::function<void(int done, int total)> progress;  ///< after each frame read; total = frames read
 };
 
@@ -87,6 +55,7 @@ struct TriangulationReport {
   int n_points_inconsistent = 0;    ///< >= 2 views that never agreed -> missing
   int n_observations_rejected = 0;  ///< camera observations dropped as outliers
   int n_bone_rejections = 0;        ///< points marked missing by the bone-length rule
+  int n_arm_bone_fits = 0;          ///< frames whose arm was refitted to its bone lengths (bone_fit_px_per_m)
   int n_points_interpolated = 0;    ///< missing points bridged by the gap policy (not in n_points_valid/missing)
   double median_reprojection_px = 0.0;  ///< over valid points, RMS over their cameras
   /// Per output frame of triangulateCapture (sorted present indices): per camera the index of
@@ -94,55 +63,14 @@ struct TriangulationReport {
   std::vector<std::vector<int>> subject_person;
 };
 
-/// One camera's detection of one point.
-struct Observation {
-  int camera = 0;                 ///< index into the CameraSet
-  Eigen::Vector2d px;             ///< pixel (distorted image)
-  double confidence = 1.0;        ///< weight, (0, 1]
-};
-
-/// A triangulated point.
-struct PointEstimate {
-  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();  ///< world frame, m (meaningless when !ok)
-  bool ok = false;
-  int n_used = 0;              ///< cameras in the final fit
-  int n_rejected = 0;          ///< cameras dropped by the outlier rule
-  std::uint32_t views = 0;     ///< cameras in the final fit: bit c = Observation::camera c (c < 32)
-  bool inconsistent = false;   ///< had >= 2 views but none agreed
-  double rms_px = 0.0;         ///< RMS reprojection error over the used cameras
-};
-
-/// Normalised undistorted image coordinates (x/z, y/z) of pixel `px`: inverse of camera.hpp's
-/// distort() and K by Newton iteration (to 1e-14 or 50 iterations).
-Eigen::Vector2d undistortPixel(const Camera& cam, const Eigen::Vector2d& px);
-
-/// Confidence-weighted linear (DLT) triangulation from >= 2 observations (rows scaled by
-/// sqrt(confidence) * focal length). nullopt if degenerate (point at infinity).
-std::optional<Eigen::Vector3d> triangulateDlt(const CameraSet& cameras, const std::vector<Observation>& obs);
-
-/// Ceres refinement of p0_W on the confidence-weighted pixel reprojection error.
-Eigen::Vector3d refineOnReprojection(const CameraSet& cameras, const std::vector<Observation>& obs,
-                                     const Eigen::Vector3d& p0_W, int max_iterations);
-
-/// One point from all its observations, with the camera selection of the file comment.
-/// `previous_W`, the point's latest estimate (triangulateCapture: of the last 0.25 s), breaks ties between
-/// equally large agreeing camera sets (the nearer wins).
-PointEstimate triangulatePoint(const CameraSet& cameras, std::vector<Observation> obs, const TriangulateOptions& opt,
-                               const std::optional<Eigen::Vector3d>& previous_W = std::nullopt);
-
-/// Subject chosen in one frame: per camera the index into its people, or -1.
-struct SubjectChoice {
-  bool found = false;
-  std::vector<int> person;                          ///< per camera
-  int n_points = 0;                                 ///< consistent upper-body points
-  double median_px = 0.0;
-  Eigen::Vector3d centre_W = Eigen::Vector3d::Zero();  ///< torso centre, m
-};
-
-/// Subject selection of the file comment. `people[c]` is camera c's people of this frame;
-/// `previous_centre_W` is the last frame's subject centre, if any.
-SubjectChoice chooseSubject(const CameraSet& cameras, const std::vector<const std::vector<Person2d>*>& people,
-                            const std::optional<Eigen::Vector3d>& previous_centre_W, const TriangulateOptions& opt);
+using nao::chooseSubject;
+using nao::Observation;
+using nao::PointEstimate;
+using nao::refineOnReprojection;
+using nao::SubjectChoice;
+using nao::triangulateDlt;
+using nao::triangulatePoint;
+using nao::undistortPixel;
 
 /// Triangulates a whole capture, applying the bone-length rule when enabled; no resampling.
 /// Frames pair across cameras by KeypointFrame::index: one output frame per index present in
@@ -157,6 +85,15 @@ Skeleton triangulateCapture(const CameraSet& cameras, const std::vector<CameraKe
 
 /// Bone-length rule of the file comment; returns how many points it marked missing.
 int rejectBoneLengthOutliers(Skeleton& frames, double tolerance);
+
+/// Zero-lag low-pass over time (offline): every measured point (ok, not interpolated) is
+/// replaced by the value at its own time of a straight line fitted by weighted least squares to
+/// that point's measured samples within 3 sigma_s, weighted exp(-dt^2 / (2 sigma_s^2)) (local
+/// linear regression with a Gaussian kernel: no lag, no bias at the ends of a run or for a
+/// steady motion; -3 dB near 0.13 / sigma_s Hz). Frames further apart than 1.5 / capture_fps
+/// (absent indices) split the runs. Points with fewer than 3 samples in reach are left alone.
+/// Nothing happens for sigma_s <= 0. Returns how many points it changed.
+int smoothSkeletonZeroLag(Skeleton& frames, double sigma_s, double capture_fps);
 
 /// Gap policy of the file comment on capture frames at capture_fps: interpolates every gap of
 /// a point that lasts at most max_gap_s (missing capture frames / capture_fps) between two
