@@ -84,7 +84,7 @@ class Rule(unittest.TestCase):
     def test_row_holds_names_each_reason(self):
         self.assertEqual(verdict.row_holds(row("wrist", "RElbowYaw", *STRONG), 1), (True, "holds"))
         self.assertEqual(verdict.row_holds(row("wrist", "RElbowYaw", *WEAK), 1)[1], "not strong: below 0.5")
-        self.assertEqual(verdict.row_holds(row("wrist", "RElbowYaw", *WIDE), 1)[1], "interval reaches 0")
+        self.assertEqual(verdict.row_holds(row("wrist", "RElbowYaw", *WIDE), 1)[1], "interval not above 0")
         self.assertIn("opposite sign", verdict.row_holds(row("wrist", "RElbowYaw", *NEGATIVE), 1)[1])
         self.assertTrue(verdict.row_holds(row("wrist", "RElbowYaw", *NEGATIVE), -1)[0])
         nan = float("nan")

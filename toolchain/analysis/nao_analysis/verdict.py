@@ -41,7 +41,7 @@ def row_holds(row, sign):
     if not math.isfinite(bound):
         reasons.append("no interval")
     elif sign * bound <= 0:
-        reasons.append("interval reaches 0")
+        reasons.append("interval not %s 0" % ("above" if sign > 0 else "below"))
     return not reasons, ", ".join(reasons) or "holds"
 
 
