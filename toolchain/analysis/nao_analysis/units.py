@@ -14,41 +14,79 @@ import numpy as np
 UNIT_DTW_M = 1e-3
 
 
-def dtw_mean_distance(a, b):
-    """Dynamic-time-warping distance of two paths of points, as nao_rt scores a rollout
-    (docs/nao_rt.md): the minimum-cost monotone alignment of every point of a (n, 3) with every
-    point of b (m, 3), steps (1,0), (0,1), (1,1), point cost the Euclidean distance, divided by
-    the number of matched pairs on that alignment; among alignments of equal cost the one with
-    more pairs wins. Returns nan if either path is empty.
+def point_distances(a, b):
+    """Euclidean distances over the last axis, the squares summed in coordinate order (the
+    runtime's and the tests' reference order, so the DTW is exact to the last bit)."""
+    return np.sqrt(np.sum((a - b) ** 2, axis=-1))
 
-    Computed along anti-diagonals (every cell of one depends only on the two before it), so
-    the loop runs n + m times, not n * m."""
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    n, m = len(a), len(b)
-    if n == 0 or m == 0:
+
+def dtw_mean_distances(pairs):
+    """nao_rt's DTW distance (rt::dtwMeanDistance, docs/nao_rt.md) for every (a, b) of pairs
+    (arrays (n, k), (m, k)), vectorised over the pairs: the minimum-cost monotone alignment of
+    every point of a with every point of b, steps (1,0), (0,1), (1,1), point cost the Euclidean
+    distance, divided by the number of matched pairs on that alignment; among alignments of
+    equal cost the one with more pairs wins (candidates diagonal, up, left).
+
+    The cells of a pair past its own lengths are computed on padding and never read: a cell
+    depends on cells with smaller indices only."""
+    out = np.empty(len(pairs))
+    chunk = 512
+    for c0 in range(0, len(pairs), chunk):
+        part = pairs[c0:c0 + chunk]
+        p = len(part)
+        la = np.array([len(a) for a, _ in part])
+        lb = np.array([len(b) for _, b in part])
+        na, nb = la.max(), lb.max()
+        k = part[0][0].shape[1]
+        A = np.zeros((p, na, k))
+        B = np.zeros((p, nb, k))
+        for i, (a, b) in enumerate(part):
+            A[i, :len(a)] = a
+            B[i, :len(b)] = b
+        inf = np.inf
+        cost_prev = np.full((p, nb), inf)
+        len_prev = np.zeros((p, nb))
+        result_cost = np.empty(p)
+        result_len = np.empty(p)
+        rows = np.arange(p)
+        for i in range(na):
+            d = point_distances(A[:, i, None, :], B)  # (p, nb)
+            cost = np.empty((p, nb))
+            ln = np.empty((p, nb))
+            for j in range(nb):
+                if i == 0 and j == 0:
+                    cost[:, 0] = d[:, 0]
+                    ln[:, 0] = 1
+                    continue
+                best = np.full(p, inf)
+                best_len = np.zeros(p)
+                cands = []
+                if i > 0 and j > 0:
+                    cands.append((cost_prev[:, j - 1], len_prev[:, j - 1]))
+                if i > 0:
+                    cands.append((cost_prev[:, j], len_prev[:, j]))
+                if j > 0:
+                    cands.append((cost[:, j - 1], ln[:, j - 1]))
+                for c, l in cands:
+                    take = (c < best) | ((c == best) & (l > best_len))
+                    best = np.where(take, c, best)
+                    best_len = np.where(take, l, best_len)
+                cost[:, j] = best + d[:, j]
+                ln[:, j] = best_len + 1
+            done = la - 1 == i
+            if done.any():
+                result_cost[done] = cost[rows[done], lb[done] - 1]
+                result_len[done] = ln[rows[done], lb[done] - 1]
+            cost_prev, len_prev = cost, ln
+        out[c0:c0 + p] = result_cost / result_len
+    return out
+
+
+def dtw_mean_distance(a, b):
+    """dtw_mean_distances of one pair; nan if either path is empty."""
+    if len(a) == 0 or len(b) == 0:
         return float("nan")
-    d = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
-    cost = np.full((n, m), np.inf)
-    pairs = np.zeros((n, m), dtype=np.int64)
-    cost[0, 0], pairs[0, 0] = d[0, 0], 1
-    for s in range(1, n + m - 1):
-        i = np.arange(max(0, s - m + 1), min(n, s + 1))
-        j = s - i
-        best = np.full(len(i), np.inf)
-        best_pairs = np.zeros(len(i), dtype=np.int64)
-        # Candidates in the order diagonal, up (i-1, j), left (i, j-1): lower cost wins, then
-        # more pairs (an alignment of equal total cost with more pairs has the lower mean).
-        for di, dj in ((1, 1), (1, 0), (0, 1)):
-            ok = (i >= di) & (j >= dj)
-            c = np.where(ok, cost[np.maximum(i - di, 0), np.maximum(j - dj, 0)], np.inf)
-            p = np.where(ok, pairs[np.maximum(i - di, 0), np.maximum(j - dj, 0)], 0)
-            take = (c < best) | ((c == best) & (p > best_pairs))
-            best = np.where(take, c, best)
-            best_pairs = np.where(take, p, best_pairs)
-        cost[i, j] = best + d[i, j]
-        pairs[i, j] = best_pairs + 1
-    return float(cost[n - 1, m - 1] / pairs[n - 1, m - 1])
+    return float(dtw_mean_distances([(np.asarray(a, dtype=float), np.asarray(b, dtype=float))])[0])
 
 
 def hand_path(run):
@@ -56,17 +94,12 @@ def hand_path(run):
     return np.column_stack([run.columns[c] for c in ("ee_x", "ee_y", "ee_z")])
 
 
-def common_dtw(path_a, path_b):
-    """DTW mean distance of two hand paths over their common ticks (the shorter one's length):
-    a run that repeats the beginning of a longer one is at distance 0 from it."""
-    k = min(len(path_a), len(path_b))
-    return dtw_mean_distance(path_a[:k], path_b[:k])
-
-
 def group_units(paths, threshold_m=UNIT_DTW_M):
-    """Indices of the paths grouped into distinct rollouts: a path within threshold_m (common
-    DTW) of any path of a group joins it, transitively. Returns (groups, distances): groups a
-    list of index lists in order of their first member, distances the (n, n) common DTW matrix."""
+    """Indices of the paths grouped into distinct rollouts: a path within threshold_m of any path
+    of a group joins it, transitively. The distance of two paths is their DTW over their common
+    ticks (the shorter one's length): a run that repeats the beginning of a longer one is at 0.
+    Returns (groups, distances): groups a list of index lists in order of their first member,
+    distances the (n, n) matrix of these DTWs."""
     n = len(paths)
     dist = np.zeros((n, n))
     parent = list(range(n))
@@ -77,10 +110,13 @@ def group_units(paths, threshold_m=UNIT_DTW_M):
             i = parent[i]
         return i
 
-    for i in range(n):
-        for k in range(i + 1, n):
-            dist[i, k] = dist[k, i] = common_dtw(paths[i], paths[k])
-            if dist[i, k] < threshold_m:
+    pairs = [(i, k) for i in range(n) for k in range(i + 1, n)]
+    if pairs:
+        common = [min(len(paths[i]), len(paths[k])) for i, k in pairs]
+        d = dtw_mean_distances([(paths[i][:c], paths[k][:c]) for (i, k), c in zip(pairs, common)])
+        for (i, k), v in zip(pairs, d):
+            dist[i, k] = dist[k, i] = v
+            if v < threshold_m:
                 parent[root(k)] = root(i)
     groups = {}
     for i in range(n):
