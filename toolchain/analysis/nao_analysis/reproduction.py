@@ -227,7 +227,7 @@ def reproduction_markdown(docs, command):
     L = ["# Reproduction: the paper's Table 2 and findings on its own protocol", "",
          "Generated from the Table 2 files of %d training seed(s) (do not edit by hand):" % len(seeds), "",
          "```", command, "```", "",
-         "Each file was made by `toolchain/nao analyze` on the autonomous rollouts of one model:", ""]
+         "Each file comes from `toolchain/nao analyze` on the autonomous rollouts of one model:", ""]
     for s in seeds:
         L += ["```", "%s" % docs[s]["command"], "```", ""]
     L += ["Models: %s." % " · ".join(models), "",
