@@ -59,7 +59,7 @@ class NearCopies(unittest.TestCase):
             os.path.join(cls.tmp, "planted"), "elbow", seed=105, planted_joint=PLANTED)]
         found, cls.separation = protocol.movement_units(cls.runs)
         cls.units = found["elbow"]
-        cls.rows = protocol.pooled_rows(cls.units, "elbow", "linear", 200, 1)
+        cls.rows = protocol.pooled_rows(cls.units, "elbow", "linear", 100, 1)
 
     @classmethod
     def tearDownClass(cls):
@@ -88,13 +88,13 @@ class NearCopies(unittest.TestCase):
         # The contrast that shows what the units fix: every run its own unit (near-copies as
         # independent evidence) puts the MI far above its null.
         xs, ys = zip(*(protocol._run_series(r, 0, "linear", "att") for r in self.runs))
-        res = protocol.unit_statistics(list(xs), list(ys), 100, 1)
+        res = protocol.unit_statistics(list(xs), list(ys), 0, 1)  # the point and the null, no interval
         self.assertGreater(res["point"][3], res["mi_null_q95"] + 0.2,
                            "runs as units: MI %.2f, null q95 %.2f" % (res["point"][3], res["mi_null_q95"]))
 
     def test_a_planted_dependence_among_near_copies_is_still_found(self):
         units_, _ = protocol.movement_units(self.planted)
-        rows = protocol.pooled_rows(units_["elbow"], "elbow", "linear", 200, 1)
+        rows = protocol.pooled_rows(units_["elbow"], "elbow", "linear", 100, 1)
         r = rows[PLANTED]
         self.assertEqual(r["n_units"], 3)
         self.assertGreater(r["spearman_rho"], 0.5)
@@ -116,7 +116,7 @@ class UnitStatisticsOverSeeds(unittest.TestCase):
             lengths = rng.integers(100, 151, 3)
             xs = [run_fixture.ar1(int(n), 0.9, rng) for n in lengths]
             ys = [run_fixture.ar1(int(n), 0.9, rng) for n in lengths]
-            res = protocol.unit_statistics(xs, ys, 200, seed)
+            res = protocol.unit_statistics(xs, ys, 100, seed, n_perm=100)
             counts["p_r"] += res["p"][0] < 0.05
             counts["ci_r"] += res["ci_lo"][0] > 0 or res["ci_hi"][0] < 0
             counts["mi"] += res["point"][3] > res["mi_null_q95"]

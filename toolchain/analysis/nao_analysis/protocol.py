@@ -91,8 +91,8 @@ def _pooled_stats(xs, ys, xps, yps, pick, ticks=None):
 def unit_statistics(xs, ys, n_boot, seed, n_perm=N_PERM):
     """Table 2's numbers of one movement x joint from its units' detrended series xs, ys (lists
     of (n_u,) arrays, one per distinct rollout). Returns a dict: point, ci_lo, ci_hi, p (each
-    (4,) in stats.STAT_NAMES order; ci nan below MIN_UNITS units), mi_null_median, mi_null_q95,
-    block_len (median over units).
+    (4,) in stats.STAT_NAMES order; ci nan below MIN_UNITS units or without resamples),
+    mi_null_median, mi_null_q95, block_len (median over units).
 
     The bootstrap is two-stage: draw units with replacement, then resample each drawn unit by
     circular blocks of its own block length. Units alone would see only the spread between 2-3
@@ -106,7 +106,7 @@ def unit_statistics(xs, ys, n_boot, seed, n_perm=N_PERM):
     blocks = [stats.pair_block_length(x, y) for x, y in zip(xs, ys)]
     rng = np.random.default_rng(seed)
     lo = hi = np.full(4, math.nan)
-    if n_units >= MIN_UNITS:
+    if n_units >= MIN_UNITS and n_boot > 0:
         boot = np.empty((n_boot, 4))
         for k in range(n_boot):
             pick = [int(i) for i in rng.integers(0, n_units, n_units)]
