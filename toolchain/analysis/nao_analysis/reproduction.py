@@ -16,7 +16,6 @@ from .table_json import read_table_json, row_from_json
 
 REPO = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", ".."))
 DOC = os.path.join(REPO, "docs", "reproduction.md")
-JSON_DIR = "docs/reproduction"
 MOVEMENTS = ("whole_arm", "elbow", "wrist")
 
 
