@@ -229,7 +229,9 @@ def reproduction_markdown(docs, command):
          "Each file comes from `toolchain/nao analyze` on the autonomous rollouts of one model:", ""]
     for s in seeds:
         L += ["```", "%s" % docs[s]["command"], "```", ""]
-    L += ["Models: %s." % " · ".join(models), "",
+    L += ["Models: %s. How each seed's model and rollouts are made: docs/analysis.md, \"Regenerating "
+          "docs/reproduction.md\" (seed 1 is models/autonomous.bin, its card models/autonomous.md; seed N's card is "
+          "docs/reproduction/seed_N_model.md)." % " · ".join(models), "",
           "Paper: %s, sections 4.1–4.2, Table 2." % CITATION, ""]
     L += verdict_section(found, seeds)
     L += not_reproduced_section(found)
