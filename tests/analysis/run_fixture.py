@@ -7,6 +7,7 @@ that are noise except for one planted joint whose score follows that joint's vel
 """
 
 import json
+import math
 import os
 import struct
 import sys
@@ -51,11 +52,56 @@ def make_series(n, seed, planted_joint):
     return t, q, att.astype(np.float32)
 
 
-def write_run(path, movement, n=80, seed=0, planted_joint=3, bypass=(), layers=1, heads=2, d_model=8):
+def ar1(n, phi, rng, burn=200):
+    """(n,) AR(1) series x_i = phi x_{i-1} + e_i with unit-variance innovations, after a burn-in."""
+    e = rng.standard_normal(n + burn)
+    x = np.zeros(n + burn)
+    for i in range(1, n + burn):
+        x[i] = phi * x[i - 1] + e[i]
+    return x[burn:]
+
+
+def ar1_rollout(n, rng, phi=0.9, planted_joint=None):
+    """(t_s, q, att) of one smooth "rollout": every joint's velocity an AR(1) series (phi, about
+    0.3 rad/s), q its integral; every score an AR(1) series of its own, independent of the motion
+    unless planted_joint names a joint whose score then follows that joint's velocity."""
+    t = 0.1 * np.arange(n)
+    centre = np.array([0.5, -0.5, 0.0, 0.8, 0.0])
+    v = np.column_stack([ar1(n, phi, rng) for _ in range(5)]) * 0.3 * math.sqrt(1 - phi * phi)
+    q = centre + 0.1 * np.cumsum(v, axis=0)
+    att = 12.0 + 2.0 * math.sqrt(1 - phi * phi) * np.column_stack([ar1(n, phi, rng) for _ in range(5)])
+    if planted_joint is not None:
+        vj = np.gradient(q[:, planted_joint], t)
+        att[:, planted_joint] = 12.0 + 3.0 * vj / vj.std() + 0.5 * rng.standard_normal(n)
+    return t, q, att.astype(np.float32)
+
+
+def write_near_copy_runs(root, movement, seed, n_series=3, n_runs=16, planted_joint=None, min_len=100,
+                         max_len=150):
+    """The near-copy protocol on independent series: n_series AR(1) rollouts (ar1_rollout), cut
+    into n_runs run directories root/<movement>_<k> (run k is series k mod n_series, its first
+    100..150 ticks), as nao_rt's autonomous runs from a few start poses are. Returns the paths."""
+    rng = np.random.default_rng(seed)
+    series = [ar1_rollout(max_len, rng, planted_joint=planted_joint) for _ in range(n_series)]
+    paths = []
+    for k in range(n_runs):
+        n = int(rng.integers(min_len, max_len + 1))
+        t, q, att = series[k % n_series]
+        paths.append(write_run(os.path.join(root, "%s_%02d" % (movement, k)), movement, n=n, seed=seed + k,
+                               series=(t[:n], q[:n], att[:n])))
+    return paths
+
+
+def write_run(path, movement, n=80, seed=0, planted_joint=3, bypass=(), layers=1, heads=2, d_model=8, series=None,
+              ablation=None):
     """Writes ticks.csv, attention.bin, summary.json into path (created). Ticks in `bypass`
-    get fault human_timeout (the policy bypassed) and a stale score of 0."""
+    get fault human_timeout (the policy bypassed) and a stale score of 0. series: (t_s, q, att)
+    to write instead of make_series(n, seed, planted_joint). ablation: (mass (n, 5), delta (n, 5))
+    written as ablation.csv, the masses also as attention.bin's mass."""
     os.makedirs(path, exist_ok=True)
-    t, q, att = make_series(n, seed, planted_joint)
+    t, q, att = series if series is not None else make_series(n, seed, planted_joint)
+    att = np.array(att, dtype=np.float32)
+    n = len(t)
     fault = np.zeros(n, dtype=np.int64)
     for i in bypass:
         fault[i] = FAULT_HUMAN_TIMEOUT
@@ -89,7 +135,7 @@ def write_run(path, movement, n=80, seed=0, planted_joint=3, bypass=(), layers=1
     for i in range(n):
         logits = rng.standard_normal((layers, heads, T, T))
         alpha = np.exp(logits) / np.exp(logits).sum(axis=-1, keepdims=True)
-        mass = alpha[-1].mean(axis=(0, 1))
+        mass = alpha[-1].mean(axis=(0, 1)) if ablation is None else np.asarray(ablation[0][i], dtype=float)
         ages = rng.random(W)
         body = (struct.pack("<QII", i, int(fault[i]), 0) + att[i].astype("<f4").tobytes()
                 + mass.astype("<f4").tobytes() + (ages / ages.sum()).astype("<f4").tobytes()
@@ -113,4 +159,10 @@ def write_run(path, movement, n=80, seed=0, planted_joint=3, bypass=(), layers=1
                              "record_count": n}}
     with open(os.path.join(path, "summary.json"), "w") as f:
         json.dump(summary, f, indent=2)
+    if ablation is not None:
+        with open(os.path.join(path, "ablation.csv"), "w") as f:
+            f.write(",".join(["tick"] + ["mass_%d" % j for j in range(5)] + ["delta_%d" % j for j in range(5)]) + "\n")
+            for i in range(n):
+                f.write(",".join([str(i)] + [repr(float(np.float32(x))) for x in ablation[0][i]]
+                                 + [_f(x) for x in ablation[1][i]]) + "\n")
     return path

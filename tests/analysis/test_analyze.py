@@ -4,6 +4,7 @@ and a self-contained report; the same input gives the same bytes."""
 
 import csv
 import filecmp
+import json
 import os
 import re
 import shutil
@@ -29,7 +30,9 @@ class EndToEnd(unittest.TestCase):
         cls.runs = [run_fixture.write_run(os.path.join(cls.tmp, m), m, n=60, seed=i, planted_joint=PLANTED)
                     for i, m in enumerate(MOVEMENTS)]
         cls.out = os.path.join(cls.tmp, "out")
-        cls.proc = subprocess.run(["/usr/bin/python3", ANALYZE, "--bootstrap", "100", "--out", cls.out] + cls.runs,
+        cls.json = os.path.join(cls.tmp, "seed_7.json")
+        cls.proc = subprocess.run(["/usr/bin/python3", ANALYZE, "--bootstrap", "100", "--out", cls.out,
+                                   "--training-seed", "7", "--table-json", cls.json] + cls.runs,
                                   capture_output=True, text=True, timeout=600)
 
     @classmethod
@@ -42,7 +45,7 @@ class EndToEnd(unittest.TestCase):
         self.assertIn(self.out, self.proc.stdout)
 
     def test_every_output_file_exists(self):
-        names = ["table2.csv", "table2.md", "report.html", "fig_umap.png", "fig_umap.svg"]
+        names = ["table2.csv", "table2.md", "findings.md", "report.html", "fig_umap.png", "fig_umap.svg"]
         for m in MOVEMENTS:
             for kind in ("ee", "attention", "motion"):
                 names += ["fig_%s_%s.png" % (kind, m), "fig_%s_%s.svg" % (kind, m)]
@@ -80,6 +83,46 @@ class EndToEnd(unittest.TestCase):
                     self.assertGreater(float(r[s + "_ci_hi"]), float(r[s]))
             else:
                 self.assertLess(abs(float(r["pearson_r"])), 0.5, r)
+
+    def test_the_table_json_has_every_row_with_its_mi_null_and_units(self):
+        with open(self.json) as f:
+            doc = json.load(f)
+        self.assertEqual(doc["schema"], "nao-table2/1")
+        self.assertEqual(doc["training_seed"], 7)
+        self.assertEqual(sorted(doc["movements"]), sorted(MOVEMENTS))
+        for m in MOVEMENTS:
+            self.assertEqual((doc["movements"][m]["n_runs"], doc["movements"][m]["n_units"]), (1, 1))
+            self.assertIsNone(doc["ablation"][m], "no fixture run has ablation.csv")
+            self.assertEqual(len(doc["attention_mass"][m]["mean"]), 5)
+        rows = doc["table2"]["att"]
+        self.assertEqual(len(rows), 5 * len(MOVEMENTS))
+        with open(os.path.join(self.out, "table2.csv")) as f:
+            csv_rows = list(csv.DictReader(f))
+        above_by_chance = 0
+        for o, c in zip(rows, csv_rows):
+            self.assertEqual((o["movement"], o["joint"]), (c["movement"], c["joint"]))
+            for s in stats.STAT_NAMES:
+                self.assertEqual(set(o[s]) >= {"estimate", "ci_lo", "ci_hi", "p"}, True, s)
+                self.assertAlmostEqual(o[s]["estimate"], float(c[s]), 6)
+            mi = o["mi_bits"]
+            self.assertAlmostEqual(mi["excess"], mi["estimate"] - mi["null_median"], 12)
+            self.assertEqual(mi["above_null_q95"], mi["estimate"] > mi["null_q95"])
+            if o["joint"] == run_fixture.JOINTS[PLANTED]:
+                self.assertTrue(mi["above_null_q95"], "planted %s: MI %.2f, null q95 %.2f"
+                                % (o["movement"], mi["estimate"], mi["null_q95"]))
+            else:
+                above_by_chance += mi["above_null_q95"]
+        # Independent noise lies above its null's 95 % quantile in about 1 of 20 rows.
+        self.assertLessEqual(above_by_chance, 1, "MI above the null in %d of 8 rows without dependence"
+                             % above_by_chance)
+
+    def test_findings_md_prints_the_rule_and_has_no_verdict_from_one_seed(self):
+        with open(os.path.join(self.out, "findings.md")) as f:
+            text = f.read()
+        self.assertIn("Criterion: A finding is *reproduced* only when", text)
+        self.assertIn("wrist RElbowYaw", text)
+        self.assertIn("not measured: no run has ablation.csv", text)
+        self.assertNotIn("reproduced.", text)
 
     def test_table2_md_states_the_method(self):
         with open(os.path.join(self.out, "table2.md")) as f:

@@ -45,6 +45,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from nao_analysis import AnalysisError  # noqa: E402
 from nao_analysis.kinematics import hand_position, load_arm_model  # noqa: E402
+from nao_analysis.units import dtw_mean_distances as dtw_batch  # noqa: E402
 
 MOVEMENTS = ("whole_arm", "elbow", "wrist")
 
@@ -58,64 +59,6 @@ def read_features(path):
     labels = np.array([int(r["label"]) for r in rows])
     f = np.array([[float(r["f_%d" % j]) for j in range(5)] for r in rows])
     return labels, f
-
-
-def dtw_batch(pairs):
-    """rt::dtwMeanDistance for every (a, b) of pairs (arrays (n, k)), vectorised over the pairs.
-
-    The cells of a pair past its own lengths are computed on padding and never read: a cell
-    depends on cells with smaller indices only."""
-    out = np.empty(len(pairs))
-    chunk = 512
-    for c0 in range(0, len(pairs), chunk):
-        part = pairs[c0:c0 + chunk]
-        p = len(part)
-        la = np.array([len(a) for a, _ in part])
-        lb = np.array([len(b) for _, b in part])
-        na, nb = la.max(), lb.max()
-        k = part[0][0].shape[1]
-        A = np.zeros((p, na, k))
-        B = np.zeros((p, nb, k))
-        for i, (a, b) in enumerate(part):
-            A[i, :len(a)] = a
-            B[i, :len(b)] = b
-        inf = np.inf
-        cost_prev = np.full((p, nb), inf)
-        len_prev = np.zeros((p, nb))
-        result_cost = np.empty(p)
-        result_len = np.empty(p)
-        rows = np.arange(p)
-        for i in range(na):
-            d = np.linalg.norm(A[:, i, None, :] - B, axis=2)  # (p, nb)
-            cost = np.empty((p, nb))
-            ln = np.empty((p, nb))
-            for j in range(nb):
-                if i == 0 and j == 0:
-                    cost[:, 0] = d[:, 0]
-                    ln[:, 0] = 1
-                    continue
-                best = np.full(p, inf)
-                best_len = np.zeros(p)
-                cands = []
-                if i > 0 and j > 0:
-                    cands.append((cost_prev[:, j - 1], len_prev[:, j - 1]))
-                if i > 0:
-                    cands.append((cost_prev[:, j], len_prev[:, j]))
-                if j > 0:
-                    cands.append((cost[:, j - 1], ln[:, j - 1]))
-                for c, l in cands:
-                    take = (c < best) | ((c == best) & (l > best_len))
-                    best = np.where(take, c, best)
-                    best_len = np.where(take, l, best_len)
-                cost[:, j] = best + d[:, j]
-                ln[:, j] = best_len + 1
-            done = la - 1 == i
-            if done.any():
-                result_cost[done] = cost[rows[done], lb[done] - 1]
-                result_len[done] = ln[rows[done], lb[done] - 1]
-            cost_prev, len_prev = cost, ln
-        out[c0:c0 + p] = result_cost / result_len
-    return out
 
 
 def dtw_path(a, b):

@@ -5,10 +5,11 @@ import os
 import shlex
 import sys
 
-from . import AnalysisError
+from . import JOINT_NAMES, AnalysisError
 from . import stats
 from . import table2 as t2
 from .rundir import read_run
+from .units import UNIT_DTW_M
 
 PROG = "nao analyze"
 
@@ -31,11 +32,17 @@ def parse_args(argv):
     p.add_argument("--bootstrap", type=int, default=t2.DEFAULT_BOOTSTRAP)
     p.add_argument("--seed", type=int, default=t2.DEFAULT_SEED)
     p.add_argument("--screenshot")
-    p.add_argument("--reproduction", action="store_true")
-    p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR")
+    p.add_argument("--table-json", metavar="FILE")
+    p.add_argument("--training-seed", type=int)
+    p.add_argument("--reproduction-from", nargs="+", metavar="JSON")
+    p.add_argument("run_dirs", nargs="*", metavar="RUN_DIR")
     args = p.parse_args(argv)
     if args.bootstrap < 100:
         p.error("--bootstrap needs at least 100 resamples, got %d" % args.bootstrap)
+    if args.reproduction_from and args.run_dirs:
+        p.error("--reproduction-from takes Table 2 files, not run directories (%s)" % args.run_dirs[0])
+    if not args.reproduction_from and not args.run_dirs:
+        p.error("no RUN_DIR given")
     return args
 
 
@@ -66,34 +73,65 @@ def analyze(args, command):
         raise AnalysisError("cannot create the output directory %s: %s" % (out_dir, e.strerror)) from None
     options = {"detrend": args.detrend, "bootstrap": args.bootstrap, "seed": args.seed, "out": out_dir}
 
-    from . import protocol
+    from . import ablation, protocol
     pooled = protocol.is_protocol(runs)
+    groups = protocol.group_runs(runs)
     if pooled:
-        # The paper's protocol: several runs per movement, pooled with the run as the unit.
-        groups = protocol.group_runs(runs)
-        progress("protocol: %s" % ", ".join("%s %d run(s)" % (m, len(v)) for m, v in sorted(groups.items())))
-        rows_by_prefix = protocol.protocol_rows(runs, args.detrend, args.bootstrap, args.seed, progress)
+        # The paper's protocol: several runs per movement, pooled with the distinct rollout as the unit.
+        progress("protocol: %s; grouping near-copies into distinct rollouts (hand-path DTW)"
+                 % ", ".join("%s %d run(s)" % (m, len(v)) for m, v in sorted(groups.items())))
+        units, separation = protocol.movement_units(runs)
+        progress("distinct rollouts: %s" % ", ".join("%s %d of %d" % (m, len(units[m]), len(groups[m]))
+                                                      for m in sorted(units)))
+        prefixes = protocol.score_prefixes(runs)
+        rows_by_prefix = protocol.protocol_rows(units, args.detrend, args.bootstrap, args.seed, prefixes, progress)
         rows = rows_by_prefix["att"]
         if "attm" in rows_by_prefix:
             with open(os.path.join(out_dir, "table2_attm.csv"), "w") as f:
                 f.write(t2.table2_csv(rows_by_prefix["attm"]))
-        found = protocol.findings(rows, groups)
-        table, notes = protocol.offsets_markdown(groups, sorted(rows_by_prefix))
-        with open(os.path.join(out_dir, "findings.md"), "w") as f:
-            f.write("\n".join(["# Findings checklist", ""] + protocol.findings_markdown(found)
-                              + ["", "# Attention offsets", ""] + table + [""] + notes) + "\n")
         # Figures of one run per movement (the first); the UMAP takes every run.
         shown = [(r, lab) for r, lab in zip(runs, labels) if r is groups[r.movement][0]]
     else:
         rows = []
         for run, label in zip(runs, labels):
             rows += t2.table2_rows(run, label, args.detrend, args.bootstrap, args.seed, progress)
+        rows_by_prefix = {"att": rows}
+        units = {m: [[r] for r in v] for m, v in groups.items()}
+        separation = {m: {"max_dtw_within_unit_m": None, "min_dtw_between_units_m": None} for m in groups}
         shown = list(zip(runs, labels))
+    options.update({"pooled": pooled, "permutations": protocol.N_PERM if pooled else "every shift",
+                    "resampling_unit": "distinct rollout" if pooled else "circular block of ticks",
+                    "unit_dtw_m": UNIT_DTW_M})
+    progress("ablation and attention spread")
+    ablations = {m: ablation.ablation_summary(units[m], args.bootstrap, args.seed) for m in sorted(units)}
+    spreads = {m: ablation.mass_spread(units[m]) for m in sorted(units)}
     with open(os.path.join(out_dir, "table2.csv"), "w") as f:
         f.write(t2.table2_csv(rows))
     from . import report  # after the statistics: the tables are written even if a figure fails
     with open(os.path.join(out_dir, "table2.md"), "w") as f:
         f.write(report.table2_markdown(rows, options))
+    findings = report.findings_markdown(rows, args.training_seed, units, ablations, spreads)
+    with open(os.path.join(out_dir, "findings.md"), "w") as f:
+        f.write(findings)
+    if args.table_json:
+        from .table_json import table_document, write_table_json
+        reps = {m: [u[0] for u in units[m]] for m in units}
+        movements = {m: dict({"n_runs": len(groups[m]), "n_units": len(units[m]),
+                              "n_ticks": int(sum(int(r.policy_mask().sum()) for r in reps[m])),
+                              "units": [[os.path.basename(r.path) for r in u] for u in units[m]]}, **separation[m])
+                     for m in sorted(units)}
+        offsets = {}
+        for m in sorted(units):
+            share, mean, total = protocol.attention_offsets(reps[m])
+            offsets[m] = {"n_ticks": total, "top_share": dict(zip(JOINT_NAMES, map(float, share))),
+                          "mean_score": dict(zip(JOINT_NAMES, map(float, mean)))}
+        models = sorted({(str(r.summary.get("model", {}).get("path", "?")),
+                          str(r.summary.get("model", {}).get("checksum", "?")),
+                          str(r.summary.get("model", {}).get("conditioning", "?"))) for r in runs})
+        doc = table_document(args.training_seed, [{"path": p, "checksum": c, "conditioning": k} for p, c, k in models],
+                             options, command, movements, rows_by_prefix, offsets, spreads, ablations)
+        write_table_json(args.table_json, doc)
+        progress("wrote %s" % args.table_json)
 
     from . import figures, kinematics
     arm = kinematics.load_arm_model()
@@ -117,35 +155,12 @@ def analyze(args, command):
         made["age_profile"] = [(profile, "temporal attention profile: mean cross-attention mass per age of the "
                                          "attended tick, per movement (band: range over runs)")]
     with open(os.path.join(out_dir, "report.html"), "w") as f:
-        f.write(report.report_html(runs, labels, rows, made, options, command))
+        f.write(report.report_html(runs, labels, rows, made, options, command, findings))
 
     if args.screenshot:
         from .screenshot import screenshot_report
         progress("screenshot of report.html with headless Chromium")
         screenshot_report(os.path.join(out_dir, "report.html"), args.screenshot)
-    if args.reproduction and pooled:
-        from .reproduction import DOC, FIG_DIR, copy_figure
-        progress("writing docs/reproduction.md and docs/figures/ (the paper's protocol)")
-        names = []
-        for run, label in shown:
-            names += [("fig_attention_%s" % label, "%s: attention per body part and the robot pose at a–d "
-                       "(paper Figs. 11–13), one autonomous rollout" % label),
-                      ("fig_motion_%s" % label, "%s: joint angle, velocity, acceleration and attention "
-                       "(paper Figs. 14–16), one autonomous rollout" % label)]
-        names.append(("fig_umap", "UMAP of the last decoder layer's cross-attention outputs of every rollout, "
-                      "by run, time and movement phase"))
-        if "age_profile" in made:
-            names.append(("fig_age_profile", "temporal attention profile: the last decoder layer's mean "
-                          "cross-attention mass per age of the attended tick, per movement"))
-        os.makedirs(FIG_DIR, exist_ok=True)
-        for name, _ in names:
-            copy_figure(os.path.join(out_dir, name + ".png"), os.path.join(FIG_DIR, name + ".png"))
-        with open(DOC, "w") as f:
-            f.write(protocol.reproduction_markdown(groups, rows_by_prefix, found, command, names))
-    elif args.reproduction:
-        from .reproduction import write_reproduction
-        progress("writing docs/reproduction.md and docs/figures/")
-        write_reproduction(out_dir, runs, labels, rows, options, command)
     return out_dir
 
 
@@ -155,6 +170,11 @@ def main(argv=None):
     command = os.environ.get("NAO_ANALYZE_COMMAND") or " ".join(
         shlex.quote(a) for a in ["toolchain/analysis/analyze.py"] + list(argv))
     try:
+        if args.reproduction_from:
+            from .reproduction import DOC, write_reproduction
+            doc, found = write_reproduction(args.reproduction_from, command, args.out or DOC)
+            print("%s: wrote %s: %s" % (PROG, doc, ", ".join("(%s) %s" % (f["id"], f["verdict"]) for f in found)))
+            return 0
         out_dir = analyze(args, command)
     except AnalysisError as e:
         print("nao: error: analyze: %s" % e, file=sys.stderr)

@@ -42,6 +42,18 @@ def method_lines(options):
         "Statistics: Pearson r, Spearman ρ (average ranks), Kendall τ-b, and mutual information in bits "
         "(Kraskov–Stögbauer–Grassberger estimator 1, k = %d, max-norm, series standardised, tie-breaking "
         "jitter 1e-10 from a fixed seed; not clipped at 0)." % stats.KSG_K,
+    ] + (_pooled_method(options) if options.get("pooled") else _single_method(options)) + [
+        "MI beside its null: the median and 95 % quantile of the MI over the null draws of the p-value "
+        "(columns mi_null_median, mi_null_q95), the excess over the median (mi_excess); KSG on smooth series "
+        "reads autocorrelation as information, so an MI is evidence of dependence only above the null's 95 % "
+        "quantile (mi_above_null).",
+        "Seeds: each row's bootstrap and jitter seed is CRC-32 of 'movement/joint/%d'; UMAP random_state 0."
+        % options["seed"],
+    ]
+
+
+def _single_method(options):
+    return [
         "95%% intervals: circular block bootstrap (Politis & Romano 1992), %d resamples, percentile "
         "interval; block length per row = the larger of the two series' Politis–White (2004/2009) "
         "automatic block length (column block_len, ticks). For MI the resampled values are first "
@@ -50,9 +62,65 @@ def method_lines(options):
         "p-values: circular-shift permutation test: every shift s of the attention series with "
         "block_len ≤ s ≤ n − block_len (column n_shifts), two-sided for the correlations, one-sided "
         "(larger) for MI; p = (1 + #{null ≥ observed}) / (1 + n_shifts), so p ≥ 1/(1 + n_shifts).",
-        "Seeds: each row's bootstrap and jitter seed is CRC-32 of 'movement/joint/%d'; UMAP random_state 0."
-        % options["seed"],
     ]
+
+
+def _pooled_method(options):
+    return [
+        "Units: the runs of a movement whose hand paths lie within %g mm of each other (DTW mean distance "
+        "over their common ticks) repeat one rollout and form one distinct rollout (columns n_runs, n_units); "
+        "each unit enters once, as its longest run, its series detrended on their own; the units are "
+        "concatenated." % (1e3 * options["unit_dtw_m"]),
+        "95%% intervals: bootstrap over distinct rollouts (draw as many units as there are, with replacement), "
+        "%d resamples, percentile interval; none with fewer than 2 units. For MI the resampled values are "
+        "re-centred on the estimate, and copies of a unit are never each other's KSG neighbours." % options["bootstrap"],
+        "p-values: %d permutations, each shifting every unit's attention series circularly by its own random "
+        "shift between its block length and its length minus the block length; two-sided for the "
+        "correlations, one-sided (larger) for MI; p = (1 + #{null ≥ observed}) / (1 + %d)."
+        % (options["permutations"], options["permutations"]),
+    ]
+
+
+def findings_markdown(rows, training_seed, units, ablations, spreads):
+    """findings.md of one analysis: the rule's check of each paper row on this seed alone (a
+    verdict needs the training seeds together: --reproduction-from), the distinct rollouts, the
+    attention's spread and the ablation."""
+    from . import verdict
+
+    seed = training_seed if training_seed is not None else 0
+    found = verdict.judge({seed: {(r["movement"], r["joint"]): r for r in rows}})
+    L = ["# The paper's findings on this analysis", "",
+         "Criterion: " + verdict.CRITERION, "",
+         "One seed (%s) is analysed here: the verdict over %d seeds comes from `toolchain/nao analyze "
+         "--reproduction-from` on their `--table-json` files." % (
+             "training seed %d" % training_seed if training_seed is not None else "training seed not given",
+             verdict.N_SEEDS), ""]
+    for f in found:
+        L.append("- (%s) %s:" % (f["id"], f["title"]))
+        for movement, joint, _, holds, why, row in f["checks"]:
+            L.append("  - %s %s: ρ %s: %s" % (movement, joint, "%s [%s, %s]" % (
+                fmt(row["spearman_rho"]), fmt(row["spearman_rho_ci_lo"]), fmt(row["spearman_rho_ci_hi"]))
+                if row else "–", "holds" if holds else "does not hold (%s)" % why))
+    L += ["", "# Distinct rollouts", ""]
+    for m in sorted(units):
+        L.append("- %s: %d run(s), %d distinct rollout(s)" % (m, sum(len(u) for u in units[m]), len(units[m])))
+    L += ["", "# Attention spread (attention.bin mass per body part; uniform 0.20)", ""]
+    for m in sorted(spreads):
+        e = spreads[m]
+        L.append("- %s: %s" % (m, "no format-2 masses" if e is None else
+                               "%.2f–%.2f over %d ticks; variation over time %s" % (
+                                   e["min"], e["max"], e["n_ticks"],
+                                   " / ".join("%.0f %%" % (100 * x) for x in e["cv_over_time"]))))
+    L += ["", "# Attention against ablation (ablation.csv)", ""]
+    for m in sorted(ablations):
+        e = ablations[m]
+        L.append("- %s: %s" % (m, "not measured: no run has ablation.csv" if e is None else
+                               "median per-tick ρ(mass, delta) %s [%s, %s]; top body part matches %s [%s, %s] "
+                               "(chance %.2f); attention %s the ablation" % (
+                                   fmt(e["rho_median"]), fmt(e["rho_ci"][0]), fmt(e["rho_ci"][1]),
+                                   fmt(e["top_match_rate"]), fmt(e["top_match_ci"][0]), fmt(e["top_match_ci"][1]),
+                                   e["chance_top_match"], "predicts" if e["predicts"] else "does not predict")))
+    return "\n".join(L) + "\n"
 
 
 def table2_markdown(rows, options):
@@ -60,7 +128,8 @@ def table2_markdown(rows, options):
              "Trend removal: **%s**." % options["detrend"], ""]
     lines += ["- " + m for m in method_lines(options)]
     lines += ["", "Each cell: estimate [95% CI] and the permutation p-value.", ""]
-    head = ["movement", "joint"] + [STAT_LABELS[s] for s in stats.STAT_NAMES] + ["n (dropped)", "block"]
+    head = (["movement", "joint"] + [STAT_LABELS[s] for s in stats.STAT_NAMES]
+            + ["MI null median / q95", "MI excess", "runs / units", "n (dropped)", "block"])
     lines.append("| " + " | ".join(head) + " |")
     lines.append("|" + "---|" * len(head))
     for r in rows:
@@ -68,7 +137,10 @@ def table2_markdown(rows, options):
         for s in stats.STAT_NAMES:
             cells.append("%s [%s, %s] p=%s" % (fmt(r[s]), fmt(r[s + "_ci_lo"]), fmt(r[s + "_ci_hi"]),
                                                 fmt_p(r[s + "_p"])))
-        cells += ["%d (%d)" % (r["n_ticks"], r["n_dropped"]), str(r["block_len"])]
+        cells += ["%s / %s" % (fmt(r["mi_null_median"]), fmt(r["mi_null_q95"])),
+                  "%s%s" % (fmt(r["mi_excess"]), " (above q95)" if r["mi_above_null"] else ""),
+                  "%d / %d" % (r["n_runs"], r["n_units"]),
+                  "%d (%d)" % (r["n_ticks"], r["n_dropped"]), str(r["block_len"])]
         lines.append("| " + " | ".join(cells) + " |")
     runs = sorted({(r["run"], r["movement"]) for r in rows})
     lines += ["", "Runs: " + ", ".join("%s (%s)" % (_shown(run), m) for run, m in runs) + ".", ""]
@@ -85,7 +157,8 @@ def _img(out_dir, name, alt):
 
 def _table2_html(rows):
     head = "".join("<th>%s</th><th>95%% CI</th><th>p</th>" % html.escape(STAT_LABELS[s]) for s in stats.STAT_NAMES)
-    out = ["<table><thead><tr><th>movement</th><th>joint</th>%s<th>n</th><th>dropped</th><th>block</th>"
+    out = ["<table><thead><tr><th>movement</th><th>joint</th>%s<th>MI null median</th><th>MI null q95</th>"
+           "<th>MI excess</th><th>runs</th><th>units</th><th>n</th><th>dropped</th><th>block</th>"
            "<th>shifts</th></tr></thead><tbody>" % head]
     for r in rows:
         cells = ["<td>%s</td><td>%s</td>" % (html.escape(r["movement"]), html.escape(r["joint"]))]
@@ -94,6 +167,10 @@ def _table2_html(rows):
             cls = ' class="sig"' if math.isfinite(p) and p < 0.05 else ""
             cells.append("<td%s>%s</td><td>[%s, %s]</td><td%s>%s</td>"
                          % (cls, fmt(r[s]), fmt(r[s + "_ci_lo"]), fmt(r[s + "_ci_hi"]), cls, fmt_p(p)))
+        cls = ' class="sig"' if r["mi_above_null"] else ""
+        cells.append("<td>%s</td><td>%s</td><td%s>%s</td><td>%d</td><td>%d</td>"
+                     % (fmt(r["mi_null_median"]), fmt(r["mi_null_q95"]), cls, fmt(r["mi_excess"]), r["n_runs"],
+                        r["n_units"]))
         cells.append("<td>%d</td><td>%d</td><td>%d</td><td>%d</td>"
                      % (r["n_ticks"], r["n_dropped"], r["block_len"], r["n_shifts"]))
         out.append("<tr>%s</tr>" % "".join(cells))
@@ -147,14 +224,16 @@ figcaption { font-size: 0.85em; color: #555; } .note { color: #555; font-size: 0
 """
 
 
-def report_html(runs, labels, rows, figures, options, command):
-    """The whole page as one string. figures: {label or 'umap': [(name, caption), ...]}."""
+def report_html(runs, labels, rows, figures, options, command, findings=None):
+    """The whole page as one string. figures: {label or 'umap': [(name, caption), ...]};
+    findings: findings.md's text, shown as it is."""
     out_dir = options["out"]
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              "<title>nao-rt attention–motion analysis</title><style>%s</style></head><body>" % CSS,
              "<h1>nao-rt attention–motion analysis</h1>",
              '<p class="note">Paper Table 2 and Figs. 8–16 from nao_rt runs (DESIGN §10), with what the '
-             "paper lacks: block-bootstrap confidence intervals and shift-test p-values.</p>",
+             "paper lacks: bootstrap confidence intervals, shift-test p-values and the null of every mutual "
+             "information (runs that repeat one rollout count once).</p>",
              "<h2>Command</h2><pre>%s</pre>" % html.escape(command),
              "<p>Runs: %s. Output: <code>%s</code>.</p>" % (
                  ", ".join("<code>%s</code> (%s)" % (html.escape(_shown(r.path)), html.escape(lab)) for r, lab in zip(runs, labels)),
@@ -169,6 +248,9 @@ def report_html(runs, labels, rows, figures, options, command):
              "<p class=\"note\">The paper's “Elbow roll” is NAOqi's RElbowYaw (its Table 1 ranges). "
              "Source: %s.</p>" % html.escape(CITATION),
              _paper_html(rows)]
+    if findings:
+        parts.append("<h2>Findings, distinct rollouts, attention spread, ablation</h2><pre>%s</pre>"
+                     % html.escape(findings))
     for run, lab in zip(runs, labels):
         parts.append("<h2>Run %s</h2>" % html.escape(lab))
         for name, caption in figures.get(lab, []):

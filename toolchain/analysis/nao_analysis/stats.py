@@ -293,6 +293,34 @@ def circular_shift_pvalue(stat, x, y, min_shift, two_sided=True):
     return float(_shift_p(np.array([stat(x, y)]), null.reshape(-1, 1), two_sided)[0]) if len(null) else math.nan
 
 
+def shift_null(x, y, min_shift, seed):
+    """The four statistics of x, y (4,) and of x against every circular shift s of y with
+    min_shift <= s <= n - min_shift ((n_shifts, 4); empty when there is none)."""
+    xp, yp = ksg_prepare(x, y, seed)
+    obs = all_stats_prepared(x, y, xp, yp)
+    shifts = circular_shifts(len(x), min_shift)
+    null = np.array([all_stats_prepared(x, np.roll(y, s), xp, np.roll(yp, s)) for s in shifts]).reshape(-1, 4)
+    return obs, null
+
+
+def null_pvalues(obs, null):
+    """p-values of the four statistics against null draws (n, 4): correlations two-sided (|stat|),
+    MI one-sided (larger = more dependence); p = (1 + #{null >= observed}) / (1 + n)."""
+    if len(null) == 0:
+        return np.full(len(STAT_NAMES), math.nan)
+    return np.r_[_shift_p(obs[:3], null[:, :3], True), _shift_p(obs[3:], null[:, 3:], False)]
+
+
+def mi_null_quantiles(null_mi):
+    """(median, 95 % quantile) of the MI under the null; nan when undefined."""
+    v = np.asarray(null_mi, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return math.nan, math.nan
+    med, q95 = np.quantile(v, [0.5, 0.95])
+    return float(med), float(q95)
+
+
 def shift_pvalues(x, y, min_shift, seed):
     """Circular-shift permutation p-values of the four statistics, and the number of shifts.
 
@@ -300,11 +328,5 @@ def shift_pvalues(x, y, min_shift, seed):
     it keeps both series' autocorrelation and breaks only their alignment. All shifts are used
     (no randomness). Correlations are two-sided (|stat|), MI one-sided (larger = more
     dependence). p = (1 + #{null >= observed}) / (1 + shifts), so p >= 1 / (1 + shifts)."""
-    shifts = circular_shifts(len(x), min_shift)
-    if len(shifts) == 0:
-        return np.full(len(STAT_NAMES), math.nan), 0
-    xp, yp = ksg_prepare(x, y, seed)
-    obs = all_stats_prepared(x, y, xp, yp)
-    null = np.array([all_stats_prepared(x, np.roll(y, s), xp, np.roll(yp, s)) for s in shifts])
-    p = np.r_[_shift_p(obs[:3], null[:, :3], True), _shift_p(obs[3:], null[:, 3:], False)]
-    return p, len(shifts)
+    obs, null = shift_null(x, y, min_shift, seed)
+    return null_pvalues(obs, null), len(null)

@@ -23,8 +23,11 @@ DEFAULT_SEED = 1
 # One manifest of the table's columns: table2.csv, table2.md and the report walk it.
 CI_COLUMNS = tuple("%s_ci_%s" % (s, e) for s in stats.STAT_NAMES for e in ("lo", "hi"))
 P_COLUMNS = tuple("%s_p" % s for s in stats.STAT_NAMES)
-COLUMNS = (("movement", "joint") + stats.STAT_NAMES + CI_COLUMNS + P_COLUMNS
-           + ("n_ticks", "n_dropped", "block_len", "n_shifts", "detrend", "run"))
+# The MI beside its circular-shift null: the null's median and 95 % quantile, the excess over
+# the median, and whether the MI lies above the 95 % quantile (1/0).
+MI_NULL_COLUMNS = ("mi_null_median", "mi_null_q95", "mi_excess", "mi_above_null")
+COLUMNS = (("movement", "joint") + stats.STAT_NAMES + CI_COLUMNS + P_COLUMNS + MI_NULL_COLUMNS
+           + ("n_ticks", "n_dropped", "block_len", "n_shifts", "detrend", "run", "n_runs", "n_units"))
 
 
 def joint_series(run, j, detrend_spec):
@@ -55,19 +58,30 @@ def table2_rows(run, label, detrend_spec, n_boot=DEFAULT_BOOTSTRAP, base_seed=DE
             progress("%s %s: statistics, %d bootstrap resamples, circular shifts" % (label, joint, n_boot))
         t, v, att = joint_series(run, j, detrend_spec)
         seed = row_seed(run.movement, joint, base_seed)
-        xp, yp = stats.ksg_prepare(v, att, seed)
-        point = stats.all_stats_prepared(v, att, xp, yp)
         b = stats.pair_block_length(v, att)
         ci = stats.bootstrap_ci(v, att, b, n_boot, seed)
-        p, n_shifts = stats.shift_pvalues(v, att, b, seed)
+        point, null = stats.shift_null(v, att, b, seed)
+        med, q95 = stats.mi_null_quantiles(null[:, 3])
         row = {"movement": run.movement, "joint": joint, "n_ticks": n_used, "n_dropped": run.n_ticks - n_used,
-               "block_len": b, "n_shifts": n_shifts, "detrend": detrend_spec, "run": label}
-        for s, name in enumerate(stats.STAT_NAMES):
-            row[name] = point[s]
-            row[name + "_ci_lo"], row[name + "_ci_hi"] = ci[s]
-            row[name + "_p"] = p[s]
-        rows.append(row)
+               "block_len": b, "n_shifts": len(null), "detrend": detrend_spec, "run": label, "n_runs": 1,
+               "n_units": 1}
+        rows.append(fill_row(row, {"point": point, "ci_lo": ci[:, 0], "ci_hi": ci[:, 1],
+                                   "p": stats.null_pvalues(point, null), "mi_null_median": med, "mi_null_q95": q95}))
     return rows
+
+
+def fill_row(row, res):
+    """row (the identifying columns) completed with the statistics of res: point, ci_lo, ci_hi,
+    p ((4,) each, stats.STAT_NAMES order), mi_null_median, mi_null_q95."""
+    for s, name in enumerate(stats.STAT_NAMES):
+        row[name] = float(res["point"][s])
+        row[name + "_ci_lo"], row[name + "_ci_hi"] = float(res["ci_lo"][s]), float(res["ci_hi"][s])
+        row[name + "_p"] = float(res["p"][s])
+    mi, med, q95 = row["mi_bits"], res["mi_null_median"], res["mi_null_q95"]
+    row["mi_null_median"], row["mi_null_q95"] = med, q95
+    row["mi_excess"] = mi - med if math.isfinite(mi) and math.isfinite(med) else math.nan
+    row["mi_above_null"] = int(math.isfinite(mi) and math.isfinite(q95) and mi > q95)
+    return row
 
 
 def _cell(value):
@@ -84,17 +98,3 @@ def table2_csv(rows):
     for r in rows:
         w.writerow([_cell(r[c]) for c in COLUMNS])
     return out.getvalue()
-
-
-def read_table2_csv(path):
-    """table2.csv -> list of dicts (numbers as float/int), for make_reproduction and tests."""
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    ints = ("n_ticks", "n_dropped", "block_len", "n_shifts")
-    floats = stats.STAT_NAMES + CI_COLUMNS + P_COLUMNS
-    for r in rows:
-        for c in ints:
-            r[c] = int(r[c])
-        for c in floats:
-            r[c] = float(r[c])
-    return rows

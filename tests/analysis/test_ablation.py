@@ -1,0 +1,116 @@
+"""The attention ablation check (nao_analysis/ablation.py) on fixture runs whose ablation.csv has a
+known answer: per-tick Spearman rho between masses and deltas, the top-body-part match rate, and
+their intervals over distinct rollouts."""
+
+import os
+import shutil
+import tempfile
+import unittest
+
+import numpy as np
+
+import run_fixture
+from nao_analysis import AnalysisError, ablation, protocol
+from nao_analysis.rundir import read_run
+
+N = 50
+IDENTITY = (0, 1, 2, 3, 4)   # delta ranks = mass ranks: rho 1, top part matches
+TOP_SWAPPED = (0, 1, 2, 4, 3)  # the two most-attended swapped: rho 1 - 6*2/120 = 0.9, never matches
+REVERSED = (4, 3, 2, 1, 0)   # rho -1, never matches
+
+
+def masses_and_deltas(seed, ranks_to_delta):
+    """(mass (N, 5), delta (N, 5)): random attention shares; each body part's delta is set by
+    its mass rank through the permutation ranks_to_delta."""
+    rng = np.random.default_rng(seed)
+    mass = rng.random((N, 5)) + 0.5
+    mass = (mass / mass.sum(axis=1, keepdims=True)).astype(np.float32).astype(float)
+    rank = np.argsort(np.argsort(mass, axis=1), axis=1)
+    delta = 0.01 * (np.array(ranks_to_delta)[rank] + 1)
+    return mass, delta
+
+
+class Ablation(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.mkdtemp(prefix="nao-ablation-")
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.tmp)
+
+    def runs(self, name, perms):
+        """One run per permutation, each with its own motion (so its own distinct rollout)."""
+        out = []
+        for k, perm in enumerate(perms):
+            path = run_fixture.write_run(os.path.join(self.tmp, name, "elbow_%d" % k), "elbow", n=N, seed=10 + k,
+                                         ablation=masses_and_deltas(k, perm))
+            out.append(read_run(path))
+        return out
+
+    def summary(self, runs):
+        units, _ = protocol.movement_units(runs)
+        self.assertEqual(len(units["elbow"]), len(runs))
+        return ablation.ablation_summary(units["elbow"], 200, 1)
+
+    def test_per_tick_rho_and_match_of_the_known_permutations(self):
+        for perm, rho, match in ((IDENTITY, 1.0, 1.0), (TOP_SWAPPED, 0.9, 0.0), (REVERSED, -1.0, 0.0)):
+            mass, delta = masses_and_deltas(0, perm)
+            np.testing.assert_allclose(ablation.tick_rho(mass, delta), rho, atol=1e-12)
+            np.testing.assert_array_equal(ablation.top_match(mass, delta), match)
+
+    def test_attention_that_ranks_the_ablation_effect_predicts_it(self):
+        s = self.summary(self.runs("faithful", (IDENTITY, IDENTITY, IDENTITY)))
+        self.assertEqual((s["n_units"], s["n_ticks"]), (3, 3 * N))
+        self.assertAlmostEqual(s["rho_median"], 1.0, 12)
+        self.assertEqual(s["top_match_rate"], 1.0)
+        self.assertAlmostEqual(s["rho_ci"][0], 1.0, 12)
+        self.assertEqual(s["chance_top_match"], 0.2)
+        self.assertTrue(s["predicts"])
+
+    def test_a_mixed_movement_gives_its_median_and_rate_and_no_claim(self):
+        # Ticks: 50 with rho 1, 50 with 0.9, 50 with -1: median 0.9; the top part matches in 50 of 150.
+        s = self.summary(self.runs("mixed", (IDENTITY, TOP_SWAPPED, REVERSED)))
+        self.assertAlmostEqual(s["rho_median"], 0.9, 12)
+        self.assertAlmostEqual(s["top_match_rate"], 1.0 / 3.0, 12)
+        self.assertAlmostEqual(s["rho_ci"][0], -1.0, 12, "a bootstrap drawing the reversed unit three times")
+        self.assertLess(s["top_match_ci"][0], 0.2)
+        self.assertFalse(s["predicts"])
+
+    def test_runs_without_ablation_csv_give_no_summary(self):
+        run = read_run(run_fixture.write_run(os.path.join(self.tmp, "none", "elbow_0"), "elbow", n=N, seed=3))
+        self.assertIsNone(ablation.read_ablation(run))
+        self.assertIsNone(ablation.ablation_summary([[run]], 100, 1))
+
+    def test_masses_that_are_not_attention_bins_are_refused(self):
+        run = self.runs("tampered", (IDENTITY,))[0]
+        path = os.path.join(run.path, "ablation.csv")
+        with open(path) as f:
+            lines = f.read().splitlines()
+        cells = lines[7].split(",")
+        cells[1] = repr(float(cells[1]) + 0.01)
+        lines[7] = ",".join(cells)
+        with open(path, "w") as f:
+            f.write("\n".join(lines) + "\n")
+        with self.assertRaises(AnalysisError) as cm:
+            ablation.read_ablation(run)
+        self.assertIn("mass at tick 6 is not attention.bin's mass", str(cm.exception))
+        with open(path, "w") as f:
+            f.write("tick,mass_0\n0,0.2\n")
+        with self.assertRaises(AnalysisError) as cm:
+            ablation.read_ablation(run)
+        self.assertIn("missing column(s) mass_1", str(cm.exception))
+
+    def test_the_mass_spread_is_read_from_attention_bin(self):
+        runs = self.runs("spread", (IDENTITY, REVERSED))
+        units, _ = protocol.movement_units(runs)
+        s = ablation.mass_spread(units["elbow"])
+        masses = np.concatenate([masses_and_deltas(k, p)[0] for k, p in enumerate((IDENTITY, REVERSED))])
+        self.assertEqual(s["n_ticks"], 2 * N)
+        self.assertAlmostEqual(s["min"], masses.min(), 7)
+        self.assertAlmostEqual(s["max"], masses.max(), 7)
+        np.testing.assert_allclose(s["cv_over_time"], masses.std(axis=0) / masses.mean(axis=0), rtol=1e-6)
+
+
+if __name__ == "__main__":
+    unittest.main()
