@@ -115,6 +115,8 @@ std::string configHeader(const ModelFile& model, const std::string& source, cons
   s << "inline constexpr int kClusters = " << a.clusters << ";\n";
   s << "inline constexpr int kMaxSteps = " << a.max_steps << ";\n";
   s << "inline constexpr int kWindow = " << a.window << ";\n";
+  s << "inline constexpr int kChunk = " << a.chunk << ";\n";
+  s << "inline constexpr int kBins = " << a.bins << ";\n";
   s << "inline constexpr Conditioning kConditioning = Conditioning::"
     << (h.conditioning == Conditioning::kReference ? "kReference" : "kAutonomous") << ";\n\n";
 
@@ -177,8 +179,7 @@ std::string dimsHeader(const ModelFile& model) {
        "#endif\n"
        "#include \"nao/policy.hpp\"\n\n"
        "namespace nao::compiled {\n\n"
-       "using Dims = nao::PolicyDims<kDModel, kHeads, kEncoderLayers, kDecoderLayers, kFfn0, kFfn1, kFfn2, kMovements,\n"
-       "                             kClusters, kMaxSteps, kWindow>;\n\n"
+       "using Dims = nao::PolicyDims<kDModel, kHeads, kEncoderLayers, kDecoderLayers, kFfn0, kFfn1, kFfn2, kWindow>;\n\n"
        "}  // namespace nao::compiled\n";
   return s.str();
 }

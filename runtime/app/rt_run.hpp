@@ -161,14 +161,6 @@ ValidationSet validationDemos(const std::string& metadata_json, const std::strin
 /// <movement>_test<seed>_<index>. Throws std::invalid_argument if count < 1.
 ValidationSet testDemos(const std::string& movement, std::uint64_t test_seed, int count);
 
-/// The linear AR base an autonomous model was trained over (metadata training.linear_ar: per
-/// movement, per joint {"order", "c", "beta", "alpha"}; PolicyWeights::linear_ar), as doubles.
-struct LinearArCoefficients {
-  std::vector<std::array<double, 5>> c, beta;                                    ///< [movement][joint]
-  std::vector<std::array<std::array<double, 5>, kPolicyArMaxOrder>> alpha;       ///< [movement][k − 1][joint]
-  bool empty() const { return c.empty(); }
-};
-
 /// Everything configured before the policy is bound.
 struct PreparedRun {
   ArmModel arm;
@@ -181,12 +173,10 @@ struct PreparedRun {
   const std::uint8_t* int8_bytes = nullptr;
   /// fp32-packed: the compiled-in packed blob (checked); nullptr: pack the model at start-up.
   const std::uint8_t* packed_bytes = nullptr;
-  LinearArCoefficients linear_ar;       ///< autonomous models over the linear AR base (metadata)
   ReferenceSpec spec;
   int movement_index = 0;              ///< into model.header.movement_names
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
   RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
-  float residual_gain = 0.0f;          ///< the model's training.residual_gain (PolicyWeights)
   std::int64_t phase_ticks = 0;        ///< the model's training.phase_ticks (ControllerParams)
   tools::ReferenceStream reference;    ///< synthetic/file (empty for none)
   ValidationSet validation;            ///< none only
@@ -202,36 +192,10 @@ struct PreparedRun {
 RetargetParams modelRetargetSetting(const std::string& metadata_json, const RetargetParams& defaults,
                                     const std::string& origin);
 
-/// The residual gain a reference-mode model was trained with (metadata training.residual_gain,
-/// PolicyWeights::residual_gain); 0 when the metadata has none. Throws std::runtime_error naming
-/// `origin` for a value that is present but not a finite number >= 0.
-float modelResidualGain(const std::string& metadata_json, const std::string& origin);
-
-/// Empty when the metadata has none. Throws std::runtime_error naming `origin` for one that is
-/// present but unusable (not `movements` movements of 5 joints, an order outside 1..12, a
-/// coefficient that is not a finite number).
-LinearArCoefficients modelLinearAr(const std::string& metadata_json, int movements, const std::string& origin);
-
 /// The phase grid an autonomous model's step embedding was trained on (metadata
 /// training.phase_ticks, ControllerParams::phase_ticks); 0 when the metadata has none. Throws
 /// std::runtime_error naming `origin` for a value that is present but not an integer in [1, 1e5].
 std::int64_t modelPhaseTicks(const std::string& metadata_json, const std::string& origin);
-
-/// `k` as the runtime's float base (on = !k.empty()).
-template <int M>
-LinearArBase<M> linearArBase(const LinearArCoefficients& k) {
-  LinearArBase<M> b;
-  b.on = !k.empty() && k.c.size() == static_cast<std::size_t>(M);
-  if (!b.on) return b;
-  for (std::size_t m = 0; m < static_cast<std::size_t>(M); ++m)
-    for (std::size_t j = 0; j < 5; ++j) {
-      b.c[m][j] = static_cast<float>(k.c[m][j]);
-      b.beta[m][j] = static_cast<float>(k.beta[m][j]);
-      for (std::size_t i = 0; i < static_cast<std::size_t>(kPolicyArMaxOrder); ++i)
-        b.alpha[m][i][j] = static_cast<float>(k.alpha[m][i][j]);
-    }
-  return b;
-}
 
 /// Configure-time checks and preparation, in the order that fails fastest: reference syntax,
 /// URDF, model (file checks, joints against the URDF, architecture against `compiled_arch`),
@@ -289,24 +253,6 @@ std::string oneLine(std::string s);
 // that exists only when a file is loaded. The compiled-in model is bound in place and costs
 // nothing here (this replaced a 24 MB static array in .bss; issue 14).
 
-/// Floats of weight storage for every manifest tensor of Dims, each padded to 64 bytes (the
-/// manifest of policy_config.cpp, counted at compile time; prepareRun's binder checks it).
-template <class Dims>
-constexpr std::size_t policyStorageFloats() {
-  constexpr std::size_t D = Dims::kDModel, J = Dims::kTokens, M = Dims::kMovements, K = Dims::kClusters;
-  constexpr std::size_t S = Dims::kMaxSteps, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
-  constexpr auto pad = [](std::size_t n) { return (n + 15) / 16 * 16; };
-  const std::size_t norm = 2 * pad(D);
-  const std::size_t attention = 4 * (pad(D * D) + pad(D));
-  const std::size_t ffn = pad(D * F0) + pad(F0) + pad(F0 * F1) + pad(F1) + pad(F1 * F2) + pad(F2) + pad(F2 * D) + pad(D);
-  std::size_t n = pad(Dims::kFeatures * D) + pad(D) + pad(J * D) + pad(M * D) + pad(S * D) + pad(D) + pad(D) + pad(J * D);
-  const std::size_t age_bias = pad(static_cast<std::size_t>(Dims::kHeads) * Dims::kWindow);  // window attention only
-  n += Dims::kEncoderLayers * (norm + attention + age_bias + norm + ffn) + norm;
-  n += Dims::kDecoderLayers * (norm + attention + norm + attention + age_bias + norm + ffn) + norm;
-  n += pad(D) + pad(1) + 6 * pad(J) + pad(M * K * J);
-  return n;
-}
-
 /// The aligned floats a --weights model's tensors are copied into; empty (no memory) for the
 /// compiled-in model. Owned by the run, alive until the loop has ended.
 struct WeightStorage {
@@ -317,16 +263,15 @@ struct WeightStorage {
   std::size_t n_floats = 0;
 };
 
-/// Copies the tensors of `model` into `storage` (allocated here: policyStorageFloats<Dims>,
-/// 64-byte aligned, zero-filled, so the padding between tensors reads as zeros) and returns where
-/// each one starts, in manifest order. Configure time: allocates; throws std::bad_alloc, or
-/// std::logic_error if the storage is too small (a programming error in policyStorageFloats).
-/// nao_bench reads its weights from here too, so it times what nao_rt reads.
-template <class Dims>
-std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& storage) {
+/// Copies the tensors of `model` into `storage` (allocated here: every tensor of its table, each
+/// padded to 64 bytes, 64-byte aligned, zero-filled, so the padding between tensors reads as
+/// zeros) and returns where each one starts, in manifest order. Configure time: allocates;
+/// throws std::bad_alloc. nao_bench reads its weights from here too, so it times what nao_rt reads.
+inline std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& storage) {
   std::vector<const float*> pointers;
   pointers.reserve(model.tensors.size());
-  storage.n_floats = policyStorageFloats<Dims>();
+  storage.n_floats = 0;
+  for (const TensorEntry& t : model.tensors) storage.n_floats += (t.spec.count() + 15) / 16 * 16;
   storage.floats.reset(static_cast<float*>(
       ::operator new[](storage.n_floats * sizeof(float), std::align_val_t{kModelAlignment})));
   float* floats = storage.floats.get();
@@ -346,8 +291,8 @@ std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& 
 /// The weights of a --weights model: copyWeightFile, the views bound by name.
 template <class Dims>
 PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
-  const std::vector<const float*> pointers = copyWeightFile<Dims>(p.model, storage);
-  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.conditioning);
+  const std::vector<const float*> pointers = copyWeightFile(p.model, storage);
+  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.arch, p.model.header.conditioning);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -413,10 +358,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // a --weights file: its tensors copied into aligned storage, bound by name.
     PolicyWeights<Dims> weights =
         p.model_bytes != nullptr
-            ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model.header.conditioning)
+            ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model.header.arch,
+                                        p.model.header.conditioning)
             : bindWeightFile<Dims>(p, weight_storage);
-    weights.residual_gain = p.residual_gain;
-    weights.linear_ar = linearArBase<Dims::kMovements>(p.linear_ar);
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
     // longer read, so its memory goes back now, before an int8 or packed copy is made from the
     // views (one fp32 copy resident at a time: docs/embedded.md, RSS).

@@ -334,7 +334,7 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
     in.a_prev = data.a_prev.template cast<float>();
     in.r = (clampToLimits(model.arm, data.feature_f) - q).template cast<float>();  // target − q (docs/policy.md)
     in.movement = data.movement;
-    in.step = policyStep(data.tick, p, Dims::kMaxSteps);
+    in.step = policyStep(data.tick, p, model.policy.max_steps);
     a = stepPolicy(model.policy, *data.policy, in).template cast<double>();
     if (data.tick >= p.inject_policy_nan_first && data.tick <= p.inject_policy_nan_last)
       a[0] = std::nan("");
