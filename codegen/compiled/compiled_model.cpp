@@ -13,7 +13,9 @@ extern "C" const std::uint8_t nao_model_packed_end[];
 namespace nao::compiled {
 
 static_assert(kFormatVersion == kModelFormatVersion, "the generated config is of another model.bin format");
-static_assert(kNumTensors == detail::policyViewCount<Dims>(), "the generated tensor table is not the manifest's");
+static_assert(kNumTensors == detail::policyViewCount<Dims>(kBins, kChunk), "the generated tensor table is not the manifest's");
+static_assert(kChunk >= 1 && kChunk <= kPolicyMaxChunk && kBins >= 0 && kBins <= kPolicyMaxBins,
+              "the compiled-in model's head is beyond the runtime's");
 static_assert(kJointNames.size() == static_cast<std::size_t>(kTokens), "one joint per token");
 
 ModelBytes modelBytes() {
@@ -25,6 +27,11 @@ namespace {
 ModelHeader makeHeader() {
   ModelHeader h;
   h.arch = Dims::arch();
+  h.arch.movements = kMovements;
+  h.arch.clusters = kClusters;
+  h.arch.max_steps = kMaxSteps;
+  h.arch.chunk = kChunk;
+  h.arch.bins = kBins;
   h.conditioning = kConditioning;
   for (std::size_t j = 0; j < kJointNames.size(); ++j)
     h.joints.push_back({std::string(kJointNames[j]), kJointLower[j], kJointUpper[j], kJointVelocity[j]});
@@ -33,10 +40,15 @@ ModelHeader makeHeader() {
   return h;
 }
 
+const ModelHeader& compiledHeader() {
+  static const ModelHeader header = makeHeader();
+  return header;
+}
+
 }  // namespace
 
 ModelImage modelImage() {
-  static const ModelHeader header = makeHeader();
+  const ModelHeader& header = compiledHeader();
   const ModelBytes b = modelBytes();
   ModelImage image{b.data, b.size, kChecksum, &header, kTensorOffsets.data(), kTensorOffsets.size()};
   if constexpr (kInt8Weights) {
@@ -56,7 +68,7 @@ static_assert(!kInt8Weights || kInt8Bytes == quantizedPolicyBytes<Dims>(), "the 
 static_assert(!kPackedWeights || kPackedBytes == packedPolicyBytes<Dims>(), "the generated packed blob is not the layout's");
 
 PolicyWeights<Dims> policyWeights() noexcept {
-  PolicyWeights<Dims> w = bindPolicyWeightsAt<Dims>(nao_model_blob, kTensorOffsets, kConditioning);
+  PolicyWeights<Dims> w = bindPolicyWeightsAt<Dims>(nao_model_blob, kTensorOffsets.data(), compiledHeader().arch, kConditioning);
   if constexpr (kInt8Weights) bindQuantizedWeights<Dims>(w, nao_model_int8);
   if constexpr (kPackedWeights) bindPackedWeights<Dims>(w, nao_model_packed);
   return w;

@@ -85,10 +85,13 @@ std::vector<ArchConstant> archConstants(const PolicyArch& a) {
     c.push_back({"kFfn" + std::to_string(k), a.ffn_hidden[k], true});
   c.push_back({"kTokens", a.tokens, false});
   c.push_back({"kFeatures", a.features, false});
-  c.push_back({"kMovements", a.movements, true});
-  c.push_back({"kClusters", a.clusters, true});
-  c.push_back({"kMaxSteps", a.max_steps, true});
+  // The table and head sizes are the bound model's (nao::PolicyWeights), not dimensions.
+  c.push_back({"kMovements", a.movements, false});
+  c.push_back({"kClusters", a.clusters, false});
+  c.push_back({"kMaxSteps", a.max_steps, false});
   c.push_back({"kWindow", a.window, true});
+  c.push_back({"kChunk", a.chunk, false});
+  c.push_back({"kBins", a.bins, false});
   return c;
 }
 

@@ -234,9 +234,6 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   p.centroids = modelKeyPoses(p.model, p.movement_index);
   // The reference is retargeted the way the model's training data was.
   p.retarget = modelRetargetSetting(h.metadata_json, o.controller.retarget, p.model_source);
-  p.residual_gain = modelResidualGain(h.metadata_json, p.model_source);
-  p.linear_ar = modelLinearAr(h.metadata_json, h.arch.movements, p.model_source);
-  p.phase_ticks = modelPhaseTicks(h.metadata_json, p.model_source);
 
   std::int64_t default_ticks = 0;
   switch (p.spec.kind) {

@@ -142,13 +142,10 @@ struct PreparedRun {
   const std::uint8_t* int8_bytes = nullptr;
   /// fp32-packed: the compiled-in packed blob (checked); nullptr: pack the model at start-up.
   const std::uint8_t* packed_bytes = nullptr;
-  LinearArCoefficients linear_ar;       ///< autonomous models over the linear AR base (metadata)
   ReferenceSpec spec;
   int movement_index = 0;              ///< into model.header.movement_names
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
   RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
-  float residual_gain = 0.0f;          ///< the model's training.residual_gain (PolicyWeights)
-  std::int64_t phase_ticks = 0;        ///< the model's training.phase_ticks (ControllerParams)
   std::unique_ptr<HumanSource> human;  ///< the frames the ticks see; nullptr: none (autonomous)
   /// file: the recorded reference (owned by `human`, so it stays put when the run is moved);
   /// nullptr for none.
@@ -173,24 +170,6 @@ PreparedRun prepareRun(const RunOptions& options, const PolicyArch& compiled_arc
 // that exists only when a file is loaded. The compiled-in model is bound in place and costs
 // nothing here.
 
-/// Floats of weight storage for every manifest tensor of Dims, each padded to 64 bytes (the
-/// manifest of policy_config.cpp, counted at compile time; copyWeightFile checks it).
-template <class Dims>
-constexpr std::size_t policyStorageFloats() {
-  constexpr std::size_t D = Dims::kDModel, J = Dims::kTokens, M = Dims::kMovements, K = Dims::kClusters;
-  constexpr std::size_t S = Dims::kMaxSteps, F0 = Dims::kFfn0, F1 = Dims::kFfn1, F2 = Dims::kFfn2;
-  constexpr auto pad = [](std::size_t n) { return (n + 15) / 16 * 16; };
-  const std::size_t norm = 2 * pad(D);
-  const std::size_t attention = 4 * (pad(D * D) + pad(D));
-  const std::size_t ffn = pad(D * F0) + pad(F0) + pad(F0 * F1) + pad(F1) + pad(F1 * F2) + pad(F2) + pad(F2 * D) + pad(D);
-  std::size_t n = pad(Dims::kFeatures * D) + pad(D) + pad(J * D) + pad(M * D) + pad(S * D) + pad(D) + pad(D) + pad(J * D);
-  const std::size_t age_bias = pad(static_cast<std::size_t>(Dims::kHeads) * Dims::kWindow);  // window attention only
-  n += Dims::kEncoderLayers * (norm + attention + age_bias + norm + ffn) + norm;
-  n += Dims::kDecoderLayers * (norm + attention + norm + attention + age_bias + norm + ffn) + norm;
-  n += pad(D) + pad(1) + 6 * pad(J) + pad(M * K * J);
-  return n;
-}
-
 /// The aligned floats a --weights model's tensors are copied into; empty (no memory) for the
 /// compiled-in model. Owned by the run, alive until the loop has ended.
 struct WeightStorage {
@@ -201,16 +180,15 @@ struct WeightStorage {
   std::size_t n_floats = 0;
 };
 
-/// Copies the tensors of `model` into `storage` (allocated here: policyStorageFloats<Dims>,
-/// 64-byte aligned, zero-filled, so the padding between tensors reads as zeros) and returns where
-/// each one starts, in manifest order. Configure time: allocates; throws std::bad_alloc, or
-/// std::logic_error if the storage is too small (a programming error in policyStorageFloats).
-/// nao_bench reads its weights from here too, so it times what nao_rt reads.
-template <class Dims>
-std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& storage) {
+/// Copies the tensors of `model` into `storage` (allocated here: every tensor of its table, each
+/// padded to 64 bytes, 64-byte aligned, zero-filled, so the padding between tensors reads as
+/// zeros) and returns where each one starts, in manifest order. Configure time: allocates; throws
+/// std::bad_alloc. nao_bench reads its weights from here too, so it times what nao_rt reads.
+inline std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& storage) {
   std::vector<const float*> pointers;
   pointers.reserve(model.tensors.size());
-  storage.n_floats = policyStorageFloats<Dims>();
+  storage.n_floats = 0;
+  for (const TensorEntry& t : model.tensors) storage.n_floats += (t.spec.count() + 15) / 16 * 16;
   storage.floats.reset(static_cast<float*>(
       ::operator new[](storage.n_floats * sizeof(float), std::align_val_t{kModelAlignment})));
   float* floats = storage.floats.get();
@@ -230,8 +208,8 @@ std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& 
 /// The weights of a --weights model: copyWeightFile, the views bound by name.
 template <class Dims>
 PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
-  const std::vector<const float*> pointers = copyWeightFile<Dims>(p.model, storage);
-  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.conditioning);
+  const std::vector<const float*> pointers = copyWeightFile(p.model, storage);
+  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.arch, p.model.header.conditioning);
 }
 
 }  // namespace nao::rt

@@ -118,10 +118,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // a --weights file: its tensors copied into aligned storage, bound by name.
     PolicyWeights<Dims> weights =
         p.model_bytes != nullptr
-            ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model.header.conditioning)
+            ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model.header.arch,
+                                        p.model.header.conditioning)
             : bindWeightFile<Dims>(p, weight_storage);
-    weights.residual_gain = p.residual_gain;
-    weights.linear_ar = linearArBase<Dims::kMovements>(p.linear_ar);
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
     // longer read, so its memory goes back now, before an int8 or packed copy is made from the
     // views (one fp32 copy resident at a time: docs/embedded.md, RSS).
@@ -162,8 +161,6 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       }
     }
     ControllerParams controller_params = options.controller;
-    controller_params.phase_ticks = p.phase_ticks;  // the run's length sets the pace of a phase model
-    controller_params.run_ticks = p.ticks;
     controller_params.retarget = p.retarget;
     // The human's scale d_h is calibrated once per reference, as the training data and the
     // evaluation target were retargeted (one scale per demonstration from all its frames:

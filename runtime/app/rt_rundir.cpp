@@ -184,9 +184,8 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
   j["model"] = {{"path", p.model_source},
                 {"checksum", hex64(p.model.checksum)},
                 {"conditioning", conditioningName(p.model.header.conditioning)},
-                {"residual_gain", p.residual_gain},
-                {"linear_ar_base", !p.linear_ar.empty()},
-                {"phase_ticks", p.phase_ticks},
+                {"chunk", p.model.header.arch.chunk},
+                {"bins", p.model.header.arch.bins},
                 {"precision", weightPrecisionName(p.precision)},
                 {"kernel", policyKernelName(activePolicyKernel())}};
   j["reference"] = p.description;

@@ -25,8 +25,8 @@ static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "model.bin views need a
 namespace nao {
 namespace {
 
-// Layout of model.bin version 1 (docs/policy.md).
-constexpr std::size_t kFixedBytes = 64;       // magic, version, header size, 12 u32 fields
+// Layout of model.bin (docs/policy.md).
+constexpr std::size_t kFixedBytes = 72;       // magic, version, header size, 14 u32 fields
 constexpr std::size_t kNameBytes = 32;        // joint and movement names
 constexpr std::size_t kJointBytes = kNameBytes + 3 * 8;
 constexpr std::size_t kTensorNameBytes = 64;
@@ -148,10 +148,13 @@ struct RawEntry {
   std::uint64_t count = 0;
 };
 
-enum Field : int { kDModel, kHeads, kEncLayers, kDecLayers, kFfnCount, kTokens, kFeatures, kMovements, kClusters, kMaxSteps, kWindow, kConditioning, kNumFields };
+enum Field : int {
+  kDModel, kHeads, kEncLayers, kDecLayers, kFfnCount, kTokens, kFeatures, kMovements, kClusters, kMaxSteps, kWindow,
+  kChunk, kBins, kConditioning, kNumFields
+};
 constexpr const char* kFieldNames[kNumFields] = {"d_model", "heads", "encoder_layers", "decoder_layers", "ffn count",
                                                  "tokens", "features", "movements", "clusters", "max_steps", "window",
-                                                 "conditioning"};
+                                                 "chunk", "bins", "conditioning"};
 
 struct RawHeader {
   std::uint32_t header_size = 0;
@@ -354,6 +357,8 @@ PolicyArch toArch(const RawHeader& h, const std::string& origin) {
   a.clusters = dim(kClusters);
   a.max_steps = dim(kMaxSteps);
   a.window = dim(kWindow);
+  a.chunk = dim(kChunk);
+  a.bins = dim(kBins);
   return a;
 }
 
@@ -462,7 +467,7 @@ std::vector<std::uint8_t> encodeModel(const ModelHeader& header, const std::vect
   w.u32(kModelFormatVersion);
   w.u32(static_cast<std::uint32_t>(header_size));
   for (int v : {a.d_model, a.heads, a.encoder_layers, a.decoder_layers, static_cast<int>(a.ffn_hidden.size()), a.tokens,
-                a.features, a.movements, a.clusters, a.max_steps, a.window})
+                a.features, a.movements, a.clusters, a.max_steps, a.window, a.chunk, a.bins})
     w.u32(static_cast<std::uint32_t>(v));
   w.u32(static_cast<std::uint32_t>(header.conditioning));
   for (int width : a.ffn_hidden) w.u32(static_cast<std::uint32_t>(width));

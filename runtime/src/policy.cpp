@@ -16,14 +16,14 @@ std::string shapeText(const std::vector<int>& shape) {
   return s + "]";
 }
 
-std::string archText(const PolicyArch& a) {
+// The dimensions a compiled runtime fixes (PolicyDims): the computation's, not the tables'.
+std::string computeText(const PolicyArch& a) {
   std::string ffn;
   for (std::size_t i = 0; i < a.ffn_hidden.size(); ++i) ffn += (i ? "-" : "") + std::to_string(a.ffn_hidden[i]);
   return "d_model " + std::to_string(a.d_model) + ", heads " + std::to_string(a.heads) + ", encoder layers " +
          std::to_string(a.encoder_layers) + ", decoder layers " + std::to_string(a.decoder_layers) + ", ffn " + ffn +
-         ", tokens " + std::to_string(a.tokens) + ", features " + std::to_string(a.features) + ", movements " +
-         std::to_string(a.movements) + ", clusters " + std::to_string(a.clusters) + ", max_steps " +
-         std::to_string(a.max_steps) + ", window " + std::to_string(a.window);
+         ", tokens " + std::to_string(a.tokens) + ", features " + std::to_string(a.features) + ", window " +
+         std::to_string(a.window);
 }
 
 }  // namespace
@@ -54,7 +54,12 @@ void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<Ten
     long rows = spec.shape.empty() ? 1 : spec.shape.back();
     long cols = 1;
     for (std::size_t k = 0; k + 1 < spec.shape.size(); ++k) cols *= spec.shape[k];
-    if (rows != slot.rows || cols != slot.cols)
+    // A flat view (one dynamic column) takes the tensor whole.
+    if (slot.rows == Eigen::Dynamic && slot.cols == 1) {
+      rows *= cols;
+      cols = 1;
+    }
+    if ((slot.rows != Eigen::Dynamic && rows != slot.rows) || (slot.cols != Eigen::Dynamic && cols != slot.cols))
       throw std::invalid_argument("policy weights: tensor '" + spec.name + "' has shape " + shapeText(spec.shape) +
                                   " (Eigen [" + std::to_string(rows) + "," + std::to_string(cols) +
                                   "]), its view is Eigen [" + std::to_string(slot.rows) + "," +
@@ -63,7 +68,7 @@ void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<Ten
     if (tensors[i] == nullptr)
       throw std::invalid_argument("policy weights: tensor '" + spec.name + "' (entry " + std::to_string(i) +
                                   ") has no data");
-    slot.rebind(slot.view, tensors[i]);
+    slot.rebind(slot.view, tensors[i], rows, cols);
     bound[it->second] = true;
   }
   for (std::size_t i = 0; i < slots.size(); ++i)
@@ -71,9 +76,17 @@ void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<Ten
 }
 
 void requireArch(const PolicyArch& compiled, const PolicyArch& given) {
-  if (compiled != given)
-    throw std::invalid_argument("policy architecture (" + archText(given) + ") differs from the compiled one (" +
-                                archText(compiled) + ")");
+  if (computeText(compiled) != computeText(given) || compiled.ffn_hidden != given.ffn_hidden)
+    throw std::invalid_argument("policy architecture (" + computeText(given) + ") differs from the compiled one (" +
+                                computeText(compiled) + ")");
+  const std::string problem = archProblem(given);
+  if (!problem.empty()) throw std::invalid_argument("policy architecture: " + problem);
+  if (given.chunk > kPolicyMaxChunk)
+    throw std::invalid_argument("policy architecture: chunk " + std::to_string(given.chunk) + " is above the runtime's " +
+                                std::to_string(kPolicyMaxChunk));
+  if (given.bins > kPolicyMaxBins)
+    throw std::invalid_argument("policy architecture: bins " + std::to_string(given.bins) + " is above the runtime's " +
+                                std::to_string(kPolicyMaxBins));
 }
 
 }  // namespace nao::detail

@@ -3,19 +3,13 @@
 // do not, so a seed gives the same files with any standard library).
 #pragma once
 
+#include "nao/tools/splitmix.hpp"
+
 #include <cmath>
 #include <cstdint>
 #include <random>
 
 namespace nao::tools {
-
-/// splitmix64 finaliser: decorrelates seeds derived from small integers.
-inline std::uint64_t splitMix64(std::uint64_t x) {
-  x += 0x9e3779b97f4a7c15ULL;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-  return x ^ (x >> 31);
-}
 
 class SynthRandom {
  public:

@@ -126,19 +126,7 @@ struct ControllerParams {
   /// Pole of the online feature-extracted reference the policy is fed in reference mode (the
   /// blend of the snapped key poses, as the training data's f; must equal the data's).
   double feature_pole = kFeatureBlendPole;
-  /// A model trained with phase steps (metadata training.phase_ticks > 0; docs/policy.md): the
-  /// step row of tick t is floor(t·phase_ticks / run_ticks), the movement's phase over the run's
-  /// planned length, instead of t. 0: t.
-  std::int64_t phase_ticks = 0;
-  std::int64_t run_ticks = 0;  ///< the run's planned length (phase steps; > 0 when phase_ticks is)
 };
-
-/// The step-embedding row of tick `tick` (docs/policy.md): the tick itself, or with phase steps
-/// its phase on the model's grid; clamped to the embedding's rows.
-inline int policyStep(std::int64_t tick, const ControllerParams& p, int max_steps) {
-  const std::int64_t step = p.phase_ticks > 0 ? tick * p.phase_ticks / p.run_ticks : tick;
-  return static_cast<int>(std::min<std::int64_t>(step, max_steps - 1));
-}
 
 /// One tick as recorded (ticks.csv; angles rad, positions m in the torso frame).
 struct TickRecord {
@@ -335,7 +323,7 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
     in.a_prev = data.a_prev.template cast<float>();
     in.r = (clampToLimits(model.arm, data.feature_f) - q).template cast<float>();  // target − q (docs/policy.md)
     in.movement = data.movement;
-    in.step = policyStep(data.tick, p, Dims::kMaxSteps);
+    in.step = static_cast<int>(std::min<std::int64_t>(data.tick, model.policy.max_steps - 1));
     a = stepPolicy(model.policy, *data.policy, in).template cast<double>();
     if (data.tick >= p.inject_policy_nan_first && data.tick <= p.inject_policy_nan_last)
       a[0] = std::nan("");

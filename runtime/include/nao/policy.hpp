@@ -39,15 +39,19 @@
 #include <memory>
 #include <new>
 #include <string>
+#include <string_view>
 #include <type_traits>
 #include <vector>
 
 namespace nao {
 
-/// Compile-time dimensions of a policy (STYLE 3). The runtime supports exactly three FFN hidden
-/// layers; a model.bin with another count has a different PolicyArch and is rejected by
-/// checkPolicyArch.
-template <int D, int H, int LE, int LD, int F0, int F1, int F2, int M = 3, int K = 10, int S = 256, int W = 20>
+/// Compile-time dimensions of a policy's computation (STYLE 3). The runtime supports exactly three
+/// FFN hidden layers; a model.bin with another count has a different PolicyArch and is rejected
+/// by checkPolicyArch. The sizes of the model's tables - movements M, key poses K, step rows S,
+/// the action chunk C and the action bins B - are the bound model's (PolicyWeights), not
+/// compile-time: they are lookups and a small head, and one compiled runtime serves every model
+/// of these dimensions, whatever movements it was trained on (docs/policy.md).
+template <int D, int H, int LE, int LD, int F0, int F1, int F2, int W = 20>
 struct PolicyDims {
   static constexpr int kDModel = D;
   static constexpr int kHeads = H;
@@ -59,16 +63,12 @@ struct PolicyDims {
   static constexpr int kFfn2 = F2;
   static constexpr int kTokens = 5;
   static constexpr int kFeatures = kPolicyFeatures;
-  static constexpr int kMovements = M;
-  static constexpr int kClusters = K;
-  static constexpr int kMaxSteps = S;
   static constexpr int kWindow = W;               ///< ticks of history, the current one included
   static constexpr int kMemory = W * kTokens;     ///< tokens in a full window
 
   static_assert(D >= 1 && H >= 1 && D % H == 0, "d_model must be a positive multiple of heads");
   static_assert(LE >= 1 && LD >= 1, "at least one encoder and one decoder layer");
   static_assert(F0 >= 1 && F1 >= 1 && F2 >= 1, "FFN hidden widths must be positive");
-  static_assert(M >= 1 && K >= 1 && S >= 1, "movements, clusters and max_steps must be positive");
   static_assert(W >= 1, "the window holds at least the current tick");
   // The key/value rings are [d, W J] fixed-size matrices, under the same cap.
   static_assert(static_cast<std::size_t>(D) * W * kTokens * sizeof(float) <= EIGEN_STACK_ALLOCATION_LIMIT,
@@ -79,7 +79,8 @@ struct PolicyDims {
                     EIGEN_STACK_ALLOCATION_LIMIT,
                 "a [width, J] activation buffer exceeds Eigen's fixed-size limit");
 
-  /// The same dimensions as a runtime PolicyArch (allocates; configure time only).
+  /// The same dimensions as a runtime PolicyArch (allocates; configure time only); the table and
+  /// head sizes are PolicyArch's defaults.
   static PolicyArch arch() {
     PolicyArch a;
     a.d_model = D;
@@ -89,19 +90,22 @@ struct PolicyDims {
     a.ffn_hidden = {F0, F1, F2};
     a.tokens = kTokens;
     a.features = kFeatures;
-    a.movements = M;
-    a.clusters = K;
-    a.max_steps = S;
     a.window = W;
     return a;
   }
 };
 
 /// paperArch() (paper §4.1) and smallArch() (tests) as compiled dimensions.
-using PaperPolicyDims = PolicyDims<128, 4, 4, 4, 512, 512, 512, 3, 10, 256, 20>;
-using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 3, 10, 256, 8>;
+using PaperPolicyDims = PolicyDims<128, 4, 4, 4, 512, 512, 512, 20>;
+using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 8>;
 
-/// Read-only fixed-size view of one manifest tensor, Eigen shape [rows, cols] column-major.
+/// Largest action chunk C and number of action bins B a runtime holds (the workspace's chunk
+/// ring and logits); archProblem's caps are above, bindPolicyWeights refuses a model beyond these.
+inline constexpr int kPolicyMaxChunk = 32;
+inline constexpr int kPolicyMaxBins = 1024;
+
+/// Read-only fixed-size view of one manifest tensor, Eigen shape [rows, cols] column-major. R or C
+/// Eigen::Dynamic: that extent is the bound model's (tables and head; PolicyDims).
 template <int R, int C>
 using WeightView = Eigen::Map<const Eigen::Matrix<float, R, C>>;
 
@@ -176,32 +180,26 @@ struct DecoderLayerWeights {
   FfnWeights<Dims> ffn;
 };
 
-/// The immutable model: views of every manifest tensor (the bytes stay where they were bound)
-/// Most past actions the linear AR base reads (the toolchain's kMaxLinearArOrder).
-inline constexpr int kPolicyArMaxOrder = 12;
-
-/// Autonomous mode's linear autoregressive base (docs/policy.md): per movement m and joint j,
-/// base_j = c + β q_j(t) + Σ_{k=1..12} α_k a_j(t−k) (α zero past the fitted order), the fitted
-/// baseline (toolchain linear_ar.hpp) the network's output is a residual over. From the model's
-/// metadata (training.linear_ar); off in older files and in reference mode.
-template <int M>
-struct LinearArBase {
-  bool on = false;
-  std::array<std::array<float, 5>, M> c{}, beta{};
-  std::array<std::array<std::array<float, 5>, kPolicyArMaxOrder>, M> alpha{};  ///< [m][k − 1][j]
-};
-
-/// plus the conditioning mode. Built by bindPolicyWeights.
+/// The immutable model: views of every manifest tensor (the bytes stay where they were bound),
+/// the table and head sizes of the bound model, and the conditioning mode. Built by
+/// bindPolicyWeights.
 template <class Dims>
 struct PolicyWeights {
-  static constexpr int D = Dims::kDModel, J = Dims::kTokens, M = Dims::kMovements;
-  static constexpr int K = Dims::kClusters, S = Dims::kMaxSteps;
+  static constexpr int D = Dims::kDModel, J = Dims::kTokens;
+  static constexpr int X = Eigen::Dynamic;
+
+  // Sizes of the bound model (its PolicyArch).
+  int movements = 1;  ///< M
+  int clusters = 1;   ///< K key poses per movement
+  int max_steps = 1;  ///< S step rows
+  int chunk = 1;      ///< C actions per token and tick
+  int bins = 0;       ///< B action bins; 0: the head regresses the chunk
 
   WeightView<D, 3> embed_in_weight{nullptr};   ///< columns: q, a(t-1), r features
   WeightView<D, 1> embed_in_bias{nullptr};
   WeightView<D, J> embed_joint_enc{nullptr};   ///< column j: encoder embedding of joint j
-  WeightView<D, M> embed_movement{nullptr};    ///< column m: movement m
-  WeightView<D, S> embed_step{nullptr};        ///< column s: step s (zero in reference mode)
+  WeightView<D, X> embed_movement{nullptr, D, 0};  ///< [d, M], column m: movement m
+  WeightView<D, X> embed_step{nullptr, D, 0};      ///< [d, S], column s: step s (zero in reference mode)
   WeightView<D, 1> embed_act_weight{nullptr};
   WeightView<D, 1> embed_act_bias{nullptr};
   WeightView<D, J> embed_joint_dec{nullptr};   ///< column j: decoder embedding of joint j
@@ -209,20 +207,28 @@ struct PolicyWeights {
   LayerNormWeights<Dims> enc_norm;
   std::array<DecoderLayerWeights<Dims>, Dims::kDecoderLayers> dec;
   LayerNormWeights<Dims> dec_norm;
-  WeightView<1, D> head_weight{nullptr};
-  WeightView<1, 1> head_bias{nullptr};
+  // The head (docs/policy.md "Head"), normalised units. Regression (bins == 0):
+  WeightView<X, D> head_weight{nullptr, 0, D};  ///< [C, d]: row c, a_j(t + c) of token j
+  WeightView<X, 1> head_bias{nullptr, 0, 1};    ///< [C]
+  // Bins (bins >= 1):
+  WeightView<X, X> head_logit_weight{nullptr, 0, 0};  ///< [B, J·d]: columns j·d .. j·d+d−1, token j's share
+  WeightView<X, 1> head_logit_bias{nullptr, 0, 1};    ///< [B]
+  WeightView<X, D> head_offset_weight{nullptr, 0, D}; ///< [B·C, d]: row b·C + c, bin b's a_j(t + c) offset
+  WeightView<X, 1> head_offset_bias{nullptr, 0, 1};   ///< [B·C]
+  WeightView<X, 1> head_centers{nullptr, 0, 1};       ///< [B·J·C]: element (b·J + j)·C + c
+  WeightView<X, 1> head_ensemble_decay{nullptr, 0, 1};  ///< [1] when C > 1: w_k = exp(−decay·k)
   WeightView<J, 1> q_mean{nullptr}, q_std{nullptr};  ///< rad
   WeightView<J, 1> a_mean{nullptr}, a_std{nullptr};  ///< rad per step
   WeightView<J, 1> r_mean{nullptr}, r_std{nullptr};  ///< rad
-  WeightView<J, M * K> centroids{nullptr};  ///< column m*K + k: key pose k of movement m, rad
+  WeightView<J, X> centroids{nullptr, J, 0};  ///< [J, M·K], column m*K + k: key pose k of movement m, rad
+  /// law.gain: the runtime's only law on top of the network, gain_j · r_j added to a reference-mode
+  /// model's action (the first-order servo inversion, docs/policy.md); all 0 in autonomous models.
+  WeightView<J, 1> law_gain{nullptr};
   Conditioning conditioning = Conditioning::kReference;
-  /// Residual gain g of reference-mode models: the action is g·r plus the network's output, the
-  /// net learning only what a first-order servo inversion of the target r = f(t+1) − q misses
-  /// (docs/policy.md). From the model's metadata (training.residual_gain); 0: none.
-  float residual_gain = 0.0f;
-  /// Autonomous models trained as a residual over the linear AR baseline: the action is that
-  /// baseline plus the network's output (docs/policy.md). Off: none.
-  LinearArBase<Dims::kMovements> linear_ar;
+  /// w_k / Σ w of the temporal ensemble, for the chunk made k ticks ago, once k + 1 chunks
+  /// exist (row k of the triangle: ensemble_weight[n − 1][k] with n = min(ticks, C) chunks);
+  /// made at bind time from head.ensemble_decay.
+  std::array<std::array<float, kPolicyMaxChunk>, kPolicyMaxChunk> ensemble_weight{};
 };
 
 /// Everything stepPolicy writes: intermediates, the key/value rings of the last W ticks and the
@@ -294,11 +300,16 @@ struct PolicyWorkspace {
   /// before the residual add).
   Tokens cross_out = Tokens::Zero();
 
-  JointVec action_n = JointVec::Zero();  ///< normalised actions an'
-  JointVec action = JointVec::Zero();    ///< actions a(t), rad per step
-  /// The linear AR base's past actions, newest first: a_hist[k − 1] = a(t − k) (the inputs
-  /// a_prev of this and the previous steps; 0 before the stream started).
-  std::array<JointVec, kPolicyArMaxOrder> a_hist{};
+  /// The head's chunk of this tick, rad: column c is a(t + c) (the first C columns are used).
+  using Chunk = Eigen::Matrix<float, J, kPolicyMaxChunk>;
+  Chunk chunk = Chunk::Zero();
+  /// The chunks of the last C ticks: the one made at tick τ in slot τ % C.
+  std::array<Chunk, kPolicyMaxChunk> chunk_ring{};
+  Eigen::Matrix<float, kPolicyMaxBins, 1> logits = Eigen::Matrix<float, kPolicyMaxBins, 1>::Zero();  ///< first B used
+  int bin = -1;                          ///< the bin picked this tick (-1: regression head)
+  /// The network's action a(t), rad: the temporal ensemble of the chunks' entries for this tick.
+  JointVec net_action = JointVec::Zero();
+  JointVec action = JointVec::Zero();    ///< actions a(t), rad per step: net_action plus the model's law
 };
 
 /// A heap-allocated workspace (configure time).
@@ -321,16 +332,21 @@ namespace detail {
 /// One view of PolicyWeights as the binder sees it.
 struct WeightSlot {
   std::string name;  ///< manifest name
-  int rows;          ///< Eigen shape of the view
+  int rows;          ///< Eigen shape of the view; Eigen::Dynamic: the tensor's
   int cols;
   void* view;        ///< the WeightView<rows, cols> to point at the tensor
-  void (*rebind)(void* view, const float* data);
+  void (*rebind)(void* view, const float* data, long rows, long cols);
 };
 
 template <int R, int C>
-void rebindView(void* view, const float* data) {
+void rebindView(void* view, const float* data, long rows, long cols) {
   // Eigen's documented way to change the array a Map views.
-  new (view) WeightView<R, C>(data);
+  if constexpr (R == Eigen::Dynamic || C == Eigen::Dynamic)
+    new (view) WeightView<R, C>(data, rows, cols);
+  else
+    new (view) WeightView<R, C>(data);
+  (void)rows;
+  (void)cols;
 }
 
 /// The manifest name of one view, kept in parts so that walking the views costs no string:
@@ -416,8 +432,18 @@ void visitWeightViews(PolicyWeights<Dims>& w, F&& f) {
     visitFfnViews(f, "dec", l, d.ffn);
   }
   visitNormViews(f, "dec.norm", -1, nullptr, w.dec_norm);
-  f(ViewName{"head.weight"}, w.head_weight);
-  f(ViewName{"head.bias"}, w.head_bias);
+  if (w.bins == 0) {
+    f(ViewName{"head.weight"}, w.head_weight);
+    f(ViewName{"head.bias"}, w.head_bias);
+  } else {
+    f(ViewName{"head.logit.weight"}, w.head_logit_weight);
+    f(ViewName{"head.logit.bias"}, w.head_logit_bias);
+    f(ViewName{"head.offset.weight"}, w.head_offset_weight);
+    f(ViewName{"head.offset.bias"}, w.head_offset_bias);
+    f(ViewName{"head.centers"}, w.head_centers);
+  }
+  if (w.chunk > 1) f(ViewName{"head.ensemble_decay"}, w.head_ensemble_decay);
+  f(ViewName{"law.gain"}, w.law_gain);
   f(ViewName{"norm.q_mean"}, w.q_mean);
   f(ViewName{"norm.q_std"}, w.q_std);
   f(ViewName{"norm.a_mean"}, w.a_mean);
@@ -427,12 +453,14 @@ void visitWeightViews(PolicyWeights<Dims>& w, F&& f) {
   f(ViewName{"centroids"}, w.centroids);
 }
 
-/// Number of views of PolicyWeights<Dims> (= entries of policyManifest(Dims::arch())).
+/// Number of views of a PolicyWeights<Dims> with `bins` action bins and chunk `chunk` (= entries
+/// of its policyManifest).
 template <class Dims>
-constexpr std::size_t policyViewCount() {
+constexpr std::size_t policyViewCount(int bins, int chunk) {
   constexpr std::size_t norm = 2, attention = 8, temporal = 9, ffn = 8;
+  const std::size_t head = (bins == 0 ? 2 : 5) + (chunk > 1 ? 1 : 0) + 1;
   return 8 + Dims::kEncoderLayers * (norm + temporal + norm + ffn) + norm +
-         Dims::kDecoderLayers * (norm + attention + norm + temporal + norm + ffn) + norm + 2 + 6 + 1;
+         Dims::kDecoderLayers * (norm + attention + norm + temporal + norm + ffn) + norm + head + 6 + 1;
 }
 
 /// Every view of `w` with its manifest name (binding matches by name).
@@ -557,6 +585,26 @@ inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<
   affine<false>(A.wo, A.wo8, A.bo, ws.o, ws.out);
 }
 
+/// α of J queries over the last n ticks (alpha[i][age·J + j]) as if the keys of the body parts
+/// in `masked` (bit j: part j) had logits −∞: theirs set to 0, the others rescaled to sum to 1
+/// again - the softmax over the remaining keys, exactly. A query whose whole mass was masked
+/// keeps zeros (its output is then 0).
+template <int J, int N>
+inline void maskBodyParts(float (*alpha)[N], int n, unsigned masked) {
+  for (int i = 0; i < J; ++i) {
+    float keep = 0.0f;
+    for (int age = 0; age < n; ++age)
+      for (int j = 0; j < J; ++j)
+        if (((masked >> j) & 1u) == 0) keep += alpha[i][age * J + j];
+    const float inv = keep > 0.0f ? 1.0f / keep : 0.0f;
+    for (int age = 0; age < n; ++age)
+      for (int j = 0; j < J; ++j) {
+        float& a = alpha[i][age * J + j];
+        a = ((masked >> j) & 1u) != 0 ? 0.0f : a * inv;
+      }
+  }
+}
+
 /// Attention of the J queries in ws.q over the tokens of the last `n` ticks in the rings K
 /// (keys, transposed) and V (n = min(ticks, W), the newest tick in `slot`), with the age bias:
 /// ws.o (before Wo) and α in ws.alpha[h][i][age * J + j]. The softmax and the value sum visit
@@ -565,9 +613,12 @@ inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<
 /// queries go through each pass side by side: every query's maximum, sum and value sum still
 /// run over its keys in order (the same bits as one query at a time), but the J chains of
 /// dependent operations overlap instead of waiting on each other.
+/// `masked`: bit j set, the keys of body part j are left out (their logits −∞), every tick of
+/// the window - the attention ablation's probe (maskBodyParts); 0 in a normal step.
 template <class Dims>
 inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typename PolicyWorkspace<Dims>::KeyRing& K,
-                            const typename PolicyWorkspace<Dims>::Ring& V, int slot, int n, PolicyWorkspace<Dims>& ws) {
+                            const typename PolicyWorkspace<Dims>::Ring& V, int slot, int n, PolicyWorkspace<Dims>& ws,
+                            unsigned masked = 0) {
   constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim, W = Dims::kWindow, N = Dims::kMemory, D = Dims::kDModel;
   constexpr int NP = PolicyWorkspace<Dims>::kKeyRows;
   const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
@@ -592,6 +643,7 @@ inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typen
     }
     float (*s)[N] = ws.alpha[hd];
     windowSoftmax<J, W, NP, N>(raw[0], A.age_bias.col(hd).data(), slot, n, s[0]);
+    if (masked != 0) maskBodyParts<J, N>(s, n, masked);
     windowValuesQueries<Dh, J, W, J>(s[0], N, V.data() + c0, D, slot, n, ws.o.data() + c0, D);
   }
 }
@@ -647,54 +699,104 @@ inline void feedForward(const FfnWeights<Dims>& F, PolicyWorkspace<Dims>& ws) {
 
 }  // namespace detail
 
-/// Throws std::invalid_argument (naming both) if `arch`, e.g. the header of a model.bin, is not
-/// the compiled Dims (another FFN depth included). Configure time.
+/// Throws std::invalid_argument (naming both) if `arch`, e.g. the header of a model.bin, does
+/// not have the compiled Dims' computation (another FFN depth included), is unusable
+/// (archProblem), or has a chunk or a bin count beyond the runtime's (kPolicyMaxChunk,
+/// kPolicyMaxBins). The table sizes (movements, key poses, step rows) may be anything. Configure
+/// time.
 template <class Dims>
 void checkPolicyArch(const PolicyArch& arch) {
   detail::requireArch(Dims::arch(), arch);
 }
 
-/// Binds the views of a PolicyWeights to tensor data. Configure time (allocates).
-/// @param tensors tensors[i] points to the floats of entry i of policyManifest(Dims::arch()),
-///                row-major as in model.bin; the data must outlive the returned weights
-/// @param count   number of pointers; must equal the manifest size
-/// @param c       the conditioning mode of the model
-/// @throws std::invalid_argument on a wrong count or a null pointer; a manifest entry without a
-///         view of the same name and shape (a programming error) is reported the same way.
+namespace detail {
+
+/// The table and head sizes of `arch` into `w`, so the visitors walk its views.
 template <class Dims>
-PolicyWeights<Dims> bindPolicyWeights(const float* const* tensors, std::size_t count, Conditioning c) {
-  PolicyWeights<Dims> w;
-  // By name against the manifest itself, so its order can change without a silent mismatch.
-  detail::bindWeightSlots(detail::weightSlots(w), policyManifest(Dims::arch()), tensors, count);
+void setPolicySizes(PolicyWeights<Dims>& w, const PolicyArch& arch, Conditioning c) noexcept {
+  w.movements = arch.movements;
+  w.clusters = arch.clusters;
+  w.max_steps = arch.max_steps;
+  w.chunk = arch.chunk;
+  w.bins = arch.bins;
   w.conditioning = c;
+}
+
+/// The normalised temporal-ensemble weights from head.ensemble_decay (equal weights for C = 1).
+template <class Dims>
+void setEnsembleWeights(PolicyWeights<Dims>& w) noexcept {
+  const float decay = w.chunk > 1 ? w.head_ensemble_decay(0) : 0.0f;
+  for (int n = 1; n <= w.chunk; ++n) {
+    double sum = 0.0;
+    for (int k = 0; k < n; ++k) sum += std::exp(-static_cast<double>(decay) * k);
+    for (int k = 0; k < n; ++k)
+      w.ensemble_weight[static_cast<std::size_t>(n - 1)][static_cast<std::size_t>(k)] =
+          static_cast<float>(std::exp(-static_cast<double>(decay) * k) / sum);
+  }
+}
+
+}  // namespace detail
+
+/// Binds the views of a PolicyWeights to tensor data. Configure time (allocates).
+/// @param tensors tensors[i] points to the floats of entry i of policyManifest(arch), row-major
+///                as in model.bin; the data must outlive the returned weights
+/// @param count   number of pointers; must equal the manifest size
+/// @param arch    the model's architecture (checkPolicyArch<Dims>)
+/// @param c       the conditioning mode of the model
+/// @throws std::invalid_argument on another architecture, a wrong count or a null pointer; a
+///         manifest entry without a view of the same name and shape (a programming error) is
+///         reported the same way.
+template <class Dims>
+PolicyWeights<Dims> bindPolicyWeights(const float* const* tensors, std::size_t count, const PolicyArch& arch,
+                                      Conditioning c) {
+  checkPolicyArch<Dims>(arch);
+  PolicyWeights<Dims> w;
+  detail::setPolicySizes(w, arch, c);
+  // By name against the manifest itself, so its order can change without a silent mismatch.
+  detail::bindWeightSlots(detail::weightSlots(w), policyManifest(arch), tensors, count);
+  detail::setEnsembleWeights(w);
   return w;
 }
 
 /// Binds the views of a PolicyWeights to a model.bin image in memory (the compiled-in bytes in
-/// .rodata) at fixed byte offsets, entry i of policyManifest(Dims::arch()) at base + offsets[i]
-/// (policyViewCount<Dims>() entries): the compile-time binding of the compiled-in model
-/// (codegen's constexpr kTensorOffsets, checked against the manifest by name when the code was
-/// generated). No name lookup, no copy, no allocation; the image must outlive the weights.
+/// .rodata) at fixed byte offsets, entry i of policyManifest(arch) at base + offsets[i]
+/// (policyViewCount<Dims>(arch.bins, arch.chunk) entries): the compile-time binding of the
+/// compiled-in model (codegen's constexpr kTensorOffsets and architecture, checked against the
+/// manifest by name when the code was generated). No name lookup, no copy, no allocation; the
+/// image must outlive the weights. `arch` must pass checkPolicyArch<Dims> (codegen's does).
 template <class Dims>
-PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::uint64_t* offsets,
+PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::uint64_t* offsets, const PolicyArch& arch,
                                         Conditioning c) noexcept {
   (void)activePolicyKernel();  // configure time: decide the kernel now, not in the loop
   PolicyWeights<Dims> w;
+  detail::setPolicySizes(w, arch, c);
+  const int J = Dims::kTokens, D = Dims::kDModel, M = arch.movements, K = arch.clusters, S = arch.max_steps;
+  const int C = arch.chunk, B = arch.bins;
   std::size_t i = 0;
-  detail::visitWeightViews(w, [&](const detail::ViewName&, auto& view) {
+  detail::visitWeightViews(w, [&](const detail::ViewName& name, auto& view) {
     using View = std::remove_reference_t<decltype(view)>;
-    new (&view) View(reinterpret_cast<const float*>(base + offsets[i++]));
+    const float* data = reinterpret_cast<const float*>(base + offsets[i++]);
+    if constexpr (View::RowsAtCompileTime != Eigen::Dynamic && View::ColsAtCompileTime != Eigen::Dynamic) {
+      new (&view) View(data);
+    } else {
+      // The runtime extents of the table and head views, by name (the manifest's shapes).
+      const std::string_view n = name.head;
+      long rows = 1, cols = 1;
+      if (n == "embed.movement") rows = D, cols = M;
+      else if (n == "embed.step") rows = D, cols = S;
+      else if (n == "centroids") rows = J, cols = static_cast<long>(M) * K;
+      else if (n == "head.weight") rows = C, cols = D;
+      else if (n == "head.bias") rows = C;
+      else if (n == "head.logit.weight") rows = B, cols = static_cast<long>(J) * D;
+      else if (n == "head.logit.bias") rows = B;
+      else if (n == "head.offset.weight") rows = static_cast<long>(B) * C, cols = D;
+      else if (n == "head.offset.bias") rows = static_cast<long>(B) * C;
+      else if (n == "head.centers") rows = static_cast<long>(B) * J * C;
+      new (&view) View(data, rows, cols);
+    }
   });
-  w.conditioning = c;
+  detail::setEnsembleWeights(w);
   return w;
-}
-
-/// The same with the offsets as a constexpr array: its length is checked at compile time.
-template <class Dims, std::size_t N>
-PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::array<std::uint64_t, N>& offsets,
-                                        Conditioning c) noexcept {
-  static_assert(N == detail::policyViewCount<Dims>(), "one offset per manifest tensor");
-  return bindPolicyWeightsAt<Dims>(base, offsets.data(), c);
 }
 
 /// True if every int8 matrix of a Dims model has an even input size of at most kInt8MaxIn
@@ -834,34 +936,30 @@ std::size_t warmPolicy(const PolicyWeights<Dims>& w, const PolicyWorkspace<Dims>
   return bytes + detail::touchLines(&ws, sizeof(ws), sink);
 }
 
-/// Starts a new rollout: the window is empty (the next step is tick 0 and sees only itself).
-/// Real-time safe. Ring contents are not cleared: a slot is read only after this stream wrote it.
+/// Starts a new rollout: the window and the chunk ring are empty (the next step is tick 0 and
+/// sees only itself). Real-time safe. Ring contents are not cleared: a slot is read only after
+/// this stream wrote it.
 template <class Dims>
 void resetPolicyStream(PolicyWorkspace<Dims>& ws) {
   ws.ticks = 0;
-  for (auto& a : ws.a_hist) a.setZero();
 }
 
-/// One policy step (docs/policy.md) at the stream's next tick: normalise the inputs, make the
-/// tick's J encoder tokens, run them through the encoder layers attending to the window (their
-/// keys/values enter the rings), add their memory to the cross-attention rings, run the decoder
-/// over the J action tokens, de-normalise the head's output. Movement and step are clamped to
-/// 0..M-1 and 0..S-1 (a caller's index out of range picks the nearest embedding rather than
-/// reading out of bounds). rn = 0 in autonomous mode; embed.step is added in both modes (zero in
-/// reference-mode files). Non-finite inputs give non-finite actions (the caller checks) and poison
-/// the window until resetPolicyStream. Writes the attention record (ws.cross, ws.mass, ws.score,
-/// ws.age_profile, ws.cross_out) and the intermediates into ws.
-/// @return ws.action: a_j(t), rad per step, joint order. Real-time safe: no allocation, no
-///         exception, no I/O; deterministic (fixed summation order, no FMA contraction).
+/// The first part of a policy step (docs/policy.md) at the stream's next tick: normalise the
+/// inputs, make the tick's J encoder tokens, run them through the encoder layers attending to the
+/// window (their keys/values enter the rings at the tick's slot) and add their memory to the
+/// cross-attention rings. Movement and step are clamped to the model's 0..M-1 and 0..S-1 (a
+/// caller's index out of range picks the nearest embedding rather than reading out of bounds).
+/// rn = 0 in autonomous mode; embed.step is added in both modes (zero in reference-mode files).
+/// Does not advance the stream: decodePolicyTick and commitPolicyTick finish the tick
+/// (stepPolicy runs all three). Real-time safe.
 template <class Dims>
-const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws,
-                                              const PolicyInput& in) {
+void encodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, const PolicyInput& in) {
   constexpr int J = Dims::kTokens, W = Dims::kWindow, H = Dims::kHeads, Dh = Dims::kHeadDim, D = Dims::kDModel;
   static_assert(J == 5, "PolicyInput carries 5 joints");
   const int slot = static_cast<int>(ws.ticks % W);
   const int n = static_cast<int>(std::min<std::int64_t>(ws.ticks + 1, W));  // ticks in the window
-  ws.movement = std::clamp(in.movement, 0, Dims::kMovements - 1);
-  ws.step = std::clamp(in.step, 0, Dims::kMaxSteps - 1);
+  ws.movement = std::clamp(in.movement, 0, w.movements - 1);
+  ws.step = std::clamp(in.step, 0, w.max_steps - 1);
   ws.qn = ((in.q - w.q_mean).array() / w.q_std.array()).matrix();
   ws.an = ((in.a_prev - w.a_mean).array() / w.a_std.array()).matrix();
   if (w.conditioning == Conditioning::kAutonomous)
@@ -869,12 +967,10 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
   else
     ws.rn = ((in.r - w.r_mean).array() / w.r_std.array()).matrix();
 
-  for (int j = 0; j < J; ++j) {
+  for (int j = 0; j < J; ++j)
     ws.x.col(j) = w.embed_in_weight.col(0) * ws.qn[j] + w.embed_in_weight.col(1) * ws.an[j] +
                   w.embed_in_weight.col(2) * ws.rn[j] + w.embed_in_bias + w.embed_joint_enc.col(j) +
                   w.embed_movement.col(ws.movement) + w.embed_step.col(ws.step);
-    ws.y.col(j) = w.embed_act_weight * ws.an[j] + w.embed_act_bias + w.embed_joint_dec.col(j);
-  }
 
   for (int l = 0; l < Dims::kEncoderLayers; ++l) {
     const EncoderLayerWeights<Dims>& L = w.enc[static_cast<std::size_t>(l)];
@@ -931,6 +1027,33 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
       ws.f_ring[static_cast<std::size_t>(hd)].template middleCols<J>(slot * J) = f;
     }
   }
+}
+
+namespace detail {
+
+/// Σ_i a[i] b[i] in index order, one rounding per operation (the head's small products; the same
+/// bits on every build).
+template <class A, class B>
+inline float dotInOrder(const A& a, const B& b, int size) {
+  float s = 0.0f;
+  for (int i = 0; i < size; ++i) s += a[i] * b[i];
+  return s;
+}
+
+}  // namespace detail
+
+/// The second part of a step: the decoder over the J action tokens of the tick encodePolicyTick
+/// made, and the head, into ws.chunk (rad; column c is a(t + c)), ws.logits and ws.bin. The
+/// attention record (ws.cross, ws.mass, ws.score, ws.age_profile, ws.cross_out) is this
+/// decoding's. `masked` (bit j: body part j) leaves those parts' keys out of every decoder
+/// layer's cross-attention over the whole window: the attention ablation (0 in a normal step).
+/// May run several times per tick (each overwrites what the last wrote). Real-time safe.
+template <class Dims>
+void decodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, unsigned masked = 0) {
+  constexpr int J = Dims::kTokens, W = Dims::kWindow, H = Dims::kHeads, D = Dims::kDModel;
+  const int slot = static_cast<int>(ws.ticks % W);
+  const int n = static_cast<int>(std::min<std::int64_t>(ws.ticks + 1, W));
+  for (int j = 0; j < J; ++j) ws.y.col(j) = w.embed_act_weight * ws.an[j] + w.embed_act_bias + w.embed_joint_dec.col(j);
 
   for (int l = 0; l < Dims::kDecoderLayers; ++l) {
     const DecoderLayerWeights<Dims>& L = w.dec[static_cast<std::size_t>(l)];
@@ -940,7 +1063,7 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
     detail::layerNorm<Dims>(ws.y, L.ln2, ws.h);
     detail::affine<false>(L.cross.wq, L.cross.wq8, L.cross.bq, ws.h, ws.q);
     detail::windowAttention<Dims>(L.cross, ws.cross_k[static_cast<std::size_t>(l)],
-                                  ws.cross_v[static_cast<std::size_t>(l)], slot, n, ws);
+                                  ws.cross_v[static_cast<std::size_t>(l)], slot, n, ws, masked);
     detail::affine<false>(L.cross.wo, L.cross.wo8, L.cross.bo, ws.o, ws.out);
     // Per body part: α summed over the window's ticks, a query's J sums side by side (each over
     // the ages in order, the same bits; one chain of n dependent adds after the other took ~5 µs
@@ -963,27 +1086,77 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
   }
   detail::layerNorm<Dims>(ws.y, w.dec_norm, ws.h);
 
-  for (int j = 0; j < J; ++j) ws.action_n[j] = w.head_weight.row(0).dot(ws.h.col(j).transpose()) + w.head_bias(0, 0);
-  ws.action = (ws.action_n.array() * w.a_std.array() + w.a_mean.array()).matrix();
-  if (w.conditioning == Conditioning::kReference && w.residual_gain != 0.0f) ws.action += w.residual_gain * in.r;
-  // The linear AR base: a(t−1) is this step's input, older actions the previous steps'. The
-  // history is kept only by models that use it (fixed for a stream), so no other tick pays.
-  if (w.conditioning == Conditioning::kAutonomous && w.linear_ar.on) {
-    for (int k = kPolicyArMaxOrder - 1; k > 0; --k)
-      ws.a_hist[static_cast<std::size_t>(k)] = ws.a_hist[static_cast<std::size_t>(k - 1)];
-    ws.a_hist[0] = in.a_prev;
-    const auto m = static_cast<std::size_t>(ws.movement);
-    for (int j = 0; j < J; ++j) {
-      const auto jj = static_cast<std::size_t>(j);
-      // The order of the float operations of PolicyNet::linearArBase (libtorch).
-      float b = w.linear_ar.c[m][jj] + w.linear_ar.beta[m][jj] * in.q[j];
-      for (int k = 0; k < kPolicyArMaxOrder; ++k)
-        b = b + w.linear_ar.alpha[m][static_cast<std::size_t>(k)][jj] * ws.a_hist[static_cast<std::size_t>(k)][j];
-      ws.action[j] += b;
+  // The head, normalised units, then rad. Regression: token j's row of the chunk. Bins: the
+  // logits are the tokens' shares summed; the first largest wins; its center plus its offset.
+  const int C = w.chunk, B = w.bins;
+  if (B == 0) {
+    ws.bin = -1;
+    for (int j = 0; j < J; ++j)
+      for (int c = 0; c < C; ++c)
+        ws.chunk(j, c) = detail::dotInOrder(w.head_weight.row(c), ws.h.col(j), D) + w.head_bias(c);
+  } else {
+    for (int b = 0; b < B; ++b) {
+      float z = w.head_logit_bias(b);
+      for (int j = 0; j < J; ++j) z += detail::dotInOrder(w.head_logit_weight.row(b).segment(j * D, D), ws.h.col(j), D);
+      ws.logits(b) = z;
     }
+    int best = 0;
+    for (int b = 1; b < B; ++b)
+      if (ws.logits(b) > ws.logits(best)) best = b;
+    ws.bin = best;
+    for (int j = 0; j < J; ++j)
+      for (int c = 0; c < C; ++c) {
+        const int r = best * C + c;
+        ws.chunk(j, c) = w.head_centers((best * J + j) * C + c) +
+                         (detail::dotInOrder(w.head_offset_weight.row(r), ws.h.col(j), D) + w.head_offset_bias(r));
+      }
   }
+  for (int j = 0; j < J; ++j)
+    for (int c = 0; c < C; ++c) ws.chunk(j, c) = ws.chunk(j, c) * w.a_std(j) + w.a_mean(j);
+}
+
+/// The network's action for this tick from ws.chunk and the chunks of the last C − 1 ticks (the
+/// temporal ensemble: the entry for this tick of every chunk that has one, weighted by age,
+/// PolicyWeights::ensemble_weight), rad. Reads, writes nothing. Real-time safe.
+template <class Dims>
+Eigen::Matrix<float, 5, 1> ensembledAction(const PolicyWeights<Dims>& w, const PolicyWorkspace<Dims>& ws) {
+  const int C = w.chunk;
+  const int have = static_cast<int>(std::min<std::int64_t>(ws.ticks + 1, C));  // chunks with an entry for now
+  const auto& weight = w.ensemble_weight[static_cast<std::size_t>(have - 1)];
+  Eigen::Matrix<float, 5, 1> a = weight[0] * ws.chunk.col(0);
+  for (int k = 1; k < have; ++k) {
+    const auto& old = ws.chunk_ring[static_cast<std::size_t>((ws.ticks - k) % C)];
+    a += weight[static_cast<std::size_t>(k)] * old.col(k);
+  }
+  return a;
+}
+
+/// The last part of a step: ws.net_action = ensembledAction, ws.action = that plus the model's
+/// law (reference mode: law.gain ⊙ r), ws.chunk into the ring, and the stream advanced.
+/// @return ws.action: a_j(t), rad per step, joint order. Real-time safe.
+template <class Dims>
+const Eigen::Matrix<float, 5, 1>& commitPolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws,
+                                                    const PolicyInput& in) {
+  ws.net_action = ensembledAction(w, ws);
+  ws.action = ws.net_action;
+  if (w.conditioning == Conditioning::kReference)
+    ws.action += (w.law_gain.array() * in.r.array()).matrix();
+  ws.chunk_ring[static_cast<std::size_t>(ws.ticks % w.chunk)] = ws.chunk;
   ++ws.ticks;
   return ws.action;
+}
+
+/// One policy step (docs/policy.md): encodePolicyTick, decodePolicyTick, commitPolicyTick.
+/// Non-finite inputs give non-finite actions (the caller checks) and poison the window until
+/// resetPolicyStream. Writes the attention record and the intermediates into ws.
+/// @return ws.action: a_j(t), rad per step, joint order. Real-time safe: no allocation, no
+///         exception, no I/O; deterministic (fixed summation order, no FMA contraction).
+template <class Dims>
+const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws,
+                                              const PolicyInput& in) {
+  encodePolicyTick(w, ws, in);
+  decodePolicyTick(w, ws);
+  return commitPolicyTick(w, ws, in);
 }
 
 /// Index of the key pose of `movement` nearest to q (Euclidean, rad; ties to the lower index,
@@ -993,13 +1166,13 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
 template <class Dims, class Derived>
 int snapToCentroid(const PolicyWeights<Dims>& w, int movement, const Eigen::MatrixBase<Derived>& q) {
   static_assert(Derived::SizeAtCompileTime == Dims::kTokens, "q must have one entry per joint");
-  const int m = std::clamp(movement, 0, Dims::kMovements - 1);
+  const int m = std::clamp(movement, 0, w.movements - 1);
   int best = 0;
   double best_d = std::numeric_limits<double>::infinity();
-  for (int k = 0; k < Dims::kClusters; ++k) {
+  for (int k = 0; k < w.clusters; ++k) {
     double d = 0.0;
     for (int j = 0; j < Dims::kTokens; ++j) {
-      const double diff = static_cast<double>(w.centroids(j, m * Dims::kClusters + k)) - static_cast<double>(q[j]);
+      const double diff = static_cast<double>(w.centroids(j, m * w.clusters + k)) - static_cast<double>(q[j]);
       d += diff * diff;
     }
     if (d < best_d) {
@@ -1013,9 +1186,9 @@ int snapToCentroid(const PolicyWeights<Dims>& w, int movement, const Eigen::Matr
 /// Key pose k of `movement`, rad (both indices clamped). Real-time safe.
 template <class Dims>
 Eigen::Matrix<float, 5, 1> centroid(const PolicyWeights<Dims>& w, int movement, int k) {
-  const int m = std::clamp(movement, 0, Dims::kMovements - 1);
-  const int kc = std::clamp(k, 0, Dims::kClusters - 1);
-  return w.centroids.col(m * Dims::kClusters + kc);
+  const int m = std::clamp(movement, 0, w.movements - 1);
+  const int kc = std::clamp(k, 0, w.clusters - 1);
+  return w.centroids.col(m * w.clusters + kc);
 }
 
 }  // namespace nao

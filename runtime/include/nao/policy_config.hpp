@@ -36,12 +36,20 @@ struct PolicyArch {
   /// W: ticks of history the encoder and the cross-attention see (the current tick included),
   /// 20 ticks = 2 s at 10 Hz (DESIGN §7). The runtime keeps a key/value ring of W ticks.
   int window = 20;
+  /// C: actions each action token predicts per tick, a(t) .. a(t+C-1) of its joint (an action
+  /// chunk); the executed action averages the chunks of the last C ticks (temporal ensembling).
+  /// 1: the next action only.
+  int chunk = 1;
+  /// B: 0, the head regresses the chunk; >= 1, it picks one of B action bins (key chunks of the
+  /// training labels, k-means) by its logits and adds that bin's offset (docs/policy.md "Head").
+  int bins = 0;
 
   bool operator==(const PolicyArch& o) const;
   bool operator!=(const PolicyArch& o) const { return !(*this == o); }
 };
 
-/// Paper configuration (paper §4.1): 4+4 layers, 4 heads, d_model 128, FFN 128-512-512-512-128.
+/// Paper configuration (paper §4.1): 4+4 layers, 4 heads, d_model 128, FFN 128-512-512-512-128,
+/// one action per tick, regression head.
 PolicyArch paperArch();
 /// Small configuration for tests: 2+2 layers, 4 heads, d_model 32, FFN 32-64-64-64-32, window 8.
 PolicyArch smallArch();

@@ -285,30 +285,6 @@ void evaluate(const Args& a) {
   if (ec) throw UserError("cannot create " + a.out + ": " + ec.message());
 
   const std::vector<std::string> train_names = splitNames(meta, "train");
-  // A model trained at a canonical pace (training.canonical_pace: method, and per movement in the
-  // model's order the template's ticks and name): its linear AR baseline is also fitted on the
-  // same paced trajectories.
-  std::optional<PaceMethod> pace_method;
-  std::vector<std::string> pace_templates;
-  std::vector<std::size_t> pace_ticks;
-  if (meta.is_object() && meta.contains("training") && meta["training"].is_object() &&
-      meta["training"].contains("canonical_pace")) {
-    const json& p = meta["training"]["canonical_pace"];
-    const std::size_t n = auto_model.header.movement_names.size();
-    const std::string bad = a.autonomous_model + ": training.canonical_pace is not {method: linear|dtw, ticks: [integer " +
-                            "per movement], templates: [demonstration per movement]}";
-    if (!p.is_object() || !p.contains("method") || !p["method"].is_string() || !p.contains("ticks") ||
-        !p["ticks"].is_array() || p["ticks"].size() != n || !p.contains("templates") || !p["templates"].is_array() ||
-        p["templates"].size() != n)
-      throw UserError(bad);
-    pace_method = parsePaceMethod(p["method"].get<std::string>());
-    for (std::size_t m = 0; m < n; ++m) {
-      if (!p["ticks"][m].is_number_integer() || p["ticks"][m].get<long long>() < 2 || !p["templates"][m].is_string())
-        throw UserError(bad);
-      pace_ticks.push_back(p["ticks"][m].get<std::size_t>());
-      pace_templates.push_back(p["templates"][m].get<std::string>());
-    }
-  }
   const SimModel sim = makeSimModel(arm, SimParams{});
   const double period_s = ControllerParams{}.period_s;
   // The gain that inverts the simulated first-order servo over one tick (the expert's first step).
@@ -388,20 +364,7 @@ void evaluate(const Args& a) {
     if (val.empty()) throw UserError("no held-out demonstration of " + name + " in the data set " + a.data);
     w.ar_train_demos = train.size();
     SimData sim_data(sim, w.held.target.front().front());
-    for (int paced = 0; paced <= (pace_method ? 1 : 0); ++paced) {
-      if (paced) {
-        const std::size_t mi = static_cast<std::size_t>(it - names.begin());
-        const auto t = std::find(train_of.begin(), train_of.end(), pace_templates[mi]);
-        if (t == train_of.end())
-          throw UserError(a.autonomous_model + ": the pace template " + pace_templates[mi] +
-                          " is not a training demonstration of " + name);
-        const std::vector<JointVector> tmpl = train[static_cast<std::size_t>(t - train_of.begin())];
-        if (tmpl.size() != pace_ticks[mi])
-          throw UserError("the pace template " + pace_templates[mi] + " has " + std::to_string(tmpl.size()) +
-                          " samples here, " + std::to_string(pace_ticks[mi]) + " in " + a.autonomous_model);
-        for (std::vector<JointVector>& f : train) f = pacedTrajectory(f, tmpl, *pace_method);
-        for (std::vector<JointVector>& f : val) f = pacedTrajectory(f, tmpl, *pace_method);
-      }
+    for (int paced = 0; paced <= 0; ++paced) {
       ArBaseline b;
       b.paced = paced != 0;
       b.model = fitLinearAr(train, val, a.max_order);
@@ -589,8 +552,6 @@ void evaluate(const Args& a) {
                                       : json{{"kind", "validation"}}},
       {"linear_ar_training_data", data_source},
       {"linear_ar_max_order", a.max_order},
-      {"linear_ar_canonical_pace", pace_method ? json{{"method", paceMethodName(*pace_method)}, {"templates", pace_templates}}
-                                               : json(nullptr)},
       {"blend_law_pole", pole},
       {"gain_law", gain},
       {"detail", "detail.json"}};

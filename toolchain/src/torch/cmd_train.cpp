@@ -23,18 +23,11 @@ struct TrainArgs {
   std::string rendezvous, interface, checkpoint, resume;
   std::uint64_t seed = 1;
   int epochs = 200, patience = 10, batch = 2, world_size = 1, rank = 0, max_batches = 0, window = 0;
+  int chunk = 0, bins = -1;
   int noisy_rollouts = ExecutionOptions{}.noisy_rollouts;
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
-  double residual_gain = -1.0;
-  int dagger_rounds = 0, dagger_start = TrainOptions{}.dagger_start;
-  double dagger_beta = ExecutionOptions{}.dagger_beta, dagger_max_drift = ExecutionOptions{}.dagger_max_drift_rad;
-  int dagger_align_band = ExecutionOptions{}.dagger_align_band;
-  double dagger_return = ExecutionOptions{}.dagger_return;
-  std::string dagger_align_label = "successor";
-  int phase_ticks = 0;
+  double law_gain = -1.0, offset_weight = TrainOptions{}.offset_weight, ensemble_decay = TrainOptions{}.ensemble_decay;
   std::string select = "val-loss";
-  bool ar_residual = false;
-  std::string canonical_pace = "off";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
@@ -86,8 +79,12 @@ void run(const TrainArgs& a) {
   o.lr = a.lr;
   o.execution.noisy_rollouts = a.noisy_rollouts;
   o.execution.noise_std_rad = a.noise_std;
-  o.residual_gain = a.residual_gain;
+  o.law_gain = a.law_gain;
+  o.offset_weight = a.offset_weight;
+  o.ensemble_decay = a.ensemble_decay;
   if (a.window > 0) o.arch.window = a.window;
+  if (a.chunk > 0) o.arch.chunk = a.chunk;
+  if (a.bins >= 0) o.arch.bins = a.bins;
   o.dist.world_size = a.world_size;
   o.dist.rank = a.rank;
   o.dist.rendezvous = a.rendezvous;
@@ -96,18 +93,7 @@ void run(const TrainArgs& a) {
   o.checkpoint = a.checkpoint;
   o.resume = a.resume;
   o.max_batches = a.max_batches;
-  o.dagger_rounds = a.dagger_rounds;
-  o.dagger_start = a.dagger_start;
-  o.execution.dagger_beta = a.dagger_beta;
-  o.execution.dagger_max_drift_rad = a.dagger_max_drift;
-  o.execution.dagger_align_band = a.dagger_align_band;
-  o.execution.dagger_return = a.dagger_return;
-  o.execution.dagger_align_label = a.dagger_align_label == "command" ? ExecutionOptions::AlignLabel::kCommand
-                                                                     : ExecutionOptions::AlignLabel::kSuccessor;
-  o.select_by_rollout = a.select == "rollout-dtw";
-  o.ar_residual = a.ar_residual;
-  o.phase_ticks = a.phase_ticks;
-  if (a.canonical_pace != "off") o.canonical_pace = parsePaceMethod(a.canonical_pace);
+  o.select_by_rollout = a.select == "rollouts";
   o.live_progress = isatty(fileno(stdout)) != 0;
   if (a.rank >= a.world_size)
     throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
@@ -159,9 +145,10 @@ void run(const TrainArgs& a) {
   } catch (const ModelFileError& e) {
     throw UserError(e.what());
   }
-  std::printf("train: %zu epochs, best %d: val MSE %.4e rad^2 (zero action %.4e, repeat last %.4e), train %.4e rad^2\n",
+  std::printf("train: %zu epochs, best %d: val MSE %.4e rad^2 (zero action %.4e, repeat last %.4e, gain law %.4e), "
+              "train %.4e rad^2\n",
               r.history.size(), r.best_epoch, r.val.mse_rad2, r.val_baselines.zero_action,
-              r.val_baselines.repeat_last, r.train.mse_rad2);
+              r.val_baselines.repeat_last, r.val_baselines.gain_law, r.train.mse_rad2);
   std::printf("train: %zu train / %zu val ticks -> %s (checksum %s), %.1f s\n", r.train_samples, r.val_samples,
               a.out.c_str(), hex64(checksum).c_str(), r.seconds);
   if (!a.card.empty()) {
@@ -185,7 +172,8 @@ void setup(CLI::App& app) {
       "train",
       "Trains the body-part Transformer policy (docs/policy.md) on a clustered data set: DATA/centroids.json\n"
       "and DATA/<movement>_<index>/features.csv (nao_toolchain cluster). Split by demonstration, normalisation\n"
-      "from the training split, Adam, early stopping on the validation loss (the best weights are exported).\n"
+      "from the training split, Adam; the epoch exported is the best by the validation loss or, for an\n"
+      "autonomous model, by its rollouts from the held-out demonstrations' starts (--select).\n"
       "One thread per process and seeded: two equal runs write byte-identical model.bin files.\n"
       "Data-parallel over libtorch's c10d Gloo process group (docs/training.md): start the same command\n"
       "once per rank with --world-size N --rank R --rendezvous URL (toolchain/nao train --procs N does it\n"
@@ -227,15 +215,32 @@ void setup(CLI::App& app) {
       ->delimiter(',')
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
-  cmd->add_option("--residual-gain", args->residual_gain,
-                  "Reference mode: the policy learns the residual of a = G (f(t+1) - q), the first-order servo "
-                  "inversion, and nao_rt adds G r back. Negative: G = 1/(1 - exp(-K T)) of the simulated servo "
-                  "(1.089); 0: the network predicts the whole action. Ignored in autonomous mode")
+  cmd->add_option("--law-gain", args->law_gain,
+                  "Reference mode: nao_rt adds G r to the network's action (r = f(t+1) - q: the first-order servo "
+                  "inversion, model.bin's law.gain) and the network learns the rest. Negative: G = 1/(1 - exp(-K T)) "
+                  "of the simulated servo (1.089); 0: the network predicts the whole action. Autonomous models "
+                  "have no law")
       ->check(CLI::Range(-1.0, 100.0))
+      ->capture_default_str();
+  cmd->add_option("--chunk", args->chunk,
+                  "Actions each action token predicts per tick, a(t) .. a(t+C-1) (an action chunk); the executed "
+                  "action averages the last C chunks' entries for the tick (default: 1)")
+      ->check(CLI::Range(1, 32));
+  cmd->add_option("--bins", args->bins,
+                  "0: the head regresses the chunk; B > 0: it picks one of B action bins (k-means++ of the training "
+                  "chunks) by its logits and adds that bin's offset, so it commits to one mode of the "
+                  "demonstrations where a regression would average them (default: 0)")
+      ->check(CLI::Range(0, 1024));
+  cmd->add_option("--offset-weight", args->offset_weight, "Bins: weight of the offset's squared error beside the cross-entropy")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
+  cmd->add_option("--ensemble-decay", args->ensemble_decay,
+                  "Chunks: a chunk made k ticks ago weighs exp(-decay k) in the executed action (0: equal weights)")
+      ->check(CLI::Range(0.0, 20.0))
       ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "
-                  "nao_rt is compiled for the paper config's W")
+                  "Another W needs a nao_rt built for it (toolchain/nao build --model FILE)")
       ->check(CLI::Range(1, 1000));
   cmd->add_option("--urdf", args->urdf, "Robot description (joint names and limits stored in the model)")
       ->check(CLI::ExistingFile)
@@ -268,69 +273,15 @@ void setup(CLI::App& app) {
                   "Stop every epoch after this many global batches (timing runs; recorded in the model)")
       ->check(CLI::Range(0, 1 << 30))
       ->capture_default_str();
-  cmd->add_option("--dagger-rounds", args->dagger_rounds,
-                  "DAgger: after each of this many epochs (from --dagger-start on) the current policy is rolled "
-                  "out on the simulated arm from every training demonstration's start, the states it reaches are "
-                  "labelled by the expert and added to the training set (0: off; no --resume)")
-      ->check(CLI::Range(0, 1000))
-      ->capture_default_str();
-  cmd->add_option("--dagger-start", args->dagger_start, "Epoch after which the first DAgger round runs")
-      ->check(CLI::Range(1, 1 << 20))
-      ->capture_default_str();
-  cmd->add_option("--dagger-beta", args->dagger_beta,
-                  "DAgger's beta: in round i each tick executes the expert's command instead of the policy's with "
-                  "probability beta^i (seeded), so the states stay near the demonstrations; 0: pure policy")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  cmd->add_option("--dagger-max-drift", args->dagger_max_drift,
-                  "DAgger: a round's rollout ends before the first tick where the arm is farther than this from "
-                  "the demonstration (rad, any joint); the states past it are not added. 0: no bound")
-      ->check(CLI::Range(0.0, 10.0))
-      ->capture_default_str();
-  cmd->add_option("--dagger-align", args->dagger_align_band,
-                  "DAgger: label each state toward the successor of the nearest point (position and velocity) of "
-                  "any training demonstration of the movement within this many ticks of the clock, instead of "
-                  "toward the rollout's own demonstration at the clock's tick; --dagger-max-drift then bounds the "
-                  "distance to that point. 0: the clock's labels")
-      ->check(CLI::Range(0, 1000))
-      ->capture_default_str();
-  cmd->add_option("--dagger-align-label", args->dagger_align_label,
-                  "DAgger with --dagger-align: successor (the expert's command that ends the tick at the aligned "
-                  "point's successor, see --dagger-return) or command (the command the expert gave at the aligned "
-                  "point in that demonstration's clean execution: the servo takes the arm back at its own pace)")
-      ->check(CLI::IsMember({"successor", "command"}))
-      ->capture_default_str();
-  cmd->add_option("--dagger-return", args->dagger_return,
-                  "DAgger with --dagger-align: the share of the offset from the aligned point a label takes back in "
-                  "one tick (1: all of it)")
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  cmd->add_option("--phase-steps", args->phase_ticks,
-                  "Autonomous mode: index the step embedding by the movement's phase, "
-                  "floor(t * N / L) for tick t of a demonstration of L samples (nao_rt: of a run of L ticks: the "
-                  "policy is told how long the movement takes) instead of by t. 0: by t")
-      ->check(CLI::Range(0, 100000))
-      ->capture_default_str();
-  cmd->add_option("--canonical-pace", args->canonical_pace,
-                  "Autonomous mode: train every demonstration at the pace of its movement's shortest training "
-                  "demonstration (the template), then held at its last pose for the rest of its length: linear (the "
-                  "whole movement resampled linearly) or dtw (time-warped onto the template by dynamic time warping, "
-                  "which lines up the loops too); off: as demonstrated. Rollouts are still scored against the "
-                  "demonstrations as they are (docs/policy.md)")
-      ->check(CLI::IsMember({"off", "linear", "dtw"}))
-      ->capture_default_str();
   cmd->add_option("--select", args->select,
-                  "Which epoch is exported (and what patience counts on): val-loss (the one-step validation loss) "
-                  "or rollout-dtw (after every epoch the net is rolled out on the simulated arm from each "
-                  "validation demonstration's start, as nao_rt's autonomous runs; the lowest mean over movements "
-                  "of the median hand-path DTW to the nearest validation demonstration wins; paper or small "
-                  "architecture)")
-      ->check(CLI::IsMember({"val-loss", "rollout-dtw"}))
+                  "Which epoch is exported (and what patience counts on): val-loss (the validation loss) or "
+                  "rollouts (autonomous: after every epoch the net is rolled out on the simulated arm from each "
+                  "validation demonstration's start, as nao_rt's autonomous runs; among the epochs whose runs make "
+                  "the movement - middle-phase hand speed 0.7-1.3x the demonstrations', loops within ±1 - the "
+                  "lowest mean over movements of the median hand-path DTW to the nearest validation demonstration "
+                  "wins; paper or small dimensions)")
+      ->check(CLI::IsMember({"val-loss", "rollouts"}))
       ->capture_default_str();
-  cmd->add_flag("--ar-residual", args->ar_residual,
-               "Autonomous mode: the network learns the residual over the linear AR baseline (per movement and "
-               "joint, fitted on the training split's feature trajectories as nao_toolchain evaluate fits it; "
-               "stored in the metadata, added back by nao_rt); its head starts at zero");
   cmd->callback([args] { run(*args); });
 }
 

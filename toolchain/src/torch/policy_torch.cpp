@@ -242,7 +242,21 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
   for (int l = 0; l < arch.decoder_layers; ++l)
     dec.push_back(dec_holder->register_module(std::to_string(l), DecoderLayer(arch)));
   dec_norm = dec_holder->register_module("norm", LayerNorm(d));
-  head = register_module("head", Affine(d, 1));
+  const int C = arch.chunk, nb = arch.bins;
+  if (nb == 0) {
+    head_chunk = register_module("head", Affine(d, C));
+    head = head_chunk.ptr();
+  } else {
+    head = register_module("head", std::make_shared<torch::nn::Module>());
+    auto logit = head->register_module("logit", std::make_shared<torch::nn::Module>());
+    head_logit_weight = logit->register_parameter("weight", torch::empty({n_joints, d, nb}));
+    head_logit_bias = logit->register_parameter("bias", torch::empty({nb}));
+    head_offset = head->register_module("offset", Affine(d, nb * C));
+    head_centers = head->register_buffer("centers", torch::zeros({nb, n_joints, C}));
+  }
+  if (C > 1) ensemble_decay = head->register_buffer("ensemble_decay", torch::zeros({1}));
+  auto law = register_module("law", std::make_shared<torch::nn::Module>());
+  law_gain = law->register_buffer("gain", torch::zeros({n_joints}));
 
   auto norm = register_module("norm", std::make_shared<torch::nn::Module>());
   q_mean = norm->register_buffer("q_mean", torch::zeros({n_joints}));
@@ -258,7 +272,9 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
   torch::NoGradGuard no_grad;
   for (auto& [name, t] : inManifestOrder(*this, arch_)) {
     const std::string last = lastComponent(name);
-    if (name.rfind("norm.", 0) == 0 || name == "centroids") continue;  // buffers, set above
+    if (name.rfind("norm.", 0) == 0 || name == "centroids" || name == "head.centers" || name == "head.ensemble_decay" ||
+        name == "law.gain")
+      continue;  // buffers, set above
     if (name == "embed.step" && conditioning == Conditioning::kReference)
       t.zero_();
     else if (name == "embed.joint_enc" || name == "embed.movement" || name == "embed.step" || name == "embed.joint_dec")
@@ -269,6 +285,8 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
       t.fill_(1.0);
     else if (last == "bias" || last == "bq" || last == "bk" || last == "bv" || last == "bo")
       t.zero_();
+    else if (name == "head.logit.weight")
+      t.normal_(0.0, 0.02);  // near-uniform over the bins at the start
     else if (last == "weight" || last == "wq" || last == "wk" || last == "wv" || last == "wo")
       torch::nn::init::xavier_uniform_(t);
     else
@@ -276,23 +294,14 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
   }
 }
 
-torch::Tensor PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttention* attention) const {
+PolicyHeadOutput PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttention* attention) const {
   const std::int64_t n_batch = batch.qn.size(0), n_ticks = batch.qn.size(1), n_joints = arch_.tokens;
   const std::int64_t d = arch_.d_model, n_heads = arch_.heads, window = arch_.window;
   const torch::Tensor rn =
       conditioning_ == Conditioning::kAutonomous ? torch::zeros_like(batch.qn) : batch.rn;
   // Encoder tokens (τ, j): [qn, an, rn] embedded, plus joint, movement and the tick's step row.
   const torch::Tensor tick = torch::arange(n_ticks, torch::kInt64);
-  torch::Tensor step_rows;
-  if (phase_ticks > 0) {
-    if (!batch.length.defined() || batch.length.numel() != n_batch)
-      throw std::invalid_argument("a net with phase steps needs each sequence's length (PolicyBatch::length)");
-    const torch::Tensor step =
-        (tick.view({1, n_ticks}) * phase_ticks).div(batch.length.view({n_batch, 1}), "floor").clamp_max(arch_.max_steps - 1);
-    step_rows = step_emb.index_select(0, step.reshape({-1})).view({n_batch, n_ticks, 1, d});
-  } else {
-    step_rows = step_emb.index_select(0, tick.clamp_max(arch_.max_steps - 1)).view({1, n_ticks, 1, d});
-  }
+  const torch::Tensor step_rows = step_emb.index_select(0, tick.clamp_max(arch_.max_steps - 1)).view({1, n_ticks, 1, d});
   torch::Tensor x = embed_in->forward(torch::stack({batch.qn, batch.an, rn}, -1));  // [B,T,J,d]
   x = x + joint_enc + movement_emb.index_select(0, batch.movement).view({n_batch, 1, 1, d}) + step_rows;
   x = x.reshape({n_batch, n_ticks * n_joints, d});
@@ -327,59 +336,53 @@ torch::Tensor PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttention* 
     attention->score = g.norm(2, -1).view({n_batch, n_ticks, n_joints, n_ticks, n_joints}).sum({2, 3});
     attention->cross_out = cross_out;
   }
-  return head->forward(dec_norm->forward(y)).squeeze(-1);  // [B,T,J]
+  const torch::Tensor h = dec_norm->forward(y);  // [B,T,J,d]
+  PolicyHeadOutput out;
+  if (arch_.bins == 0) {
+    out.chunk = head_chunk->forward(h);  // [B,T,J,C]
+  } else {
+    out.logits = torch::einsum("btjd,jdk->btk", {h, head_logit_weight}) + head_logit_bias;
+    out.offsets = head_offset->forward(h).view({n_batch, n_ticks, n_joints, arch_.bins, arch_.chunk});
+  }
+  return out;
+}
+
+torch::Tensor PolicyNetImpl::decodeChunk(const PolicyHeadOutput& out) const {
+  if (arch_.bins == 0) return out.chunk;
+  const std::int64_t n_batch = out.logits.size(0), n_ticks = out.logits.size(1), J = arch_.tokens, C = arch_.chunk;
+  const torch::Tensor best = out.logits.argmax(-1);  // [B,T]; the first of equal maxima
+  const torch::Tensor center = head_centers.index_select(0, best.reshape({-1})).view({n_batch, n_ticks, J, C});
+  const torch::Tensor index = best.view({n_batch, n_ticks, 1, 1, 1}).expand({n_batch, n_ticks, J, 1, C});
+  return center + out.offsets.gather(3, index).squeeze(3);
 }
 
 torch::Tensor PolicyNetImpl::act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
                                  const torch::Tensor& movement, PolicyAttention* attention,
-                                 const torch::Tensor& length) const {
+                                 torch::Tensor* net_action) const {
   PolicyBatch batch;
-  batch.length = length;
   batch.qn = (q - q_mean) / q_std;
   batch.an = (a_prev - a_mean) / a_std;
   batch.rn = (r - r_mean) / r_std;
   batch.movement = movement;
-  torch::Tensor a = forward(batch, attention) * a_std + a_mean;
-  if (conditioning_ == Conditioning::kReference && residual_gain != 0.0)
-    a = a + static_cast<float>(residual_gain) * r;  // float, as the runtime computes it
-  if (conditioning_ == Conditioning::kAutonomous && !linear_ar_.empty()) a = a + linearArBase(q, a_prev, movement);
-  return a;
-}
-
-void PolicyNetImpl::setLinearAr(const std::vector<LinearArModel>& per_movement) {
-  if (!per_movement.empty() && per_movement.size() != static_cast<std::size_t>(arch_.movements))
-    throw std::invalid_argument("linear AR base: " + std::to_string(per_movement.size()) + " movements, the net has " +
-                                std::to_string(arch_.movements));
-  linear_ar_ = per_movement;
-  const auto m = static_cast<std::int64_t>(per_movement.size());
-  ar_c_ = torch::zeros({m, kNumJoints});
-  ar_beta_ = torch::zeros({m, kNumJoints});
-  ar_alpha_ = torch::zeros({m, kMaxLinearArOrder, kNumJoints});
-  for (std::int64_t i = 0; i < m; ++i)
-    for (int j = 0; j < kNumJoints; ++j) {
-      const LinearArJoint& x = per_movement[static_cast<std::size_t>(i)].joints[static_cast<std::size_t>(j)];
-      ar_c_[i][j] = static_cast<float>(x.c);
-      ar_beta_[i][j] = static_cast<float>(x.beta);
-      for (std::size_t k = 0; k < x.alpha.size() && k < static_cast<std::size_t>(kMaxLinearArOrder); ++k)
-        ar_alpha_[i][static_cast<std::int64_t>(k)][j] = static_cast<float>(x.alpha[k]);
+  // [B,T,J,C] in rad.
+  const torch::Tensor chunk = decodeChunk(forward(batch, attention)) * a_std.view({1, 1, -1, 1}) + a_mean.view({1, 1, -1, 1});
+  const std::int64_t n_ticks = chunk.size(1), C = arch_.chunk;
+  // The temporal ensemble (the runtime's ensembledAction): tick t takes entry k of the chunk
+  // made at t − k, for every k < min(t + 1, C), weighted exp(−decay k) / Σ over those k.
+  const double decay = C > 1 ? ensemble_decay.item<double>() : 0.0;
+  torch::Tensor a = torch::zeros_like(chunk.select(3, 0));
+  for (std::int64_t t = 0; t < n_ticks; ++t) {
+    const std::int64_t have = std::min<std::int64_t>(t + 1, C);
+    double sum = 0.0;
+    for (std::int64_t k = 0; k < have; ++k) sum += std::exp(-decay * static_cast<double>(k));
+    for (std::int64_t k = 0; k < have; ++k) {
+      const auto w = static_cast<float>(std::exp(-decay * static_cast<double>(k)) / sum);
+      a.select(1, t).add_(chunk.select(1, t - k).select(2, k) * w);
     }
-}
-
-torch::Tensor PolicyNetImpl::linearArBase(const torch::Tensor& q, const torch::Tensor& a_prev,
-                                          const torch::Tensor& movement) const {
-  if (linear_ar_.empty()) return torch::zeros_like(q);
-  const std::int64_t n_ticks = q.size(1);
-  const torch::Tensor c = ar_c_.index_select(0, movement).unsqueeze(1);        // [B,1,J]
-  const torch::Tensor beta = ar_beta_.index_select(0, movement).unsqueeze(1);  // [B,1,J]
-  const torch::Tensor alpha = ar_alpha_.index_select(0, movement);            // [B,12,J]
-  torch::Tensor b = c + beta * q;
-  for (std::int64_t k = 1; k <= kMaxLinearArOrder; ++k) {
-    // a(t−k) = a_prev at tick t−k+1: shifted k−1 ticks later, zeros in front.
-    torch::Tensor past = torch::zeros_like(a_prev);
-    if (k - 1 < n_ticks) past.slice(1, k - 1, n_ticks).copy_(a_prev.slice(1, 0, n_ticks - (k - 1)));
-    b = b + alpha.select(1, k - 1).unsqueeze(1) * past;
   }
-  return b;
+  if (net_action) *net_action = a.clone();
+  if (conditioning_ == Conditioning::kReference) a = a + law_gain * r;
+  return a;
 }
 
 void PolicyNetImpl::setNormalisation(const NormStats& s) {
@@ -409,6 +412,26 @@ void PolicyNetImpl::setCentroids(const std::vector<std::vector<JointVector>>& c)
       for (int j = 0; j < kNumJoints; ++j)
         acc[static_cast<std::int64_t>(m)][static_cast<std::int64_t>(k)][j] = static_cast<float>(c[m][k][j]);
   }
+}
+
+void PolicyNetImpl::setBinCenters(const torch::Tensor& centers) {
+  if (arch_.bins == 0) throw std::invalid_argument("a regression head has no bin centers");
+  if (centers.sizes() != head_centers.sizes())
+    throw std::invalid_argument("bin centers of shape " + c10::str(centers.sizes()) + ", the head's are " +
+                                c10::str(head_centers.sizes()));
+  torch::NoGradGuard no_grad;
+  head_centers.copy_(centers);
+}
+
+void PolicyNetImpl::setEnsembleDecay(double decay) {
+  if (arch_.chunk == 1) return;  // one chunk entry per tick: nothing to weigh
+  torch::NoGradGuard no_grad;
+  ensemble_decay.fill_(decay);
+}
+
+void PolicyNetImpl::setLawGain(double gain) {
+  torch::NoGradGuard no_grad;
+  law_gain.fill_(conditioning_ == Conditioning::kReference ? gain : 0.0);
 }
 
 std::vector<torch::Tensor> PolicyNetImpl::trainableParameters() const {

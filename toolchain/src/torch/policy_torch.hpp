@@ -14,7 +14,6 @@
 #pragma once
 
 #include "nao/policy_config.hpp"
-#include "nao/tools/linear_ar.hpp"
 #include "nao/tools/policy_dataset.hpp"
 
 #include <torch/torch.h>
@@ -33,7 +32,13 @@ struct PolicyBatch {
   torch::Tensor an;        ///< [B,T,J] float, normalised a(t-1)
   torch::Tensor rn;        ///< [B,T,J] float (ignored in autonomous mode: taken as 0)
   torch::Tensor movement;  ///< [B] int64
-  torch::Tensor length;    ///< [B] int64: each rollout's demonstration's samples L (phase steps only)
+};
+
+/// The head's output for every tick of a batch (docs/policy.md "Head"), normalised units.
+struct PolicyHeadOutput {
+  torch::Tensor chunk;    ///< regression: [B,T,J,C], token j's a_j(t) .. a_j(t+C-1)
+  torch::Tensor logits;   ///< bins: [B,T,nb]
+  torch::Tensor offsets;  ///< bins: [B,T,J,nb,C], every bin's offset
 };
 
 /// The attention record of docs/policy.md, per batch element and tick.
@@ -153,21 +158,33 @@ class PolicyNetImpl : public torch::nn::Module {
   /// norm means 0, stds 1, centroids 0.
   PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning);
 
-  /// Normalised actions an' [B,T,J] for a normalised batch of sequences; fills `attention` if
-  /// given (memory grows as (T·J)² · d: for short sequences, tests and analysis).
-  torch::Tensor forward(const PolicyBatch& batch, PolicyAttention* attention = nullptr) const;
+  /// The head's output for a normalised batch of sequences; fills `attention` if given (memory
+  /// grows as (T·J)² · d: for short sequences, tests and analysis).
+  PolicyHeadOutput forward(const PolicyBatch& batch, PolicyAttention* attention = nullptr) const;
 
-  /// The actions a(t) in rad [B,T,J] from raw sequences in rad (q, a(t-1), r: [B,T,J] float;
-  /// movement [B] int64), normalised with the norm.* buffers (rn = 0 in autonomous mode).
-  /// `length` [B] int64: PolicyBatch::length, needed with phase steps only.
+  /// Each tick's chunk as the runtime decodes it, normalised [B,T,J,C]: regression, the chunk;
+  /// bins, the center of the bin with the largest logit (the first of equals) plus its offset.
+  torch::Tensor decodeChunk(const PolicyHeadOutput& out) const;
+
+  /// The actions a(t) in rad [B,T,J] the runtime executes, from raw sequences in rad (q, a(t-1),
+  /// r: [B,T,J] float; movement [B] int64), normalised with the norm.* buffers (rn = 0 in
+  /// autonomous mode): the decoded chunks de-normalised, temporally ensembled over the last C
+  /// ticks (head.ensemble_decay), plus law.gain ⊙ r in reference mode. `net_action` (if given)
+  /// receives the ensembled chunks alone, the network's share.
   torch::Tensor act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
                     const torch::Tensor& movement, PolicyAttention* attention = nullptr,
-                    const torch::Tensor& length = {}) const;
+                    torch::Tensor* net_action = nullptr) const;
 
   /// Stores the statistics in the norm.* buffers.
   void setNormalisation(const NormStats& stats);
   /// Stores the centroids [M][K] in the "centroids" buffer [M,K,J].
   void setCentroids(const std::vector<std::vector<JointVector>>& centroids);
+  /// Stores the action bins [nb, J, C] (normalised) in head.centers (bins models only).
+  void setBinCenters(const torch::Tensor& centers);
+  /// Stores the temporal ensemble's decay per tick of age in head.ensemble_decay (C > 1 only).
+  void setEnsembleDecay(double decay);
+  /// Stores the law the runtime adds in reference mode, gain_j r_j, in law.gain (0 autonomous).
+  void setLawGain(double gain);
 
   /// The parameters the optimiser updates (everything but a frozen embed.step).
   std::vector<torch::Tensor> trainableParameters() const;
@@ -175,30 +192,11 @@ class PolicyNetImpl : public torch::nn::Module {
   const PolicyArch& arch() const { return arch_; }
   Conditioning conditioning() const { return conditioning_; }
 
-  /// Reference mode: act() returns g·r plus the de-normalised network output, so forward()
-  /// learns the residual of the first-order servo inversion (runtime PolicyWeights::residual_gain).
-  double residual_gain = 0.0;
-  /// Autonomous mode: > 0 makes the step row of tick t floor(t·phase_ticks / L) for a
-  /// demonstration of L samples (the movement's phase on a fixed grid) instead of t.
-  std::int64_t phase_ticks = 0;
   /// How forward() lays out the window attention (WindowMask): the same function either way;
   /// kAuto takes the cheaper one for the sequence length.
   WindowLayout window_layout = WindowLayout::kAuto;
 
-  /// Autonomous mode over the linear AR baseline (docs/policy.md): act() adds linearArBase, so
-  /// forward() learns the residual over the fitted per-movement, per-joint AR model. One model
-  /// per movement (index order); empty: off. Not a manifest tensor (model.bin metadata
-  /// training.linear_ar; runtime PolicyWeights::linear_ar).
-  void setLinearAr(const std::vector<LinearArModel>& per_movement);
-  const std::vector<LinearArModel>& linearAr() const { return linear_ar_; }
-  /// The base [B,T,J] from raw q and a(t−1) [B,T,J] and movement [B]: c + β q(t) + Σ_k α_k a(t−k),
-  /// k = 1..12 (a(t−k) = a_prev at tick t−k+1, 0 before the start), in float, in the runtime's
-  /// order of operations. Zeros when off.
-  torch::Tensor linearArBase(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& movement) const;
-
  private:
-  std::vector<LinearArModel> linear_ar_;
-  torch::Tensor ar_c_, ar_beta_, ar_alpha_;  ///< [M,J], [M,J], [M,12,J] float
   PolicyArch arch_;
   Conditioning conditioning_;
 
@@ -211,7 +209,12 @@ class PolicyNetImpl : public torch::nn::Module {
   std::vector<EncoderLayer> enc;
   std::vector<DecoderLayer> dec;
   LayerNorm enc_norm{nullptr}, dec_norm{nullptr};
-  Affine head{nullptr};
+  // head.*: regression (bins 0) head.weight [d,C], head.bias [C]; bins head.logit.weight
+  // [J,d,nb], head.logit.bias [nb], head.offset (Affine d -> nb·C), head.centers [nb,J,C]
+  // (buffer); C > 1: head.ensemble_decay [1] (buffer). law.gain [J] (buffer).
+  std::shared_ptr<torch::nn::Module> head;
+  Affine head_chunk{nullptr}, head_offset{nullptr};
+  torch::Tensor head_logit_weight, head_logit_bias, head_centers, ensemble_decay, law_gain;
   // norm.* and centroids (buffers)
   torch::Tensor q_mean, q_std, a_mean, a_std, r_mean, r_std, centroids;
 };

@@ -1,0 +1,128 @@
+// The measures of whether a rollout makes the movement (toolchain movement_metrics.hpp), checked
+// on paths whose answers are known in closed form: circles drawn a known number of times at a
+// known speed, back-and-forth strokes that draw no loop, copies and shifted copies of a path.
+#include "nao/tools/command.hpp"
+#include "nao/tools/movement_metrics.hpp"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+using namespace nao;
+using namespace nao::tools;
+
+namespace {
+
+// `loops` turns of a circle of radius r about c in the plane (u, v), n points per turn, plus
+// `still` points held at the start before and after (so the middle stretch is the circling).
+HandPath circle(const Eigen::Vector3d& c, const Eigen::Vector3d& u, const Eigen::Vector3d& v, double r, double loops,
+                int n, int still = 0, double sense = 1.0) {
+  HandPath p;
+  for (int i = 0; i < still; ++i) p.push_back(c + r * u);
+  const int total = static_cast<int>(std::lround(loops * n));
+  for (int i = 0; i <= total; ++i) {
+    const double a = sense * 2.0 * M_PI * i / n;
+    p.push_back(c + r * (std::cos(a) * u + std::sin(a) * v));
+  }
+  for (int i = 0; i < still; ++i) p.push_back(p.back());
+  return p;
+}
+
+const Eigen::Vector3d kX = Eigen::Vector3d::UnitX(), kY = Eigen::Vector3d::UnitY(), kZ = Eigen::Vector3d::UnitZ();
+
+}  // namespace
+
+TEST_CASE("the middle stretch is the middle 60 % of the ticks") {
+  CHECK(middleStretch(10).begin == 2);
+  CHECK(middleStretch(10).end == 8);
+  CHECK(middleStretch(11).begin == 2);
+  CHECK(middleStretch(11).end == 9);
+  CHECK(middleStretch(1).end == 0);
+}
+
+TEST_CASE("a circle drawn k times over the middle stretch counts k loops, either sense, in any plane") {
+  // 100 ticks: the middle 60 are 3 whole turns of 20 points each.
+  for (const double sense : {1.0, -1.0}) {
+    HandPath p;
+    for (int i = 0; i < 100; ++i) {
+      const double a = sense * 2.0 * M_PI * (i - 20) / 20.0;
+      p.push_back(Eigen::Vector3d(0.1, -0.1, 0.2) + 0.05 * (std::cos(a) * kX + std::sin(a) * kZ));
+    }
+    const Eigen::Matrix<double, 3, 2> plane = loopPlane({p});
+    // The plane is x-z: its normal is ±y.
+    CHECK(std::abs(plane.col(0).cross(plane.col(1)).dot(kY)) == doctest::Approx(1.0).epsilon(1e-9));
+    CHECK(loopCount(p, plane) == doctest::Approx(3.0).epsilon(1e-9));
+  }
+}
+
+TEST_CASE("a stroke back and forth along an arc draws no loop") {
+  // ±60° of a circle, swept there and back four times.
+  HandPath p;
+  for (int i = 0; i < 120; ++i) {
+    const double a = M_PI / 3.0 * std::sin(2.0 * M_PI * i / 30.0);
+    p.push_back(0.05 * (std::cos(a) * kX + std::sin(a) * kZ));
+  }
+  const Eigen::Matrix<double, 3, 2> plane = loopPlane({circle(Eigen::Vector3d::Zero(), kX, kZ, 0.05, 3, 20, 15)});
+  CHECK(loopCount(p, plane) < 0.05);
+}
+
+TEST_CASE("the middle RMS speed of a circle is its chord per tick over the period") {
+  const double r = 0.08, period = 0.1;
+  const int n = 25;
+  const HandPath p = circle(Eigen::Vector3d(0.0, 0.0, 0.3), kY, kZ, r, 5, n);
+  const double chord = 2.0 * r * std::sin(M_PI / n);
+  CHECK(middleRmsSpeed(p, period) == doctest::Approx(chord / period).epsilon(1e-12));
+  // Holding still in the middle: zero.
+  CHECK(middleRmsSpeed(HandPath(50, Eigen::Vector3d(0.1, 0.2, 0.3)), period) == 0.0);
+  CHECK(std::isnan(middleRmsSpeed(HandPath(2, Eigen::Vector3d::Zero()), period)));
+}
+
+TEST_CASE("runs are distinct unless a near-copy of another run is closer than 1 mm") {
+  const HandPath a = circle(Eigen::Vector3d::Zero(), kX, kZ, 0.05, 2, 20);
+  HandPath shifted = a, near = a;
+  for (auto& x : shifted) x += Eigen::Vector3d(0.0, 0.005, 0.0);  // 5 mm away
+  for (auto& x : near) x += Eigen::Vector3d(0.0, 0.0004, 0.0);    // 0.4 mm away
+  CHECK(distinctRuns({a, shifted}) == 2);
+  CHECK(distinctRuns({a, shifted, near}) == 1);  // a and its near-copy both fall out
+  CHECK(distinctRuns({a, a, a}) == 0);
+  CHECK(distinctRuns({a}) == 1);
+}
+
+TEST_CASE("the medoid is the path with the smallest summed DTW to the others") {
+  std::vector<HandPath> paths;
+  for (const double dy : {0.0, 0.01, 0.02, 0.035, 0.1}) {
+    HandPath p = circle(Eigen::Vector3d::Zero(), kX, kZ, 0.05, 1, 20);
+    for (auto& x : p) x.y() += dy;
+    paths.push_back(p);
+  }
+  CHECK(medoid(paths, {0, 1, 2, 3, 4}) == 2);
+  CHECK(medoid(paths, {0, 1}) == 0);  // a tie goes to the earlier member
+  CHECK(medoid(paths, {4, 3, 0}) == 3);
+  CHECK_THROWS_AS(medoid(paths, {}), UserError);
+}
+
+TEST_CASE("nearest starts come nearest first, ties to the lower index") {
+  std::vector<JointVector> starts;
+  for (const double x : {0.3, 0.1, 0.2, 0.1, 0.5}) starts.push_back(JointVector::Constant(x));
+  const std::vector<int> n = nearestStarts(starts, JointVector::Constant(0.12), 3);
+  REQUIRE(n.size() == 3);
+  CHECK(n[0] == 1);
+  CHECK(n[1] == 3);
+  CHECK(n[2] == 2);
+  CHECK(nearestStarts(starts, JointVector::Zero(), 10).size() == 5);
+}
+
+TEST_CASE("the RMS of a sequence of joint vectors runs over every tick and joint") {
+  CHECK(rmsOf({}) == 0.0);
+  CHECK(rmsOf({JointVector::Constant(2.0), JointVector::Constant(-2.0)}) == doctest::Approx(2.0));
+  JointVector one = JointVector::Zero();
+  one[0] = 1.0;
+  CHECK(rmsOf({one}) == doctest::Approx(std::sqrt(1.0 / 5.0)));
+}
+
+TEST_CASE("points that span no plane are refused for the loop plane") {
+  HandPath line;
+  for (int i = 0; i < 30; ++i) line.push_back(Eigen::Vector3d(0.01 * i, 0.0, 0.0));
+  CHECK_THROWS_AS(loopPlane({line}), UserError);
+  CHECK_THROWS_AS(loopPlane({}), UserError);
+}

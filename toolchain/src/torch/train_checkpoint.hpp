@@ -1,0 +1,34 @@
+// Checkpoints of a training run (docs/training.md): torch archives holding the trainable
+// parameters in manifest order, Adam's state, the best weights so far, the history, and a key of
+// everything that makes the run what it is except the world size, the epoch cap and the
+// patience (those may change on resume). Offline only (libtorch).
+#pragma once
+
+#include "policy_train.hpp"
+
+#include <string>
+#include <vector>
+
+namespace nao::tools {
+
+/// The key a checkpoint must match to be resumed by a run of `o` on data `fingerprint`.
+std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint);
+
+struct Checkpoint {
+  std::vector<torch::Tensor> best;
+  int best_epoch = 0;
+  std::vector<EpochStats> history;
+};
+
+/// Writes the state aside and renames it over `path` (a run killed while saving leaves the
+/// previous checkpoint whole). Throws UserError when it cannot.
+void writeCheckpoint(const std::string& path, const std::string& key, const std::vector<torch::Tensor>& params,
+                     torch::optim::Adam& optimiser, const std::vector<torch::Tensor>& best, int best_epoch,
+                     const std::vector<EpochStats>& history);
+
+/// Reads `path` into `params` and `optimiser`; returns the best weights and the history. Throws
+/// UserError for another run's checkpoint, an unreadable file or one without a finished epoch.
+Checkpoint readCheckpoint(const std::string& path, const std::string& key, std::vector<torch::Tensor>& params,
+                          torch::optim::Adam& optimiser);
+
+}  // namespace nao::tools

@@ -1,0 +1,256 @@
+#include "train_data.hpp"
+
+#include "nao/tools/command.hpp"
+#include "nao/tools/splitmix.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace nao::tools {
+namespace {
+
+torch::Tensor put(const std::vector<JointVector>& v) {
+  torch::Tensor x = torch::empty({static_cast<std::int64_t>(v.size()), kNumJoints});
+  auto acc = x.accessor<float, 2>();
+  for (std::size_t i = 0; i < v.size(); ++i)
+    for (int j = 0; j < kNumJoints; ++j) acc[static_cast<std::int64_t>(i)][j] = static_cast<float>(v[i][j]);
+  return x;
+}
+
+// Sequences packed as doubles, one after another: demo, movement, rollout, the lengths of q,
+// a_prev, r and a, worst_miss_rad, then the four vectors' joints. Exact: every field is a double
+// or a small integer.
+constexpr std::size_t kPackedHead = 8;
+
+std::size_t packedSize(const PolicySequence& s) {
+  return kPackedHead + kNumJoints * (s.q.size() + s.a_prev.size() + s.r.size() + s.a.size());
+}
+
+double* pack(const PolicySequence& s, double* out) {
+  const double head[kPackedHead] = {static_cast<double>(s.demo),         static_cast<double>(s.movement),
+                                    static_cast<double>(s.rollout),      static_cast<double>(s.q.size()),
+                                    static_cast<double>(s.a_prev.size()), static_cast<double>(s.r.size()),
+                                    static_cast<double>(s.a.size()),      s.worst_miss_rad};
+  out = std::copy(head, head + kPackedHead, out);
+  for (const std::vector<JointVector>* v : {&s.q, &s.a_prev, &s.r, &s.a})
+    for (const JointVector& x : *v) out = std::copy(x.data(), x.data() + kNumJoints, out);
+  return out;
+}
+
+const double* unpack(const double* in, const double* end, PolicySequence& s) {
+  if (end - in < static_cast<std::ptrdiff_t>(kPackedHead)) throw std::logic_error("gatherSequences: truncated record");
+  s.demo = static_cast<int>(in[0]);
+  s.movement = static_cast<int>(in[1]);
+  s.rollout = static_cast<int>(in[2]);
+  s.worst_miss_rad = in[7];
+  std::vector<JointVector>* vs[4] = {&s.q, &s.a_prev, &s.r, &s.a};
+  const double* x = in + kPackedHead;
+  for (int k = 0; k < 4; ++k) {
+    const auto n = static_cast<std::size_t>(in[3 + k]);
+    if (static_cast<std::size_t>(end - x) < n * kNumJoints) throw std::logic_error("gatherSequences: truncated record");
+    vs[k]->resize(n);
+    for (JointVector& v : *vs[k]) {
+      std::copy(x, x + kNumJoints, v.data());
+      x += kNumJoints;
+    }
+  }
+  return x;
+}
+
+// Nearest row of `centers` [nb, n] for each row of `x` [m, n], ties to the lower row: squared
+// distances written out (no matmul shortcut), so every build picks the same bins.
+torch::Tensor nearestRows(const torch::Tensor& x, const torch::Tensor& centers) {
+  const torch::Tensor d = (x.unsqueeze(1) - centers.unsqueeze(0)).square().sum(-1);  // [m, nb]
+  return d.argmin(1);
+}
+
+}  // namespace
+
+SequenceTensors toTensors(const PolicyNet& net, const std::vector<PolicySequence>& seqs) {
+  SequenceTensors t;
+  const std::int64_t C = net->arch().chunk;
+  for (const PolicySequence& s : seqs) {
+    const torch::Tensor q = put(s.q), a_prev = put(s.a_prev), r = put(s.r), a = put(s.a);
+    t.qn.push_back((q - net->q_mean) / net->q_std);
+    t.an.push_back((a_prev - net->a_mean) / net->a_std);
+    t.rn.push_back((r - net->r_mean) / net->r_std);
+    t.action.push_back(a);
+    t.r.push_back(r);
+    // The net's part of each label: the label less the law the runtime adds (reference mode).
+    const torch::Tensor net_part = a - net->law_gain * r;
+    const std::int64_t n = net_part.size(0);
+    // Past the end the arm holds: a = 0 and r = 0, so the net's part is 0 too.
+    const torch::Tensor padded = torch::cat({net_part, torch::zeros({C, kNumJoints})}, 0);
+    torch::Tensor chunk = torch::empty({n, kNumJoints, C});
+    for (std::int64_t c = 0; c < C; ++c) chunk.select(2, c).copy_(padded.slice(0, c, c + n));
+    t.target.push_back((chunk - net->a_mean.view({1, -1, 1})) / net->a_std.view({1, -1, 1}));
+    t.movement.push_back(s.movement);
+    t.ticks += n;
+  }
+  return t;
+}
+
+void labelBins(const PolicyNet& net, SequenceTensors& t) {
+  if (net->arch().bins == 0) throw std::logic_error("labelBins: a regression head has no bins");
+  const torch::Tensor centers = net->head_centers.reshape({net->arch().bins, -1});
+  t.label.clear();
+  for (const torch::Tensor& y : t.target) t.label.push_back(nearestRows(y.reshape({y.size(0), -1}), centers));
+}
+
+torch::Tensor fitActionBins(const SequenceTensors& train, int bins, std::uint64_t seed, int iterations) {
+  std::vector<torch::Tensor> rows;
+  for (const torch::Tensor& y : train.target) rows.push_back(y.reshape({y.size(0), -1}));
+  const torch::Tensor x = torch::cat(rows, 0).to(torch::kFloat64);  // [N, J·C]
+  const std::int64_t n = x.size(0);
+  if (n < bins)
+    throw UserError("action bins: " + std::to_string(n) + " training ticks for " + std::to_string(bins) + " bins");
+  SplitMix64 rng(seed ^ 0x6a09e667f3bcc909ull);
+  const auto uniform = [&rng] { return rng.uniform(); };
+  // k-means++: the first center uniformly, each next one with probability ∝ D(x)².
+  std::vector<std::int64_t> chosen{static_cast<std::int64_t>(uniform() * static_cast<double>(n)) % n};
+  torch::Tensor d2 = (x - x[chosen[0]]).square().sum(1);
+  for (int k = 1; k < bins; ++k) {
+    const torch::Tensor cum = d2.cumsum(0);
+    const double total = cum[n - 1].item<double>();
+    std::int64_t pick = 0;
+    if (total > 0.0) {
+      const double u = uniform() * total;
+      pick = std::min<std::int64_t>(n - 1, torch::searchsorted(cum, torch::tensor({u}, torch::kFloat64)).item<std::int64_t>());
+    } else {
+      pick = static_cast<std::int64_t>(uniform() * static_cast<double>(n)) % n;  // all points coincide
+    }
+    chosen.push_back(pick);
+    d2 = torch::minimum(d2, (x - x[pick]).square().sum(1));
+  }
+  torch::Tensor centers = x.index_select(0, torch::tensor(chosen, torch::kInt64)).clone();
+  // Lloyd by mean; a center left without points keeps its place.
+  torch::Tensor labels = nearestRows(x, centers);
+  for (int it = 0; it < iterations; ++it) {
+    torch::Tensor sum = torch::zeros_like(centers).index_add_(0, labels, x);
+    torch::Tensor count = torch::zeros({bins}, torch::kFloat64).index_add_(0, labels, torch::ones({n}, torch::kFloat64));
+    const torch::Tensor filled = count > 0;
+    centers = torch::where(filled.unsqueeze(1), sum / count.clamp_min(1.0).unsqueeze(1), centers);
+    const torch::Tensor next = nearestRows(x, centers);
+    if (torch::equal(next, labels)) break;
+    labels = next;
+  }
+  const std::int64_t C = train.target.front().size(2);
+  return centers.to(torch::kFloat32).view({bins, kNumJoints, C});
+}
+
+Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index) {
+  std::int64_t longest = 0;
+  for (std::size_t i : index) longest = std::max(longest, t.qn[i].size(0));
+  const auto n = static_cast<std::int64_t>(index.size());
+  const std::int64_t C = t.target.front().size(2);
+  Padded p;
+  p.in.qn = torch::zeros({n, longest, kNumJoints});
+  p.in.an = torch::zeros({n, longest, kNumJoints});
+  p.in.rn = torch::zeros({n, longest, kNumJoints});
+  p.target = torch::zeros({n, longest, kNumJoints, C});
+  p.action = torch::zeros({n, longest, kNumJoints});
+  p.r = torch::zeros({n, longest, kNumJoints});
+  p.mask = torch::zeros({n, longest});
+  const bool bins = !t.label.empty();
+  if (bins) p.label = torch::zeros({n, longest}, torch::kInt64);
+  std::vector<std::int64_t> movement;
+  for (std::int64_t b = 0; b < n; ++b) {
+    const std::size_t i = index[static_cast<std::size_t>(b)];
+    const std::int64_t len = t.qn[i].size(0);
+    p.in.qn[b].slice(0, 0, len).copy_(t.qn[i]);
+    p.in.an[b].slice(0, 0, len).copy_(t.an[i]);
+    p.in.rn[b].slice(0, 0, len).copy_(t.rn[i]);
+    p.target[b].slice(0, 0, len).copy_(t.target[i]);
+    p.action[b].slice(0, 0, len).copy_(t.action[i]);
+    p.r[b].slice(0, 0, len).copy_(t.r[i]);
+    if (bins) p.label[b].slice(0, 0, len).copy_(t.label[i]);
+    p.mask[b].slice(0, 0, len).fill_(1.0);
+    movement.push_back(t.movement[i]);
+    p.ticks += len;
+  }
+  p.in.movement = torch::tensor(movement, torch::kInt64);
+  return p;
+}
+
+LossSums lossSums(const PolicyNet& net, const Padded& p, double offset_weight) {
+  const PolicyHeadOutput out = net->forward(p.in);
+  LossSums s;
+  torch::Tensor per_tick;  // [B,T]
+  if (net->arch().bins == 0) {
+    per_tick = (out.chunk - p.target).square().mean({2, 3});
+  } else {
+    const std::int64_t nb = net->arch().bins, B = p.mask.size(0), T = p.mask.size(1);
+    const torch::Tensor ce =
+        torch::nn::functional::cross_entropy(out.logits.reshape({B * T, nb}), p.label.reshape({B * T}),
+                                             torch::nn::functional::CrossEntropyFuncOptions().reduction(torch::kNone))
+            .view({B, T});
+    const std::int64_t J = net->arch().tokens, C = net->arch().chunk;
+    const torch::Tensor index = p.label.view({B, T, 1, 1, 1}).expand({B, T, J, 1, C});
+    const torch::Tensor offset = out.offsets.gather(3, index).squeeze(3);  // [B,T,J,C]
+    const torch::Tensor center = net->head_centers.index_select(0, p.label.reshape({-1})).view({B, T, J, C});
+    per_tick = ce + offset_weight * (offset - (p.target - center)).square().mean({2, 3});
+  }
+  s.loss = (per_tick * p.mask).sum();
+  {
+    torch::NoGradGuard no_grad;
+    // The executed action's first term: the decoded chunk's a(t) in rad plus the law.
+    const torch::Tensor first = net->decodeChunk(out).select(3, 0) * net->a_std + net->a_mean + net->law_gain * p.r;
+    s.action_sse_rad2 = ((first - p.action).square().sum(2) * p.mask).sum().item<double>();
+  }
+  return s;
+}
+
+SplitLoss evaluateLoss(const PolicyNet& net, const SequenceTensors& t, double offset_weight, ProcessGroup* group) {
+  SplitLoss out;
+  if (t.size() == 0) return out;
+  torch::NoGradGuard no_grad;
+  std::int64_t begin = 0, end = static_cast<std::int64_t>(t.size());
+  if (group) std::tie(begin, end) = shardRange(end, group->worldSize(), group->rank());
+  double loss = 0.0, sse = 0.0;
+  for (std::int64_t i = begin; i < end; ++i) {
+    const LossSums s = lossSums(net, pad(t, {static_cast<std::size_t>(i)}), offset_weight);
+    loss += s.loss.item<double>();
+    sse += s.action_sse_rad2;
+  }
+  if (group) {
+    torch::Tensor both = torch::tensor({loss, sse}, torch::kFloat64);
+    group->sum(both, "validation sums");
+    loss = both[0].item<double>();
+    sse = both[1].item<double>();
+  }
+  out.loss = loss / static_cast<double>(t.ticks);
+  out.mse_rad2 = sse / (static_cast<double>(t.ticks) * kNumJoints);
+  return out;
+}
+
+std::vector<PolicySequence> gatherSequences(ProcessGroup& g, std::vector<PolicySequence> mine) {
+  const int w = g.worldSize();
+  torch::Tensor sizes = torch::zeros({w}, torch::kInt64);
+  std::int64_t my_size = 0;
+  for (const PolicySequence& s : mine) my_size += static_cast<std::int64_t>(packedSize(s));
+  sizes[g.rank()] = my_size;
+  g.sum(sizes, "sequence sizes");
+  std::vector<PolicySequence> all;
+  for (int r = 0; r < w; ++r) {
+    torch::Tensor buf = torch::empty({sizes[r].item<std::int64_t>()}, torch::kFloat64);
+    double* const b = buf.data_ptr<double>();
+    double* const e = b + buf.numel();
+    if (r == g.rank()) {
+      double* out = b;
+      for (const PolicySequence& s : mine) out = pack(s, out);
+    }
+    g.broadcast(buf, r, "executed sequences");
+    if (r == g.rank()) {
+      for (PolicySequence& s : mine) all.push_back(std::move(s));
+      continue;
+    }
+    for (const double* in = b; in < e;) {
+      PolicySequence s;
+      in = unpack(in, e, s);
+      all.push_back(std::move(s));
+    }
+  }
+  return all;
+}
+
+}  // namespace nao::tools

@@ -1,0 +1,325 @@
+// trainPolicy: the training loop (docs/policy.md, docs/training.md).
+#include "nao/controller.hpp"
+#include "nao/tools/command.hpp"
+#include "policy_train.hpp"
+#include "train_checkpoint.hpp"
+#include "train_data.hpp"
+#include "train_select.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+
+namespace nao::tools {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+std::string duration(double s) {
+  char buf[32];
+  if (s < 90)
+    std::snprintf(buf, sizeof buf, "%.0f s", s);
+  else if (s < 5400)
+    std::snprintf(buf, sizeof buf, "%.0f min", s / 60);
+  else
+    std::snprintf(buf, sizeof buf, "%.1f h", s / 3600);
+  return buf;
+}
+
+void check(const PolicyData& data, const TrainOptions& o) {
+  const std::string problem = archProblem(o.arch);
+  if (!problem.empty()) throw UserError("architecture: " + problem);
+  if (o.arch.movements != data.movements())
+    throw UserError("the architecture has " + std::to_string(o.arch.movements) + " movements, the data " +
+                    std::to_string(data.movements()));
+  if (o.arch.clusters != data.clusters())
+    throw UserError("the architecture has " + std::to_string(o.arch.clusters) + " clusters, the data " +
+                    std::to_string(data.clusters()));
+  if (o.max_epochs < 1) throw UserError("epochs must be at least 1");
+  if (o.patience < 1) throw UserError("patience must be at least 1");
+  if (o.batch < 1) throw UserError("batch must be at least 1 sequence");
+  if (!(o.lr > 0.0)) throw UserError("learning rate must be positive");
+  if (!(o.offset_weight >= 0.0)) throw UserError("the offset weight must not be negative");
+  if (!(o.ensemble_decay >= 0.0 && o.ensemble_decay <= 20.0)) throw UserError("the ensemble decay must be in [0, 20]");
+  if (o.select_by_rollout && o.conditioning != Conditioning::kAutonomous)
+    throw UserError("model selection on rollouts is for autonomous mode (a reference-mode run needs a human)");
+  if (o.select_by_rollout && !hasRuntimeStep(o.arch))
+    throw UserError("model selection on rollouts needs the runtime's step, compiled here for the paper and small "
+                    "dimensions only (d_model, heads, layers, FFN, window): select by validation loss instead");
+}
+
+// Runs carried between ranks as sequences (q and a; the rest unused).
+std::vector<PolicyRun> sharedRuns(ProcessGroup* g, const std::vector<int>& demos, const PolicyData& data,
+                                  const SimModel& sim, const PolicyNet& net) {
+  const std::vector<PolicySequence> seqs = sharedSequences(g, demos, [&](const std::vector<int>& d) {
+    std::vector<PolicySequence> out;
+    for (PolicyRun& r : netRuns(data, d, sim, net)) {
+      PolicySequence s;
+      s.demo = r.demo;
+      s.movement = r.movement;
+      s.q = std::move(r.q);
+      s.a = std::move(r.a);
+      out.push_back(std::move(s));
+    }
+    return out;
+  });
+  std::vector<PolicyRun> runs;
+  for (const PolicySequence& s : seqs) runs.push_back({s.demo, s.movement, s.q, s.a});
+  return runs;
+}
+
+}  // namespace
+
+double lawGain(const TrainOptions& o, const SimModel& sim) {
+  if (o.conditioning != Conditioning::kReference) return 0.0;
+  if (o.law_gain >= 0.0) return o.law_gain;
+  return servoStepGain(sim.params);
+}
+
+TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const TrainOptions& o, std::ostream* progress) {
+  check(data, o);
+  const Clock::time_point t_start = Clock::now();
+  // Determinism: one thread (no reduction-order races), deterministic kernels, seeded init.
+  torch::set_num_threads(1);
+  at::globalContext().setDeterministicAlgorithms(true, false);
+  torch::manual_seed(o.seed);
+  // Ranks > 0 say nothing: rank 0 speaks for the group.
+  if (o.dist.rank != 0) progress = nullptr;
+
+  TrainResult res;
+  res.world_size = o.dist.world_size;
+  res.threads_per_rank = torch::get_num_threads();
+  res.fingerprint = dataFingerprint(data);
+  res.split = splitByDemonstration(data, o.val_fraction, o.seed);
+  if (res.split.val.empty())
+    throw UserError("no validation demonstration: model selection needs a movement with at least 2 demonstrations "
+                    "and a positive validation fraction");
+  // An autonomous run starts where its demonstrator did: the data it learns from do too.
+  const PolicyData executed = o.conditioning == Conditioning::kAutonomous ? fromOwnStarts(data) : data;
+  // The group joins after the cheap checks and the data: a bad option fails alone, at once.
+  const std::string key = checkpointKey(o, res.fingerprint);
+  std::unique_ptr<ProcessGroup> group;
+  if (o.dist.world_size > 1) {
+    group = std::make_unique<ProcessGroup>(o.dist);
+    // Ranks that disagree would call different collectives: refuse before any work.
+    group->checkSame(fnv1a64(reinterpret_cast<const std::uint8_t*>(key.data()), key.size()), "options and data");
+  }
+  // The executed rollouts (seeded per demonstration, deterministic; each rank executes its share
+  // and every rank gets all). Validation: the clean rollouts of the validation demonstrations.
+  const Clock::time_point t_exec = Clock::now();
+  if (progress)
+    *progress << "executing the demonstrations on the simulated arm (expert labels"
+              << (group ? ", " + std::to_string(o.dist.world_size) + " ranks" : std::string()) << ")" << std::endl;
+  const std::vector<PolicySequence> train_seqs = sharedSequences(group.get(), res.split.train, [&](const std::vector<int>& d) {
+    return executeDemos(executed, d, sim, o.execution, o.seed, progress);
+  });
+  ExecutionOptions clean = o.execution;
+  clean.noisy_rollouts = 0;
+  const std::vector<PolicySequence> val_seqs = sharedSequences(
+      group.get(), res.split.val, [&](const std::vector<int>& d) { return executeDemos(executed, d, sim, clean, o.seed, nullptr); });
+  for (const PolicySequence& s : train_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
+  for (const PolicySequence& s : val_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
+  res.execution_seconds = secondsSince(t_exec);
+  res.train_samples = tickCount(train_seqs);
+  res.val_samples = tickCount(val_seqs);
+  res.train_sequences = train_seqs.size();
+  res.stats = normStats(train_seqs);
+  const double servo_gain = servoStepGain(sim.params);
+  res.train_baselines = baselines(train_seqs, servo_gain);
+  res.val_baselines = baselines(val_seqs, servo_gain);
+  if (progress) {
+    char line[200];
+    std::snprintf(line, sizeof line, "%zu training rollouts (%zu ticks), %zu validation (%zu ticks) in %.0f s; expert's worst miss %.2g rad",
+                  train_seqs.size(), res.train_samples, val_seqs.size(), res.val_samples, res.execution_seconds,
+                  res.expert_worst_miss_rad);
+    *progress << line << std::endl;
+  }
+
+  PolicyNet net(o.arch, o.conditioning);
+  net->setNormalisation(res.stats);
+  net->setCentroids(data.centroids);
+  res.law_gain = lawGain(o, sim);
+  net->setLawGain(res.law_gain);
+  net->setEnsembleDecay(o.ensemble_decay);
+  SequenceTensors train = toTensors(net, train_seqs);
+  SequenceTensors val = toTensors(net, val_seqs);
+  if (o.arch.bins > 0) {
+    net->setBinCenters(fitActionBins(train, o.arch.bins, o.seed));
+    labelBins(net, train);
+    labelBins(net, val);
+    // How well the bins cover the targets: the share of ticks within their bin's RMS radius.
+    torch::NoGradGuard no_grad;
+    const torch::Tensor centers = net->head_centers.reshape({o.arch.bins, -1});
+    std::vector<torch::Tensor> dist, label;
+    for (std::size_t i = 0; i < train.size(); ++i) {
+      const torch::Tensor y = train.target[i].reshape({train.target[i].size(0), -1});
+      dist.push_back((y - centers.index_select(0, train.label[i])).square().sum(1));
+      label.push_back(train.label[i]);
+    }
+    const torch::Tensor d = torch::cat(dist), l = torch::cat(label);
+    const torch::Tensor count = torch::zeros({o.arch.bins}).index_add_(0, l, torch::ones_like(d));
+    const torch::Tensor radius2 = torch::zeros({o.arch.bins}).index_add_(0, l, d) / count.clamp_min(1.0);
+    res.bin_coverage = (d <= radius2.index_select(0, l)).to(torch::kFloat64).mean().item<double>();
+  }
+
+  std::vector<torch::Tensor> params = net->trainableParameters();
+  torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
+  std::vector<torch::Tensor> best;
+  EpochStats best_stats;
+  best_stats.rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
+  best_stats.val_loss = std::numeric_limits<double>::infinity();
+  double epoch_seconds_sum = 0.0;
+  int first_epoch = 1;
+  if (!o.resume.empty()) {
+    Checkpoint ck = readCheckpoint(o.resume, key, params, optimiser);
+    best = std::move(ck.best);
+    res.best_epoch = ck.best_epoch;
+    res.history = std::move(ck.history);
+    for (const EpochStats& e : res.history) {
+      epoch_seconds_sum += e.seconds;
+      if (e.epoch == res.best_epoch) best_stats = e;
+    }
+    first_epoch = static_cast<int>(res.history.size()) + 1;
+    res.resumed_after = first_epoch - 1;
+  }
+  if (group) {
+    // Ranks that disagree would call different collectives: refuse before the first batch.
+    group->checkSame(res.train_samples, "training samples");
+    group->checkInSync(params);
+  }
+  const bool live = progress && o.live_progress;
+  const double period_s = ControllerParams{}.period_s;
+  SelectionReference ref;
+  if (o.select_by_rollout) {
+    ref = selectionReference(data, res.split.val, sim.arm, period_s);
+    res.val_nn_dtw_m = ref.nn_dtw_m;
+  }
+
+  const bool done_before = !res.history.empty() && (res.history.back().epoch - res.best_epoch >= o.patience ||
+                                                     res.history.back().epoch >= o.max_epochs);
+  for (int epoch = first_epoch; epoch <= o.max_epochs && !done_before; ++epoch) {
+    const Clock::time_point t_epoch = Clock::now();
+    net->train();
+    // Batch order: one stream per (seed, epoch), independent of torch's generator and of the
+    // world size (a global batch is the same sequences for every world size).
+    const std::vector<std::size_t> order =
+        shuffledIndices(train.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
+    const auto n_seq = static_cast<std::int64_t>(train.size());
+    const std::int64_t n_batches = (n_seq + o.batch - 1) / o.batch;
+    const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
+    double loss_sum = 0.0;
+    std::int64_t seen = 0;
+    Clock::time_point t_live = Clock::now();
+    for (std::int64_t k = 0; k < n_run; ++k) {
+      const std::int64_t b = k * o.batch, e = std::min<std::int64_t>(b + o.batch, n_seq);
+      // The global batch's real ticks: every rank knows them, so each can scale its share.
+      std::int64_t global_ticks = 0;
+      for (std::int64_t i = b; i < e; ++i) global_ticks += train.qn[order[static_cast<std::size_t>(i)]].size(0);
+      const auto [lo, hi] = group ? shardRange(e - b, o.dist.world_size, o.dist.rank) : std::pair<std::int64_t, std::int64_t>{0, e - b};
+      optimiser.zero_grad();
+      if (hi > lo) {
+        std::vector<std::size_t> index;
+        for (std::int64_t i = b + lo; i < b + hi; ++i) index.push_back(order[static_cast<std::size_t>(i)]);
+        // This rank's share of the global batch's mean over real ticks: the all-reduced sum of
+        // the gradients is the gradient of that mean.
+        const LossSums s = lossSums(net, pad(train, index), o.offset_weight);
+        (s.loss / static_cast<double>(global_ticks)).backward();
+        loss_sum += s.loss.item<double>();
+      }
+      if (group) group->sumGradients(params);
+      optimiser.step();
+      seen += global_ticks;
+      if (live && secondsSince(t_live) >= 0.5) {
+        t_live = Clock::now();
+        const double sec = secondsSince(t_epoch);
+        char line[160];
+        std::snprintf(line, sizeof line, "\r\033[Kepoch %d/%d  batch %lld/%lld  %.0f ticks/s  epoch ~%s left", epoch,
+                      o.max_epochs, static_cast<long long>(k + 1), static_cast<long long>(n_run),
+                      static_cast<double>(seen) / sec,
+                      duration(sec / static_cast<double>(k + 1) * static_cast<double>(n_run - k - 1)).c_str());
+        *progress << line << std::flush;
+      }
+    }
+    if (group) {
+      torch::Tensor total = torch::tensor({loss_sum}, torch::kFloat64);
+      group->sum(total, "training loss");
+      loss_sum = total.item<double>();
+    }
+    net->eval();
+    EpochStats st;
+    st.epoch = epoch;
+    st.samples = static_cast<std::size_t>(seen);
+    st.train_loss = loss_sum / static_cast<double>(seen);
+    const SplitLoss v = evaluateLoss(net, val, o.offset_weight, group.get());
+    st.val_loss = v.loss;
+    st.val_mse_rad2 = v.mse_rad2;
+    const Clock::time_point t_score = Clock::now();
+    // Each rank rolls out its share of the validation demonstrations; all score all of them.
+    if (o.select_by_rollout) scoreRuns(sharedRuns(group.get(), res.split.val, executed, sim, net), ref, sim.arm, period_s, st);
+    const double score_seconds = secondsSince(t_score);
+    const bool better = o.select_by_rollout ? (best.empty() || betterEpoch(st, best_stats)) : st.val_loss < best_stats.val_loss;
+    if (better) {
+      best_stats = st;
+      res.best_epoch = epoch;
+      best.clear();
+      for (const torch::Tensor& p : params) best.push_back(p.detach().clone());
+    }
+    // Every rank applied the same summed gradients: a difference is a bug or a mixed group.
+    if (group) group->checkInSync(params);
+    st.seconds = secondsSince(t_epoch);
+    epoch_seconds_sum += st.seconds;
+    res.history.push_back(st);
+    const bool stop = epoch - res.best_epoch >= o.patience || epoch == o.max_epochs;
+    if (!o.checkpoint.empty() && o.dist.rank == 0)
+      writeCheckpoint(o.checkpoint, key, params, optimiser, best, res.best_epoch, res.history);
+    if (progress) {
+      char line[320];
+      if (o.select_by_rollout) {
+        std::string moves;
+        for (std::size_t m = 0; m < st.rollouts.size(); ++m) {
+          char part[96];
+          std::snprintf(part, sizeof part, "%s%s %.1f mm x%.2f %.1f/%.1f loops", m ? ", " : "",
+                        data.movement_names[m].c_str(), 1e3 * st.rollouts[m].dtw_m, st.rollouts[m].speed_ratio,
+                        st.rollouts[m].loops_run, st.rollouts[m].loops_demo);
+          moves += part;
+        }
+        std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g  rollouts %.1f mm%s (%s)  best @ %d  %.1f s (rollouts %.1f s)  ",
+                      live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, 1e3 * st.rollout_dtw_m,
+                      st.makes_movement ? " moves" : "", moves.c_str(), res.best_epoch, st.seconds, score_seconds);
+      } else {
+        std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  %.0f samples/s  ",
+                      live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, best_stats.val_loss,
+                      res.best_epoch, st.seconds, static_cast<double>(st.samples) / st.seconds);
+      }
+      *progress << line
+                << (stop ? std::string(epoch == o.max_epochs ? "epoch cap reached" : "early stop")
+                         : "~" + duration(epoch_seconds_sum / (epoch - first_epoch + 1) * (o.max_epochs - epoch)) + " left")
+                << std::endl;
+    }
+    if (stop) break;
+  }
+
+  {
+    torch::NoGradGuard no_grad;
+    for (std::size_t i = 0; i < params.size() && i < best.size(); ++i) params[i].copy_(best[i]);
+  }
+  net->eval();
+  res.net = net;
+  res.train = evaluateLoss(net, train, o.offset_weight, group.get());
+  res.val = evaluateLoss(net, val, o.offset_weight, group.get());
+  res.seconds = secondsSince(t_start);
+  double samples = 0.0, seconds = 0.0;
+  for (const EpochStats& e : res.history) {
+    samples += static_cast<double>(e.samples);
+    seconds += e.seconds;
+  }
+  res.samples_per_s = seconds > 0.0 ? samples / seconds : 0.0;
+  return res;
+}
+
+}  // namespace nao::tools

@@ -1,0 +1,148 @@
+#include "train_select.hpp"
+
+#include "nao/policy.hpp"
+#include "nao/tools/command.hpp"
+#include "nao/tools/evaluate.hpp"
+#include "policy_train.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace nao::tools {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+template <class Dims>
+std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
+                                const PolicyNet& net) {
+  const std::vector<std::vector<float>> floats = manifestFloats(net);
+  std::vector<const float*> pointers;
+  for (const std::vector<float>& f : floats) pointers.push_back(f.data());
+  const PolicyWeights<Dims> weights =
+      bindPolicyWeights<Dims>(pointers.data(), pointers.size(), net->arch(), net->conditioning());
+  const auto ws = makePolicyWorkspace<Dims>();
+  const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
+                                   const JointVector& r) -> JointVector {
+    if (t == 0) resetPolicyStream(*ws);
+    PolicyInput in;
+    in.q = q.cast<float>();
+    in.a_prev = a_prev.cast<float>();
+    in.r = r.cast<float>();  // ignored in autonomous mode
+    in.movement = movement;
+    in.step = t;
+    return stepPolicy(weights, *ws, in).template cast<double>();
+  };
+  return rolloutPolicy(data, demos, sim, policy);
+}
+
+bool sameComputation(const PolicyArch& a, const PolicyArch& b) {
+  return a.d_model == b.d_model && a.heads == b.heads && a.encoder_layers == b.encoder_layers &&
+         a.decoder_layers == b.decoder_layers && a.ffn_hidden == b.ffn_hidden && a.tokens == b.tokens &&
+         a.features == b.features && a.window == b.window;
+}
+
+}  // namespace
+
+bool hasRuntimeStep(const PolicyArch& arch) {
+  return arch.chunk <= kPolicyMaxChunk && arch.bins <= kPolicyMaxBins &&
+         (sameComputation(arch, PaperPolicyDims::arch()) || sameComputation(arch, SmallPolicyDims::arch()));
+}
+
+std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
+                               const PolicyNet& net) {
+  const PolicyArch& arch = net->arch();
+  if (hasRuntimeStep(arch) && sameComputation(arch, PaperPolicyDims::arch()))
+    return runsWith<PaperPolicyDims>(data, demos, sim, net);
+  if (hasRuntimeStep(arch) && sameComputation(arch, SmallPolicyDims::arch()))
+    return runsWith<SmallPolicyDims>(data, demos, sim, net);
+  throw UserError("rollouts through the runtime's step need the paper or small dimensions (d_model, heads, layers, "
+                  "FFN, window); other architectures are rolled out by the nao_rt built for them "
+                  "(toolchain/nao build --model FILE)");
+}
+
+SelectionReference selectionReference(const PolicyData& data, const std::vector<int>& val, const ArmModel& arm,
+                                      double period_s) {
+  const auto nm = static_cast<std::size_t>(data.movements());
+  SelectionReference ref;
+  ref.demos.resize(nm);
+  ref.q_min.assign(nm, JointVector::Constant(std::numeric_limits<double>::infinity()));
+  ref.q_max.assign(nm, JointVector::Constant(-std::numeric_limits<double>::infinity()));
+  for (int d : val) {
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
+    ref.demos[static_cast<std::size_t>(demo.movement)].push_back(handPath(arm, demo.f));
+  }
+  for (const PolicyDemo& demo : data.demos)
+    for (const JointVector& q : demo.f) {
+      ref.q_min[static_cast<std::size_t>(demo.movement)] = ref.q_min[static_cast<std::size_t>(demo.movement)].cwiseMin(q);
+      ref.q_max[static_cast<std::size_t>(demo.movement)] = ref.q_max[static_cast<std::size_t>(demo.movement)].cwiseMax(q);
+    }
+  for (std::size_t m = 0; m < nm; ++m) {
+    const std::vector<HandPath>& paths = ref.demos[m];
+    std::vector<double> speed, loops, nn;
+    Eigen::Matrix<double, 3, 2> plane = Eigen::Matrix<double, 3, 2>::Identity();
+    if (!paths.empty()) plane = loopPlane(paths);
+    for (std::size_t i = 0; i < paths.size(); ++i) {
+      speed.push_back(middleRmsSpeed(paths[i], period_s));
+      loops.push_back(loopCount(paths[i], plane));
+      const NearestDemo n = nearestDemo(paths[i], paths, static_cast<int>(i));
+      if (n.index >= 0) nn.push_back(n.dtw_m);
+    }
+    ref.plane.push_back(plane);
+    ref.demo_speed.push_back(median(speed));
+    ref.demo_loops.push_back(median(loops));
+    ref.nn_dtw_m.push_back(median(nn));
+  }
+  return ref;
+}
+
+void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref, const ArmModel& arm, double period_s,
+               EpochStats& st) {
+  const std::size_t nm = ref.demos.size();
+  std::vector<std::vector<double>> dtw(nm), speed(nm), loops(nm);
+  std::vector<double> excess(nm, 0.0);
+  std::vector<bool> broken(nm, false);
+  for (const PolicyRun& run : runs) {
+    const auto m = static_cast<std::size_t>(run.movement);
+    bool finite = true;
+    for (const JointVector& q : run.q) finite = finite && q.allFinite();
+    if (!finite || ref.demos[m].empty()) {
+      broken[m] = true;
+      continue;
+    }
+    const HandPath path = handPath(arm, run.q);
+    dtw[m].push_back(nearestDemo(path, ref.demos[m]).dtw_m);
+    speed[m].push_back(middleRmsSpeed(path, period_s));
+    loops[m].push_back(loopCount(path, ref.plane[m]));
+    for (const JointVector& q : run.q)
+      excess[m] = std::max({excess[m], (q - ref.q_max[m]).maxCoeff(), (ref.q_min[m] - q).maxCoeff()});
+  }
+  st.rollouts.assign(nm, MovementScore{});
+  double sum = 0.0;
+  int n = 0;
+  st.makes_movement = true;
+  for (std::size_t m = 0; m < nm; ++m) {
+    if (dtw[m].empty() && !broken[m]) continue;  // no validation run of this movement
+    MovementScore& s = st.rollouts[m];
+    s.dtw_m = broken[m] ? kNaN : median(dtw[m]);
+    s.speed_ratio = broken[m] ? kNaN : median(speed[m]) / ref.demo_speed[m];
+    s.loops_run = broken[m] ? kNaN : median(loops[m]);
+    s.loops_demo = ref.demo_loops[m];
+    s.range_excess_rad = broken[m] ? kNaN : excess[m];
+    st.makes_movement = st.makes_movement && s.speed_ratio >= 0.7 && s.speed_ratio <= 1.3 &&
+                        std::abs(s.loops_run - s.loops_demo) <= 1.0 && s.range_excess_rad <= 0.1;
+    sum += s.dtw_m;
+    ++n;
+  }
+  st.rollout_dtw_m = n > 0 ? sum / n : kNaN;
+}
+
+bool betterEpoch(const EpochStats& a, const EpochStats& b) {
+  if (!std::isfinite(a.rollout_dtw_m)) return false;
+  if (!std::isfinite(b.rollout_dtw_m)) return true;
+  if (a.makes_movement != b.makes_movement) return a.makes_movement;
+  return a.rollout_dtw_m < b.rollout_dtw_m;
+}
+
+}  // namespace nao::tools

@@ -1,0 +1,53 @@
+// Model selection on autonomous rollouts (docs/policy.md "Model selection"): the net rolled out
+// through the runtime's own streaming inference from the validation demonstrations' starts, and
+// scored the way `nao_toolchain evaluate` scores runs. Offline only (libtorch).
+#pragma once
+
+#include "nao/arm_model.hpp"
+#include "nao/tools/movement_metrics.hpp"
+#include "nao/tools/policy_dataset.hpp"
+#include "policy_torch.hpp"
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace nao::tools {
+
+struct EpochStats;
+
+/// True if the toolchain holds the runtime's step for `arch`'s computation (the paper and the
+/// small dimensions, PaperPolicyDims / SmallPolicyDims; any table sizes, chunk and bins). Other
+/// computations are rolled out by the nao_rt built for them (`toolchain/nao build --model`).
+bool hasRuntimeStep(const PolicyArch& arch);
+
+/// `net`'s runs from each listed demonstration's start (rolloutPolicy over `data`, whose f(0) are
+/// the starts), its present weights bound to the runtime's stepPolicy as nao_rt binds them; the
+/// step row is the tick. Throws UserError unless hasRuntimeStep(net->arch()).
+std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
+                               const PolicyNet& net);
+
+/// What runs of each movement are measured against: its validation demonstrations' hand paths,
+/// the plane loops are counted in, their middle-phase speeds and loops, and the joint range of
+/// all the movement's demonstrations in the data.
+struct SelectionReference {
+  std::vector<std::vector<HandPath>> demos;  ///< [movement][validation demonstration]
+  std::vector<Eigen::Matrix<double, 3, 2>> plane;
+  std::vector<double> demo_speed, demo_loops;  ///< medians per movement
+  std::vector<JointVector> q_min, q_max;       ///< per movement
+  std::vector<double> nn_dtw_m;                ///< per movement: the demonstrations' own nearest-neighbour DTW
+};
+SelectionReference selectionReference(const PolicyData& data, const std::vector<int>& val, const ArmModel& arm,
+                                      double period_s);
+
+/// Scores `runs` into `st` (rollout_dtw_m, makes_movement, rollouts): per movement the medians of
+/// the DTW to the nearest validation demonstration, of the speed ratio and of the loops, and the
+/// worst excursion beyond the joint range. A non-finite run scores NaN (never kept).
+void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref, const ArmModel& arm, double period_s,
+               EpochStats& st);
+
+/// True if epoch `a` is better than `b` for selection: one that makes the movement over one that
+/// does not, then the lower rollout DTW (a NaN never wins).
+bool betterEpoch(const EpochStats& a, const EpochStats& b);
+
+}  // namespace nao::tools
