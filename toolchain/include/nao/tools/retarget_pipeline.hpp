@@ -23,6 +23,9 @@ enum RetargetRowFlags : std::uint32_t {
 };
 
 struct RetargetOptions {
+  /// Algorithm 1's tuning. retargetSkeleton / retargetSkeletonLm bound each sample's step by the
+  /// skeleton's own sample interval (skeletonStepTime) in place of a positive params.step_time_s
+  /// (<= 0 keeps the steps unbounded).
   RetargetParams params;
   HumanKinematicsConfig human;
   /// Add the hand's pointing direction as a target when the hand is seen. Off by default: x_target
@@ -48,13 +51,18 @@ std::vector<RetargetFrame> retargetTargets(const ArmModel& arm, const Skeleton& 
                                            const RetargetOptions& options, std::vector<bool>& ok,
                                            std::vector<bool>& hand_seen);
 
+/// The time between samples of `frames` (the median of the positive differences of t_s), s;
+/// `fallback` when there are fewer than two samples.
+double skeletonStepTime(const Skeleton& frames, double fallback);
+
 /// Solves one frame of Algorithm 1 for retargetSkeletonWith: (targets, pointing direction or
 /// nullptr) -> the frame's result; warm starts are the solver's own state.
 using RetargetFrameSolver =
     std::function<const RetargetResult&(const RetargetFrame& target, const Eigen::Vector3d* u_target_TH)>;
 
 /// Algorithm 1 over the whole sequence, each measured frame solved by `solve`, in order. A frame
-/// whose human arm was not measured holds the previous solution and is flagged.
+/// whose human arm was not measured holds the previous solution (before the first measurement,
+/// the first one) and is flagged.
 std::vector<RetargetRow> retargetSkeletonWith(const ArmModel& arm, const Skeleton& frames,
                                               const RetargetOptions& options, const RetargetFrameSolver& solve);
 
