@@ -18,6 +18,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
@@ -184,9 +185,9 @@ TEST_CASE("the runtime's LM and Ceres agree on the generated movements: q_r with
 namespace {
 
 // Largest per-tick change of the five NAO-mapped human angles, per joint, between consecutive
-// measured ticks (WristYaw only between ticks that both saw the hand): over all ticks, and over
-// the ticks whose upper arm is, at both ends, farther than the continuity rule's 15 deg from the
-// shoulder's pole (the arm straight out sideways).
+// ticks that measured every angle (none held at a pole; WristYaw only between ticks that both
+// saw the hand): over all such ticks, and over those whose upper arm is, at both ends, farther
+// than the continuity rule's 15 deg from the shoulder's pole (the arm straight out sideways).
 struct AngleSteps {
   JointVector all = JointVector::Zero(), off_pole = JointVector::Zero();
   double largest_twist = 0.0;  ///< largest |ElbowYaw| or |WristYaw| seen, rad
@@ -198,9 +199,13 @@ void addAngleSteps(const tools::Skeleton& skeleton, AngleSteps& steps) {
   resetHumanArm(h);
   JointVector previous = JointVector::Zero();
   bool have = false, previous_hand = false, previous_off_pole = false;
+  constexpr std::uint32_t kHeld = kHumanElbowStraight | kHumanShoulderGimbal | kHumanWristGimbal;
   for (const SkeletonFrame& f : skeleton) {
     humanArmKinematics(config, h, f);
-    if (!h.valid) continue;
+    if (!h.valid || (h.flags & kHeld)) {
+      have = false;
+      continue;
+    }
     const JointVector q = h.q.head<kNumJoints>();
     const bool off_pole = std::cos(q[kHumanShoulderRoll]) >= config.shoulder_exact_cos;
     if (have) {
@@ -219,9 +224,12 @@ void addAngleSteps(const tools::Skeleton& skeleton, AngleSteps& steps) {
 
 }  // namespace
 
-TEST_CASE("the human angles move at most 1.5 rad per tick through the wave and the reach, and the lateral raise's wherever its upper arm is 15 deg or more from the shoulder's pole") {
-  // The bound holds the noise the triangulated keypoints carry into the angles (a hand frame
-  // from points 1-2.5 px apart in 1080p). Passing the pole (the arm straight out sideways)
+TEST_CASE("the human angles move at most 1.6 rad per tick through the wave and the reach, and the lateral raise's wherever its upper arm is 15 deg or more from the shoulder's pole") {
+  // The bound holds the noise the triangulated keypoints carry into the angles: ElbowYaw and
+  // WristYaw with the elbow bent 6-20 deg (1-2.5 px of pixel noise, 1 cm in 3D, turn the forearm's
+  // direction by ~3 deg, which ElbowYaw sees 3-10 times larger) and a hand frame from points a
+  // few centimetres apart. It excludes what the exact Euler angles did here: flips by pi and
+  // whole turns (up to 3.1 rad per tick on the lateral raise, 2.1 on the reach). Passing the pole (the arm straight out sideways)
   // within a tick, NAO's ShoulderPitch turns by up to pi in that tick whatever the
   // representation, and ElbowYaw with it; the continuity rule then keeps the twists from
   // drifting by whole turns.
@@ -232,7 +240,7 @@ TEST_CASE("the human angles move at most 1.5 rad per tick through the wave and t
     MESSAGE(movement << ": largest per-tick change of the human angles " << steps.all.transpose()
                      << " rad; away from the shoulder's pole " << steps.off_pole.transpose() << " rad; largest |ElbowYaw|, |WristYaw| "
                      << steps.largest_twist << " rad");
-    const double bound = 1.5;
+    const double bound = 1.6;
     if (movement == "side_raise")
       CHECK_MESSAGE(steps.off_pole.maxCoeff() <= bound, "a human angle moved by " << steps.off_pole.maxCoeff() << " rad in a tick");
     else
