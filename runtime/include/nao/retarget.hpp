@@ -152,7 +152,7 @@ struct RetargetParams {
   /// while the hand reaches its target (the solve is the frame's own, the human's posture alone
   /// deciding the null space); out of reach the hand error pulls the arm with a force that grows
   /// with the miss, and so does the price of following it (docs/retargeting.md).
-  double motion_weight = 0.02;
+  double motion_weight = 0.005;
   /// Time between two frames, s (the runtime's 10 Hz tick): each frame's q_x and q_q stay
   /// within v_max * step_time_s of the previous frame's (v_max = ArmModel::v_max, the URDF
   /// velocity limits). <= 0: no bound.
