@@ -65,7 +65,7 @@ Eigen::Matrix3d torsoAxes(const SkeletonFrame& f) {
 
 TEST_CASE("every movement's recording is what triangulate --demo reads: cam0/, cam1/, calibration.json, OpenPose file names, 6-10 s at 30 fps") {
   const fs::path out = freshDir("recordings_layout");
-  for (const char* movement : rec::kMovementNames) {
+  for (const std::string movement : rec::kMovementNames) {
     CAPTURE(movement);
     const rec::Recording r = rec::generateRecording(movement, 0, 3);
     rec::writeRecording(r, out.string());
@@ -147,7 +147,8 @@ TEST_CASE("recordings differ in subject size, duration, amplitude, speed and sta
     const char* speed;
   } kinds[] = {{"wave", "swing_deg", "wave_hz"}, {"reach", "azimuth_deg", "reach_s"}, {"side_raise", "top_deg", "up_s"}};
   for (const auto& kind : kinds) {
-    CAPTURE(kind.movement);
+    const std::string movement = kind.movement;
+    CAPTURE(movement);
     std::vector<double> stature, duration, amplitude, speed, start_elbow;
     for (int i = 0; i < 8; ++i) {
       const rec::Recording r = rec::generateRecording(kind.movement, i, 11);

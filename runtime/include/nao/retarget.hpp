@@ -69,8 +69,9 @@
 // demos 65 % of 10 Hz steps of q_r moved a joint > 0.3 rad (the clamped human angles 32 %).
 // mu = 3e-5 (1 rad for 5.5 mm) measured (nao_toolchain gap, 8 held-out demos per movement):
 // median hand miss 0.06-0.49 mm, >= 98 % of reachable frames within 1 cm, p99 step 0.88-1.08 rad
-// (clamp 0.83-0.87). Near a singular direction the hand gives way by about
-// mu / (sigma^2 + mu) of the posture pull along it (sigma ~ 0.05 m/rad away from the rim: ~1 %).
+// frame by frame, before the step bound (clamp 0.83-0.87). Near a singular direction the hand
+// gives way by about mu / (sigma^2 + mu) of the posture pull along it (sigma ~ 0.05 m/rad away
+// from the rim: ~1 %).
 //
 // Fallback: the clamped human angles are always a feasible pose. A solve whose pose puts the hand
 // farther from x_target than they do (a capped or failed solve) would be worse than clamping on
