@@ -322,3 +322,98 @@ TEST_CASE("ElbowYaw stays continuous when the forearm wobbles across the atan2 c
   // A 2 deg wobble, not a 2 pi jump.
   CHECK_MESSAGE(largest_step < 2.5 * kDeg, "ElbowYaw jumped by " << largest_step << " rad between frames");
 }
+
+namespace {
+
+// A right arm in the torso frame of poseFrame's body (identity torso at p_WT): the upper arm
+// along `u`, the forearm along `f`, the hand's x axis along the forearm and its palm normal as
+// near `palm` as the hand axis allows. Points only: no joint convention involved.
+SkeletonFrame directionFrame(const tools::Anthropometrics& body, const Eigen::Vector3d& p_WT, const Eigen::Vector3d& u,
+                             const Eigen::Vector3d& f, const Eigen::Vector3d& palm) {
+  SkeletonFrame frame = poseFrame(body, Eigen::Matrix3d::Identity(), p_WT, HumanJointVector::Zero());
+  const Eigen::Vector3d p_WS = frame.p_W[kRShoulder];
+  const Eigen::Vector3d p_WE = p_WS + body.upper_arm_m * u.normalized();
+  const Eigen::Vector3d p_WR = p_WE + body.forearm_m * f.normalized();
+  Eigen::Matrix3d R_WK;
+  R_WK.col(0) = f.normalized();
+  R_WK.col(1) = (palm - R_WK.col(0) * R_WK.col(0).dot(palm)).normalized();
+  R_WK.col(2) = R_WK.col(0).cross(R_WK.col(1));
+  frame.p_W[kRElbow] = p_WE;
+  frame.p_W[kRWrist] = p_WR;
+  for (int h = 0; h < 4; ++h) frame.p_W[kRHand0 + h] = p_WR + R_WK * body.p_KHand[static_cast<std::size_t>(h)];
+  return frame;
+}
+
+}  // namespace
+
+TEST_CASE("a lateral raise through the horizontal, 20 times up and down: exact angles 15 deg or more from the shoulder's pole, no whole-turn drift of ElbowYaw or WristYaw") {
+  // The arm, slightly bent and palm down, swings up sideways from 70 to 110 deg of elevation in
+  // five frames and back, in the frontal plane turned 2 deg forward: it passes 2 deg from the
+  // pole where ShoulderPitch is undefined. Away from the pole the angles must be the exact
+  // (first-measurement) ones; through it ShoulderPitch turns by ~pi through the front and
+  // ElbowYaw with it, and after 20 passes neither twist has gathered a turn.
+  const tools::Anthropometrics body = tools::generateDemo(Movement::kWholeArm, 0, 1, true).body;
+  const HumanKinematicsConfig config;
+  const Eigen::Vector3d p_WT(0.0, 0.0, 1.4);
+  const double plane = 2.0 * kDeg, bend = 12.0 * kDeg;
+  auto frameAt = [&](double elevation) {
+    const Eigen::Vector3d axis(std::cos(plane), std::sin(plane), 0.0);
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(-elevation, axis).toRotationMatrix();
+    const Eigen::Vector3d f0 = -std::cos(bend) * Eigen::Vector3d::UnitZ() + std::sin(bend) * Eigen::Vector3d::UnitX();
+    return directionFrame(body, p_WT, R * -Eigen::Vector3d::UnitZ(), R * f0, R * Eigen::Vector3d::UnitY());
+  };
+  HumanArmData data;
+  resetHumanArm(data);
+  double largest_twist = 0.0, worst_exact = 0.0;
+  int n_exact = 0;
+  for (int pass = 0; pass < 20; ++pass) {
+    for (int k = 0; k <= 10; ++k) {
+      const double elevation = (70.0 + 40.0 * (k <= 5 ? k : 10 - k) / 5.0) * kDeg;
+      const SkeletonFrame f = frameAt(elevation);
+      humanArmKinematics(config, data, f);
+      REQUIRE(data.valid);
+      REQUIRE(data.q.allFinite());
+      largest_twist = std::max({largest_twist, std::abs(data.q[kHumanElbowYaw]), std::abs(data.q[kHumanWristYaw])});
+      if (std::cos(data.q[kHumanShoulderRoll]) >= config.shoulder_exact_cos) {
+        HumanArmData fresh;
+        humanArmKinematics(config, fresh, f);
+        for (int j = 0; j < kNumHumanJoints; ++j) worst_exact = std::max(worst_exact, angleDiff(data.q[j], fresh.q[j]));
+        ++n_exact;
+      }
+    }
+  }
+  MESSAGE(n_exact << " frames 15 deg or more from the pole, largest difference from the exact angles " << worst_exact
+                  << " rad; largest |ElbowYaw|, |WristYaw| " << largest_twist << " rad");
+  REQUIRE(n_exact >= 20 * 3);  // 70 deg up, 110 deg at the top, 70 deg down
+  CHECK_MESSAGE(worst_exact < 1e-9, "away from the pole the angles should be the exact ones (mod 2 pi), off by " << worst_exact);
+  CHECK_MESSAGE(largest_twist < 1.5 * kPi, "a twist drifted to " << largest_twist << " rad over 20 passes");
+}
+
+TEST_CASE("near a straight elbow ElbowYaw follows only part of a measured swing, and the forearm's total twist stays with WristYaw") {
+  // A forearm 4 deg from straight (between the 3 deg hold and the 6 deg of exactness): a 1 rad
+  // turn of the forearm about the upper arm moves ElbowYaw by sin(4)/sin(6) of it, and WristYaw
+  // takes the rest, so ElbowYaw + WristYaw (the twist of the nearly straight arm) follows the hand.
+  const tools::Anthropometrics body = tools::generateDemo(Movement::kWholeArm, 0, 1, true).body;
+  const HumanKinematicsConfig config;
+  const Eigen::Vector3d p_WT(0.0, 0.0, 1.4);
+  HumanJointVector q;
+  q << 30 * kDeg, -20 * kDeg, 40 * kDeg, 4 * kDeg, -30 * kDeg, 0.0, 0.0;
+  HumanArmData data;
+  humanArmKinematics(config, data, poseFrame(body, Eigen::Matrix3d::Identity(), p_WT, q));
+  REQUIRE(data.flags == 0u);
+  const HumanJointVector before = data.q;
+  HumanJointVector q2 = q;
+  q2[kHumanElbowYaw] += 1.0;
+  q2[kHumanWristYaw] -= 0.3;
+  humanArmKinematics(config, data, poseFrame(body, Eigen::Matrix3d::Identity(), p_WT, q2));
+  REQUIRE(data.valid);
+  CHECK((data.flags & kHumanNearPole) != 0u);
+  const double share = std::sin(4 * kDeg) / std::sin(6 * kDeg);
+  CHECK(std::abs((data.q[kHumanElbowYaw] - before[kHumanElbowYaw]) - share * 1.0) < 1e-9);
+  const double twist_before = before[kHumanElbowYaw] + before[kHumanWristYaw];
+  const double twist_after = data.q[kHumanElbowYaw] + data.q[kHumanWristYaw];
+  // cos(4 deg) of the ElbowYaw change shows in the forearm's own twist.
+  CHECK_MESSAGE(std::abs((twist_after - twist_before) - (1.0 - 0.3)) < 0.02,
+                "expected the total twist to move by 0.7 rad, it moved by " << twist_after - twist_before);
+  CHECK(std::abs(data.q[kHumanElbowRoll] - 4 * kDeg) < 1e-9);
+}

@@ -9,12 +9,18 @@
 namespace nao {
 namespace {
 
-// atan2 answers in (-pi, pi]; a joint whose angle crosses +-pi (the forearm pointing straight
-// out from a hanging upper arm, for ElbowYaw) would jump by 2 pi between frames, and clamped
-// to NAO's limits that becomes a limit-to-limit jump. Take the 2 pi copy nearest the
-// previous value instead (0 before the first measurement).
-double unwrapNear(double raw, double previous) noexcept {
-  return previous + std::remainder(raw - previous, 2.0 * 3.14159265358979323846);
+constexpr double kPi = 3.14159265358979323846;
+
+// Share of an azimuth's measured change it takes this frame (the continuity rule of the header):
+// all of it from rho_exact on, rho / rho_exact below, none at or below rho_hold. The change is
+// taken to the 2 pi copy of the measurement nearest the previous value: atan2 answers in
+// (-pi, pi], and a joint whose angle crosses +-pi (ElbowYaw with the forearm straight out from a
+// hanging upper arm) would otherwise jump by 2 pi, which NAO's limits turn into a
+// limit-to-limit jump.
+double azimuthGain(double rho, double rho_hold, double rho_exact) noexcept {
+  if (rho >= rho_exact) return 1.0;
+  if (rho <= rho_hold) return 0.0;
+  return rho / rho_exact;
 }
 
 // Shorter than this (m) a segment or axis has no direction.
@@ -126,23 +132,47 @@ const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, Huma
   const Eigen::Vector3d u_T = (p_TE - p_TS) / l_upper;    // upper-arm direction
   const Eigen::Vector3d f_T = (p_TR - p_TE) / l_forearm;  // forearm direction
 
-  // Shoulder: u = Ry(pitch) Rz(roll) e_x = (cos p cos r, sin r, -sin p cos r).
+  // The continuity rule applies from the second measurement on; the first is exact.
+  const bool arm_prior = data.arm_measured;
+  auto gain = [&](double rho, double rho_hold, double rho_exact, bool prior) {
+    const double g = prior ? azimuthGain(rho, rho_hold, rho_exact) : (rho <= rho_hold ? 0.0 : 1.0);
+    if (g > 0.0 && g < 1.0) data.flags |= kHumanNearPole;
+    return g;
+  };
+  // An angle measured in a frame that itself turned since the previous measurement (ElbowYaw in
+  // the upper arm's frame Ry(pitch) Rz(roll), WristYaw in the forearm's) is continued from its
+  // previous value carried along by that frame's twist about the segment (the twist part of a
+  // swing-twist split of the frame's motion): where the shoulder passes its pole, ShoulderPitch
+  // turns by up to pi within a frame and ElbowYaw with it, and the carried value decides which
+  // 2 pi copy of the measurement is the continuous one. The twist is the body rate's component
+  // along the segment integrated over the coordinates' own changes (taken at their mid-point),
+  // so it turns the way the pitch turned (through the front), never the other way round.
+  const HumanJointVector q_prev = data.q;
+
+  // Shoulder: u = Ry(pitch) Rz(roll) e_x = (cos p cos r, sin r, -sin p cos r). Pitch on its
+  // principal value: its cut (the arm pointing backwards) is out of any arm's reach, and a pass
+  // by the pole (the arm straight out sideways) then turns it through the front, as NAO must.
   HumanJointVector q = data.q;
   q[kHumanShoulderRoll] = std::asin(clampUnit(u_T.y()));
-  if (std::sqrt(u_T.x() * u_T.x() + u_T.z() * u_T.z()) < config.shoulder_gimbal_cos)
-    data.flags |= kHumanShoulderGimbal;
-  else
-    q[kHumanShoulderPitch] = unwrapNear(std::atan2(-u_T.z(), u_T.x()), q[kHumanShoulderPitch]);
+  const double rho_shoulder = std::sqrt(u_T.x() * u_T.x() + u_T.z() * u_T.z());
+  if (rho_shoulder < config.shoulder_gimbal_cos) data.flags |= kHumanShoulderGimbal;
+  const double g_pitch = gain(rho_shoulder, config.shoulder_gimbal_cos, config.shoulder_exact_cos, arm_prior);
+  q[kHumanShoulderPitch] += g_pitch * (std::atan2(-u_T.z(), u_T.x()) - q[kHumanShoulderPitch]);
 
   // Elbow: in the upper-arm frame before the humeral rotation, the forearm direction is
   // Rx(yaw) Rz(flex) e_x = (cos flex, sin flex cos yaw, sin flex sin yaw).
   const Eigen::Matrix3d R_TU0 = rotY(q[kHumanShoulderPitch]) * rotZ(q[kHumanShoulderRoll]);
   const Eigen::Vector3d f_U0 = R_TU0.transpose() * f_T;
   q[kHumanElbowRoll] = std::acos(clampUnit(f_U0.x()));
-  if (q[kHumanElbowRoll] < config.elbow_straight_rad)
-    data.flags |= kHumanElbowStraight;
-  else
-    q[kHumanElbowYaw] = unwrapNear(std::atan2(f_U0.z(), f_U0.y()), q[kHumanElbowYaw]);
+  if (q[kHumanElbowRoll] < config.elbow_straight_rad) data.flags |= kHumanElbowStraight;
+  const double g_yaw = gain(std::sin(q[kHumanElbowRoll]), std::sin(config.elbow_straight_rad),
+                            std::sin(config.elbow_exact_rad), arm_prior);
+  const double d_pitch = q[kHumanShoulderPitch] - q_prev[kHumanShoulderPitch];
+  const double d_roll = q[kHumanShoulderRoll] - q_prev[kHumanShoulderRoll];
+  const double roll_mid = q_prev[kHumanShoulderRoll] + 0.5 * d_roll;
+  // Twist of Ry(pitch) Rz(roll) about its x axis: sin(roll) d pitch.
+  const double yaw_from = q_prev[kHumanElbowYaw] - (arm_prior ? std::sin(roll_mid) * d_pitch : 0.0);
+  q[kHumanElbowYaw] = yaw_from + g_yaw * std::remainder(std::atan2(f_U0.z(), f_U0.y()) - yaw_from, 2.0 * kPi);
 
   // Hand: R_F0K = Rx(wrist yaw) Rz(flex) Ry(dev) relative to the forearm frame before the
   // forearm rotation. Row 0 = (cos b cos c, -sin b, cos b sin c); column 1 =
@@ -154,12 +184,20 @@ const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, Huma
     const Eigen::Matrix3d R_TF0 = R_TU0 * rotX(q[kHumanElbowYaw]) * rotZ(q[kHumanElbowRoll]);
     const Eigen::Matrix3d M = R_TF0.transpose() * R_TK;
     q[kHumanWristFlex] = std::asin(clampUnit(-M(0, 1)));
-    if (std::cos(q[kHumanWristFlex]) < config.wrist_gimbal_cos) {
-      data.flags |= kHumanWristGimbal;
-    } else {
-      q[kHumanWristDev] = unwrapNear(std::atan2(M(0, 2), M(0, 0)), q[kHumanWristDev]);
-      q[kHumanWristYaw] = unwrapNear(std::atan2(M(2, 1), M(1, 1)), q[kHumanWristYaw]);
-    }
+    const double rho_wrist = std::cos(q[kHumanWristFlex]);
+    if (rho_wrist < config.wrist_gimbal_cos) data.flags |= kHumanWristGimbal;
+    const double g_wrist = gain(rho_wrist, config.wrist_gimbal_cos, config.wrist_exact_cos, data.hand_measured);
+    q[kHumanWristDev] += g_wrist * std::remainder(std::atan2(M(0, 2), M(0, 0)) - q[kHumanWristDev], 2.0 * kPi);
+    // Twist of the forearm frame R_TU0 Rx(yaw) Rz(flex) about its x axis.
+    const double d_yaw = q[kHumanElbowYaw] - q_prev[kHumanElbowYaw];
+    const double yaw_mid = q_prev[kHumanElbowYaw] + 0.5 * d_yaw;
+    const double flex_mid = 0.5 * (q_prev[kHumanElbowRoll] + q[kHumanElbowRoll]);
+    const double forearm_twist =
+        std::cos(flex_mid) * (std::sin(roll_mid) * d_pitch + d_yaw) +
+        std::sin(flex_mid) * (std::cos(yaw_mid) * std::cos(roll_mid) * d_pitch + std::sin(yaw_mid) * d_roll);
+    const double wrist_from = q_prev[kHumanWristYaw] - (data.hand_measured ? forearm_twist : 0.0);
+    q[kHumanWristYaw] = wrist_from + g_wrist * std::remainder(std::atan2(M(2, 1), M(1, 1)) - wrist_from, 2.0 * kPi);
+    data.hand_measured = true;
     data.R_TK = R_TK;
     data.p_TH = p_TC;
   } else {
@@ -180,6 +218,7 @@ const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, Huma
   data.d_h_m = config.scale_m > 0.0 ? config.scale_m : l_upper + l_forearm + data.l_hand_m;
   data.q = q;
   data.valid = true;
+  data.arm_measured = true;
   return data;
 }
 

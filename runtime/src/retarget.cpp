@@ -21,12 +21,12 @@ constexpr double kLambdaCeiling = 1e20;
 struct IkProblem {
   const Eigen::Vector3d& p_target_TH;
   const Eigen::Vector3d* u_target_TH;
-  const JointVector& q_anchor;
-  const JointVector& mu_w;  // mu times the per-joint posture weights
+  const JointVector& centre;  // where the joint-space pull vanishes
+  const JointVector& mu_w;    // its per-joint weight (posture and motion costs)
   double w;
 
   double cost(const ArmData& arm) const {
-    double c = (arm.p_TH - p_target_TH).squaredNorm() + (mu_w.array() * (arm.q - q_anchor).array().square()).sum();
+    double c = (arm.p_TH - p_target_TH).squaredNorm() + (mu_w.array() * (arm.q - centre).array().square()).sum();
     if (u_target_TH != nullptr) c += w * w * (arm.u_TH - *u_target_TH).squaredNorm();
     return 0.5 * c;
   }
@@ -39,7 +39,7 @@ struct IkProblem {
       g.noalias() += (w * w) * (arm.Ju_TH.transpose() * (arm.u_TH - *u_target_TH));
       H.noalias() += (w * w) * (arm.Ju_TH.transpose() * arm.Ju_TH);
     }
-    g.array() += mu_w.array() * (arm.q - q_anchor).array();
+    g.array() += mu_w.array() * (arm.q - centre).array();
     H.diagonal() += mu_w;
   }
 };
@@ -63,28 +63,57 @@ bool parseRetargetPriority(const char* name, RetargetPriority& priority) {
   return false;
 }
 
-void resetRetarget(RetargetData& data) { data.has_warm_start = false; }
+void resetRetarget(RetargetData& data) { data.history = RetargetHistory{}; }
 
 void resetRetarget(const ArmModel& model, RetargetData& data, const JointVector& q_start) {
-  data.q_warm = clampToLimits(model, q_start);
-  data.has_warm_start = true;
+  data.history = RetargetHistory{};
+  data.history.q_warm = clampToLimits(model, q_start);
+  data.history.has_warm_start = true;
   // A frame with bad input holds data.result: make that the start pose, not a stale or zero one.
   RetargetResult& r = data.result;
   r = RetargetResult{};
-  r.q_x = r.q_q = r.q_r = data.q_warm;
-  r.p_TH_x = r.p_TH_q = forwardKinematics(model, data.arm, data.q_warm);
+  r.q_x = r.q_q = r.q_r = data.history.q_warm;
+  r.p_TH_x = r.p_TH_q = forwardKinematics(model, data.arm, data.history.q_warm);
+}
+
+IkJointTerms ikJointTerms(const ArmModel& model, const RetargetParams& params, const JointVector& q_anchor,
+                          const JointVector* q_previous, double nu) {
+  IkJointTerms terms;
+  const JointVector anchor = clampToLimits(model, q_anchor);
+  const JointVector mu_w = params.mu * params.posture_weights;
+  terms.lower = model.q_min;
+  terms.upper = model.q_max;
+  if (q_previous == nullptr || !(nu > 0.0)) {
+    terms.centre = anchor;
+    terms.weight = mu_w;
+  } else {
+    terms.weight = (mu_w.array() + nu).matrix();
+    terms.centre = (mu_w.cwiseProduct(anchor) + nu * *q_previous).cwiseQuotient(terms.weight);
+  }
+  if (q_previous != nullptr && params.step_time_s > 0.0) {
+    const JointVector step = params.step_time_s * model.v_max;
+    terms.lower = terms.lower.cwiseMax(*q_previous - step);
+    terms.upper = terms.upper.cwiseMin(*q_previous + step);
+  }
+  return terms;
 }
 
 const JointVector& solveHandIk(const ArmModel& model, const RetargetParams& params, RetargetData& data,
                                const Eigen::Vector3d& p_target_TH, const JointVector& q_start,
                                const JointVector& q_anchor, const Eigen::Vector3d* u_target_TH) {
+  return solveHandIk(model, params, data, p_target_TH, q_start, ikJointTerms(model, params, q_anchor, nullptr),
+                     u_target_TH);
+}
+
+const JointVector& solveHandIk(const ArmModel& model, const RetargetParams& params, RetargetData& data,
+                               const Eigen::Vector3d& p_target_TH, const JointVector& q_start,
+                               const IkJointTerms& terms, const Eigen::Vector3d* u_target_TH) {
   IkResult& ik = data.ik;
   ArmData& arm = data.arm;
-  const JointVector anchor = clampToLimits(model, q_anchor);
-  const JointVector mu_w = params.mu * params.posture_weights;
-  const IkProblem problem{p_target_TH, u_target_TH, anchor, mu_w, params.pointing_weight};
+  const IkProblem problem{p_target_TH, u_target_TH, terms.centre, terms.weight, params.pointing_weight};
+  auto clampToBox = [&](const JointVector& v) -> JointVector { return v.cwiseMax(terms.lower).cwiseMin(terms.upper); };
 
-  JointVector q = clampToLimits(model, q_start);
+  JointVector q = clampToBox(q_start);
   forwardKinematics(model, arm, q);
   handJacobian(model, arm);
   double cost = problem.cost(arm);
@@ -98,19 +127,19 @@ const JointVector& solveHandIk(const ArmModel& model, const RetargetParams& para
   int it = 0;
   while (it < params.max_inner_iterations) {
     // First-order optimality for the box: the projected gradient vanishes.
-    const JointVector q_pg = clampToLimits(model, q - g);
+    const JointVector q_pg = clampToBox(q - g);
     if ((q - q_pg).cwiseAbs().maxCoeff() <= params.gradient_tolerance) {
       ik.converged = true;
       break;
     }
     ++it;
 
-    // Joints at a limit whose descent direction points outward are held; the damped
+    // Joints at a bound whose descent direction points outward are held; the damped
     // Gauss-Newton step (paper eq. 5) is solved for the others.
     JointMatrix A = H;
     JointVector b = -g;
     for (int j = 0; j < kNumJoints; ++j) {
-      const bool held = (q[j] <= model.q_min[j] && g[j] > 0.0) || (q[j] >= model.q_max[j] && g[j] < 0.0);
+      const bool held = (q[j] <= terms.lower[j] && g[j] > 0.0) || (q[j] >= terms.upper[j] && g[j] < 0.0);
       if (held) {
         A.row(j).setZero();
         A.col(j).setZero();
@@ -121,7 +150,7 @@ const JointVector& solveHandIk(const ArmModel& model, const RetargetParams& para
       }
     }
     const JointVector delta = A.ldlt().solve(b);
-    const JointVector q_new = clampToLimits(model, q + params.eta_x * delta);
+    const JointVector q_new = clampToBox(q + params.eta_x * delta);
     const JointVector step = q_new - q;
 
     // Gain ratio of the actual decrease over the model's prediction for the clamped step.
@@ -163,13 +192,13 @@ const RetargetResult& solveRetarget(const ArmModel& model, const RetargetParams&
                                     const Eigen::Vector3d& p_target_TH, const JointVector& q_target,
                                     const Eigen::Vector3d* u_target_TH) {
   auto ik = [&](const Eigen::Vector3d& p_goal, const Eigen::Vector3d* u_goal, const JointVector& q_start,
-                const JointVector& q_anchor, JointVector& q_out, int& iterations) {
-    q_out = solveHandIk(model, params, data, p_goal, q_start, q_anchor, u_goal);
+                const IkJointTerms& terms, JointVector& q_out, int& iterations) {
+    q_out = solveHandIk(model, params, data, p_goal, q_start, terms, u_goal);
     iterations = data.ik.iterations;
     return data.ik.converged;
   };
-  return detail::runAlgorithm1(model, params, data.arm, data.q_warm, data.has_warm_start, data.result, p_target_TH,
-                               q_target, u_target_TH, ik);
+  return detail::runAlgorithm1(model, params, data.arm, data.history, data.result, p_target_TH, q_target,
+                               u_target_TH, ik);
 }
 
 }  // namespace nao

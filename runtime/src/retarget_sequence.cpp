@@ -1,6 +1,8 @@
 // Retargeting of a whole skeleton sequence (nao/retarget_sequence.hpp).
 #include "nao/retarget_sequence.hpp"
 
+#include <algorithm>
+
 #include "nao/human_scale.hpp"
 #include "nao/input_error.hpp"
 #include "nao/kinematics.hpp"
@@ -45,8 +47,8 @@ std::vector<RetargetRow> retargetSkeletonWith(const ArmModel& arm, const Skeleto
   const std::vector<RetargetFrame> targets = retargetTargets(arm, frames, options, ok, hand_seen);
 
   std::vector<RetargetRow> rows(frames.size());
-  ArmData kin;
   const RetargetRow* previous = nullptr;
+  std::size_t n_leading = 0;  // rows before the first measurement
   for (std::size_t i = 0; i < frames.size(); ++i) {
     RetargetRow& row = rows[i];
     row.t_s = frames[i].t_s;
@@ -56,9 +58,7 @@ std::vector<RetargetRow> retargetSkeletonWith(const ArmModel& arm, const Skeleto
         row.target = previous->target;
         row.result = previous->result;
       } else {
-        // Before the first measurement: the zero pose clamped, so every row stays inside the limits.
-        row.result.q_x = row.result.q_q = row.result.q_r = clampToLimits(arm, JointVector::Zero());
-        row.result.p_TH_x = row.result.p_TH_q = forwardKinematics(arm, kin, row.result.q_x);
+        ++n_leading;
       }
       row.result.flags = 0;
       row.flags = kRowHumanMissing;
@@ -70,15 +70,33 @@ std::vector<RetargetRow> retargetSkeletonWith(const ArmModel& arm, const Skeleto
     row.flags = row.result.flags | (hand_seen[i] ? 0u : kRowHandNotSeen);
     previous = &row;
   }
+  // Before the first measurement the first solution is held too (backwards), so the trajectory
+  // starts at rest there instead of jumping to it from an arbitrary pose.
+  for (std::size_t i = 0; i < n_leading && previous != nullptr; ++i) {
+    rows[i].target = rows[n_leading].target;
+    rows[i].result = rows[n_leading].result;
+    rows[i].result.flags = 0;
+  }
   return rows;
 }
 
+double skeletonStepTime(const Skeleton& frames, double fallback) {
+  std::vector<double> dt;
+  for (std::size_t i = 1; i < frames.size(); ++i)
+    if (frames[i].t_s > frames[i - 1].t_s) dt.push_back(frames[i].t_s - frames[i - 1].t_s);
+  if (dt.empty()) return fallback;
+  std::nth_element(dt.begin(), dt.begin() + static_cast<long>(dt.size() / 2), dt.end());
+  return dt[dt.size() / 2];
+}
+
 std::vector<RetargetRow> retargetSkeletonLm(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options) {
+  RetargetParams params = options.params;
+  if (params.step_time_s > 0.0) params.step_time_s = skeletonStepTime(frames, params.step_time_s);
   RetargetData lm;
   resetRetarget(lm);
   return retargetSkeletonWith(arm, frames, options,
                               [&](const RetargetFrame& t, const Eigen::Vector3d* u) -> const RetargetResult& {
-                                return solveRetarget(arm, options.params, lm, t.p_target_TH, t.q_target, u);
+                                return solveRetarget(arm, params, lm, t.p_target_TH, t.q_target, u);
                               });
 }
 

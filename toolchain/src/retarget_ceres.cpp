@@ -17,24 +17,24 @@ constexpr int kCeresIterationFactor = 4;
 
 constexpr int kPositionResiduals = 3 + kNumJoints;
 
-// Hand position error and the displacement term: [p_TH(q) - x_target; sqrt(mu) (q - q_anchor)].
+// Hand position error and the joint-space pull (posture and motion costs, IkJointTerms):
+// [p_TH(q) - x_target; sqrt(weight) (q - centre)].
 class HandPositionCost final : public ceres::SizedCostFunction<kPositionResiduals, kNumJoints> {
  public:
-  HandPositionCost(const ArmModel& model, ArmData& arm, const Eigen::Vector3d& p_target_TH,
-                   const JointVector& q_anchor, const JointVector& mu_w)
-      : model_(model), arm_(arm), p_target_TH_(p_target_TH), q_anchor_(q_anchor), sqrt_mu_(mu_w.cwiseSqrt()) {}
+  HandPositionCost(const ArmModel& model, ArmData& arm, const Eigen::Vector3d& p_target_TH, const IkJointTerms& terms)
+      : model_(model), arm_(arm), p_target_TH_(p_target_TH), centre_(terms.centre), sqrt_w_(terms.weight.cwiseSqrt()) {}
 
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
     const Eigen::Map<const JointVector> q(parameters[0]);
     forwardKinematics(model_, arm_, JointVector(q));
     Eigen::Map<Eigen::Matrix<double, kPositionResiduals, 1>> r(residuals);
     r.head<3>() = arm_.p_TH - p_target_TH_;
-    r.tail<kNumJoints>() = sqrt_mu_.cwiseProduct(q - q_anchor_);
+    r.tail<kNumJoints>() = sqrt_w_.cwiseProduct(q - centre_);
     if (jacobians != nullptr && jacobians[0] != nullptr) {
       handJacobian(model_, arm_);
       Eigen::Map<Eigen::Matrix<double, kPositionResiduals, kNumJoints, Eigen::RowMajor>> J(jacobians[0]);
       J.topRows<3>() = arm_.Jp_TH;
-      J.bottomRows<kNumJoints>() = sqrt_mu_.asDiagonal();
+      J.bottomRows<kNumJoints>() = sqrt_w_.asDiagonal();
     }
     return true;
   }
@@ -43,8 +43,8 @@ class HandPositionCost final : public ceres::SizedCostFunction<kPositionResidual
   const ArmModel& model_;
   ArmData& arm_;
   const Eigen::Vector3d p_target_TH_;
-  const JointVector q_anchor_;
-  const JointVector sqrt_mu_;  // sqrt(mu w_j) per joint
+  const JointVector centre_;
+  const JointVector sqrt_w_;  // sqrt(mu w_j + nu) per joint
 };
 
 // Pointing-direction error w (u_TH(q) - u_target).
@@ -75,14 +75,14 @@ class HandPointingCost final : public ceres::SizedCostFunction<3, kNumJoints> {
 
 }  // namespace
 
-void resetRetarget(CeresRetargetData& data) { data.has_warm_start = false; }
+void resetRetarget(CeresRetargetData& data) { data.history = RetargetHistory{}; }
 
 namespace {
 
 // Gradient of the IK objective at q (for the active-set check below).
 JointVector objectiveGradient(const ArmModel& model, const RetargetParams& params, ArmData& arm,
                               const Eigen::Vector3d& p_target_TH, const Eigen::Vector3d* u_target_TH,
-                              const JointVector& q_anchor, const JointVector& q) {
+                              const IkJointTerms& terms, const JointVector& q) {
   forwardKinematics(model, arm, q);
   handJacobian(model, arm);
   JointVector g = arm.Jp_TH.transpose() * (arm.p_TH - p_target_TH);
@@ -90,15 +90,15 @@ JointVector objectiveGradient(const ArmModel& model, const RetargetParams& param
     const double w2 = params.pointing_weight * params.pointing_weight;
     g.noalias() += w2 * (arm.Ju_TH.transpose() * (arm.u_TH - *u_target_TH));
   }
-  g.array() += params.mu * params.posture_weights.array() * (q - q_anchor).array();
+  g.array() += terms.weight.array() * (q - terms.centre).array();
   return g;
 }
 
 // One Ceres run from q (in place) with the joints in `held` kept constant.
 ceres::Solver::Summary runCeres(const ArmModel& model, const RetargetParams& params, ArmData& arm,
                                 const Eigen::Vector3d& p_target_TH, const Eigen::Vector3d* u_target_TH,
-                                const JointVector& q_anchor, const std::vector<int>& held, double* q) {
-  HandPositionCost position_cost(model, arm, p_target_TH, q_anchor, params.mu * params.posture_weights);
+                                const IkJointTerms& terms, const std::vector<int>& held, double* q) {
+  HandPositionCost position_cost(model, arm, p_target_TH, terms);
   HandPointingCost pointing_cost(model, arm, u_target_TH != nullptr ? *u_target_TH : Eigen::Vector3d::UnitX(),
                                  params.pointing_weight);
   ceres::Problem::Options problem_options;
@@ -107,8 +107,8 @@ ceres::Solver::Summary runCeres(const ArmModel& model, const RetargetParams& par
   problem.AddResidualBlock(&position_cost, nullptr, q);
   if (u_target_TH != nullptr) problem.AddResidualBlock(&pointing_cost, nullptr, q);
   for (int j = 0; j < kNumJoints; ++j) {
-    problem.SetParameterLowerBound(q, j, model.q_min[j]);
-    problem.SetParameterUpperBound(q, j, model.q_max[j]);
+    problem.SetParameterLowerBound(q, j, terms.lower[j]);
+    problem.SetParameterUpperBound(q, j, terms.upper[j]);
   }
   if (static_cast<int>(held.size()) == kNumJoints) {
     problem.SetParameterBlockConstant(q);
@@ -139,9 +139,15 @@ ceres::Solver::Summary runCeres(const ArmModel& model, const RetargetParams& par
 
 const JointVector& solveHandIkCeres(const ArmModel& model, const RetargetParams& params, CeresRetargetData& data,
                                     const Eigen::Vector3d& p_target_TH, const JointVector& q_start,
-                                    const JointVector& q_anchor_in, const Eigen::Vector3d* u_target_TH) {
-  const JointVector q_anchor = clampToLimits(model, q_anchor_in);
-  const JointVector q_begin = clampToLimits(model, q_start);
+                                    const JointVector& q_anchor, const Eigen::Vector3d* u_target_TH) {
+  return solveHandIkCeres(model, params, data, p_target_TH, q_start, ikJointTerms(model, params, q_anchor, nullptr),
+                          u_target_TH);
+}
+
+const JointVector& solveHandIkCeres(const ArmModel& model, const RetargetParams& params, CeresRetargetData& data,
+                                    const Eigen::Vector3d& p_target_TH, const JointVector& q_start,
+                                    const IkJointTerms& terms, const Eigen::Vector3d* u_target_TH) {
+  const JointVector q_begin = q_start.cwiseMax(terms.lower).cwiseMin(terms.upper);
   double q[kNumJoints];
   for (int j = 0; j < kNumJoints; ++j) q[j] = q_begin[j];
 
@@ -149,24 +155,23 @@ const JointVector& solveHandIkCeres(const ArmModel& model, const RetargetParams&
   // a bounded solve, then re-solves with the joints that are at a limit and pushed outward
   // held constant (an active set), until that set no longer changes.
   std::vector<int> held;
-  ceres::Solver::Summary summary =
-      runCeres(model, params, data.arm_cost, p_target_TH, u_target_TH, q_anchor, held, q);
+  ceres::Solver::Summary summary = runCeres(model, params, data.arm_cost, p_target_TH, u_target_TH, terms, held, q);
   int iterations = summary.num_successful_steps + summary.num_unsuccessful_steps;
   for (int round = 0; round < kNumJoints + 1; ++round) {
     const JointVector q_now = Eigen::Map<const JointVector>(q);
     const JointVector g =
-        objectiveGradient(model, params, data.arm_cost, p_target_TH, u_target_TH, q_anchor, q_now);
+        objectiveGradient(model, params, data.arm_cost, p_target_TH, u_target_TH, terms, q_now);
     std::vector<int> active;
     for (int j = 0; j < kNumJoints; ++j)
-      if ((q_now[j] <= model.q_min[j] && g[j] > 0.0) || (q_now[j] >= model.q_max[j] && g[j] < 0.0)) active.push_back(j);
+      if ((q_now[j] <= terms.lower[j] && g[j] > 0.0) || (q_now[j] >= terms.upper[j] && g[j] < 0.0)) active.push_back(j);
     if (active.empty() || active == held) break;
     held = active;
-    summary = runCeres(model, params, data.arm_cost, p_target_TH, u_target_TH, q_anchor, held, q);
+    summary = runCeres(model, params, data.arm_cost, p_target_TH, u_target_TH, terms, held, q);
     iterations += summary.num_successful_steps + summary.num_unsuccessful_steps;
   }
 
   // Ceres keeps q inside the bounds; the clamp only guards the contract.
-  data.ik.q = clampToLimits(model, Eigen::Map<const JointVector>(q));
+  data.ik.q = Eigen::Map<const JointVector>(q).cwiseMax(terms.lower).cwiseMin(terms.upper);
   data.ik.cost = summary.final_cost;
   data.ik.iterations = iterations;
   data.ik.converged = summary.termination_type == ceres::CONVERGENCE;
@@ -177,13 +182,13 @@ const RetargetResult& solveRetargetCeres(const ArmModel& model, const RetargetPa
                                          CeresRetargetData& data, const Eigen::Vector3d& p_target_TH,
                                          const JointVector& q_target, const Eigen::Vector3d* u_target_TH) {
   auto ik = [&](const Eigen::Vector3d& p_goal, const Eigen::Vector3d* u_goal, const JointVector& q_start,
-                const JointVector& q_anchor, JointVector& q_out, int& iterations) {
-    q_out = solveHandIkCeres(model, params, data, p_goal, q_start, q_anchor, u_goal);
+                const IkJointTerms& terms, JointVector& q_out, int& iterations) {
+    q_out = solveHandIkCeres(model, params, data, p_goal, q_start, terms, u_goal);
     iterations = data.ik.iterations;
     return data.ik.converged;
   };
-  return nao::detail::runAlgorithm1(model, params, data.arm, data.q_warm, data.has_warm_start, data.result,
-                                    p_target_TH, q_target, u_target_TH, ik);
+  return nao::detail::runAlgorithm1(model, params, data.arm, data.history, data.result, p_target_TH, q_target,
+                                    u_target_TH, ik);
 }
 
 std::vector<RetargetResult> retargetSequenceLM(const ArmModel& model, const RetargetParams& params,
@@ -230,11 +235,13 @@ RetargetAgreement compareRetarget(const std::vector<RetargetResult>& a, const st
 // reference library) stays free of Ceres.
 std::vector<RetargetRow> retargetSkeleton(const ArmModel& arm, const Skeleton& frames, const RetargetOptions& options) {
   if (!options.use_ceres) return retargetSkeletonLm(arm, frames, options);
+  RetargetParams params = options.params;
+  if (params.step_time_s > 0.0) params.step_time_s = skeletonStepTime(frames, params.step_time_s);
   CeresRetargetData ceres;
   resetRetarget(ceres);
   return retargetSkeletonWith(arm, frames, options,
                               [&](const RetargetFrame& t, const Eigen::Vector3d* u) -> const RetargetResult& {
-                                return solveRetargetCeres(arm, options.params, ceres, t.p_target_TH, t.q_target, u);
+                                return solveRetargetCeres(arm, params, ceres, t.p_target_TH, t.q_target, u);
                               });
 }
 

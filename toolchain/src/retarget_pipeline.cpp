@@ -109,7 +109,7 @@ std::vector<RetargetRow> readRetargetCsv(const std::string& path, RetargetParams
       throw UserError(csv.where() + ": column 'flags' holds " + std::to_string(flags) +
                       ", expected an integer bit set 0..4294967295");
     r.flags = static_cast<std::uint32_t>(flags);
-    r.result.flags = r.flags & 0xffu;
+    r.result.flags = r.flags & ~static_cast<std::uint32_t>(kRowHumanMissing | kRowHandNotSeen);
     rows.push_back(r);
   }
   return rows;

@@ -28,6 +28,23 @@
 // (+y), the thumb is up (+z): NAO's zero pose. The hand frame K from the keypoints: x_K from
 // hand point 0 (wrist) to 9 (middle-finger knuckle); z_K from the little-finger knuckle 17
 // towards the index knuckle 5, orthogonalised; y_K = z_K × x_K (palm normal).
+//
+// Continuity. Each stage of the chain is a direction on a sphere read as (polar angle, azimuth):
+// the upper arm (ShoulderRoll, ShoulderPitch), the forearm in the upper arm's frame (ElbowRoll,
+// ElbowYaw), the hand in the forearm's frame (wrist flexion, WristYaw with the deviation). An
+// azimuth is undefined at its pole (the upper arm along the torso's y axis, a straight elbow,
+// the wrist flexed 90 deg) and amplifies the measurement's noise by 1 / rho near it, rho the
+// direction's distance from the pole (cos roll, sin flexion, cos wrist flexion); passing by the
+// pole, the exact angles swing by up to pi within a frame. So, from the second measured frame
+// on, an azimuth moves from its previous value by rho / rho_exact of its measured change where
+// rho < rho_exact (never more than 1 / rho_exact times the direction's own change, and not at
+// all below the hold threshold), and by all of it elsewhere; the measured change is taken on
+// the 2 pi copy nearest the previous value (ShoulderPitch, whose cut lies behind the back
+// where no arm goes, on its principal value, so that a pass by the pole turns it through the
+// front where NAO can follow). Where rho >= rho_exact the angles are the exact ones above;
+// near a pole they trade exactness for continuity, and the next stage, measured relative to
+// the previous one's angles, absorbs the difference (the chain keeps the measured forearm and
+// hand directions).
 #pragma once
 
 #include "nao/arm_model.hpp"
@@ -60,6 +77,7 @@ enum HumanFlag : std::uint32_t {
   kHumanElbowStraight = 1u << 4,  ///< elbow flexion below the threshold: ElbowYaw held
   kHumanShoulderGimbal = 1u << 5, ///< upper arm along the torso's y axis: ShoulderPitch held
   kHumanWristGimbal = 1u << 6,    ///< wrist flexion near ±90°: wrist yaw and deviation held
+  kHumanNearPole = 1u << 7,       ///< an azimuth moved by only a part of its measured change (continuity)
 };
 inline constexpr std::uint32_t kHumanInvalidMask = kHumanNoTorso | kHumanNoArm | kHumanNotFinite;
 
@@ -71,6 +89,12 @@ struct HumanKinematicsConfig {
   double shoulder_gimbal_cos = 0.02;
   /// Below this |cos(wrist flexion)| the wrist yaw / deviation split is undefined and held.
   double wrist_gimbal_cos = 0.02;
+  /// rho_exact of the continuity rule (file comment): from these distances from the poles on,
+  /// the angles are exact: |cos(ShoulderRoll)| (0.26: the upper arm within 15° of pointing
+  /// straight sideways), elbow flexion (6°) and |cos(wrist flexion)| (0.26: flexed 75°).
+  double shoulder_exact_cos = 0.26;
+  double elbow_exact_rad = 6.0 * 3.14159265358979323846 / 180.0;
+  double wrist_exact_cos = 0.26;
   /// Hand segment length (wrist -> hand endpoint) used when the hand is not seen, m. When
   /// <= 0, hand_to_forearm * forearm length of the current frame is used.
   double hand_length_m = 0.0;
@@ -88,6 +112,8 @@ struct HumanArmData {
   std::uint32_t flags = kHumanNoTorso;  ///< HumanFlag bits of the last frame
   bool valid = false;      ///< torso and arm measured: angles q[0..3], points and p_SH_T usable
   bool hand_seen = false;  ///< hand frame measured: q[4..6] measured this frame
+  bool arm_measured = false;   ///< q[0..3] hold a measurement (the continuity rule applies to them)
+  bool hand_measured = false;  ///< q[4..6] hold a measurement
 
   Eigen::Matrix3d R_WT = Eigen::Matrix3d::Identity();  ///< torso frame orientation in the world
   Eigen::Vector3d p_WT = Eigen::Vector3d::Zero();      ///< torso origin (shoulder midpoint), world, m
@@ -117,10 +143,11 @@ bool humanTorsoFrame(const SkeletonFrame& frame, Eigen::Matrix3d& R_WT, Eigen::V
 /// Human right-arm kinematics of one skeleton frame (world-frame points, m).
 /// Writes into `data`: flags, valid, hand_seen, the torso frame, the arm points in it, the
 /// hand frame, the link lengths, d_h, p_h = p_SH_T and the joint angles q (HumanJoint order,
-/// rad; the first five in NAO's convention; angles from atan2 are unwrapped to the 2 pi copy
-/// nearest the previous frame, so they are continuous). Angles that cannot be measured keep their
-/// previous value and are flagged; when the frame is invalid nothing but `flags` and `valid`
-/// changes. Never invents a point, never produces NaN. Returns `data`. Real-time safe.
+/// rad; the first five in NAO's convention; continuous from frame to frame by the rule of the
+/// file comment: exact away from the poles, the first measurement exact everywhere). Angles
+/// that cannot be measured keep their previous value and are flagged; when the frame is invalid
+/// nothing but `flags` and `valid` changes. Never invents a point, never produces NaN. Returns
+/// `data`. Real-time safe.
 const HumanArmData& humanArmKinematics(const HumanKinematicsConfig& config, HumanArmData& data,
                                         const SkeletonFrame& frame) noexcept;
 

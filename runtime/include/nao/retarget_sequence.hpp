@@ -33,6 +33,9 @@ enum RetargetRowFlags : std::uint32_t {
 };
 
 struct RetargetOptions {
+  /// Algorithm 1's tuning. The sequence solvers bound each sample's step by the skeleton's own
+  /// sample interval (skeletonStepTime) in place of a positive params.step_time_s (<= 0 keeps the
+  /// steps unbounded).
   RetargetParams params;
   HumanKinematicsConfig human;
   /// Add the hand's pointing direction as a target when the hand is seen. Off by default: x_target
@@ -59,6 +62,10 @@ struct RetargetRow {
 std::vector<RetargetFrame> retargetTargets(const ArmModel& arm, const Skeleton& frames,
                                            const RetargetOptions& options, std::vector<bool>& ok,
                                            std::vector<bool>& hand_seen);
+
+/// The time between samples of `frames` (the median of the positive differences of t_s), s;
+/// `fallback` when there are fewer than two samples.
+double skeletonStepTime(const Skeleton& frames, double fallback);
 
 /// Solves one frame of Algorithm 1 for retargetSkeletonWith: (targets, pointing direction or
 /// nullptr) -> the frame's result; warm starts are the solver's own state.

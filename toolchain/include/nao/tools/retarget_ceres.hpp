@@ -3,8 +3,10 @@
 // the parameters), each IK solve done by Ceres' bounded Levenberg-Marquardt.
 //
 // Ceres setup per IK solve: one parameter block q (5) with the URDF limits as bounds, an
-// analytic-Jacobian SizedCostFunction<8, 5> for the hand position plus the displacement term
-// sqrt(mu) (q - q_start), and a SizedCostFunction<3, 5> for the pointing direction when given;
+// analytic-Jacobian SizedCostFunction<8, 5> for the hand position plus the joint-space pull
+// sqrt(mu w + nu) (q - c) (IkJointTerms: posture and motion costs), and a SizedCostFunction<3, 5>
+// for the pointing direction when given; the bounds are the IkJointTerms box (the joint limits,
+// and from the second frame on the step bound);
 // TRUST_REGION / LEVENBERG_MARQUARDT, DENSE_QR, one thread, initial trust region 1/lambda_x,
 // max_num_iterations = 4 x max_inner_iterations, gradient_tolerance and parameter_tolerance from
 // RetargetParams, function_tolerance 1e-16 (so it stops on optimality, not on a stalled cost).
@@ -28,15 +30,14 @@ namespace nao::tools {
 
 /// Workspace of the Ceres version; mirrors nao::RetargetData.
 struct CeresRetargetData {
-  ArmData arm;       ///< kinematics workspace of the outer loop
-  ArmData arm_cost;  ///< kinematics workspace of the cost functions
-  JointVector q_warm = JointVector::Zero();  ///< start of the next frame (previous q_x), rad
-  bool has_warm_start = false;               ///< false: next frame starts from q_target clamped
-  IkResult ik;                               ///< the last IK solve
-  RetargetResult result;                     ///< the last frame
+  ArmData arm;              ///< kinematics workspace of the outer loop
+  ArmData arm_cost;         ///< kinematics workspace of the cost functions
+  RetargetHistory history;  ///< warm start and the previous frame's poses
+  IkResult ik;              ///< the last IK solve
+  RetargetResult result;    ///< the last frame
 };
 
-/// Forgets the warm start (next frame starts from its q_target clamped).
+/// Forgets the warm start and the previous frame (next frame starts from its q_target clamped).
 void resetRetarget(CeresRetargetData& data);
 
 /// One bounded IK solve with Ceres; same problem and arguments as nao::solveHandIk.
@@ -44,6 +45,11 @@ void resetRetarget(CeresRetargetData& data);
 const JointVector& solveHandIkCeres(const ArmModel& model, const RetargetParams& params, CeresRetargetData& data,
                                     const Eigen::Vector3d& p_target_TH, const JointVector& q_start,
                                     const JointVector& q_anchor, const Eigen::Vector3d* u_target_TH = nullptr);
+
+/// The same solve with explicit joint terms (pull and box), as nao::solveHandIk's second form.
+const JointVector& solveHandIkCeres(const ArmModel& model, const RetargetParams& params, CeresRetargetData& data,
+                                    const Eigen::Vector3d& p_target_TH, const JointVector& q_start,
+                                    const IkJointTerms& terms, const Eigen::Vector3d* u_target_TH);
 
 /// One frame of Algorithm 1 with Ceres; same arguments, result and flags as nao::solveRetarget.
 const RetargetResult& solveRetargetCeres(const ArmModel& model, const RetargetParams& params,
