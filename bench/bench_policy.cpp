@@ -93,7 +93,7 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, WeightP
   }
   const ModelFile& model = paperModel();
   const std::vector<const float*>& p = paperWeights().tensors;  // aligned, as nao_rt --weights
-  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
+  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
   AlignedBytes blob;
   if (int8) {
     blob = quantizeModelInt8(model);

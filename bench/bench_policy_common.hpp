@@ -59,7 +59,7 @@ inline std::unique_ptr<float[], rt::WeightStorage::Free> alignedFloats(std::size
 inline const AlignedWeights& paperWeights() {
   static const AlignedWeights w = [] {
     AlignedWeights a;
-    a.tensors = rt::copyWeightFile<PaperPolicyDims>(paperModel(), a.storage);
+    a.tensors = rt::copyWeightFile(paperModel(), a.storage);
     return a;
   }();
   return w;

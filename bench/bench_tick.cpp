@@ -26,7 +26,7 @@ void runTickFull(benchmark::State& state, bool packed) {
   const ArmModel arm = loadArmModel(NAO_DEFAULT_URDF);
   checkJointsMatch(model, arm, NAO_BENCH_MODEL);
   const std::vector<const float*>& p = paperWeights().tensors;  // aligned, as nao_rt --weights
-  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
+  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
   AlignedBytes blob;
   if (packed) {
     blob = packModelFp32(model);
@@ -34,7 +34,7 @@ void runTickFull(benchmark::State& state, bool packed) {
   }
   const int movement = 1;  // whole_arm (sorted movement names)
   std::vector<JointVector> centroids;
-  for (int k = 0; k < PaperPolicyDims::kClusters; ++k) centroids.push_back(centroid(w, movement, k).cast<double>());
+  for (int k = 0; k < w.clusters; ++k) centroids.push_back(centroid(w, movement, k).cast<double>());
   const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, tools::Movement::kWholeArm, 1, 0, centroids);
   const ControllerModel<PaperPolicyDims> cm = configureController(arm, w, ControllerParams{});
   OdeArmBackend robot(cm.arm, SimParams{}, ref.target.front());
