@@ -25,8 +25,8 @@ struct TriangulateArgs {
   double outlier_px = 10.0;
   double max_gap = 0.2;
   bool no_bone_check = false;
-  double smooth = 0.05;
-  double bone_fit = 300.0;
+  double smooth = recordingOptions().zero_lag_sigma_s;
+  double bone_fit = recordingOptions().bone_fit_px_per_m;
   std::string out;
 };
 
@@ -34,7 +34,8 @@ void run(const TriangulateArgs& args) {
   if (args.demo.empty() && (args.keypoints.empty() || args.calibration.empty()))
     throw UserError("give either --demo DEMO_DIR, or --keypoints CAM_DIR (once per camera) and --calibration FILE");
   if (!args.demo.empty() && (!args.keypoints.empty() || !args.calibration.empty()))
-    throw UserError("--demo reads the demonstration's own cam*/ folders and calibration.json; "
+    throw UserError("--demo reads the recording's own cam*/ folders and its calibration (calibration.json or .toml "
+                    "in it or the folder above); "
                     "do not combine it with --keypoints or --calibration");
   if (args.demo.empty() && args.keypoints.size() < 2)
     throw UserError("triangulation needs at least 2 cameras: give --keypoints once per camera folder");
@@ -62,7 +63,7 @@ void run(const TriangulateArgs& args) {
   };
 
   const std::vector<std::string> dirs = args.demo.empty() ? args.keypoints : demoCameraDirs(args.demo);
-  const std::string calibration = args.demo.empty() ? args.calibration : args.demo + "/calibration.json";
+  const std::string calibration = args.demo.empty() ? args.calibration : demoCalibration(args.demo);
   std::cerr << "reading " << dirs.size() << " camera folders (" << args.format << "), calibration " << calibration
             << "\n";
   TriangulationReport report;
@@ -101,7 +102,7 @@ void setup(CLI::App& app) {
       "lengths, a zero-lag low-pass over time; gaps up to --max-gap are interpolated and flagged _ok = 2,\n"
       "longer ones stay missing).");
   auto* demo = cmd->add_option("--demo", args->demo,
-                               "synthesiser demonstration folder: reads its cam*/ folders (sorted) and calibration.json");
+                               "recording folder (docs/formats.md): reads its cam*/ folders (sorted) and calibration.json or .toml from it or from the folder above");
   auto* kp = cmd->add_option("--keypoints", args->keypoints,
                              "OpenPose JSON folder of one camera; repeat once per camera, in calibration order");
   auto* calib = cmd->add_option("--calibration", args->calibration, "calibration file, our .json or Anipose-style .toml");

@@ -49,8 +49,25 @@ std::vector<std::string> demoCameraDirs(const std::string& demo_dir) {
   return out;
 }
 
+std::string demoCalibration(const std::string& demo_dir) {
+  const fs::path dir(demo_dir);
+  for (const fs::path& where : {dir, dir.parent_path()})
+    for (const char* name : {"calibration.json", "calibration.toml"}) {
+      std::error_code ec;
+      if (fs::is_regular_file(where / name, ec)) return (where / name).string();
+    }
+  throw UserError(demo_dir + ": no calibration.json or calibration.toml in the recording's folder or the one above it");
+}
+
 Skeleton triangulateDemo(const std::string& demo_dir, const TriangulateOptions& opt, TriangulationReport* report) {
-  return triangulateFolders(demoCameraDirs(demo_dir), (fs::path(demo_dir) / "calibration.json").string(), opt, report);
+  return triangulateFolders(demoCameraDirs(demo_dir), demoCalibration(demo_dir), opt, report);
+}
+
+TriangulateOptions recordingOptions() {
+  TriangulateOptions o;
+  o.zero_lag_sigma_s = 0.05;
+  o.bone_fit_px_per_m = 300.0;
+  return o;
 }
 
 }  // namespace nao::tools

@@ -1,55 +1,34 @@
-// nao_toolchain evaluate: issue 13's scores per movement into OUT/summary.json (docs/evaluate.md).
-//
-//   autonomous_dtw_m   median over the held-out demonstrations d of nao_rt's rollout of the
-//                      autonomous model from d's s_0 for d's length (--reference none
-//                      --start-pose s_0 --ticks N): DTW of its hand path (ticks.csv) to the
-//                      nearest held-out demonstration
-//   demo_nn_dtw_m      median over d of the DTW from d to its nearest other held-out demonstration
-//   linear_ar_dtw_m    the per-joint linear AR baseline (linear_ar.hpp), fitted on the model's
-//                      training split, rolled out from the same s_0 on the same simulated arm
-//   reference_rmse_m   median over --seeds of nao_rt's hand RMSE in reference mode with the
-//                      reference model, on the held-out demonstration of synthesiser run seed
-//                      1000000 + s, written as a skeleton CSV (--reference file:PATH)
-//   blend_law_rmse_m   the same run with the blend law instead of the policy (--blend-law-pole)
-//   gain_law_rmse_m    the same run with the fixed-gain first-order servo inversion (--gain-law):
-//                      the closed form the execution labels would follow on an exactly
-//                      first-order arm, i.e. the bar for what the policy learns beyond a formula
+// nao_toolchain evaluate: whether an autonomous model makes its movements, into OUT/summary.json
+// (docs/evaluate.md). Per movement, nao_rt's runs of the model from every held-out
+// demonstration's start are scored against the held-out demonstrations (hand-path DTW to the
+// nearest, middle-phase speed, loops, joint range, distinct runs), against the best fixed
+// trajectory the data give (the medoid replay) and the linear AR baseline; the network's share of
+// the action and the attention ablation come from an in-process replay of each run through the
+// runtime's own controller. With a reference model, the reference mode's hand RMSE beside the
+// blend law and the gain law (nao_rt runs on recorded references).
+#include "jobs.hpp"
+#include "replica.hpp"
+
 #include "nao/controller.hpp"
 #include "nao/csv_reader.hpp"
-#include "nao/kinematics.hpp"
-#include "nao/model_file.hpp"
 #include "nao/model_metadata.hpp"
-#include "nao/sim_arm.hpp"
 #include "nao/skeleton_csv.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
-#include "nao/tools/heldout.hpp"
 #include "nao/tools/linear_ar.hpp"
-#include "nao/tools/policy_dataset.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "nao/tools/synth.hpp"
-#include "rt_metrics.hpp"
 
 #include <nlohmann/json.hpp>
-
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <map>
 #include <memory>
-#include <optional>
 #include <set>
-#include <sstream>
-
-extern char** environ;
 
 namespace nao::tools {
 namespace {
@@ -58,9 +37,10 @@ namespace fs = std::filesystem;
 using json = nlohmann::ordered_json;
 
 struct Args {
-  std::string autonomous_model = "models/autonomous.bin";
+  std::string model = "models/autonomous.bin";
   std::string reference_model = "models/default.bin";
   std::string data = "out/train/data";
+  std::string recordings;
   std::string out = "out/eval";
   std::string urdf = NAO_DEFAULT_URDF;
   std::string nao_rt;
@@ -68,135 +48,12 @@ struct Args {
   std::vector<std::uint64_t> seeds = {1, 2, 3, 4, 5};
   int jobs = 2;
   int max_order = 12;
-  int min_demos = 16;
-  std::int64_t test_seed = -1;  ///< >= 0: score on the test set of this seed (testDemos), not on validation
+  int min_demos = 0;  ///< 0: 16 for a synthetic validation set, 4 otherwise
+  std::int64_t test_seed = -1;
   int test_demos = 16;
-  bool data_given = false;
+  RecordingInput input;
+  bool no_reference = false;
 };
-
-// The linear AR baseline of one movement, fitted one way, rolled out from every held-out s_0.
-struct ArBaseline {
-  bool paced = false;  ///< fitted on the trajectories at the model's canonical pace
-  LinearArModel model;
-  std::vector<NearestDemo> nearest;
-  std::vector<int> limited;
-  std::vector<double> dtw;  ///< nearest[i].dtw_m
-};
-
-// One nao_rt process of the evaluation.
-struct Job {
-  std::string what;               // for progress and errors, e.g. "elbow autonomous elbow_012"
-  std::vector<std::string> argv;  // argv[0] = nao_rt
-  fs::path dir;                   // run directory (--log), holds nao_rt.log
-};
-
-std::string readText(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-std::string lastLine(const std::string& text) {
-  std::istringstream in(text);
-  std::string line, last;
-  while (std::getline(in, line))
-    if (!line.empty()) last = line;
-  return last;
-}
-
-pid_t spawn(const Job& job) {
-  std::error_code ec;
-  fs::create_directories(job.dir, ec);
-  if (ec) throw UserError("cannot create " + job.dir.string() + ": " + ec.message());
-  const std::string log = (job.dir / "nao_rt.log").string();
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  std::vector<char*> argv;
-  for (const std::string& a : job.argv) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  const int rc = posix_spawn(&pid, argv[0], &fa, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&fa);
-  if (rc != 0) throw UserError("cannot start " + job.argv[0] + ": " + std::strerror(rc));
-  return pid;
-}
-
-// Runs the jobs, at most `parallel` at a time. On the first failure no new job starts; the
-// running ones finish, then the failure is reported (nao_rt's own last line).
-void runJobs(const std::vector<Job>& jobs, int parallel) {
-  std::map<pid_t, std::size_t> running;
-  std::size_t next = 0, done = 0;
-  std::string failure;
-  while (done < jobs.size()) {
-    while (failure.empty() && next < jobs.size() && static_cast<int>(running.size()) < parallel) {
-      running[spawn(jobs[next])] = next;
-      ++next;
-    }
-    if (running.empty()) break;
-    int status = 0;
-    const pid_t pid = waitpid(-1, &status, 0);
-    if (pid < 0) throw UserError(std::string("waiting for nao_rt: ") + std::strerror(errno));
-    const auto it = running.find(pid);
-    if (it == running.end()) continue;
-    const Job& job = jobs[it->second];
-    running.erase(it);
-    ++done;
-    const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
-    std::fprintf(stderr, "evaluate: [%zu/%zu] %s%s\n", done, jobs.size(), job.what.c_str(), ok ? "" : " FAILED");
-    if (!ok && failure.empty()) {
-      const std::string line = lastLine(readText(job.dir / "nao_rt.log"));
-      failure = job.what + ": nao_rt " +
-                (WIFEXITED(status) ? "exit " + std::to_string(WEXITSTATUS(status)) : std::string("killed")) + ": " +
-                (line.empty() ? "(no output)" : line) + " (log: " + (job.dir / "nao_rt.log").string() + ")";
-    }
-  }
-  if (!failure.empty()) throw UserError(failure);
-}
-
-json readSummary(const Job& job) {
-  const fs::path p = job.dir / "summary.json";
-  const json j = json::parse(readText(p), nullptr, /*allow_exceptions=*/false);
-  if (!j.is_object()) throw UserError(p.string() + ": not a JSON object (nao_rt did not finish?)");
-  return j;
-}
-
-double numberAt(const json& j, const char* key, const Job& job) {
-  if (!j.contains(key) || !j[key].is_number())
-    throw UserError((job.dir / "summary.json").string() + ": no number '" + key + "'");
-  return j[key].get<double>();
-}
-
-json metadataOf(const ModelFile& m) {
-  return json::parse(m.header.metadata_json, nullptr, /*allow_exceptions=*/false);
-}
-
-std::vector<std::string> splitNames(const json& meta, const char* which) {
-  std::vector<std::string> names;
-  if (meta.is_object() && meta.contains("split") && meta["split"].contains(which) && meta["split"][which].is_array())
-    for (const json& n : meta["split"][which])
-      if (n.is_string()) names.push_back(n.get<std::string>());
-  return names;
-}
-
-// "<movement>_<index>" of `movement`: the index, or -1.
-int demoIndex(const std::string& name, const std::string& movement) {
-  const auto cut = name.rfind('_');
-  if (cut == std::string::npos || name.substr(0, cut) != movement) return -1;
-  const std::string digits = name.substr(cut + 1);
-  if (digits.empty() || digits.find_first_not_of("0123456789") != std::string::npos) return -1;
-  return std::stoi(digits);
-}
-
-std::string millimetres(double m) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.2f", m * 1e3);
-  return buf;
-}
-
-json numberOrNull(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
 
 std::string exactNumber(double v) {
   char buf[32];
@@ -204,356 +61,382 @@ std::string exactNumber(double v) {
   return buf;
 }
 
-// The hand path of a nao_rt run: the start pose's hand point (at rest, clamped to the limits),
-// then every tick's hand point (ticks.csv ee_x, ee_y, ee_z: exact doubles).
-HandPath runHandPath(const ArmModel& arm, const JointVector& q_start, const fs::path& ticks_csv) {
-  HandPath path = handPath(arm, {clampToLimits(arm, q_start)});
+json numberOrNull(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+
+std::string millimetres(double m) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.2f", m * 1e3);
+  return buf;
+}
+
+std::vector<std::string> splitNames(const json& meta, const char* which, const std::string& movement) {
+  std::vector<std::string> names;
+  if (meta.is_object() && meta.contains("split") && meta["split"].contains(which) && meta["split"][which].is_array())
+    for (const json& n : meta["split"][which])
+      if (n.is_string() && n.get<std::string>().rfind(movement + "_", 0) == 0 &&
+          n.get<std::string>().find_first_not_of("0123456789", movement.size() + 1) == std::string::npos)
+        names.push_back(n.get<std::string>());
+  return names;
+}
+
+// A nao_rt run's joint and hand paths: the start pose (at rest, clamped), then every tick's
+// (ticks.csv q_*, ee_*: exact doubles).
+struct RunPaths {
+  std::vector<JointVector> q;
+  HandPath hand;
+};
+RunPaths readRun(const ArmModel& arm, const JointVector& start, const fs::path& ticks_csv) {
+  RunPaths r;
+  r.q.push_back(clampToLimits(arm, start));
+  r.hand = handPath(arm, r.q);
   CsvReader csv(ticks_csv.string(), "ticks.csv");
+  std::size_t cq[kNumJoints];
+  for (int j = 0; j < kNumJoints; ++j) cq[j] = csv.column("q_" + std::to_string(j));
   const std::size_t x = csv.column("ee_x"), y = csv.column("ee_y"), z = csv.column("ee_z");
-  while (csv.next()) path.emplace_back(csv.number(x), csv.number(y), csv.number(z));
-  return path;
+  while (csv.next()) {
+    JointVector q;
+    for (int j = 0; j < kNumJoints; ++j) q[j] = csv.number(cq[j]);
+    r.q.push_back(q);
+    r.hand.emplace_back(csv.number(x), csv.number(y), csv.number(z));
+  }
+  return r;
+}
+
+// The worst excursion of q beyond [lo, hi] over a trajectory, rad (0 inside).
+double rangeExcess(const std::vector<JointVector>& q, const JointVector& lo, const JointVector& hi) {
+  double worst = 0.0;
+  for (const JointVector& x : q) worst = std::max({worst, (x - hi).maxCoeff(), (lo - x).maxCoeff()});
+  return worst;
 }
 
 json arJson(const LinearArModel& m) {
   json joints = json::array();
   for (const LinearArJoint& j : m.joints)
-    joints.push_back({{"order", j.order},
-                      {"c", j.c},
-                      {"beta", j.beta},
-                      {"alpha", j.alpha},
-                      {"train_mse_rad2", j.train_mse},
-                      {"val_mse_by_order_rad2", j.val_mse_by_order}});
+    joints.push_back({{"order", j.order}, {"c", j.c}, {"beta", j.beta}, {"alpha", j.alpha}});
   return joints;
 }
 
+// What one movement's evaluation holds.
+struct MovementWork {
+  std::string name;
+  int index = 0;              ///< in the model's movement names
+  std::string set_kind;       ///< validation, test or recordings
+  DemoSet held, train;
+  std::vector<int> start_index;  ///< per held-out demonstration: --start I, or -1 (--start-pose)
+  std::vector<std::size_t> auto_jobs, ref_jobs, law_jobs, gain_jobs;
+};
+
+// The synthesiser's test set of `movement`: demonstrations 0..n-1 of run seed 1000000 + S written
+// as recordings into `dir`, then processed as any recording is.
+DemoSet syntheticTestSet(const ArmModel& arm, const std::string& movement, std::uint64_t test_seed, int n,
+                         const fs::path& dir, const RecordingInput& input, const RetargetParams& retarget,
+                         const std::vector<JointVector>& key_poses) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) throw UserError("cannot create " + dir.string() + ": " + ec.message());
+  std::vector<std::string> names;
+  for (int i = 0; i < n; ++i) {
+    const SynthDemo demo = generateDemo(parseMovement(movement), i, kReferenceSeedBase + test_seed, false);
+    writeDemo(demo, dir.string());
+    names.push_back(demo.name);
+  }
+  return demoSetFromRecordings(arm, dir.string(), names, input, retarget, key_poses, movement + " test set");
+}
+
 void evaluate(const Args& a) {
-  if (a.jobs < 1) throw UserError("--jobs must be at least 1");
   if (a.seeds.empty()) throw UserError("--seeds needs at least one seed");
   const ArmModel arm = loadArmModel(a.urdf);
   const fs::path nao_rt = a.nao_rt.empty() ? fs::read_symlink("/proc/self/exe").parent_path() / "nao_rt" : fs::path(a.nao_rt);
   if (access(nao_rt.c_str(), X_OK) != 0)
     throw UserError("nao_rt not found at " + nao_rt.string() + ": build it (toolchain/nao build) or pass --nao-rt PATH");
+  const ModelFile model = readModelFile(a.model);
+  checkJointsMatch(model, arm, a.model);
+  if (model.header.conditioning != Conditioning::kAutonomous)
+    throw UserError(a.model + " is not an autonomous-mode model (--model)");
+  const json meta = json::parse(model.header.metadata_json, nullptr, /*allow_exceptions=*/false);
+  const RetargetParams retarget = modelRetargetSetting(model.header.metadata_json, RetargetParams{}, a.model);
+  const ModelStarts starts = modelStarts(model.header.metadata_json, model.header.movement_names, a.model);
+  const bool recordings = !a.recordings.empty();
+  const bool test = a.test_seed >= 0;
+  if (recordings && test) throw UserError("--test-seed scores a synthetic test set; --recordings scores the model's held-out recordings: take one");
+  const bool reference = !recordings && !a.no_reference;
+  const int min_demos = a.min_demos > 0 ? a.min_demos : (!recordings && !test ? 16 : 4);
 
-  const ModelFile auto_model = readModelFile(a.autonomous_model);
-  const ModelFile ref_model = readModelFile(a.reference_model);
-  checkJointsMatch(auto_model, arm, a.autonomous_model);
-  checkJointsMatch(ref_model, arm, a.reference_model);
-  if (auto_model.header.conditioning != Conditioning::kAutonomous)
-    throw UserError(a.autonomous_model + " is not an autonomous-mode model (--autonomous-model)");
-  if (ref_model.header.conditioning != Conditioning::kReference)
-    throw UserError(a.reference_model + " is not a reference-conditioned model (--reference-model)");
-  const json meta = metadataOf(auto_model);
-  const json ref_meta = metadataOf(ref_model);
-  const RetargetParams retarget = modelRetargetSetting(auto_model.header.metadata_json, RetargetParams{},
-                                                       a.autonomous_model);
-  double pole = KeyPoseBlend{}.pole;
-  if (ref_meta.is_object() && ref_meta.contains("training") && ref_meta["training"].contains("perturbation") &&
-      ref_meta["training"]["perturbation"].contains("blend_pole") &&
-      ref_meta["training"]["perturbation"]["blend_pole"].is_number())
-    pole = ref_meta["training"]["perturbation"]["blend_pole"].get<double>();
-
-  // The AR baseline's training data: the autonomous model's own data set when it is here (its
-  // fingerprint must be the model's), else its training demonstrations regenerated.
   std::unique_ptr<PolicyData> data;
-  std::string data_source = "regenerated";
-  if (a.data != "regenerate") {
-    if (fs::is_directory(a.data)) {
-      std::fprintf(stderr, "evaluate: reading the training data set %s\n", a.data.c_str());
-      data = std::make_unique<PolicyData>(loadPolicyData(a.data));
-      const std::string have = hex64(dataFingerprint(*data));
-      std::string want;
-      if (meta.contains("data") && meta["data"].contains("fingerprint") && meta["data"]["fingerprint"].is_string())
-        want = meta["data"]["fingerprint"].get<std::string>();
-      if (have != want)
-        throw UserError(a.data + " has data fingerprint " + have + ", " + a.autonomous_model + " was trained on " +
-                        (want.empty() ? std::string("an unrecorded one") : want) +
-                        ": rebuild it (toolchain/nao train data) or pass --data regenerate");
-      data_source = a.data + " (fingerprint " + have + ")";
-    } else if (a.data_given) {
-      throw UserError("--data " + a.data + " is not a directory (a data set of nao_toolchain cluster, or 'regenerate')");
-    } else {
-      std::fprintf(stderr,
-                   "evaluate: no data set at %s (toolchain/nao train data makes it): the linear AR baseline is fitted "
-                   "on the training demonstrations regenerated like nao_rt regenerates held-out ones\n",
-                   a.data.c_str());
-    }
+  if (!recordings) {
+    std::error_code ec;
+    if (!fs::is_directory(a.data, ec))
+      throw UserError(a.data + ": no data set (toolchain/nao train data makes it; the baselines are fitted on the model's training demonstrations)");
+    std::fprintf(stderr, "evaluate: reading the data set %s\n", a.data.c_str());
+    data = std::make_unique<PolicyData>(loadPolicyData(a.data));
+    const std::string have = hex64(dataFingerprint(*data));
+    const std::string want = meta.contains("data") && meta["data"].contains("fingerprint") && meta["data"]["fingerprint"].is_string()
+                                 ? meta["data"]["fingerprint"].get<std::string>()
+                                 : std::string("an unrecorded one");
+    if (have != want)
+      throw UserError(a.data + " has data fingerprint " + have + ", " + a.model + " was trained on " + want +
+                      " (toolchain/nao train data rebuilds the data set)");
   }
 
   const fs::path out(a.out);
   std::error_code ec;
   fs::create_directories(out, ec);
   if (ec) throw UserError("cannot create " + a.out + ": " + ec.message());
-
-  const std::vector<std::string> train_names = splitNames(meta, "train");
-  const SimModel sim = makeSimModel(arm, SimParams{});
+  const SimParams sim_params;
+  const SimModel sim = makeSimModel(arm, sim_params);
   const double period_s = ControllerParams{}.period_s;
-  // The gain that inverts the simulated first-order servo over one tick (the expert's first step).
   const double gain = servoStepGain(sim.params);
 
-  struct MovementWork {
-    std::string name;
-    HeldOutDemos held;
-    std::vector<NearestDemo> demo_nn;
-    // [0]: fitted on the demonstrations as they are; [1]: on them at the model's canonical pace
-    // (only for such a model). The bar is the better of the two.
-    std::vector<ArBaseline> ar;
-    std::size_t ar_train_demos = 0;
-    std::vector<std::size_t> auto_jobs, ref_jobs, law_jobs, gain_jobs;
-  };
   std::vector<MovementWork> work;
   std::vector<Job> jobs;
-  for (const char* mname : kMovementNames) {
-    const std::string name = mname;
+  const std::vector<std::string>& names = model.header.movement_names;
+  for (std::size_t mi = 0; mi < names.size(); ++mi) {
+    const std::string& name = names[mi];
     if (a.movement != "all" && a.movement != name) continue;
-    const auto& names = auto_model.header.movement_names;
-    const auto it = std::find(names.begin(), names.end(), name);
-    if (it == names.end()) {
-      if (a.movement != "all") throw UserError(a.autonomous_model + " has no movement '" + name + "'");
-      continue;
-    }
     MovementWork w;
     w.name = name;
-    // v: the model's validation demonstrations (the AR order is chosen on them); scored: the ones
-    // scored, v itself, or with --test-seed a test set that neither training nor selection saw.
-    const ValidationSet v = validationDemos(auto_model.header.metadata_json, name, a.autonomous_model);
-    const bool test = a.test_seed >= 0;
-    const ValidationSet scored = test ? testDemos(name, static_cast<std::uint64_t>(a.test_seed), a.test_demos) : v;
-    if (!test && static_cast<int>(v.names.size()) < a.min_demos)
-      throw UserError(a.autonomous_model + " holds out " + std::to_string(v.names.size()) + " demonstration(s) of " +
-                      name + "; the protocol needs at least " + std::to_string(a.min_demos) +
-                      " (--min-demos; retrain with a larger validation fraction)");
-    const std::vector<JointVector> key_poses = modelKeyPoses(auto_model, static_cast<int>(it - names.begin()));
-    w.held.movement = name;
-    w.held.seed = scored.seed;
-    w.held.seed_assumed = scored.seed_assumed;
-    w.held.names = scored.names;
-    w.held.indices = scored.indices;
-    std::fprintf(stderr, "evaluate: %s: regenerating %zu %s demonstrations (synth seed %llu)\n", name.c_str(),
-                 scored.names.size(), test ? "test" : "held-out", static_cast<unsigned long long>(scored.seed));
-    w.held.target = regenerateTargets(arm, name, scored.seed, scored.indices, key_poses, retarget);
-    for (const auto& t : w.held.target) w.held.hand.push_back(handPath(arm, t));
-    for (std::size_t i = 0; i < w.held.hand.size(); ++i)
-      w.demo_nn.push_back(nearestDemo(w.held.hand[i], w.held.hand, static_cast<int>(i)));
-
-    // Linear AR: fitted on the training split, order chosen on the held-out split (one step).
-    std::vector<std::vector<JointVector>> train, val;
-    std::vector<std::string> train_of;  // the name of every entry of train
-    if (data) {
-      const std::set<std::string> want_train(train_names.begin(), train_names.end());
-      const std::set<std::string> want_val(v.names.begin(), v.names.end());
-      for (const PolicyDemo& d : data->demos) {
-        if (demoIndex(d.name, name) < 0) continue;
-        if (want_train.count(d.name)) {
-          train.push_back(d.f);
-          train_of.push_back(d.name);
-        }
-        if (want_val.count(d.name)) val.push_back(d.f);
-      }
+    w.index = static_cast<int>(mi);
+    const std::vector<JointVector> key_poses = modelKeyPoses(model, w.index);
+    const std::vector<std::string> val_names = splitNames(meta, "val", name), train_names = splitNames(meta, "train", name);
+    if (recordings) {
+      w.set_kind = "recordings";
+      w.held = demoSetFromRecordings(arm, a.recordings, val_names, a.input, retarget, key_poses, name + " held out");
+      w.train = demoSetFromRecordings(arm, a.recordings, train_names, a.input, retarget, key_poses, name + " training");
     } else {
-      std::vector<int> idx;
-      for (const std::string& n : train_names)
-        if (demoIndex(n, name) >= 0) {
-          idx.push_back(demoIndex(n, name));
-          train_of.push_back(n);
-        }
-      std::fprintf(stderr, "evaluate: %s: regenerating %zu training demonstrations\n", name.c_str(), idx.size());
-      train = regenerateTargets(arm, name, v.seed, idx, key_poses, retarget);
-      val = test ? regenerateTargets(arm, name, v.seed, v.indices, key_poses, retarget) : w.held.target;
-    }
-    if (train.empty()) throw UserError(a.autonomous_model + ": no training demonstration of " + name + " (split.train)");
-    if (val.empty()) throw UserError("no held-out demonstration of " + name + " in the data set " + a.data);
-    w.ar_train_demos = train.size();
-    SimData sim_data(sim, w.held.target.front().front());
-    for (int paced = 0; paced <= 0; ++paced) {
-      ArBaseline b;
-      b.paced = paced != 0;
-      b.model = fitLinearAr(train, val, a.max_order);
-      for (std::size_t i = 0; i < w.held.target.size(); ++i) {
-        const Rollout r = rolloutOnSim(sim, sim_data, period_s, w.held.target[i].front(),
-                                       static_cast<int>(w.held.target[i].size()),
-                                       [&](const JointVector& q, const std::vector<JointVector>& a_past) {
-                                         return linearArAction(b.model, q, a_past);
-                                       });
-        b.nearest.push_back(nearestDemo(r.hand, w.held.hand));
-        b.limited.push_back(r.limited_ticks);
-        b.dtw.push_back(b.nearest.back().dtw_m);
+      w.train = demoSetFrom(arm, *data, name, train_names);
+      if (test) {
+        w.set_kind = "test";
+        w.held = syntheticTestSet(arm, name, static_cast<std::uint64_t>(a.test_seed), a.test_demos,
+                                  out / "test_recordings" / name, a.input, retarget, key_poses);
+      } else {
+        w.set_kind = "validation";
+        w.held = demoSetFrom(arm, *data, name, val_names);
       }
-      w.ar.push_back(std::move(b));
+    }
+    if (static_cast<int>(w.held.size()) < min_demos)
+      throw UserError(a.model + ": " + std::to_string(w.held.size()) + " held-out demonstration(s) of " + name +
+                      "; this evaluation needs at least " + std::to_string(min_demos) + " (--min-demos)");
+    if (w.train.size() == 0) throw UserError(a.model + ": no training demonstration of " + name + " (split.train)");
+    // A validation demonstration is one of the model's starts: nao_rt runs it with --start I.
+    for (const std::string& n : w.held.names) {
+      int index = -1;
+      if (w.set_kind != "test")
+        for (std::size_t i = 0; i < starts[mi].size(); ++i)
+          if (starts[mi][i].name == n) index = static_cast<int>(i);
+      w.start_index.push_back(index);
     }
 
-    // nao_rt runs: one autonomous rollout per held-out demonstration, reference mode per seed.
     const fs::path mdir = out / name;
-    for (const char* sub : {"autonomous", "reference", "blend_law", "gain_law", "references"})
+    for (const char* sub : {"autonomous", "reference", "blend_law", "gain_law", "references", "demos"})
       fs::remove_all(mdir / sub, ec);
-    for (std::size_t i = 0; i < scored.names.size(); ++i) {
-      // From the demonstration's s_0 (its feature-extracted start, at rest) for its length.
+    fs::create_directories(mdir / "demos", ec);
+    for (std::size_t i = 0; i < w.held.size(); ++i) {
+      writeTrajectoryCsv((mdir / "demos" / (w.held.names[i] + ".csv")).string(), w.held.f[i], period_s);
+      std::vector<std::string> argv = {nao_rt.string(), "--weights", a.model, "--urdf", a.urdf,
+                                       "--reference", "none", "--movement", name};
+      if (w.start_index[i] >= 0) {
+        argv.insert(argv.end(), {"--start", std::to_string(w.start_index[i])});
+      } else {
+        std::string pose;
+        for (int j = 0; j < kNumJoints; ++j) pose += (j > 0 ? "," : "") + exactNumber(w.held.start[i][j]);
+        argv.insert(argv.end(), {"--start-pose", pose});
+      }
+      argv.insert(argv.end(), {"--ticks", std::to_string(w.held.f[i].size()), "--zero-timing", "--log",
+                               (mdir / "autonomous" / w.held.names[i]).string()});
       w.auto_jobs.push_back(jobs.size());
-      const JointVector& s0 = w.held.target[i].front();
-      std::string pose;
-      for (int j = 0; j < kNumJoints; ++j) pose += (j > 0 ? "," : "") + exactNumber(s0[j]);
-      std::vector<std::string> argv = {nao_rt.string(), "--weights", a.autonomous_model, "--urdf", a.urdf,
-                                       "--reference", "none", "--movement", name, "--start-pose", pose,
-                                       "--ticks", std::to_string(w.held.target[i].size()),
-                                       "--zero-timing", "--log", (mdir / "autonomous" / scored.names[i]).string()};
-      jobs.push_back({name + " autonomous " + scored.names[i], argv, mdir / "autonomous" / scored.names[i]});
+      jobs.push_back({name + " autonomous " + w.held.names[i], argv, mdir / "autonomous" / w.held.names[i]});
     }
-    char pole_text[32], gain_text[32];
-    std::snprintf(pole_text, sizeof pole_text, "%.17g", pole);
-    std::snprintf(gain_text, sizeof gain_text, "%.17g", gain);
-    for (std::uint64_t s : a.seeds) {
-      const std::string seed = std::to_string(s);
-      // The reference: demonstration 0 of run seed 1000000 + s (never a training seed) as the
-      // two cameras and the triangulation see it, written exactly (17 digits).
-      const fs::path skeleton = mdir / "references" / ("seed_" + seed + ".csv");
-      fs::create_directories(skeleton.parent_path(), ec);
-      writeSkeletonCsv(skeleton.string(),
-                       observeDemo(generateDemo(parseMovement(name), 0, kReferenceSeedBase + s, false)), false, 17);
-      // One reference-mode run of the model (no extra flags) or of a baseline replacing it.
-      const auto referenceRun = [&](const std::string& label, const char* sub, std::vector<std::string> extra) {
-        const fs::path dir = mdir / sub / ("seed_" + seed);
-        std::vector<std::string> argv = {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf,
-                                         "--reference", "file:" + skeleton.string(), "--movement", name};
-        argv.insert(argv.end(), extra.begin(), extra.end());
-        for (const char* x : {"--zero-timing", "--log"}) argv.push_back(x);
-        argv.push_back(dir.string());
-        jobs.push_back({name + " " + label + " seed " + seed, argv, dir});
-        return jobs.size() - 1;
-      };
-      w.ref_jobs.push_back(referenceRun("reference", "reference", {}));
-      w.law_jobs.push_back(referenceRun("blend law", "blend_law", {"--blend-law-pole", pole_text}));
-      w.gain_jobs.push_back(referenceRun("gain law", "gain_law", {"--gain-law", gain_text}));
+    if (reference) {
+      char pole_text[32], gain_text[32];
+      std::snprintf(pole_text, sizeof pole_text, "%.17g", kFeatureBlendPole);
+      std::snprintf(gain_text, sizeof gain_text, "%.17g", gain);
+      for (std::uint64_t s : a.seeds) {
+        const std::string seed = std::to_string(s);
+        // The reference: demonstration 0 of run seed 1000000 + s (never a training seed) as the two
+        // cameras and the triangulation see it, written exactly (17 digits).
+        const fs::path skeleton = mdir / "references" / ("seed_" + seed + ".csv");
+        fs::create_directories(skeleton.parent_path(), ec);
+        writeSkeletonCsv(skeleton.string(), observeDemo(generateDemo(parseMovement(name), 0, kReferenceSeedBase + s, false)),
+                         false, 17);
+        const auto referenceRun = [&](const std::string& label, const char* sub, std::vector<std::string> extra) {
+          const fs::path dir = mdir / sub / ("seed_" + seed);
+          std::vector<std::string> argv = {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf,
+                                           "--reference", "file:" + skeleton.string(), "--movement", name};
+          argv.insert(argv.end(), extra.begin(), extra.end());
+          for (const char* x : {"--zero-timing", "--log"}) argv.push_back(x);
+          argv.push_back(dir.string());
+          jobs.push_back({name + " " + label + " seed " + seed, argv, dir});
+          return jobs.size() - 1;
+        };
+        w.ref_jobs.push_back(referenceRun("reference", "reference", {}));
+        w.law_jobs.push_back(referenceRun("blend law", "blend_law", {"--blend-law-pole", pole_text}));
+        w.gain_jobs.push_back(referenceRun("gain law", "gain_law", {"--gain-law", gain_text}));
+      }
     }
     work.push_back(std::move(w));
   }
-  if (work.empty()) throw UserError("no movement to evaluate");
+  if (work.empty()) throw UserError("no movement to evaluate (--movement " + a.movement + ")");
 
   std::fprintf(stderr, "evaluate: %zu nao_rt runs, %d at a time\n", jobs.size(), a.jobs);
   runJobs(jobs, a.jobs);
+  const bool replay = canReplay(model);
+  if (!replay)
+    std::fprintf(stderr, "evaluate: the toolchain cannot replay this architecture's runs: no network share or ablation\n");
 
   json summary, detail;
-  std::printf("%-10s %18s %16s %18s %18s %18s %18s\n", "movement", "autonomous DTW mm", "demo NN DTW mm",
-              "linear AR DTW mm", "reference RMSE mm", "blend law RMSE mm", "gain law RMSE mm");
+  std::printf("%-10s %9s %9s %9s %9s %7s %11s %7s %9s %9s\n", "movement", "auto mm", "medoid mm", "demo NN", "lin AR mm",
+              "speed", "loops r/d", "share", "distinct", "ref mm");
   for (const MovementWork& w : work) {
-    std::vector<double> auto_dtw, nn_dtw, ar_dtw, ref_rmse, law_rmse, gain_rmse;
-    json auto_runs = json::array(), nn = json::array(), ref_runs = json::array(),
-         law_runs = json::array(), gain_runs = json::array();
-    for (std::size_t i = 0; i < w.auto_jobs.size(); ++i) {
+    const fs::path mdir = out / w.name;
+    // The demonstrations' joint range (held out and training) and the plane loops are counted in.
+    JointVector lo = JointVector::Constant(1e9), hi = JointVector::Constant(-1e9);
+    for (const DemoSet* s : {&w.held, &w.train})
+      for (const auto& f : s->f)
+        for (const JointVector& q : f) {
+          lo = lo.cwiseMin(q);
+          hi = hi.cwiseMax(q);
+        }
+    const Eigen::Matrix<double, 3, 2> plane = loopPlane(w.held.hand);
+    std::vector<double> nn_dtw, demo_speed, demo_loops;
+    for (std::size_t i = 0; i < w.held.size(); ++i) {
+      nn_dtw.push_back(nearestDemo(w.held.hand[i], w.held.hand, static_cast<int>(i)).dtw_m);
+      demo_speed.push_back(middleRmsSpeed(w.held.hand[i], period_s));
+      demo_loops.push_back(loopCount(w.held.hand[i], plane));
+    }
+    // The linear AR baseline: fitted on the training demonstrations, orders on the held-out ones.
+    const LinearArModel ar = fitLinearAr(w.train.f, w.held.f, a.max_order);
+    SimData sim_data(sim, w.held.start.front());
+
+    std::vector<double> auto_dtw, medoid_dtw, ar_dtw, speed, loops, share, excess;
+    std::vector<HandPath> run_hands;
+    json runs = json::array();
+    std::size_t replay_mismatch = 0;
+    for (std::size_t i = 0; i < w.held.size(); ++i) {
       const Job& job = jobs[w.auto_jobs[i]];
       const json s = readSummary(job);
-      if (numberAt(s, "ticks", job) != static_cast<double>(w.held.target[i].size()))
-        throw UserError((job.dir / "summary.json").string() + ": not the rollout from " + w.held.names[i] +
-                        " (another length)");
-      // The hand path from s_0 against every held-out demonstration's: the nearest (the paper
-      // protocol's score) and the mean.
-      const HandPath path = runHandPath(arm, w.held.target[i].front(), job.dir / "ticks.csv");
-      const NearestDemo nearest = nearestDemo(path, w.held.hand);
-      double sum = 0.0;
-      for (const HandPath& demo : w.held.hand) sum += rt::dtwMeanDistance(path, demo);
-      const double d = nearest.dtw_m;
-      auto_dtw.push_back(d);
-      auto_runs.push_back({{"start_demo", w.held.names[i]},
-                           {"run_dir", fs::relative(job.dir, out).string()},
-                           {"ticks", s["ticks"]},
-                           {"dtw_nearest_m", d},
-                           {"nearest_demo", w.held.names[static_cast<std::size_t>(nearest.index)]},
-                           {"dtw_mean_m", sum / static_cast<double>(w.held.hand.size())},
-                           {"command_limited_ticks", s["faults"]["command_limited"]}});
-    }
-    for (std::size_t i = 0; i < w.demo_nn.size(); ++i) {
-      nn_dtw.push_back(w.demo_nn[i].dtw_m);
-      nn.push_back({{"demo", w.held.names[i]},
-                    {"dtw_nearest_m", w.demo_nn[i].dtw_m},
-                    {"nearest_demo", w.held.names[static_cast<std::size_t>(w.demo_nn[i].index)]}});
-    }
-    // The bar: the fit (as demonstrated, or at the canonical pace) with the lower median.
-    std::size_t best_ar = 0;
-    for (std::size_t k = 1; k < w.ar.size(); ++k)
-      if (median(w.ar[k].dtw) < median(w.ar[best_ar].dtw)) best_ar = k;
-    const ArBaseline& bar = w.ar[best_ar];
-    ar_dtw = bar.dtw;
-    std::vector<json> ar_fits;
-    for (const ArBaseline& b : w.ar) {
-      json runs = json::array();
-      for (std::size_t i = 0; i < b.nearest.size(); ++i)
-        runs.push_back({{"start_demo", w.held.names[i]},
-                        {"ticks", w.held.target[i].size()},
-                        {"dtw_nearest_m", b.nearest[i].dtw_m},
-                        {"nearest_demo", w.held.names[static_cast<std::size_t>(b.nearest[i].index)]},
-                        {"command_limited_ticks", b.limited[i]}});
-      ar_fits.push_back({{"training_demos", w.ar_train_demos}, {"joints", arJson(b.model)}, {"rollouts", runs}});
-    }
-    for (std::size_t k = 0; k < a.seeds.size(); ++k) {
-      for (int law = 0; law < 3; ++law) {  // 0 policy, 1 blend law, 2 gain law
-        const std::vector<std::size_t>& job_list = law == 0 ? w.ref_jobs : law == 1 ? w.law_jobs : w.gain_jobs;
-        const Job& job = jobs[job_list[k]];
-        const json s = readSummary(job);
-        const double r = numberAt(s, "ee_rmse_m", job);
-        (law == 0 ? ref_rmse : law == 1 ? law_rmse : gain_rmse).push_back(r);
-        (law == 0 ? ref_runs : law == 1 ? law_runs : gain_runs)
-            .push_back({{"seed", a.seeds[k]},
-                        {"run_dir", fs::relative(job.dir, out).string()},
-                        {"reference", s["reference"]},
-                        {"ticks", s["ticks"]},
-                        {"ee_rmse_m", r},
-                        {"ee_rmse_ticks", s["ee_rmse_ticks"]}});
+      const int ticks = static_cast<int>(w.held.f[i].size());
+      if (!s.contains("ticks") || s["ticks"] != ticks)
+        throw UserError((job.dir / "summary.json").string() + ": not the run of " + w.held.names[i]);
+      const RunPaths run = readRun(arm, w.held.start[i], job.dir / "ticks.csv");
+      const NearestDemo near = nearestDemo(run.hand, w.held.hand);
+      auto_dtw.push_back(near.dtw_m);
+      speed.push_back(middleRmsSpeed(run.hand, period_s));
+      loops.push_back(loopCount(run.hand, plane));
+      excess.push_back(rangeExcess(run.q, lo, hi));
+      run_hands.push_back(run.hand);
+      const MedoidReplay med = medoidReplay(sim, period_s, gain, w.train, w.held.start[i], ticks);
+      const NearestDemo med_near = nearestDemo(handPath(arm, med.q), w.held.hand);
+      medoid_dtw.push_back(med_near.dtw_m);
+      const Rollout ar_run = rolloutOnSim(sim, sim_data, period_s, w.held.start[i], ticks,
+                                          [&](const JointVector& q, const std::vector<JointVector>& past) {
+                                            return linearArAction(ar, q, past);
+                                          });
+      ar_dtw.push_back(nearestDemo(ar_run.hand, w.held.hand).dtw_m);
+      json r = {{"start", w.held.names[i]},
+                {"start_q", std::vector<double>(w.held.start[i].data(), w.held.start[i].data() + kNumJoints)},
+                {"run_dir", fs::relative(job.dir, out).string()},
+                {"ticks", ticks},
+                {"dtw_nearest_m", near.dtw_m},
+                {"nearest_demo", w.held.names[static_cast<std::size_t>(near.index)]},
+                {"speed_m_s", speed.back()},
+                {"loops", loops.back()},
+                {"joint_range_excess_rad", excess.back()},
+                {"medoid", w.train.names[static_cast<std::size_t>(med.medoid)]},
+                {"medoid_replay_dtw_m", med_near.dtw_m},
+                {"linear_ar_dtw_m", ar_dtw.back()}};
+      if (replay) {
+        const std::vector<ReplicaTick> rep = replayAutonomousRun(model, arm, sim_params, w.index, w.held.start[i], ticks);
+        double net2 = 0.0, act2 = 0.0, diff = 0.0;
+        for (std::size_t t = 0; t < rep.size(); ++t) {
+          net2 += rep[t].net.squaredNorm();
+          act2 += rep[t].a.squaredNorm();
+          if (t + 1 < run.q.size()) diff = std::max(diff, (rep[t].q - run.q[t + 1]).cwiseAbs().maxCoeff());
+        }
+        if (rep.size() + 1 != run.q.size() || diff != 0.0) ++replay_mismatch;
+        share.push_back(act2 > 0.0 ? std::sqrt(net2 / act2) : 1.0);
+        r["network_share"] = share.back();
+        r["replay_max_q_difference_rad"] = diff;
+        writeAblationCsv((job.dir / "ablation.csv").string(), rep);
       }
+      runs.push_back(r);
     }
+    const std::size_t distinct = distinctRuns(run_hands);
+    std::vector<double> ref_rmse, law_rmse, gain_rmse;
+    json ref_runs = json::array();
+    for (std::size_t k = 0; k < w.ref_jobs.size(); ++k)
+      for (int law = 0; law < 3; ++law) {
+        const std::vector<std::size_t>& list = law == 0 ? w.ref_jobs : law == 1 ? w.law_jobs : w.gain_jobs;
+        const Job& job = jobs[list[k]];
+        const json s = readSummary(job);
+        if (!s.contains("ee_rmse_m") || !s["ee_rmse_m"].is_number())
+          throw UserError((job.dir / "summary.json").string() + ": no number 'ee_rmse_m'");
+        const double rmse = s["ee_rmse_m"].get<double>();
+        (law == 0 ? ref_rmse : law == 1 ? law_rmse : gain_rmse).push_back(rmse);
+        ref_runs.push_back({{"law", law == 0 ? "policy" : law == 1 ? "blend" : "gain"},
+                            {"seed", a.seeds[k]},
+                            {"run_dir", fs::relative(job.dir, out).string()},
+                            {"ee_rmse_m", rmse}});
+      }
+
     json m;
+    m["set"] = w.set_kind;
     m["autonomous_dtw_m"] = numberOrNull(median(auto_dtw));
+    m["medoid_replay_dtw_m"] = numberOrNull(median(medoid_dtw));
     m["demo_nn_dtw_m"] = numberOrNull(median(nn_dtw));
     m["linear_ar_dtw_m"] = numberOrNull(median(ar_dtw));
-    m["reference_rmse_m"] = numberOrNull(median(ref_rmse));
-    m["blend_law_rmse_m"] = numberOrNull(median(law_rmse));
-    m["gain_law_rmse_m"] = numberOrNull(median(gain_rmse));
+    m["speed_ratio"] = numberOrNull(median(speed) / median(demo_speed));
+    m["loops_run_median"] = numberOrNull(median(loops));
+    m["loops_demo_median"] = numberOrNull(median(demo_loops));
+    m["network_share"] = share.empty() ? json(nullptr) : numberOrNull(median(share));
+    m["distinct_runs"] = distinct;
+    m["joint_range_excess_rad"] = excess.empty() ? 0.0 : *std::max_element(excess.begin(), excess.end());
     m["autonomous_runs"] = auto_dtw.size();
-    m["heldout_demos"] = w.held.names.size();
-    m["autonomous_dtw_per_run_m"] = auto_dtw;
-    m["demo_nn_dtw_per_demo_m"] = nn_dtw;
-    m["linear_ar_dtw_per_run_m"] = ar_dtw;
-    m["seeds"] = a.seeds;
-    m["reference_rmse_per_seed_m"] = ref_rmse;
-    m["blend_law_rmse_per_seed_m"] = law_rmse;
-    m["gain_law_rmse_per_seed_m"] = gain_rmse;
-    m["linear_ar_orders"] = json::array();
-    for (const LinearArJoint& j : bar.model.joints) m["linear_ar_orders"].push_back(j.order);
-    if (w.ar.size() > 1) {
-      m["linear_ar_fit"] = bar.paced ? "canonical_pace" : "as_demonstrated";
-      m["linear_ar_as_demonstrated_dtw_m"] = numberOrNull(median(w.ar[0].dtw));
-      m["linear_ar_canonical_pace_dtw_m"] = numberOrNull(median(w.ar[1].dtw));
+    m["heldout_demos"] = w.held.size();
+    if (reference) {
+      m["reference_rmse_m"] = numberOrNull(median(ref_rmse));
+      m["blend_law_rmse_m"] = numberOrNull(median(law_rmse));
+      m["gain_law_rmse_m"] = numberOrNull(median(gain_rmse));
+      m["reference_rmse_per_seed_m"] = ref_rmse;
+      m["blend_law_rmse_per_seed_m"] = law_rmse;
+      m["gain_law_rmse_per_seed_m"] = gain_rmse;
     }
+    m["autonomous_dtw_per_run_m"] = auto_dtw;
+    m["medoid_replay_dtw_per_run_m"] = medoid_dtw;
+    m["linear_ar_dtw_per_run_m"] = ar_dtw;
+    m["demo_nn_dtw_per_demo_m"] = nn_dtw;
     summary[w.name] = m;
-
-    json d;
-    d["heldout_demos"] = w.held.names;
-    d["synth_seed"] = w.held.seed;
-    d["synth_seed_assumed"] = w.held.seed_assumed;
-    d["autonomous"] = auto_runs;
-    d["demo_nn"] = nn;
-    d["linear_ar"] = ar_fits[0];
-    if (ar_fits.size() > 1) d["linear_ar_canonical_pace"] = ar_fits[1];
-    d["reference"] = ref_runs;
-    d["blend_law"] = law_runs;
-    d["gain_law"] = gain_runs;
-    detail[w.name] = d;
-    std::printf("%-10s %18s %16s %18s %18s %18s %18s\n", w.name.c_str(), millimetres(median(auto_dtw)).c_str(),
-                millimetres(median(nn_dtw)).c_str(), millimetres(median(ar_dtw)).c_str(),
-                millimetres(median(ref_rmse)).c_str(), millimetres(median(law_rmse)).c_str(),
-                millimetres(median(gain_rmse)).c_str());
+    detail[w.name] = {{"heldout_demos", w.held.names},
+                      {"training_demos", w.train.names},
+                      {"runs", runs},
+                      {"replays_differing_from_nao_rt", replay_mismatch},
+                      {"linear_ar", arJson(ar)},
+                      {"reference", ref_runs}};
+    if (replay_mismatch > 0)
+      std::fprintf(stderr, "evaluate: %s: %zu in-process replay(s) differ from nao_rt's run (detail.json)\n",
+                   w.name.c_str(), replay_mismatch);
+    char loops_text[32];
+    std::snprintf(loops_text, sizeof loops_text, "%.1f/%.1f", median(loops), median(demo_loops));
+    std::printf("%-10s %9s %9s %9s %9s %7.2f %11s %7.3f %4zu/%-4zu %9s\n", w.name.c_str(),
+                millimetres(median(auto_dtw)).c_str(), millimetres(median(medoid_dtw)).c_str(),
+                millimetres(median(nn_dtw)).c_str(), millimetres(median(ar_dtw)).c_str(), median(speed) / median(demo_speed),
+                loops_text, share.empty() ? std::nan("") : median(share), distinct, auto_dtw.size(),
+                reference ? millimetres(median(ref_rmse)).c_str() : "-");
   }
   summary["evaluation"] = {
-      {"format", "nao-rt evaluate 1"},
+      {"format", "nao-rt evaluate 2"},
       {"units", "m"},
-      {"autonomous_model", {{"path", a.autonomous_model}, {"checksum", "0x" + hex64(auto_model.checksum)}}},
-      {"reference_model", {{"path", a.reference_model}, {"checksum", "0x" + hex64(ref_model.checksum)}}},
-      {"demo_set", a.test_seed >= 0 ? json{{"kind", "test"},
-                                            {"test_seed", a.test_seed},
-                                            {"synth_seed", tools::kReferenceSeedBase + static_cast<std::uint64_t>(a.test_seed)},
-                                            {"per_movement", a.test_demos}}
-                                      : json{{"kind", "validation"}}},
-      {"linear_ar_training_data", data_source},
-      {"linear_ar_max_order", a.max_order},
-      {"blend_law_pole", pole},
-      {"gain_law", gain},
+      {"model", {{"path", a.model}, {"checksum", "0x" + hex64(model.checksum)}}},
+      {"reference_model", reference ? json{{"path", a.reference_model}} : json(nullptr)},
+      {"demo_set", recordings ? json{{"kind", "recordings"}, {"dir", a.recordings}}
+                   : test     ? json{{"kind", "test"},
+                                     {"test_seed", a.test_seed},
+                                     {"synth_seed", kReferenceSeedBase + static_cast<std::uint64_t>(a.test_seed)},
+                                     {"per_movement", a.test_demos}}
+                              : json{{"kind", "validation"}}},
+      {"medoid_replay", "5 training demonstrations nearest the run's start, their medoid by summed hand-path DTW, "
+                        "tracked from the run's start by a = g (f(t+1) - q)"},
+      {"gain", gain},
+      {"blend_law_pole", kFeatureBlendPole},
       {"detail", "detail.json"}};
   const std::string text = summary.dump(2) + "\n", detail_text = detail.dump(2) + "\n";
   for (const auto& [file, body] : {std::pair{out / "summary.json", &text}, std::pair{out / "detail.json", &detail_text}}) {
@@ -562,51 +445,58 @@ void evaluate(const Args& a) {
     f.close();
     if (!f) throw UserError("cannot write " + file.string());
   }
-  std::printf("evaluate: wrote %s and %s; autonomous run directories in %s/<movement>/autonomous/\n",
-              (out / "summary.json").string().c_str(), (out / "detail.json").string().c_str(), a.out.c_str());
+  std::printf("evaluate: wrote %s and %s; runs in %s/<movement>/autonomous/, demonstrations in %s/<movement>/demos/\n",
+              (out / "summary.json").string().c_str(), (out / "detail.json").string().c_str(), a.out.c_str(),
+              a.out.c_str());
 }
 
 void setup(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "evaluate",
-      "Issue 13's scores per movement, in metres, into OUT/summary.json (details: OUT/detail.json;\n"
-      "docs/evaluate.md): autonomous_dtw_m (nao_rt rollouts of the autonomous model from the s_0 of\n"
-      "every held-out demonstration, median DTW to the nearest held-out demonstration), demo_nn_dtw_m\n"
-      "(median nearest-neighbour DTW among the held-out demonstrations), linear_ar_dtw_m (the best\n"
-      "per-joint linear AR model of the training split, rolled out the same way), reference_rmse_m and\n"
-      "blend_law_rmse_m (nao_rt in reference mode per --seeds, policy and blend law; median).\n"
-      "Runs nao_rt as a separate process per run; the run directories stay in OUT/<movement>/.");
+      "Whether an autonomous model makes its movements (docs/evaluate.md), per movement in OUT/summary.json:\n"
+      "nao_rt's runs of --model from every held-out demonstration's start (the model's validation\n"
+      "demonstrations, a fresh synthetic test set with --test-seed, or the held-out recordings of\n"
+      "--recordings) scored by the hand-path DTW to the nearest held-out demonstration, beside the medoid\n"
+      "replay (the best fixed trajectory the training data give) and the linear AR baseline; the\n"
+      "middle-phase speed ratio, the loops, the joint range, the distinct runs, the network's share of\n"
+      "the action and the attention ablation (ablation.csv in each run directory). With the synthetic\n"
+      "data also the reference model's hand RMSE beside the blend law and the gain law.");
   auto args = std::make_shared<Args>();
-  cmd->add_option("--autonomous-model", args->autonomous_model, "Autonomous-mode model.bin")->capture_default_str();
-  cmd->add_option("--reference-model", args->reference_model, "Reference-conditioned model.bin")->capture_default_str();
-  cmd->add_option("--data", args->data,
-                  "The autonomous model's data set (nao_toolchain cluster output; its fingerprint must match the\n"
-                  "model's) for the linear AR fit, or 'regenerate' (its training demonstrations regenerated;\n"
-                  "also the fallback when the default is missing)")
-      ->capture_default_str()
-      ->each([args](const std::string&) { args->data_given = true; });
+  cmd->add_option("--model", args->model, "Autonomous-mode model.bin")->capture_default_str();
+  cmd->add_option("--reference-model", args->reference_model, "Reference-conditioned model.bin (synthetic data only)")
+      ->capture_default_str();
+  cmd->add_flag("--no-reference", args->no_reference, "Skip the reference-mode runs");
+  cmd->add_option("--data", args->data, "The model's data set (nao_toolchain cluster output; its fingerprint must be the model's)")
+      ->capture_default_str();
+  cmd->add_option("--recordings", args->recordings,
+                  "A folder of recordings (<movement>_<index>/cam<k>/, docs/formats.md) the model was trained on:\n"
+                  "its held-out recordings are scored, its training ones give the baselines (instead of --data)");
+  cmd->add_option("--fps", args->input.fps, "Capture rate of the recordings, Hz")->check(CLI::PositiveNumber)->capture_default_str();
+  cmd->add_option("--format", args->input.format, "Keypoint layout of the recordings")
+      ->check(CLI::IsMember({"body25", "body25b"}))
+      ->capture_default_str();
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
   cmd->add_option("--urdf", args->urdf, "Robot description")->capture_default_str()->check(CLI::ExistingFile);
-  cmd->add_option("--nao-rt", args->nao_rt, "nao_rt executable (default: the one beside nao_toolchain)");
-  cmd->add_option("--movement", args->movement, "whole_arm, elbow, wrist or all")
-      ->check(CLI::IsMember({"whole_arm", "elbow", "wrist", "all"}))
-      ->capture_default_str();
+  cmd->add_option("--nao-rt", args->nao_rt,
+                  "nao_rt executable (default: the one beside nao_toolchain; for another architecture the one\n"
+                  "toolchain/nao build --model FILE printed)");
+  cmd->add_option("--movement", args->movement, "A movement of the model, or all")->capture_default_str();
   cmd->add_option("--seeds", args->seeds, "Run seeds of the reference-mode runs")->delimiter(',')->capture_default_str();
   cmd->add_option("--jobs", args->jobs, "nao_rt processes at a time")->check(CLI::Range(1, 64))->capture_default_str();
   cmd->add_option("--max-order", args->max_order, "Largest linear AR order tried (orders 1..N, chosen per joint)")
       ->check(CLI::Range(1, kMaxLinearArOrder))
       ->capture_default_str();
   cmd->add_option("--test-seed", args->test_seed,
-                  "Score on a test set instead of the model's validation demonstrations: --test-demos\n"
-                  "demonstrations per movement of synthesiser run seed 1000000 + S, which neither training\n"
-                  "nor model selection saw (the AR order is still chosen on the validation demonstrations)")
+                  "Score on a test set instead of the model's validation demonstrations: --test-demos fresh\n"
+                  "synthetic demonstrations per movement of synthesiser run seed 1000000 + S, which neither training\n"
+                  "nor model selection saw")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--test-demos", args->test_demos, "Test demonstrations per movement with --test-seed")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
-  cmd->add_option("--min-demos", args->min_demos, "Fewest held-out demonstrations per movement accepted")
-      ->check(CLI::Range(1, 1000))
-      ->capture_default_str();
+  cmd->add_option("--min-demos", args->min_demos,
+                  "Fewest held-out demonstrations per movement accepted (default: 16 for the synthetic validation set, 4 otherwise)")
+      ->check(CLI::Range(1, 1000));
   cmd->callback([args] { evaluate(*args); });
 }
 

@@ -1,15 +1,23 @@
 #include "nao/tools/evaluate.hpp"
 
 #include "nao/kinematics.hpp"
-#include "nao/model_file.hpp"
-#include "nao/tools/synth.hpp"
+#include "nao/tools/command.hpp"
+#include "nao/tools/kmeans.hpp"
+#include "nao/tools/linear_ar.hpp"
+#include "nao/tools/retarget_pipeline.hpp"
+#include "nao/tools/triangulate.hpp"
 #include "rt_metrics.hpp"
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <limits>
 
 namespace nao::tools {
+
+namespace fs = std::filesystem;
 
 HandPath handPath(const ArmModel& arm, const std::vector<JointVector>& q) {
   ArmData kin;
@@ -40,14 +48,128 @@ NearestDemo nearestDemo(const HandPath& path, const std::vector<HandPath>& demos
   return best;
 }
 
-std::vector<std::vector<JointVector>> regenerateTargets(const ArmModel& arm, const std::string& movement,
-                                                        std::uint64_t seed, const std::vector<int>& indices,
-                                                        const std::vector<JointVector>& key_poses,
-                                                        const RetargetParams& retarget) {
-  const Movement m = parseMovement(movement);
-  std::vector<std::vector<JointVector>> out;
-  for (int index : indices) out.push_back(makeDemoReference(arm, m, seed, index, key_poses, retarget).target);
+DemoSet demoSetFrom(const ArmModel& arm, const PolicyData& data, const std::string& movement,
+                    const std::vector<std::string>& names) {
+  DemoSet set;
+  for (const std::string& name : names) {
+    const auto it = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& d) { return d.name == name; });
+    if (it == data.demos.end() || data.movement_names[static_cast<std::size_t>(it->movement)] != movement)
+      throw UserError("the data set holds no demonstration '" + name + "' of " + movement);
+    set.names.push_back(name);
+    set.f.push_back(it->f);
+    set.start.push_back(it->start);
+    set.hand.push_back(handPath(arm, it->f));
+  }
+  return set;
+}
+
+std::vector<std::string> recordingNames(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw UserError(dir + ": not a directory of recordings");
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    if (!entry.is_directory()) continue;
+    const std::string name = entry.path().filename().string();
+    const auto cut = name.rfind('_');
+    if (cut == std::string::npos || cut == 0 || cut + 1 == name.size() ||
+        name.find_first_not_of("0123456789", cut + 1) != std::string::npos)
+      continue;
+    bool cameras = false;
+    for (const auto& sub : fs::directory_iterator(entry.path()))
+      cameras = cameras || (sub.is_directory() && sub.path().filename().string().rfind("cam", 0) == 0);
+    if (cameras) names.push_back(name);
+  }
+  std::sort(names.begin(), names.end());
+  if (names.empty())
+    throw UserError(dir + ": no recording (<movement>_<index>/cam<k>/ folders of OpenPose JSON, docs/formats.md)");
+  return names;
+}
+
+PolicyDemo processRecording(const ArmModel& arm, const std::string& dir, const std::string& name,
+                            const RecordingInput& input, const RetargetParams& retarget,
+                            const std::vector<JointVector>& key_poses) {
+  const std::string where = (fs::path(dir) / name).string();
+  try {
+    TriangulateOptions topt = recordingOptions();
+    topt.fps = input.fps;
+    topt.format = parsePoseFormat(input.format);
+    const Skeleton skeleton = triangulateDemo(where, topt);
+    RetargetOptions ropt;
+    ropt.params = retarget;
+    const std::vector<RetargetRow> rows = retargetSkeleton(arm, skeleton, ropt);
+    std::vector<double> t_meas, t_grid;
+    std::vector<JointVector> q_meas;
+    PolicyDemo demo;
+    demo.name = name;
+    for (const RetargetRow& r : rows) {
+      const bool measured = (r.flags & kRowHumanMissing) == 0;
+      t_grid.push_back(r.t_s);
+      demo.measured.push_back(measured ? 1 : 0);
+      if (!measured) continue;
+      if (t_meas.empty()) demo.start = r.result.q_r;
+      t_meas.push_back(r.t_s);
+      q_meas.push_back(r.result.q_r);
+    }
+    if (q_meas.empty()) throw UserError("no sample with a measured human arm");
+    demo.t_s = t_grid;
+    demo.f = featureTrajectory(key_poses, t_meas, q_meas, t_grid);
+    demo.label = keyPoseLabels(key_poses, t_meas, q_meas, t_grid);
+    return demo;
+  } catch (const UserError& e) {
+    throw UserError(where + ": " + e.what());
+  }
+}
+
+DemoSet demoSetFromRecordings(const ArmModel& arm, const std::string& dir, const std::vector<std::string>& names,
+                              const RecordingInput& input, const RetargetParams& retarget,
+                              const std::vector<JointVector>& key_poses, const std::string& what) {
+  DemoSet set;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    std::fprintf(stderr, "evaluate: %s: triangulating and retargeting %s (%zu/%zu)\n", what.c_str(), names[i].c_str(),
+                 i + 1, names.size());
+    const PolicyDemo d = processRecording(arm, dir, names[i], input, retarget, key_poses);
+    set.names.push_back(names[i]);
+    set.f.push_back(d.f);
+    set.start.push_back(d.start);
+    set.hand.push_back(handPath(arm, d.f));
+  }
+  return set;
+}
+
+MedoidReplay medoidReplay(const SimModel& sim, double period_s, double gain, const DemoSet& train, const JointVector& start,
+                          int ticks, std::size_t k) {
+  const std::vector<int> near = nearestStarts(train.start, start, k);
+  MedoidReplay out;
+  out.medoid = medoid(train.hand, near);
+  const std::vector<JointVector>& f = train.f[static_cast<std::size_t>(out.medoid)];
+  SimData data(sim, start);
+  int t = 0;
+  const Rollout r = rolloutOnSim(sim, data, period_s, start, ticks, [&](const JointVector& q, const std::vector<JointVector>&) {
+    // The medoid's next sample, held at its last one when the run outlasts it.
+    const JointVector target = clampToLimits(sim.arm, f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, f.size() - 1)]);
+    ++t;
+    return JointVector(gain * (target - q));
+  });
+  out.q.push_back(clampToLimits(sim.arm, start));
+  out.q.insert(out.q.end(), r.q.begin(), r.q.end());
   return out;
+}
+
+void writeTrajectoryCsv(const std::string& path, const std::vector<JointVector>& q, double period_s) {
+  std::ofstream csv(path);
+  if (!csv) throw UserError("cannot write " + path);
+  csv << "t_s,q_0,q_1,q_2,q_3,q_4\n";
+  char buf[64];
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    std::snprintf(buf, sizeof buf, "%.17g", static_cast<double>(i) * period_s);
+    csv << buf;
+    for (int j = 0; j < kNumJoints; ++j) {
+      std::snprintf(buf, sizeof buf, ",%.17g", q[i][j]);
+      csv << buf;
+    }
+    csv << '\n';
+  }
+  if (!csv) throw UserError("cannot write " + path);
 }
 
 }  // namespace nao::tools

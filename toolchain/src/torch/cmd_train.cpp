@@ -20,7 +20,7 @@ namespace {
 
 struct TrainArgs {
   std::string config = "paper", out, data, conditioning = "reference", urdf = NAO_DEFAULT_URDF, card;
-  std::string rendezvous, interface, checkpoint, resume;
+  std::string rendezvous, interface, checkpoint, resume, execution_cache;
   std::uint64_t seed = 1;
   int epochs = 200, patience = 10, batch = 2, world_size = 1, rank = 0, max_batches = 0, window = 0;
   int chunk = 0, bins = -1;
@@ -92,6 +92,7 @@ void run(const TrainArgs& a) {
   o.dist.timeout_s = a.timeout;
   o.checkpoint = a.checkpoint;
   o.resume = a.resume;
+  o.execution_cache = a.execution_cache;
   o.max_batches = a.max_batches;
   o.select_by_rollout = a.select == "rollouts";
   o.live_progress = isatty(fileno(stdout)) != 0;
@@ -269,6 +270,10 @@ void setup(CLI::App& app) {
                   "Continue from this checkpoint (same data and options; any world size; --epochs and "
                   "--patience may change)")
       ->check(CLI::ExistingFile);
+  cmd->add_option("--execution-cache", args->execution_cache,
+                  "Keep the executed demonstrations in this directory and read them back in later runs of the "
+                  "same data, split, seed and execution options (other heads or training options): the same bytes, "
+                  "without executing again");
   cmd->add_option("--max-batches", args->max_batches,
                   "Stop every epoch after this many global batches (timing runs; recorded in the model)")
       ->check(CLI::Range(0, 1 << 30))

@@ -32,6 +32,10 @@ struct TrainOptions {
   ExecutionOptions execution;         ///< how the demonstrations are executed and labelled
   DistOptions dist;                   ///< world size 1: this process alone, the single-process loop
   std::string checkpoint;             ///< if set, rank 0 writes the state here after every epoch
+  /// If set, a directory where the executed demonstrations are kept, one file per (data, split,
+  /// execution options, seed, conditioning): a run of other head or training options on the same
+  /// data reads them instead of executing again (the bytes are the same either way).
+  std::string execution_cache;
   std::string resume;                 ///< if set, continue from this checkpoint (any world size)
   int max_batches = 0;                ///< > 0: each epoch stops after this many global batches (timing)
   bool live_progress = false;         ///< rank 0 also redraws a '\r' line during the epoch (terminals)

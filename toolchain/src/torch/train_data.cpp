@@ -4,6 +4,7 @@
 #include "nao/tools/splitmix.hpp"
 
 #include <algorithm>
+#include <cstdio>
 #include <stdexcept>
 
 namespace nao::tools {
@@ -221,6 +222,46 @@ SplitLoss evaluateLoss(const PolicyNet& net, const SequenceTensors& t, double of
   out.loss = loss / static_cast<double>(t.ticks);
   out.mse_rad2 = sse / (static_cast<double>(t.ticks) * kNumJoints);
   return out;
+}
+
+void writeSequences(const std::string& path, const std::vector<PolicySequence>& seqs) {
+  std::size_t n = 1;
+  for (const PolicySequence& s : seqs) n += packedSize(s);
+  std::vector<double> buf(n);
+  buf[0] = static_cast<double>(seqs.size());
+  double* out = buf.data() + 1;
+  for (const PolicySequence& s : seqs) out = pack(s, out);
+  // Written aside and renamed: a run killed while writing leaves no half file behind.
+  const std::string tmp = path + ".tmp";
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (f == nullptr) throw UserError("cannot write " + tmp);
+  const bool ok = std::fwrite(buf.data(), sizeof(double), n, f) == n;
+  if (std::fclose(f) != 0 || !ok || std::rename(tmp.c_str(), path.c_str()) != 0)
+    throw UserError("cannot write " + path);
+}
+
+bool readSequences(const std::string& path, std::vector<PolicySequence>& seqs) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return false;
+  std::vector<double> buf;
+  double chunk[4096];
+  for (std::size_t got; (got = std::fread(chunk, sizeof(double), 4096, f)) > 0;) buf.insert(buf.end(), chunk, chunk + got);
+  std::fclose(f);
+  if (buf.empty()) throw UserError(path + ": empty execution cache");
+  seqs.clear();
+  const double* in = buf.data() + 1;
+  const double* end = buf.data() + buf.size();
+  try {
+    for (std::size_t i = 0; i < static_cast<std::size_t>(buf[0]); ++i) {
+      PolicySequence s;
+      in = unpack(in, end, s);
+      seqs.push_back(std::move(s));
+    }
+  } catch (const std::logic_error&) {
+    throw UserError(path + ": a truncated execution cache (delete it to execute again)");
+  }
+  if (in != end) throw UserError(path + ": an execution cache with trailing data (delete it to execute again)");
+  return true;
 }
 
 std::vector<PolicySequence> gatherSequences(ProcessGroup& g, std::vector<PolicySequence> mine) {

@@ -7,6 +7,7 @@
 #include "policy_torch.hpp"
 
 #include <cstdint>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -66,6 +67,12 @@ struct SplitLoss {
   double mse_rad2 = 0.0;  ///< the first action's squared error per tick and joint
 };
 SplitLoss evaluateLoss(const PolicyNet& net, const SequenceTensors& t, double offset_weight, ProcessGroup* group = nullptr);
+
+/// Executed sequences kept in a file, so that training runs on the same data, execution options
+/// and split share them (TrainOptions::execution_cache): exact doubles, little-endian. readSequences
+/// returns false when the file does not exist; both throw UserError on a broken or unwritable file.
+void writeSequences(const std::string& path, const std::vector<PolicySequence>& seqs);
+bool readSequences(const std::string& path, std::vector<PolicySequence>& seqs);
 
 /// Every rank's `mine`, in rank order, on every rank of `group`: each rank broadcasts its own
 /// sequences (Gloo), so every rank holds the doubles their owner computed. A collective.

@@ -10,8 +10,10 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <limits>
 #include <memory>
+#include <sstream>
 
 namespace nao::tools {
 namespace {
@@ -73,6 +75,29 @@ std::vector<PolicyRun> sharedRuns(ProcessGroup* g, const std::vector<int>& demos
   return runs;
 }
 
+// The execution cache's file stem for this run (empty: no cache): everything the executed
+// sequences depend on, hashed.
+std::string executionCacheFile(const TrainOptions& o, std::uint64_t fingerprint, const PolicySplit& split) {
+  if (o.execution_cache.empty()) return {};
+  std::ostringstream k;
+  k.precision(17);
+  k << "nao-rt execution 1; data " << hex64(fingerprint) << "; " << conditioningName(o.conditioning) << "; seed "
+    << o.seed << "; " << o.execution.noisy_rollouts << " " << o.execution.noise_corr << " "
+    << o.execution.expert_iterations << " " << o.execution.expert_tol_rad;
+  for (double q : o.execution.noise_std_rad) k << " " << q;
+  k << "; train";
+  for (int d : split.train) k << " " << d;
+  k << "; val";
+  for (int d : split.val) k << " " << d;
+  const std::string key = k.str();
+  std::error_code ec;
+  std::filesystem::create_directories(o.execution_cache, ec);
+  if (ec) throw UserError("cannot create the execution cache " + o.execution_cache + ": " + ec.message());
+  return (std::filesystem::path(o.execution_cache) /
+          hex64(fnv1a64(reinterpret_cast<const std::uint8_t*>(key.data()), key.size())))
+      .string();
+}
+
 }  // namespace
 
 double lawGain(const TrainOptions& o, const SimModel& sim) {
@@ -115,13 +140,24 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   if (progress)
     *progress << "executing the demonstrations on the simulated arm (expert labels"
               << (group ? ", " + std::to_string(o.dist.world_size) + " ranks" : std::string()) << ")" << std::endl;
-  const std::vector<PolicySequence> train_seqs = sharedSequences(group.get(), res.split.train, [&](const std::vector<int>& d) {
-    return executeDemos(executed, d, sim, o.execution, o.seed, progress);
-  });
   ExecutionOptions clean = o.execution;
   clean.noisy_rollouts = 0;
-  const std::vector<PolicySequence> val_seqs = sharedSequences(
-      group.get(), res.split.val, [&](const std::vector<int>& d) { return executeDemos(executed, d, sim, clean, o.seed, nullptr); });
+  std::vector<PolicySequence> train_seqs, val_seqs;
+  const std::string cache = executionCacheFile(o, res.fingerprint, res.split);
+  if (cache.empty() || !readSequences(cache + ".train", train_seqs) || !readSequences(cache + ".val", val_seqs)) {
+    train_seqs = sharedSequences(group.get(), res.split.train, [&](const std::vector<int>& d) {
+      return executeDemos(executed, d, sim, o.execution, o.seed, progress);
+    });
+    val_seqs = sharedSequences(group.get(), res.split.val, [&](const std::vector<int>& d) {
+      return executeDemos(executed, d, sim, clean, o.seed, nullptr);
+    });
+    if (!cache.empty() && o.dist.rank == 0) {
+      writeSequences(cache + ".train", train_seqs);
+      writeSequences(cache + ".val", val_seqs);
+    }
+  } else if (progress) {
+    *progress << "executed demonstrations read from " << cache << ".{train,val}" << std::endl;
+  }
   for (const PolicySequence& s : train_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
   for (const PolicySequence& s : val_seqs) res.expert_worst_miss_rad = std::max(res.expert_worst_miss_rad, s.worst_miss_rad);
   res.execution_seconds = secondsSince(t_exec);

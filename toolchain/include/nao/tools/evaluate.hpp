@@ -1,13 +1,16 @@
-// `nao_toolchain evaluate` (issue 13, docs/evaluate.md): the paper's autonomous protocol and the
-// reference-mode bar, scored the way nao_rt scores a run. The helpers here are the pieces the
-// tests check on their own: hand paths, nearest-demonstration DTW (rt::dtwMeanDistance, the
-// runtime's), medians, and the held-out demonstrations regenerated (heldout.hpp names them).
-// Offline code (nao_eval_lib, links nao_rt_metrics): allocates, may throw.
+// `nao_toolchain evaluate` (docs/evaluate.md): the paper's autonomous protocol - the model rolled
+// out by nao_rt from every held-out demonstration's start - scored by whether it makes the
+// movement, against the baselines the data give (the medoid replay, the linear AR model), and the
+// reference-mode bar. The pieces here are the ones the tests check on their own. Offline code
+// (nao_eval_lib, links nao_rt_metrics): allocates, may throw.
 #pragma once
 
 #include "nao/arm_model.hpp"
 #include "nao/model_file.hpp"
-#include "nao/tools/reference_source.hpp"
+#include "nao/retarget.hpp"
+#include "nao/sim_arm.hpp"
+#include "nao/tools/movement_metrics.hpp"
+#include "nao/tools/policy_dataset.hpp"
 
 #include <Eigen/Core>
 
@@ -16,8 +19,6 @@
 #include <vector>
 
 namespace nao::tools {
-
-using HandPath = std::vector<Eigen::Vector3d>;
 
 /// Hand points (torso frame, m) of a joint trajectory by forward kinematics.
 HandPath handPath(const ArmModel& arm, const std::vector<JointVector>& q);
@@ -33,24 +34,55 @@ struct NearestDemo {
 };
 NearestDemo nearestDemo(const HandPath& path, const std::vector<HandPath>& demos, int exclude = -1);
 
-/// The held-out demonstrations of one movement: the autonomous model's split.val entries of the
-/// movement, regenerated (synthesiser, cameras, triangulation, the runtime's retargeting with the
-/// model's setting, the model's key poses).
-struct HeldOutDemos {
-  std::string movement;
-  std::uint64_t seed = 1;
-  bool seed_assumed = true;
+/// The demonstrations of one movement an evaluation uses: their names, feature-extracted
+/// trajectories f (the model's key poses), starts and hand paths.
+struct DemoSet {
   std::vector<std::string> names;
-  std::vector<int> indices;
-  std::vector<std::vector<JointVector>> target;  ///< feature-extracted trajectory per demo, rad
-  std::vector<HandPath> hand;                    ///< its hand path
+  std::vector<std::vector<JointVector>> f;  ///< rad, 10 Hz
+  std::vector<JointVector> start;           ///< the retargeted pose at the first measured sample, rad
+  std::vector<HandPath> hand;               ///< handPath(f)
+  std::size_t size() const { return names.size(); }
 };
 
-/// Regenerates demonstrations `indices` of `movement` (synth run seed `seed`): their
-/// feature-extracted trajectories.
-std::vector<std::vector<JointVector>> regenerateTargets(const ArmModel& arm, const std::string& movement,
-                                                        std::uint64_t seed, const std::vector<int>& indices,
-                                                        const std::vector<JointVector>& key_poses,
-                                                        const RetargetParams& retarget);
+/// The demonstrations of `data` (a clustered data set) of movement `movement` named in `names`,
+/// in that order. Throws UserError for a name the data set does not hold.
+DemoSet demoSetFrom(const ArmModel& arm, const PolicyData& data, const std::string& movement,
+                    const std::vector<std::string>& names);
+
+/// The recordings of a folder (docs/formats.md): its <movement>_<index> sub-folders that hold
+/// cam*/ folders, sorted. Throws UserError when there is none.
+std::vector<std::string> recordingNames(const std::string& dir);
+
+/// Recording `name` of `dir` as a model sees a demonstration: triangulated as nao_toolchain
+/// triangulate does by default (recordingOptions, `fps`, `format`), retargeted with `retarget` (the
+/// model's setting, Ceres), snapped to `key_poses` (featureTrajectory on the 10 Hz grid), its start
+/// the retargeted pose at its first measured sample. Throws UserError naming the recording.
+struct RecordingInput {
+  double fps = 30.0;
+  std::string format = "body25";
+};
+PolicyDemo processRecording(const ArmModel& arm, const std::string& dir, const std::string& name,
+                            const RecordingInput& input, const RetargetParams& retarget,
+                            const std::vector<JointVector>& key_poses);
+
+/// `names` of `dir` processed (processRecording) into a DemoSet, with progress on stderr.
+DemoSet demoSetFromRecordings(const ArmModel& arm, const std::string& dir, const std::vector<std::string>& names,
+                              const RecordingInput& input, const RetargetParams& retarget,
+                              const std::vector<JointVector>& key_poses, const std::string& what);
+
+/// Medoid replay (the best fixed trajectory the data give): for a run starting at `start`, the
+/// `k` training demonstrations whose starts are nearest, their medoid by summed hand-path DTW,
+/// tracked from `start` for `ticks` ticks through the same arm by the first-order servo inversion
+/// a = g (clamp(f_medoid(t+1)) - q) (the rollout step nao_rt takes). Returns the joint trajectory
+/// (the start, then the measured q after each tick) and the medoid's index into `train`.
+struct MedoidReplay {
+  std::vector<JointVector> q;
+  int medoid = -1;
+};
+MedoidReplay medoidReplay(const SimModel& sim, double period_s, double gain, const DemoSet& train, const JointVector& start,
+                          int ticks, std::size_t k = 5);
+
+/// Writes a demonstration's f as docs/evaluate.md's demos/<name>.csv: t_s, q_0..q_4 (exact).
+void writeTrajectoryCsv(const std::string& path, const std::vector<JointVector>& q, double period_s);
 
 }  // namespace nao::tools

@@ -113,8 +113,17 @@ Skeleton resampleSkeleton(const Skeleton& frames, double rate_hz, double capture
 Skeleton triangulateFolders(const std::vector<std::string>& camera_dirs, const std::string& calibration_path,
                             const TriangulateOptions& opt, TriangulationReport* report = nullptr);
 
-/// A synthesiser demonstration folder: its cam*/ folders (sorted by camera number) and
-/// calibration.json -> resampled skeleton.
+/// The calibration of a recording folder (docs/formats.md): calibration.json or calibration.toml
+/// in it, else in the folder above it (one for all recordings). Throws UserError naming the folder.
+std::string demoCalibration(const std::string& demo_dir);
+
+/// What nao_toolchain triangulate does by default beside TriangulateOptions' own defaults: the
+/// zero-lag low-pass (0.05 s) and the arm bone-length fit (300 px/m) - the recordings of a data set
+/// and of an evaluation are triangulated alike.
+TriangulateOptions recordingOptions();
+
+/// A recording folder: its cam*/ folders (sorted by camera number) and its calibration
+/// (demoCalibration) -> resampled skeleton.
 Skeleton triangulateDemo(const std::string& demo_dir, const TriangulateOptions& opt,
                          TriangulationReport* report = nullptr);
 
