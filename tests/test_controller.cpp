@@ -36,11 +36,12 @@ struct Fixture {
   ArmModel arm = loadArmModel(nao::test::kUrdfPath);
   test::RandomPolicy random = test::makeRandomPolicy(Dims::arch(), arm, 5);
   PolicyWeights<Dims> weights =
-      bindPolicyWeights<Dims>(random.pointers.data(), random.pointers.size(), Conditioning::kReference);
+      bindPolicyWeights<Dims>(random.pointers.data(), random.pointers.size(), Dims::arch(),
+                              Conditioning::kReference);
   tools::ReferenceStream ref;
   Fixture() {
     std::vector<JointVector> centroids;
-    for (int k = 0; k < Dims::kClusters; ++k) centroids.push_back(centroid(weights, 0, k).cast<double>());
+    for (int k = 0; k < weights.clusters; ++k) centroids.push_back(centroid(weights, 0, k).cast<double>());
     ref = tools::makeSyntheticReference(arm, tools::Movement::kElbow, 1, 0, centroids);
   }
 };
@@ -290,7 +291,7 @@ TEST_CASE("the reference-mode policy is fed the feature-extracted target f(t+1) 
   keys.push_back(keys.back());
   t_s.push_back(0.1 * static_cast<double>(keys.size() - 1));
   std::vector<JointVector> centroids;
-  for (int k = 0; k < Dims::kClusters; ++k) centroids.push_back(centroid(f.weights, 0, k).cast<double>());
+  for (int k = 0; k < f.weights.clusters; ++k) centroids.push_back(centroid(f.weights, 0, k).cast<double>());
   const std::vector<JointVector> offline = tools::featureTrajectory(centroids, t_s, keys);
   REQUIRE(offline.size() == online.size() + 1);
   double worst = 0.0, moved = 0.0;

@@ -16,13 +16,13 @@ using namespace nao;
 namespace {
 
 template <class Dims>
-void checkNoAllocation(std::uint64_t seed) {
+void checkNoAllocation(std::uint64_t seed, const PolicyArch& arch = Dims::arch()) {
   const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  const test::RandomPolicy random = test::makeRandomPolicy(Dims::arch(), arm, seed);
+  const test::RandomPolicy random = test::makeRandomPolicy(arch, arm, seed);
   const PolicyWeights<Dims> weights =
-      bindPolicyWeights<Dims>(random.pointers.data(), random.pointers.size(), Conditioning::kReference);
+      bindPolicyWeights<Dims>(random.pointers.data(), random.pointers.size(), arch, Conditioning::kReference);
   std::vector<JointVector> centroids;
-  for (int k = 0; k < Dims::kClusters; ++k) centroids.push_back(centroid(weights, 1, k).template cast<double>());
+  for (int k = 0; k < weights.clusters; ++k) centroids.push_back(centroid(weights, 1, k).template cast<double>());
   const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, tools::Movement::kWholeArm, 2, 0, centroids);
   ControllerParams params;
   params.inject_policy_nan_first = 100;  // exercise the fault paths too
@@ -70,3 +70,10 @@ void checkNoAllocation(std::uint64_t seed) {
 TEST_CASE("6,000 controller ticks with the small policy allocate nothing") { checkNoAllocation<SmallPolicyDims>(3); }
 
 TEST_CASE("6,000 controller ticks with the paper policy allocate nothing") { checkNoAllocation<PaperPolicyDims>(4); }
+
+TEST_CASE("6,000 controller ticks with a small bins head of chunk 5 (the temporal ensemble) allocate nothing") {
+  PolicyArch arch = SmallPolicyDims::arch();
+  arch.chunk = 5;
+  arch.bins = 8;
+  checkNoAllocation<SmallPolicyDims>(6, arch);
+}

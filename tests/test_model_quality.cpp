@@ -2,7 +2,8 @@
 // model cards state: the validation demonstrations named in model.bin are regenerated from the
 // synthesiser (training set seed 1, as toolchain/nao train makes it), executed on the simulated
 // arm with the expert's labels as docs/policy.md defines them, and the runtime's streaming
-// inference is scored against the zero action and the repeat-last-action baselines.
+// inference is scored against the zero action and the repeat-last-action baselines. An autonomous
+// model's rollouts start where their demonstrators did (fromOwnStarts), as in training.
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/kmeans.hpp"
@@ -10,7 +11,6 @@
 #include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/test_util.hpp"
-#include "nao/model_metadata.hpp"
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
@@ -39,11 +39,8 @@ Scores score(const std::string& path) {
   checkPolicyArch<PaperPolicyDims>(model.header.arch);
   std::vector<const float*> p;
   for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
-  PolicyWeights<PaperPolicyDims> w =
-      bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
-  w.residual_gain = modelResidualGain(model.header.metadata_json, path);
-  w.linear_ar = linearArBase<PaperPolicyDims::kMovements>(
-      modelLinearAr(model.header.metadata_json, model.header.arch.movements, path));
+  const PolicyWeights<PaperPolicyDims> w =
+      bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
   auto ws = makePolicyWorkspace<PaperPolicyDims>();
 
   const nlohmann::json meta = nlohmann::json::parse(model.header.metadata_json);
@@ -53,18 +50,10 @@ Scores score(const std::string& path) {
   double sum_model = 0.0, sum_zero = 0.0, sum_repeat = 0.0;
   std::map<std::string, std::vector<JointVector>> centroid_map;
   for (std::size_t m = 0; m < model.header.movement_names.size(); ++m)
-    for (int k = 0; k < PaperPolicyDims::kClusters; ++k)
+    for (int k = 0; k < w.clusters; ++k)
       centroid_map[model.header.movement_names[m]].push_back(centroid(w, static_cast<int>(m), k).cast<double>());
-  // A model trained at a canonical pace (docs/policy.md) was validated on its validation
-  // demonstrations paced onto its templates (training demonstrations, regenerated here too).
-  std::vector<std::string> names = val;
-  const nlohmann::json* pace = nullptr;
-  if (meta.at("training").contains("canonical_pace")) {
-    pace = &meta.at("training").at("canonical_pace");
-    for (const auto& t : pace->at("templates")) names.push_back(t.get<std::string>());
-  }
   std::vector<tools::PolicyDemo> demos;
-  for (const std::string& name : names) {
+  for (const std::string& name : val) {
     const std::size_t cut = name.rfind('_');
     const std::string movement = name.substr(0, cut);
     const int index = std::stoi(name.substr(cut + 1));
@@ -87,22 +76,18 @@ Scores score(const std::string& path) {
     REQUIRE(!q_meas.empty());
     d.label = tools::keyPoseLabels(centroids, t_meas, q_meas, d.t_s);
     d.f = ref.target;
+    d.start = q_meas.front();  // the retargeted pose at the first measured sample (retarget.csv)
     demos.push_back(d);
   }
   // The validation rollouts as training makes them: executed on the simulated arm, clean.
   tools::PolicyData data = tools::makePolicyData(centroid_map, demos);
-  if (pace) {
-    std::vector<int> templates;
-    for (std::size_t m = 0; m < data.movement_names.size(); ++m) {
-      const std::string t = pace->at("templates").at(m).get<std::string>();
-      int index = -1;
-      for (std::size_t i = 0; i < data.demos.size(); ++i)
-        if (data.demos[i].name == t) index = static_cast<int>(i);
-      REQUIRE(index >= 0);
-      CHECK(data.demos[static_cast<std::size_t>(index)].f.size() == pace->at("ticks").at(m).get<std::size_t>());
-      templates.push_back(index);
-    }
-    data = tools::pacedData(data, templates, tools::parsePaceMethod(pace->at("method").get<std::string>()));
+  // An autonomous model learnt (and was validated) from its demonstrators' own starts.
+  if (model.header.conditioning == Conditioning::kAutonomous) {
+    const ModelStarts starts = modelStarts(model.header.metadata_json, model.header.movement_names, path);
+    for (const tools::PolicyDemo& d : data.demos)
+      for (const ModelStart& st : starts[static_cast<std::size_t>(d.movement)])
+        if (st.name == d.name) CHECK_MESSAGE((st.q - d.start).cwiseAbs().maxCoeff() < 1e-3, d.name);
+    data = tools::fromOwnStarts(data);
   }
   std::vector<int> all;
   for (std::size_t i = 0; i < data.demos.size(); ++i)
@@ -120,8 +105,13 @@ Scores score(const std::string& path) {
       in.a_prev = seq.a_prev[t].cast<float>();
       in.r = seq.r[t].cast<float>();
       in.movement = seq.movement;
-      in.step = static_cast<int>(std::min<std::size_t>(t, PaperPolicyDims::kMaxSteps - 1));
-      const JointVector a = stepPolicy(w, *ws, in).cast<double>();
+      in.step = static_cast<int>(std::min<std::size_t>(t, static_cast<std::size_t>(w.max_steps - 1)));
+      stepPolicy(w, *ws, in);
+      // The trainer's validation MSE is of the executed action's first term: this tick's chunk
+      // entry plus the law (the action itself for a chunk of 1; the ensemble mixes older chunks in).
+      Eigen::Matrix<float, 5, 1> first = ws->chunk.col(0);
+      if (w.conditioning == Conditioning::kReference) first += (w.law_gain.array() * in.r.array()).matrix();
+      const JointVector a = first.cast<double>();
       sum_model += (a - seq.a[t]).squaredNorm();
       sum_zero += seq.a[t].squaredNorm();
       sum_repeat += (seq.a_prev[t] - seq.a[t]).squaredNorm();

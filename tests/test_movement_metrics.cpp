@@ -3,6 +3,7 @@
 // known speed, back-and-forth strokes that draw no loop, copies and shifted copies of a path.
 #include "nao/tools/command.hpp"
 #include "nao/tools/movement_metrics.hpp"
+#include <Eigen/Geometry>
 
 #include <doctest/doctest.h>
 

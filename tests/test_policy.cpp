@@ -1,12 +1,17 @@
 // The streaming policy forward pass (nao/policy.hpp) against an independent double-precision
 // reference written here from docs/policy.md: the whole sequence at once, every layer over all
 // T·J tokens with the sliding-window mask and the age bias (plain loops over the manifest
-// tensors by name, row-vector convention, no Eigen, no rings), plus the properties the
-// architecture promises: attention rows sum to 1, the decoder is causal across joints, the
-// encoder causal in time with a finite receptive field, the conditioning inputs that must not
-// matter do not, a reset stream repeats bitwise.
+// tensors by name, row-vector convention, no Eigen, no rings), the head (a regressed chunk, or
+// the bin with the largest logit plus its offset), the temporal ensemble of the last C chunks and
+// the law; the attention ablation (body parts masked) against the same reference with those keys'
+// logits −∞. Plus the properties the architecture promises: attention rows sum to 1, the decoder
+// is causal across joints, the encoder causal in time with a finite receptive field, the
+// conditioning inputs that must not matter do not, a reset stream repeats bitwise; the binding
+// of the head's views, by name and at fixed offsets, and model.bin format 3.
+#include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "support/random_policy.hpp"
+#include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
 
@@ -50,7 +55,9 @@ struct TestModel {
 
 /// Random weights shaped like a real initialisation (Xavier-uniform matrices), with non-zero
 /// biases, layer-norm parameters and embeddings large enough that every term shows in the output.
-TestModel randomModel(const PolicyArch& arch, std::uint64_t seed, bool zero_step_embedding) {
+/// A bins head gets logits of a few units (the bin changes from tick to tick, no near ties) and
+/// centers spread over the normalised range; law.gain is about 1; head.ensemble_decay is `decay`.
+TestModel randomModel(const PolicyArch& arch, std::uint64_t seed, bool zero_step_embedding, double decay = 0.3) {
   TestModel m;
   m.manifest = policyManifest(arch);
   std::mt19937_64 rng(seed);
@@ -70,6 +77,12 @@ TestModel randomModel(const PolicyArch& arch, std::uint64_t seed, bool zero_step
         x = uniform(rng, -0.5, 0.5);
       else if (endsWith(n, ".age_bias"))
         x = uniform(rng, -1.0, 1.0);  // a clear preference of ages, different per head
+      else if (n == "head.logit.weight")
+        x = uniform(rng, -0.5, 0.5);
+      else if (n == "head.centers")
+        x = uniform(rng, -1.0, 1.0);
+      else if (n == "head.ensemble_decay")
+        x = static_cast<float>(decay);
       else if (endsWith(n, ".gain"))
         x = uniform(rng, 0.8, 1.2);
       else if (s.shape.size() == 2) {
@@ -94,7 +107,11 @@ PolicyInput randomInput(std::mt19937_64& rng, int movement, int step) {
 using Tokens = std::vector<std::vector<double>>;  // [token][feature]
 
 struct Reference {                // one tick
-  std::vector<double> action;     // [J]
+  std::vector<double> action;     // [J]: the executed action (ensemble + law)
+  std::vector<double> net_action; // [J]: the ensemble alone
+  std::vector<double> chunk;      // [J·C], entry j·C + c: this tick's a_j(t + c), rad
+  int bin = -1;                   // bins head: the bin with the largest logit
+  double bin_margin = 0.0;        // its logit less the runner-up's (the pick is not a near tie)
   std::vector<double> cross;      // [l][h][i][j], α summed over the window's ticks
   std::vector<double> score;      // [J]
   std::vector<double> mass;       // [J]
@@ -106,8 +123,9 @@ class ReferencePolicy {
  public:
   ReferencePolicy(const TestModel& m, const PolicyArch& a) : m_(m), a_(a), d_(a.d_model), J_(a.tokens), W_(a.window) {}
 
-  // Token (t, j) is entry t*J + j.
-  std::vector<Reference> run(const std::vector<PolicyInput>& seq, Conditioning c) const {
+  // Token (t, j) is entry t*J + j. `masked` (bit j: body part j) leaves those keys out of every
+  // decoder cross-attention (their logits −∞; a query left without keys attends to nothing).
+  std::vector<Reference> run(const std::vector<PolicyInput>& seq, Conditioning c, unsigned masked = 0) const {
     const int T = static_cast<int>(seq.size()), H = a_.heads;
     Tokens x(static_cast<std::size_t>(T * J_), std::vector<double>(d_)), y = x;
     const auto& w_in = t("embed.in.weight");  // [3, d]
@@ -144,7 +162,7 @@ class ReferencePolicy {
       add(y, attention(p + ".self", h, h, Mask::kJointsCausal, nullptr, nullptr));
       std::vector<double> alpha;  // [h][query token][key token]
       Tokens v;
-      const Tokens co = attention(p + ".cross", layerNorm(p + ".ln2", y), memory, Mask::kWindow, &alpha, &v);
+      const Tokens co = attention(p + ".cross", layerNorm(p + ".ln2", y), memory, Mask::kWindow, &alpha, &v, masked);
       const std::size_t n = static_cast<std::size_t>(T * J_);
       for (int tk = 0; tk < T; ++tk) {
         Reference& r = out[static_cast<std::size_t>(tk)];
@@ -162,17 +180,84 @@ class ReferencePolicy {
       add(y, ffn(p + ".ffn", layerNorm(p + ".ln3", y)));
     }
     const Tokens yn = layerNorm("dec.norm", y);
-    for (int tk = 0; tk < T; ++tk)
-      for (int j = 0; j < J_; ++j) {
-        double a = t("head.bias")[0];
-        for (int k = 0; k < d_; ++k) a += yn[static_cast<std::size_t>(tk * J_ + j)][k] * t("head.weight")[k];
-        out[static_cast<std::size_t>(tk)].action.push_back(a * t("norm.a_std")[j] + t("norm.a_mean")[j]);
-      }
+    for (int tk = 0; tk < T; ++tk) head(yn, tk, out[static_cast<std::size_t>(tk)]);
+    ensemble(seq, c, out);
     return out;
   }
 
  private:
   enum class Mask { kWindow, kJointsCausal };
+
+  // docs/policy.md "Head", normalised units, then rad. Regression: head.weight [d, C], head.bias
+  // [C] on each action token. Bins: logit(b) = Σ_j y_j · head.logit.weight[j, :, b] + bias(b);
+  // the first largest wins; its center [b, j, c] plus the offset y_j · head.offset.weight[:, b·C + c].
+  void head(const Tokens& yn, int tk, Reference& r) const {
+    const int C = a_.chunk, B = a_.bins;
+    const auto token = [&](int j) -> const std::vector<double>& { return yn[static_cast<std::size_t>(tk * J_ + j)]; };
+    r.chunk.assign(static_cast<std::size_t>(J_ * C), 0.0);
+    if (B == 0) {
+      for (int j = 0; j < J_; ++j)
+        for (int c = 0; c < C; ++c) {
+          double v = t("head.bias")[static_cast<std::size_t>(c)];
+          for (int k = 0; k < d_; ++k) v += token(j)[k] * t("head.weight")[static_cast<std::size_t>(k * C + c)];
+          r.chunk[static_cast<std::size_t>(j * C + c)] = v;
+        }
+    } else {
+      std::vector<double> logit(static_cast<std::size_t>(B));
+      for (int b = 0; b < B; ++b) {
+        double z = t("head.logit.bias")[static_cast<std::size_t>(b)];
+        for (int j = 0; j < J_; ++j)
+          for (int k = 0; k < d_; ++k)
+            z += token(j)[k] * t("head.logit.weight")[static_cast<std::size_t>((j * d_ + k) * B + b)];
+        logit[static_cast<std::size_t>(b)] = z;
+      }
+      int best = 0;
+      for (int b = 1; b < B; ++b)
+        if (logit[static_cast<std::size_t>(b)] > logit[static_cast<std::size_t>(best)]) best = b;
+      double second = -INFINITY;
+      for (int b = 0; b < B; ++b)
+        if (b != best) second = std::max(second, logit[static_cast<std::size_t>(b)]);
+      r.bin = best;
+      r.bin_margin = logit[static_cast<std::size_t>(best)] - second;
+      for (int j = 0; j < J_; ++j)
+        for (int c = 0; c < C; ++c) {
+          const int col = best * C + c;
+          double v = t("head.centers")[static_cast<std::size_t>((best * J_ + j) * C + c)] +
+                     t("head.offset.bias")[static_cast<std::size_t>(col)];
+          for (int k = 0; k < d_; ++k) v += token(j)[k] * t("head.offset.weight")[static_cast<std::size_t>(k * B * C + col)];
+          r.chunk[static_cast<std::size_t>(j * C + c)] = v;
+        }
+    }
+    for (int j = 0; j < J_; ++j)
+      for (int c = 0; c < C; ++c) {
+        double& v = r.chunk[static_cast<std::size_t>(j * C + c)];
+        v = v * t("norm.a_std")[static_cast<std::size_t>(j)] + t("norm.a_mean")[static_cast<std::size_t>(j)];
+      }
+  }
+
+  // The temporal ensemble: tick t's action takes entry k of the chunk made at t − k for every
+  // k < min(t + 1, C), weighted exp(−decay·k) normalised over those k; reference mode adds the law
+  // gain_j · r_j.
+  void ensemble(const std::vector<PolicyInput>& seq, Conditioning c, std::vector<Reference>& out) const {
+    const int C = a_.chunk, T = static_cast<int>(out.size());
+    const double decay = C > 1 ? double(t("head.ensemble_decay")[0]) : 0.0;
+    for (int tk = 0; tk < T; ++tk) {
+      Reference& r = out[static_cast<std::size_t>(tk)];
+      const int have = std::min(tk + 1, C);
+      double sum = 0.0;
+      for (int k = 0; k < have; ++k) sum += std::exp(-decay * k);
+      r.net_action.assign(static_cast<std::size_t>(J_), 0.0);
+      for (int k = 0; k < have; ++k)
+        for (int j = 0; j < J_; ++j)
+          r.net_action[static_cast<std::size_t>(j)] +=
+              std::exp(-decay * k) / sum * out[static_cast<std::size_t>(tk - k)].chunk[static_cast<std::size_t>(j * C + k)];
+      r.action = r.net_action;
+      if (c == Conditioning::kReference)
+        for (int j = 0; j < J_; ++j)
+          r.action[static_cast<std::size_t>(j)] +=
+              double(t("law.gain")[static_cast<std::size_t>(j)]) * seq[static_cast<std::size_t>(tk)].r[j];
+    }
+  }
 
   const std::vector<float>& t(const std::string& name) const { return m_[name]; }
 
@@ -225,8 +310,9 @@ class ReferencePolicy {
   // MHA over all tokens of the sequence. kWindow: query (t, i) sees keys (τ, j) with
   // 0 <= t − τ < W, score + age_bias[h][t − τ]; kJointsCausal: keys of its own tick, j <= i.
   // alpha_out [h][query][key] (0 where masked), v_out = Z Wv + bv.
+  // `masked` (kWindow only): keys of those body parts are left out.
   Tokens attention(const std::string& p, const Tokens& X, const Tokens& Z, Mask mask, std::vector<double>* alpha_out,
-                   Tokens* v_out) const {
+                   Tokens* v_out, unsigned masked = 0) const {
     const Tokens Q = linear(p + ".wq", p + ".bq", X), K = linear(p + ".wk", p + ".bk", Z),
                  V = linear(p + ".wv", p + ".bv", Z);
     const int H = a_.heads, dh = d_ / H;
@@ -243,7 +329,7 @@ class ReferencePolicy {
           const int age = tq - tk;
           double bias = 0.0;
           if (mask == Mask::kWindow) {
-            if (age < 0 || age >= W_) continue;
+            if (age < 0 || age >= W_ || ((masked >> jk) & 1u) != 0) continue;
             bias = t(p + ".age_bias")[static_cast<std::size_t>(h * W_ + age)];
           } else if (age != 0 || jk > iq) {
             continue;
@@ -253,6 +339,7 @@ class ReferencePolicy {
           s[kj] = dot / std::sqrt(double(dh)) + bias;
           s_max = std::max(s_max, s[kj]);
         }
+        if (s_max == -INFINITY) continue;  // every key masked: the query attends to nothing (O = 0)
         double sum = 0.0;
         for (std::size_t kj = 0; kj < n; ++kj) sum += std::exp(s[kj] - s_max);
         for (std::size_t kj = 0; kj < n; ++kj) {
@@ -321,30 +408,61 @@ struct Worst {
   }
 };
 
+bool bitwiseEqual(const Eigen::Matrix<float, 5, 1>& a, const Eigen::Matrix<float, 5, 1>& b) {
+  return std::memcmp(a.data(), b.data(), sizeof(float) * 5) == 0;
+}
+
+/// The architecture of Dims with these table and head sizes.
 template <class Dims>
-void checkAgainstReference(std::uint64_t seed, int ticks) {
+PolicyArch archOf(int chunk = 1, int bins = 0, int movements = 3, int clusters = 10, int max_steps = 256) {
+  PolicyArch a = Dims::arch();
+  a.chunk = chunk;
+  a.bins = bins;
+  a.movements = movements;
+  a.clusters = clusters;
+  a.max_steps = max_steps;
+  return a;
+}
+
+template <class Dims>
+void checkAgainstReference(const PolicyArch& arch, std::uint64_t seed, int ticks) {
   constexpr int J = Dims::kTokens, H = Dims::kHeads, LD = Dims::kDecoderLayers, D = Dims::kDModel, W = Dims::kWindow;
-  const PolicyArch arch = Dims::arch();
+  const int C = arch.chunk;
   const TestModel model = randomModel(arch, seed, false);
   const std::vector<const float*> ptrs = model.pointers();
   std::mt19937_64 rng(seed + 1);
   for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
-    const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c);
+    const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c);
     const auto ws = makePolicyWorkspace<Dims>();
     const ReferencePolicy ref(model, arch);
     // One rollout longer than the window (the rings wrap); steps inside and outside the table
     // (clamped by both sides).
     std::vector<PolicyInput> seq;
-    const int steps[] = {0, 17, Dims::kMaxSteps - 1, Dims::kMaxSteps + 40, -5};
-    for (int tk = 0; tk < ticks; ++tk) seq.push_back(randomInput(rng, 1 % Dims::kMovements, steps[tk % 5]));
+    const int steps[] = {0, 17, arch.max_steps - 1, arch.max_steps + 40, -5};
+    for (int tk = 0; tk < ticks; ++tk) seq.push_back(randomInput(rng, 1 % arch.movements, steps[tk % 5]));
     const std::vector<Reference> r_all = ref.run(seq, c);
     resetPolicyStream(*ws);
-    Worst wa, wc, ws_, wo, wm, wp;
+    Worst wa, wn, wk, wc, ws_, wo, wm, wp;
+    double smallest_margin = INFINITY;
+    int bins_differ = 0;
+    std::vector<int> bins_seen;
     for (int tk = 0; tk < ticks; ++tk) {
       const Eigen::Matrix<float, 5, 1> action = stepPolicy(w, *ws, seq[static_cast<std::size_t>(tk)]);
       const Reference& r = r_all[static_cast<std::size_t>(tk)];
       const std::string at = "tick " + std::to_string(tk) + " ";
       for (int j = 0; j < J; ++j) wa.note(action[j], r.action[j], at + "action " + std::to_string(j));
+      for (int j = 0; j < J; ++j) wn.note(ws->net_action[j], r.net_action[j], at + "net action " + std::to_string(j));
+      for (int j = 0; j < J; ++j)
+        for (int k = 0; k < C; ++k)
+          wk.note(ws->chunk(j, k), r.chunk[static_cast<std::size_t>(j * C + k)],
+                  at + "chunk(" + std::to_string(j) + ", " + std::to_string(k) + ")");
+      if (arch.bins > 0) {
+        smallest_margin = std::min(smallest_margin, r.bin_margin);
+        bins_differ += ws->bin != r.bin;
+        if (std::find(bins_seen.begin(), bins_seen.end(), r.bin) == bins_seen.end()) bins_seen.push_back(r.bin);
+      } else {
+        CHECK(ws->bin == -1);
+      }
       for (int l = 0; l < LD; ++l)
         for (int h = 0; h < H; ++h)
           for (int i = 0; i < J; ++i)
@@ -361,13 +479,25 @@ void checkAgainstReference(std::uint64_t seed, int ticks) {
       // The comparison is not vacuous: the actions are not all equal to one value.
       CHECK(action.maxCoeff() - action.minCoeff() > 1e-3f);
     }
-    INFO(conditioningName(c), ", ", ticks, " ticks, window ", W);
+    INFO(conditioningName(c), ", ", ticks, " ticks, window ", W, ", chunk ", C, ", bins ", arch.bins);
     CHECK_MESSAGE(wa.err <= 1e-5, "actions: worst ", wa.where);
+    CHECK_MESSAGE(wn.err <= 1e-5, "net actions: worst ", wn.where);
+    CHECK_MESSAGE(wk.err <= 1e-5, "chunks: worst ", wk.where);
     CHECK_MESSAGE(wc.err <= 1e-5, "cross α: worst ", wc.where);
     CHECK_MESSAGE(ws_.err <= 1e-5, "score: worst ", ws_.where);
     CHECK_MESSAGE(wm.err <= 1e-5, "mass: worst ", wm.where);
     CHECK_MESSAGE(wp.err <= 1e-5, "age profile: worst ", wp.where);
     CHECK_MESSAGE(wo.err <= 1e-5, "cross_out: worst ", wo.where);
+    if (arch.bins > 0) {
+      // The reference's pick is clear of float rounding at every tick, the runtime made the same
+      // one, and the rollout used more than one bin.
+      CHECK_MESSAGE(smallest_margin > 1e-3, "a near tie of two logits: margin ", smallest_margin);
+      CHECK(bins_differ == 0);
+      CHECK(bins_seen.size() >= 2);
+    }
+    // The law: reference mode adds law.gain ⊙ r to the network's action, autonomous mode nothing.
+    if (c == Conditioning::kAutonomous) CHECK(bitwiseEqual(ws->action, ws->net_action));
+    if (c == Conditioning::kReference) CHECK_FALSE(bitwiseEqual(ws->action, ws->net_action));
   }
 }
 
@@ -378,10 +508,10 @@ struct Fixture {
   PolicyWeights<Dims> w;
   std::unique_ptr<PolicyWorkspace<Dims>> ws = makePolicyWorkspace<Dims>();
 
-  Fixture(std::uint64_t seed, Conditioning c, bool zero_step)
-      : model(randomModel(Dims::arch(), seed, zero_step)),
+  Fixture(std::uint64_t seed, Conditioning c, bool zero_step, const PolicyArch& arch = Dims::arch())
+      : model(randomModel(arch, seed, zero_step)),
         ptrs(model.pointers()),
-        w(bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c)) {}
+        w(bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c)) {}
 
   /// A one-tick rollout (fresh stream).
   Eigen::Matrix<float, 5, 1> run(const PolicyInput& in) {
@@ -397,10 +527,6 @@ struct Fixture {
   }
 };
 
-bool bitwiseEqual(const Eigen::Matrix<float, 5, 1>& a, const Eigen::Matrix<float, 5, 1>& b) {
-  return std::memcmp(a.data(), b.data(), sizeof(float) * 5) == 0;
-}
-
 }  // namespace
 
 TEST_CASE("compiled dimensions equal the runtime architectures") {
@@ -412,16 +538,31 @@ TEST_CASE("compiled dimensions equal the runtime architectures") {
 }
 
 TEST_CASE("streaming stepPolicy matches the whole-sequence double-precision reference of docs/policy.md, small dims") {
-  checkAgainstReference<SmallPolicyDims>(101, 3 * SmallPolicyDims::kWindow + 3);
+  checkAgainstReference<SmallPolicyDims>(SmallPolicyDims::arch(), 101, 3 * SmallPolicyDims::kWindow + 3);
 }
 
 TEST_CASE("streaming stepPolicy matches the whole-sequence double-precision reference of docs/policy.md, paper dims") {
-  checkAgainstReference<PaperPolicyDims>(202, PaperPolicyDims::kWindow + 6);
+  checkAgainstReference<PaperPolicyDims>(PaperPolicyDims::arch(), 202, PaperPolicyDims::kWindow + 6);
 }
 
 TEST_CASE("odd dimensions (no multiple of the packet width, a window of 3) match the reference too") {
-  // d_model 36 / head dim 9 / FFN 20-13-7 exercise the kernel's leftover rows and columns.
-  checkAgainstReference<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16, 3>>(303, 11);
+  // d_model 36 / head dim 9 / FFN 20-13-7 exercise the kernel's leftover rows and columns; two
+  // movements, four key poses, 16 step rows.
+  using Odd = PolicyDims<36, 4, 1, 2, 20, 13, 7, 3>;
+  checkAgainstReference<Odd>(archOf<Odd>(1, 0, 2, 4, 16), 303, 11);
+}
+
+TEST_CASE("a regressed chunk of 5 with the temporal ensemble (decay 0.3) and the law matches the reference, small dims") {
+  // Each tick's action averages the entries for it of the last 5 chunks: rollouts several
+  // windows long, so the chunk ring wraps too.
+  checkAgainstReference<SmallPolicyDims>(archOf<SmallPolicyDims>(5), 111, 3 * SmallPolicyDims::kWindow + 3);
+}
+
+TEST_CASE("a bins head (8 bins, chunk 3): the bin with the largest logit plus its offset, ensembled, matches the reference") {
+  checkAgainstReference<SmallPolicyDims>(archOf<SmallPolicyDims>(3, 8), 121, 3 * SmallPolicyDims::kWindow + 3);
+  // A bins head of one action per tick, odd dimensions (the head's dot products at d = 36).
+  using Odd = PolicyDims<36, 4, 1, 2, 20, 13, 7, 3>;
+  checkAgainstReference<Odd>(archOf<Odd>(1, 5, 2, 4, 16), 131, 30);
 }
 
 TEST_CASE("the encoder is causal in time with a finite receptive field: tick 0 reaches exactly the ticks within (LE + 1)(W − 1)") {
@@ -464,27 +605,81 @@ TEST_CASE("bindPolicyWeights views each tensor in place: Eigen [out, in] is the 
   CHECK(f.w.centroids(4, 2 * 10 + 7) == c[(2 * 10 + 7) * 5 + 4]);
   CHECK(f.w.embed_step.data() == f.model["embed.step"].data());
   CHECK(f.w.head_bias(0, 0) == f.model["head.bias"][0]);
+  CHECK(f.w.head_weight(0, 17) == f.model["head.weight"][17]);  // [d, C = 1]
+  CHECK(f.w.law_gain(3) == f.model["law.gain"][3]);
   CHECK(f.w.conditioning == Conditioning::kReference);
+  CHECK((f.w.chunk == 1 && f.w.bins == 0 && f.w.movements == 3 && f.w.clusters == 10 && f.w.max_steps == 256));
+  CHECK(f.w.ensemble_weight[0][0] == 1.0f);
 }
 
-TEST_CASE("bindPolicyWeights rejects a wrong tensor count, a null tensor and another architecture") {
+TEST_CASE("a bins head's views: logits [B, J·d], offsets [B·C, d], centers [B·J·C], and the ensemble's weights from its decay") {
+  constexpr int D = SmallPolicyDims::kDModel, J = 5, B = 6, C = 4;
+  Fixture<SmallPolicyDims> f(6, Conditioning::kAutonomous, false, archOf<SmallPolicyDims>(C, B, 2, 7, 40));
+  CHECK((f.w.chunk == C && f.w.bins == B && f.w.movements == 2 && f.w.clusters == 7 && f.w.max_steps == 40));
+  CHECK((f.w.embed_movement.cols() == 2 && f.w.embed_step.cols() == 40 && f.w.centroids.cols() == 14));
+  const std::vector<float>& lw = f.model["head.logit.weight"];   // [J, d, B]
+  const std::vector<float>& ow = f.model["head.offset.weight"];  // [d, B·C]
+  const std::vector<float>& ob = f.model["head.offset.bias"];    // [B·C]
+  const std::vector<float>& ct = f.model["head.centers"];        // [B, J, C]
+  REQUIRE((f.w.head_logit_weight.rows() == B && f.w.head_logit_weight.cols() == J * D));
+  REQUIRE((f.w.head_offset_weight.rows() == B * C && f.w.head_offset_weight.cols() == D));
+  REQUIRE(f.w.head_centers.rows() == B * J * C);
+  for (int b = 0; b < B; ++b)
+    for (int j = 0; j < J; ++j)
+      for (int k = 0; k < D; k += 7) CHECK(f.w.head_logit_weight(b, j * D + k) == lw[static_cast<std::size_t>((j * D + k) * B + b)]);
+  for (int r = 0; r < B * C; ++r) {
+    CHECK(f.w.head_offset_weight(r, 11) == ow[static_cast<std::size_t>(11 * B * C + r)]);
+    CHECK(f.w.head_offset_bias(r) == ob[static_cast<std::size_t>(r)]);
+  }
+  CHECK(f.w.head_centers((3 * J + 2) * C + 1) == ct[static_cast<std::size_t>((3 * J + 2) * C + 1)]);
+  // w_k ∝ exp(−decay k) over the k < n chunks that exist, rows summing to 1.
+  const double decay = f.model["head.ensemble_decay"][0];
+  REQUIRE(decay == doctest::Approx(0.3));
+  for (int n = 1; n <= C; ++n) {
+    double sum = 0.0, norm = 0.0;
+    for (int k = 0; k < n; ++k) norm += std::exp(-decay * k);
+    for (int k = 0; k < n; ++k) {
+      const float wk = f.w.ensemble_weight[static_cast<std::size_t>(n - 1)][static_cast<std::size_t>(k)];
+      CHECK(wk == doctest::Approx(std::exp(-decay * k) / norm).epsilon(1e-6));
+      sum += wk;
+    }
+    CHECK(sum == doctest::Approx(1.0).epsilon(1e-6));
+  }
+}
+
+TEST_CASE("bindPolicyWeights rejects a wrong tensor count, a null tensor, another computation, and a chunk or bin count beyond the runtime's") {
   const TestModel m = randomModel(smallArch(), 7, false);
   const std::vector<const float*> p = m.pointers();
-  CHECK_NOTHROW(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), Conditioning::kReference));
-  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size() - 1, Conditioning::kReference),
+  const Conditioning c = Conditioning::kReference;
+  CHECK_NOTHROW(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), smallArch(), c));
+  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size() - 1, smallArch(), c), std::invalid_argument);
+  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size() + 1, smallArch(), c), std::invalid_argument);
+  // The small model's tensors are not a paper model, nor one with a bins head.
+  CHECK_THROWS_AS(bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), smallArch(), c), std::invalid_argument);
+  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), archOf<SmallPolicyDims>(1, 4), c),
                   std::invalid_argument);
-  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size() + 1, Conditioning::kReference),
-                  std::invalid_argument);
-  // The small model's tensors are not a paper model.
-  CHECK_THROWS_AS(bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), Conditioning::kReference),
-                  std::invalid_argument);
+  // Nor is a chunk of 3 one of 2: head.weight [d, 3] is not [d, 2] (the tensor count is the same).
+  const TestModel m3 = randomModel(archOf<SmallPolicyDims>(3), 8, false);
+  const std::vector<const float*> p3 = m3.pointers();
+  CHECK_NOTHROW(bindPolicyWeights<SmallPolicyDims>(p3.data(), p3.size(), archOf<SmallPolicyDims>(3), c));
+  CHECK_THROWS_WITH_AS(bindPolicyWeights<SmallPolicyDims>(p3.data(), p3.size(), archOf<SmallPolicyDims>(2), c),
+                       doctest::Contains("head.weight"), std::invalid_argument);
   std::vector<const float*> with_null = p;
   with_null[10] = nullptr;
-  CHECK_THROWS_WITH_AS(bindPolicyWeights<SmallPolicyDims>(with_null.data(), with_null.size(), Conditioning::kReference),
+  CHECK_THROWS_WITH_AS(bindPolicyWeights<SmallPolicyDims>(with_null.data(), with_null.size(), smallArch(), c),
                        doctest::Contains(m.manifest[10].name.c_str()), std::invalid_argument);
 
   CHECK_NOTHROW(checkPolicyArch<SmallPolicyDims>(smallArch()));
   CHECK_THROWS_AS(checkPolicyArch<PaperPolicyDims>(smallArch()), std::invalid_argument);
+  // The tables and the head are the model's: any sizes bind to the same compiled dimensions.
+  CHECK_NOTHROW(checkPolicyArch<SmallPolicyDims>(archOf<SmallPolicyDims>(kPolicyMaxChunk, kPolicyMaxBins, 17, 3, 9)));
+  CHECK_THROWS_WITH_AS(checkPolicyArch<SmallPolicyDims>(archOf<SmallPolicyDims>(kPolicyMaxChunk + 1)),
+                       doctest::Contains("chunk 33"), std::invalid_argument);
+  CHECK_THROWS_WITH_AS(checkPolicyArch<SmallPolicyDims>(archOf<SmallPolicyDims>(1, kPolicyMaxBins + 1)),
+                       doctest::Contains("bins 1025"), std::invalid_argument);
+  PolicyArch window = smallArch();
+  window.window = 9;
+  CHECK_THROWS_WITH_AS(checkPolicyArch<SmallPolicyDims>(window), doctest::Contains("window 9"), std::invalid_argument);
   PolicyArch four_ffn = paperArch();
   four_ffn.ffn_hidden = {512, 512, 512, 512};
   CHECK(archProblem(four_ffn).empty());  // a valid architecture, just not a compiled one
@@ -609,7 +804,7 @@ TEST_CASE("stepPolicy is deterministic: two workspaces, a reset stream repeats b
 TEST_CASE("snapToCentroid picks the nearest key pose of the movement, ties to the lower index") {
   Fixture<SmallPolicyDims> f(61, Conditioning::kReference, false);
   std::vector<float>& c = f.model["centroids"];  // [M=3, K=10, J=5]
-  constexpr int K = SmallPolicyDims::kClusters;
+  const int K = f.w.clusters;
   std::mt19937_64 rng(62);
   // Brute force in double over the tensor itself.
   auto nearest = [&](int m, const Eigen::Matrix<double, 5, 1>& q) {
@@ -659,22 +854,249 @@ TEST_CASE("snapToCentroid picks the nearest key pose of the movement, ties to th
   CHECK(snapToCentroid(f.w, 1, q) == 6);
 }
 
-TEST_CASE("a residual gain adds exactly g·r in reference mode (same float operations) and nothing in autonomous mode") {
+TEST_CASE("law.gain adds exactly gain ⊙ r in reference mode (same float operations) and nothing in autonomous mode; net_action is the network's share") {
   std::mt19937_64 rng(41);
   std::vector<PolicyInput> seq;
   for (int t = 0; t < 3 * SmallPolicyDims::kWindow; ++t) seq.push_back(randomInput(rng, 1, t));
   for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
     Fixture<SmallPolicyDims> plain(42, c, c == Conditioning::kReference);
-    Fixture<SmallPolicyDims> residual(42, c, c == Conditioning::kReference);
-    residual.w.residual_gain = 1.0894f;
-    const auto a0 = plain.rollout(seq), a1 = residual.rollout(seq);
+    Fixture<SmallPolicyDims> law(42, c, c == Conditioning::kReference);
+    std::fill(plain.model["law.gain"].begin(), plain.model["law.gain"].end(), 0.0f);  // viewed in place
+    Eigen::Matrix<float, 5, 1> gain;
+    for (int j = 0; j < 5; ++j) gain[j] = law.model["law.gain"][static_cast<std::size_t>(j)] = 1.0894f + 0.1f * static_cast<float>(j);
+    resetPolicyStream(*plain.ws);
+    resetPolicyStream(*law.ws);
     for (std::size_t t = 0; t < seq.size(); ++t) {
-      // The network part is untouched (the gain enters after the head): the whole rollout
+      const Eigen::Matrix<float, 5, 1> a0 = stepPolicy(plain.w, *plain.ws, seq[t]);
+      const Eigen::Matrix<float, 5, 1> a1 = stepPolicy(law.w, *law.ws, seq[t]);
+      // The network's part is untouched (the law enters after the ensemble): the whole rollout
       // stays comparable tick by tick.
+      CHECK(bitwiseEqual(law.ws->net_action, plain.ws->net_action));
+      CHECK(bitwiseEqual(a0, plain.ws->net_action));
       const Eigen::Matrix<float, 5, 1> expected =
-          c == Conditioning::kReference ? Eigen::Matrix<float, 5, 1>(a0[t] + 1.0894f * seq[t].r) : a0[t];
-      CHECK(bitwiseEqual(a1[t], expected));
+          c == Conditioning::kReference ? Eigen::Matrix<float, 5, 1>(a0 + (gain.array() * seq[t].r.array()).matrix()) : a0;
+      CHECK(bitwiseEqual(a1, expected));
+      CHECK(bitwiseEqual(law.ws->action, a1));
     }
-    if (c == Conditioning::kReference) CHECK_FALSE(bitwiseEqual(a1[5], a0[5]));
+    if (c == Conditioning::kReference) CHECK_FALSE(bitwiseEqual(law.ws->action, law.ws->net_action));
   }
+}
+
+TEST_CASE("decodePolicyTick with body parts masked equals the reference with their keys' logits −∞ in every decoder cross-attention; masking nothing changes nothing bit for bit") {
+  // Independent: the double reference leaves the masked keys out of each softmax; the runtime
+  // renormalises the α it computed without them. A query left with no key (all five masked)
+  // attends to nothing in both.
+  using Dims = SmallPolicyDims;
+  constexpr int J = 5, H = Dims::kHeads, LD = Dims::kDecoderLayers;
+  const unsigned masks[] = {1u << 2, (1u << 0) | (1u << 1) | (1u << 4), 0x1eu, 0x1fu};
+  for (const int chunk : {1, 3}) {
+    const PolicyArch arch = archOf<Dims>(chunk);
+    const TestModel model = randomModel(arch, 71 + static_cast<std::uint64_t>(chunk), false);
+    const std::vector<const float*> ptrs = model.pointers();
+    std::mt19937_64 rng(72);
+    std::vector<PolicyInput> seq;
+    for (int tk = 0; tk < 2 * Dims::kWindow + 3; ++tk) seq.push_back(randomInput(rng, 2, tk));
+    for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
+      CAPTURE(chunk);
+      CAPTURE(conditioningName(c));
+      const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c);
+      const ReferencePolicy ref(model, arch);
+      std::vector<std::vector<Reference>> r_masked;
+      for (unsigned m : masks) r_masked.push_back(ref.run(seq, c, m));
+      const auto ws = makePolicyWorkspace<Dims>(), plain = makePolicyWorkspace<Dims>();
+      resetPolicyStream(*ws);
+      resetPolicyStream(*plain);
+      Worst wk, wc;
+      double masked_alpha = 0.0, moved = 0.0;
+      bool same_bits = true;
+      for (std::size_t tk = 0; tk < seq.size(); ++tk) {
+        stepPolicy(w, *plain, seq[tk]);  // a stream that never masks
+        encodePolicyTick(w, *ws, seq[tk]);
+        for (std::size_t mi = 0; mi < std::size(masks); ++mi) {
+          const unsigned m = masks[mi];
+          decodePolicyTick(w, *ws, m);
+          const Reference& r = r_masked[mi][tk];
+          const std::string at = "mask " + std::to_string(m) + " tick " + std::to_string(tk) + " ";
+          for (int j = 0; j < J; ++j)
+            for (int k = 0; k < chunk; ++k) {
+              wk.note(ws->chunk(j, k), r.chunk[static_cast<std::size_t>(j * chunk + k)], at + "chunk");
+              moved = std::max(moved, std::abs(static_cast<double>(ws->chunk(j, k)) - plain->chunk(j, k)));
+            }
+          for (int l = 0; l < LD; ++l)
+            for (int h = 0; h < H; ++h)
+              for (int i = 0; i < J; ++i)
+                for (int j = 0; j < J; ++j) {
+                  wc.note(ws->cross[l][h][i][j], r.cross[static_cast<std::size_t>(((l * H + h) * J + i) * J + j)], at + "cross");
+                  if ((m >> j) & 1u) masked_alpha = std::max(masked_alpha, static_cast<double>(ws->cross[l][h][i][j]));
+                }
+        }
+        // Masking nothing after the probes: the step's own decoding, bit for bit.
+        decodePolicyTick(w, *ws);
+        commitPolicyTick(w, *ws, seq[tk]);
+        same_bits = same_bits && bitwiseEqual(ws->action, plain->action) &&
+                    std::memcmp(ws->chunk.data(), plain->chunk.data(), sizeof(float) * ws->chunk.size()) == 0 &&
+                    std::memcmp(ws->cross, plain->cross, sizeof(ws->cross)) == 0 && bitwiseEqual(ws->score, plain->score) &&
+                    bitwiseEqual(ws->mass, plain->mass) &&
+                    std::memcmp(ws->cross_out.data(), plain->cross_out.data(), sizeof(float) * ws->cross_out.size()) == 0;
+      }
+      CHECK_MESSAGE(wk.err <= 1e-5, "masked chunk: worst ", wk.where);
+      CHECK_MESSAGE(wc.err <= 1e-5, "masked cross α: worst ", wc.where);
+      CHECK(masked_alpha == 0.0);  // a masked body part gets no attention at all
+      CHECK(moved > 1e-4);         // and its absence changes the actions
+      CHECK(same_bits);
+      // decodePolicyTick(…, 0) is the step's decoding: the explicit and the default argument agree.
+      const auto ws2 = makePolicyWorkspace<Dims>();
+      resetPolicyStream(*ws2);
+      for (std::size_t tk = 0; tk < seq.size(); ++tk) {
+        encodePolicyTick(w, *ws2, seq[tk]);
+        decodePolicyTick(w, *ws2, 0u);
+        commitPolicyTick(w, *ws2, seq[tk]);
+      }
+      CHECK(bitwiseEqual(ws2->action, plain->action));
+    }
+  }
+}
+
+TEST_CASE("ensembledAction reads without writing: between decode and commit it is what commit stores as net_action") {
+  using Dims = SmallPolicyDims;
+  constexpr int C = 4;
+  Fixture<Dims> f(81, Conditioning::kReference, false, archOf<Dims>(C));
+  std::mt19937_64 rng(82);
+  resetPolicyStream(*f.ws);
+  for (int tk = 0; tk < 3 * Dims::kWindow; ++tk) {
+    const PolicyInput in = randomInput(rng, 0, tk);
+    encodePolicyTick(f.w, *f.ws, in);
+    decodePolicyTick(f.w, *f.ws);
+    const auto ring = f.ws->chunk_ring;
+    const auto chunk = f.ws->chunk;
+    const std::int64_t ticks = f.ws->ticks;
+    const Eigen::Matrix<float, 5, 1> e1 = ensembledAction(f.w, *f.ws), e2 = ensembledAction(f.w, *f.ws);
+    CHECK(bitwiseEqual(e1, e2));
+    CHECK(f.ws->ticks == ticks);
+    CHECK(f.ws->chunk == chunk);
+    CHECK(f.ws->chunk_ring == ring);
+    commitPolicyTick(f.w, *f.ws, in);
+    CHECK(bitwiseEqual(f.ws->net_action, e1));
+    CHECK(f.ws->ticks == ticks + 1);
+    // The ring holds this tick's chunk in slot t mod C.
+    CHECK(f.ws->chunk_ring[static_cast<std::size_t>(ticks % C)] == chunk);
+    // From the second tick on the older chunks count: the ensemble is not this chunk's first entry.
+    if (tk >= 1) CHECK_FALSE(bitwiseEqual(e1, Eigen::Matrix<float, 5, 1>(chunk.col(0))));
+    if (tk == 0) CHECK(bitwiseEqual(e1, Eigen::Matrix<float, 5, 1>(chunk.col(0))));
+  }
+}
+
+namespace {
+
+/// A model.bin image of `model` (manifest order), decoded.
+ModelFile modelImage(const TestModel& model, const PolicyArch& arch, Conditioning c) {
+  ModelHeader h;
+  h.arch = arch;
+  h.conditioning = c;
+  for (int j = 0; j < arch.tokens; ++j) h.joints.push_back({"j" + std::to_string(j), -2.0, 2.0, 3.0});
+  for (int m = 0; m < arch.movements; ++m) h.movement_names.push_back("m" + std::to_string(m));
+  h.metadata_json = "{}";
+  return decodeModel(encodeModel(h, model.data), "test.bin");
+}
+
+struct ViewShape {
+  std::string name;
+  const float* data;
+  long rows, cols;
+  bool operator==(const ViewShape& o) const { return name == o.name && data == o.data && rows == o.rows && cols == o.cols; }
+};
+
+template <class Dims>
+std::vector<ViewShape> viewShapes(PolicyWeights<Dims>& w) {
+  std::vector<ViewShape> out;
+  detail::visitWeightViews(w, [&](const detail::ViewName& n, auto& view) {
+    out.push_back({n.str(), view.data(), static_cast<long>(view.rows()), static_cast<long>(view.cols())});
+  });
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("bindPolicyWeightsAt on a model.bin image binds what bindPolicyWeights binds: every view, the head's extents, the same steps bit for bit") {
+  using Dims = SmallPolicyDims;
+  for (const PolicyArch& arch : {archOf<Dims>(), archOf<Dims>(5), archOf<Dims>(3, 8, 2, 4, 30)}) {
+    CAPTURE(arch.chunk);
+    CAPTURE(arch.bins);
+    const TestModel model = randomModel(arch, 91, false);
+    const ModelFile file = modelImage(model, arch, Conditioning::kAutonomous);
+    std::vector<std::uint64_t> offsets;
+    std::vector<const float*> ptrs;
+    for (std::size_t i = 0; i < file.tensors.size(); ++i) {
+      offsets.push_back(file.tensors[i].offset);
+      ptrs.push_back(file.data(i));
+    }
+    REQUIRE(offsets.size() == detail::policyViewCount<Dims>(arch.bins, arch.chunk));
+    PolicyWeights<Dims> at = bindPolicyWeightsAt<Dims>(file.bytes.data(), offsets.data(), arch, Conditioning::kAutonomous);
+    PolicyWeights<Dims> by_name = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, Conditioning::kAutonomous);
+    const std::vector<ViewShape> a = viewShapes(at), b = viewShapes(by_name);
+    REQUIRE(a.size() == b.size());
+    for (std::size_t i = 0; i < a.size(); ++i) CHECK_MESSAGE(a[i] == b[i], a[i].name);
+    CHECK(at.ensemble_weight == by_name.ensemble_weight);
+    CHECK((at.chunk == arch.chunk && at.bins == arch.bins && at.movements == arch.movements));
+    std::mt19937_64 rng(92);
+    const auto ws_at = makePolicyWorkspace<Dims>(), ws_name = makePolicyWorkspace<Dims>();
+    for (int tk = 0; tk < 2 * Dims::kWindow; ++tk) {
+      const PolicyInput in = randomInput(rng, 1, tk);
+      CHECK(bitwiseEqual(stepPolicy(at, *ws_at, in), stepPolicy(by_name, *ws_name, in)));
+    }
+  }
+}
+
+TEST_CASE("model.bin format 3 carries the chunk and the bins: a bins model round-trips, tensor for tensor, through a file") {
+  using Dims = SmallPolicyDims;
+  const PolicyArch arch = archOf<Dims>(3, 8, 2, 4, 30);
+  const TestModel model = randomModel(arch, 93, false);
+  const ModelFile image = modelImage(model, arch, Conditioning::kAutonomous);
+  CHECK(image.header.arch == arch);
+  CHECK(image.header.arch.chunk == 3);
+  CHECK(image.header.arch.bins == 8);
+  CHECK(image.header.conditioning == Conditioning::kAutonomous);
+  const std::string path = test::writeTempFile("policy_head_v3.bin", "");
+  ModelHeader h = image.header;
+  const std::uint64_t checksum = writeModelFile(path, h, model.data);
+  const ModelFile file = readModelFile(path);
+  CHECK(file.checksum == checksum);
+  CHECK(file.header.arch == arch);
+  REQUIRE(file.tensors.size() == model.manifest.size());
+  for (std::size_t i = 0; i < file.tensors.size(); ++i) {
+    CHECK(file.tensors[i].spec.name == model.manifest[i].name);
+    CHECK(file.tensors[i].spec.shape == model.manifest[i].shape);
+    CHECK(std::memcmp(file.data(i), model.data[i].data(), model.data[i].size() * sizeof(float)) == 0);
+  }
+  CHECK_NOTHROW(file.find("head.centers"));
+  CHECK_NOTHROW(file.find("head.ensemble_decay"));
+  CHECK_THROWS_AS(file.find("head.weight"), ModelFileError);  // a bins head has no regression weights
+  // The header and the tensors must agree: another chunk is another manifest.
+  ModelHeader other = h;
+  other.arch.chunk = 2;
+  CHECK_THROWS_AS(encodeModel(other, model.data), ModelFileError);
+}
+
+TEST_CASE("a model.bin of format 2 is refused with one line naming the version") {
+  using Dims = SmallPolicyDims;
+  const TestModel model = randomModel(archOf<Dims>(), 94, false);
+  ModelHeader h;
+  h.arch = archOf<Dims>();
+  for (int j = 0; j < 5; ++j) h.joints.push_back({"j" + std::to_string(j), -2.0, 2.0, 3.0});
+  h.movement_names = {"m0", "m1", "m2"};
+  h.metadata_json = "{}";
+  std::vector<std::uint8_t> bytes = encodeModel(h, model.data);
+  REQUIRE(bytes.size() > 12);
+  CHECK(bytes[8] == 3);  // little-endian u32 after the 8-byte magic
+  bytes[8] = 2;
+  try {
+    decodeModel(bytes, "old.bin");
+    FAIL("a format-2 file was accepted");
+  } catch (const ModelFileError& e) {
+    const std::string what = e.what();
+    CHECK(what == "old.bin: format version 2 is not supported (this build reads 3)");
+    CHECK(what.find('\n') == std::string::npos);
+  }
+  const std::string path = test::writeTempFile("policy_head_v2.bin", std::string(bytes.begin(), bytes.end()));
+  CHECK_THROWS_WITH_AS(readModelFile(path), doctest::Contains("format version 2"), ModelFileError);
 }

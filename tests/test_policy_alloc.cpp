@@ -23,8 +23,9 @@ float uniform(std::mt19937_64& rng, double lo, double hi) {
 // stream is reset between them, the rings wrap inside them; movement and step indices include
 // out-of-range values, the last input of every rollout is NaN) and returns the allocations counted.
 template <class Dims>
-std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink, bool int8 = false) {
-  const std::vector<TensorSpec> manifest = policyManifest(Dims::arch());
+std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink, bool int8 = false,
+                                  const PolicyArch& arch = Dims::arch()) {
+  const std::vector<TensorSpec> manifest = policyManifest(arch);
   std::mt19937_64 rng(7);
   std::vector<std::vector<float>> tensors;
   for (const TensorSpec& s : manifest) {
@@ -35,7 +36,7 @@ std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink, boo
   }
   std::vector<const float*> ptrs;
   for (const std::vector<float>& t : tensors) ptrs.push_back(t.data());
-  PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c);
+  PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c);
   AlignedBytes blob;  // int8: the matrices through the int8 kernels (stack scratch only)
   if (int8) {
     blob = quantizePolicyInt8(w);
@@ -52,16 +53,27 @@ std::int64_t allocationsOverSteps(Conditioning c, int n_steps, double& sink, boo
       in.r[j] = uniform(rng, -1.5, 1.5);
     }
     if (i % 97 == 96) in.q[1] = std::nanf("");
-    in.movement = i % (Dims::kMovements + 2) - 1;
-    in.step = i % (Dims::kMaxSteps + 20) - 5;
+    in.movement = i % (arch.movements + 2) - 1;
+    in.step = i % (arch.max_steps + 20) - 5;
   }
 
   CountAllocations counter;
   int i = 0;
   for (const PolicyInput& in : inputs) {
     if (i++ % 97 == 0) resetPolicyStream(*ws);
-    const Eigen::Matrix<float, 5, 1>& a = stepPolicy(w, *ws, in);
-    if (a.allFinite()) sink += static_cast<double>(a[0]) + static_cast<double>(ws->score[4]);
+    if (i % 2 == 0) {
+      const Eigen::Matrix<float, 5, 1>& a = stepPolicy(w, *ws, in);
+      if (a.allFinite()) sink += static_cast<double>(a[0]) + static_cast<double>(ws->score[4]);
+    } else {
+      // The step's parts, with the attention ablation's probe (a body part masked) and the
+      // ensemble's read-only view in between: real-time code too.
+      encodePolicyTick(w, *ws, in);
+      decodePolicyTick(w, *ws, 1u << (i % 5));
+      decodePolicyTick(w, *ws);
+      const Eigen::Matrix<float, 5, 1> e = ensembledAction(w, *ws);
+      const Eigen::Matrix<float, 5, 1>& a = commitPolicyTick(w, *ws, in);
+      if (a.allFinite() && e.allFinite()) sink += static_cast<double>(a[0]) + static_cast<double>(e[1]);
+    }
     sink += static_cast<double>(snapToCentroid(w, in.movement, in.q));
   }
   return counter.count();
@@ -100,6 +112,20 @@ TEST_CASE("10,000 policy steps with the small dimensions allocate nothing, both 
   for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
     double sink = 0.0;
     const std::int64_t n_alloc = allocationsOverSteps<SmallPolicyDims>(c, kSteps, sink);
+    CHECK_MESSAGE(n_alloc == 0, conditioningName(c), ": expected no heap allocation in ", kSteps, " steps, got ",
+                  n_alloc);
+    CHECK(std::isfinite(sink));
+  }
+}
+
+TEST_CASE("10,000 policy steps with a chunk of 5 and 8 action bins allocate nothing, both conditioning modes") {
+  constexpr int kSteps = 10000;
+  PolicyArch arch = SmallPolicyDims::arch();
+  arch.chunk = 5;
+  arch.bins = 8;
+  for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
+    double sink = 0.0;
+    const std::int64_t n_alloc = allocationsOverSteps<SmallPolicyDims>(c, kSteps, sink, false, arch);
     CHECK_MESSAGE(n_alloc == 0, conditioningName(c), ": expected no heap allocation in ", kSteps, " steps, got ",
                   n_alloc);
     CHECK(std::isfinite(sink));

@@ -340,7 +340,7 @@ void checkBlobOrder(std::uint64_t seed) {
   CHECK(quantizedModelBytes(h.arch) == quantizedPolicyBytes<Dims>());
   std::vector<const float*> ptrs;
   for (const auto& t : tensors) ptrs.push_back(t.data());
-  const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), Conditioning::kReference);
+  const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), h.arch, Conditioning::kReference);
   const AlignedBytes from_views = quantizePolicyInt8(w);
   REQUIRE(from_views.size == from_file.size);
   CHECK(std::memcmp(from_views.data.get(), from_file.data.get(), from_file.size) == 0);
@@ -371,7 +371,7 @@ std::vector<float> rollActions(const PolicyWeights<Dims>& w, std::uint64_t seed,
   std::mt19937_64 rng(seed);
   std::vector<float> out;
   for (int t = 0; t < ticks; ++t) {
-    const PolicyInput in = test::randomPolicyInput(rng, t % Dims::kMovements, t, 1.2);
+    const PolicyInput in = test::randomPolicyInput(rng, t % w.movements, t, 1.2);
     const auto& a = stepPolicy(w, *ws, in);
     out.insert(out.end(), a.data(), a.data() + 5);
   }
@@ -399,11 +399,11 @@ ModelFile modelOf(const PolicyArch& arch) {
 }  // namespace
 
 TEST_CASE("quantizeModelInt8 refuses an odd head size or a matrix with an odd number of inputs") {
-  static_assert(!int8Supported<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>>());
+  static_assert(!int8Supported<PolicyDims<36, 4, 1, 2, 20, 13, 7>>());
   static_assert(int8Supported<SmallPolicyDims>() && int8Supported<PaperPolicyDims>());
-  CHECK_THROWS_WITH_AS(quantizeModelInt8(modelOf(PolicyDims<36, 4, 1, 2, 20, 14, 8, 2, 4, 16>::arch())),
+  CHECK_THROWS_WITH_AS(quantizeModelInt8(modelOf(PolicyDims<36, 4, 1, 2, 20, 14, 8>::arch())),
                        doctest::Contains("head size 9 is odd"), ModelFileError);
-  CHECK_THROWS_WITH_AS(quantizeModelInt8(modelOf(PolicyDims<32, 4, 1, 2, 20, 13, 8, 2, 4, 16>::arch())),
+  CHECK_THROWS_WITH_AS(quantizeModelInt8(modelOf(PolicyDims<32, 4, 1, 2, 20, 13, 8>::arch())),
                        doctest::Contains("13 inputs"), ModelFileError);
 }
 
@@ -412,7 +412,8 @@ TEST_CASE("stepPolicy with int8 weights: same bits under SSE2 and AVX2, near fp3
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   const test::RandomPolicy p = test::makeRandomPolicy(SmallPolicyDims::arch(), arm, 21);
   PolicyWeights<SmallPolicyDims> w =
-      bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), Conditioning::kReference);
+      bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), SmallPolicyDims::arch(),
+                                         Conditioning::kReference);
   constexpr int kTicks = 40;  // window 8: the rings wrap
   REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
   const std::vector<float> fp32 = rollActions(w, 4, kTicks);
@@ -453,7 +454,8 @@ TEST_CASE("warmPolicy reads each view stepPolicy uses once: the int8 bytes inste
   const PolicyArch arch = SmallPolicyDims::arch();
   const test::RandomPolicy p = test::makeRandomPolicy(arch, arm, 22);
   PolicyWeights<SmallPolicyDims> w =
-      bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), Conditioning::kReference);
+      bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), SmallPolicyDims::arch(),
+                                         Conditioning::kReference);
   auto ws = makePolicyWorkspace<SmallPolicyDims>();
   // From the manifest, by name: every tensor in fp32; the int8 model swaps the attention
   // projections and the FFN weights for their bytes (one per weight) and per-row float scales.

@@ -160,7 +160,7 @@ PolicyInput randomInput(std::mt19937_64& rng, int movement, int step) {
   return test::randomPolicyInput(rng, movement, step, 2.0);
 }
 
-/// What a step records, as raw floats: actions, α of every decoder layer, score, cross_out.
+/// What a step records, as raw floats: actions, α of every decoder layer, score, cross_out, the chunk and the bin.
 template <class Dims>
 std::vector<float> recordOf(const PolicyWorkspace<Dims>& ws) {
   std::vector<float> r(ws.action.data(), ws.action.data() + ws.action.size());
@@ -170,6 +170,8 @@ std::vector<float> recordOf(const PolicyWorkspace<Dims>& ws) {
   r.insert(r.end(), ws.mass.data(), ws.mass.data() + ws.mass.size());
   r.insert(r.end(), ws.age_profile.data(), ws.age_profile.data() + ws.age_profile.size());
   r.insert(r.end(), ws.cross_out.data(), ws.cross_out.data() + ws.cross_out.size());
+  r.insert(r.end(), ws.chunk.data(), ws.chunk.data() + ws.chunk.size());
+  r.push_back(static_cast<float>(ws.bin));
   return r;
 }
 
@@ -177,15 +179,15 @@ std::vector<float> recordOf(const PolicyWorkspace<Dims>& ws) {
 /// the step under kSse, under kAvx2 and under kAvx512 records the same bits. Returns the number
 /// of steps compared with another kernel (0 without AVX2).
 template <class Dims>
-int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs) {
+int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs, const PolicyArch& arch = Dims::arch()) {
   KernelGuard guard;
   int compared = 0;
   for (int m = 0; m < n_models; ++m) {
-    const std::vector<std::vector<float>> tensors = randomTensors(Dims::arch(), seed + 100 * static_cast<std::uint64_t>(m));
+    const std::vector<std::vector<float>> tensors = randomTensors(arch, seed + 100 * static_cast<std::uint64_t>(m));
     std::vector<const float*> ptrs;
     for (const std::vector<float>& t : tensors) ptrs.push_back(t.data());
     for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
-      const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), c);
+      const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c);
       // Three streams fed the same inputs in the same order (the window carries history).
       const auto ws_sse = makePolicyWorkspace<Dims>();
       const auto ws_sse2 = makePolicyWorkspace<Dims>();
@@ -193,7 +195,7 @@ int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs) {
       const auto ws_avx512 = makePolicyWorkspace<Dims>();
       std::mt19937_64 rng(seed + 7 + static_cast<std::uint64_t>(m));
       for (int n = 0; n < n_inputs; ++n) {
-        const PolicyInput in = randomInput(rng, n % Dims::kMovements, (n * 37) % (Dims::kMaxSteps + 10));
+        const PolicyInput in = randomInput(rng, n % arch.movements, (n * 37) % (arch.max_steps + 10));
         REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
         stepPolicy(w, *ws_sse, in);
         const std::vector<float> a = recordOf(*ws_sse);
@@ -206,13 +208,13 @@ int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs) {
         stepPolicy(w, *ws_avx, in);
         const std::vector<float> b = recordOf(*ws_avx);
         const long d = firstDifference(a.data(), b.data(), a.size());
-        CHECK_MESSAGE(d < 0, "SSE and AVX2 records differ at float ", d, " (0-4 actions, then α, score, mass, age profile, cross_out)");
+        CHECK_MESSAGE(d < 0, "SSE and AVX2 records differ at float ", d, " (0-4 actions, then α, score, mass, age profile, cross_out, chunk, bin)");
         ++compared;
         if (!selectPolicyKernel(PolicyKernel::kAvx512)) continue;
         stepPolicy(w, *ws_avx512, in);
         const std::vector<float> e = recordOf(*ws_avx512);
         const long d512 = firstDifference(a.data(), e.data(), a.size());
-        CHECK_MESSAGE(d512 < 0, "SSE and AVX-512 records differ at float ", d512, " (0-4 actions, then α, score, mass, age profile, cross_out)");
+        CHECK_MESSAGE(d512 < 0, "SSE and AVX-512 records differ at float ", d512, " (0-4 actions, then α, score, mass, age profile, cross_out, chunk, bin)");
       }
     }
   }
@@ -471,8 +473,22 @@ TEST_CASE("stepPolicy records the same bits under SSE and AVX2: paper dims") {
 }
 
 TEST_CASE("stepPolicy records the same bits under SSE and AVX2: odd dims (leftover rows and columns)") {
-  const int compared = checkStepBitIdentical<PolicyDims<36, 4, 1, 2, 20, 13, 7, 2, 4, 16>>(3000, 4, 40);
+  using Odd = PolicyDims<36, 4, 1, 2, 20, 13, 7>;
+  PolicyArch arch = Odd::arch();
+  arch.movements = 2;
+  arch.clusters = 4;
+  arch.max_steps = 16;
+  const int compared = checkStepBitIdentical<Odd>(3000, 4, 40, arch);
   CHECK(compared == (haveAvx2() ? 4 * 2 * 40 : 0));
+  noteAvx2Absent();
+}
+
+TEST_CASE("stepPolicy records the same bits under SSE and AVX2: a bins head of chunk 3 (the chunk and the bin too)") {
+  PolicyArch arch = SmallPolicyDims::arch();
+  arch.chunk = 3;
+  arch.bins = 8;
+  const int compared = checkStepBitIdentical<SmallPolicyDims>(4000, 2, 40, arch);
+  CHECK(compared == (haveAvx2() ? 2 * 2 * 40 : 0));
   noteAvx2Absent();
 }
 

@@ -107,7 +107,7 @@ TEST_CASE("packMatrixFp32: W(32b + i, 16s + c) at ((s·out/32 + b)·16 + c)·32 
   CHECK_THROWS_AS(packMatrixFp32(W.data(), 48, 32, P.data()), std::invalid_argument);
   CHECK_THROWS_AS(packMatrixFp32(W.data(), 64, 40, P.data()), std::invalid_argument);
   static_assert(packedSupported<SmallPolicyDims>() && packedSupported<PaperPolicyDims>());
-  static_assert(!packedSupported<PolicyDims<36, 4, 1, 2, 20, 14, 8, 2, 4, 16>>());
+  static_assert(!packedSupported<PolicyDims<36, 4, 1, 2, 20, 14, 8>>());
 }
 
 TEST_CASE("affineTokensPacked equals affineTokens bit for bit with every kernel; a wrong packing differs") {
@@ -138,7 +138,7 @@ Rollout roll(const PolicyWeights<Dims>& w, std::uint64_t seed, int ticks) {
     v.insert(v.end(), p, p + sizeof(record) / sizeof(float));
   };
   for (int t = 0; t < ticks; ++t) {
-    const PolicyInput in = test::randomPolicyInput(rng, t % Dims::kMovements, t, 1.2);
+    const PolicyInput in = test::randomPolicyInput(rng, t % w.movements, t, 1.2);
     const auto& a = stepPolicy(w, *ws, in);
     r.actions.insert(r.actions.end(), a.data(), a.data() + 5);
     append(r.cross, ws->cross);
@@ -154,7 +154,8 @@ void checkPackedStep(std::uint64_t seed, int ticks) {
   KernelGuard guard;
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   const test::RandomPolicy p = test::makeRandomPolicy(Dims::arch(), arm, seed);
-  PolicyWeights<Dims> w = bindPolicyWeights<Dims>(p.pointers.data(), p.pointers.size(), Conditioning::kReference);
+  PolicyWeights<Dims> w =
+      bindPolicyWeights<Dims>(p.pointers.data(), p.pointers.size(), Dims::arch(), Conditioning::kReference);
   REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
   const Rollout fp32 = roll(w, seed, ticks);
   // The blob from the file (manifest order) is the views' matrices packed in view order.
@@ -210,7 +211,8 @@ TEST_CASE("warmPolicy reads each matrix once: the packed copy instead of the vie
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   const test::RandomPolicy p = test::makeRandomPolicy(SmallPolicyDims::arch(), arm, 33);
   PolicyWeights<SmallPolicyDims> w =
-      bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), Conditioning::kReference);
+      bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), SmallPolicyDims::arch(),
+                                         Conditioning::kReference);
   auto ws = makePolicyWorkspace<SmallPolicyDims>();
   std::size_t fp32 = 0;
   for (const TensorSpec& t : policyManifest(SmallPolicyDims::arch())) fp32 += 4 * t.count();

@@ -56,9 +56,10 @@ fs::path tempDir(const std::string& name) {
   return dir;
 }
 
-/// A random small-config model.bin (movements elbow, whole_arm, wrist like the trainer's).
+/// A random small-config model.bin (movements elbow, whole_arm, wrist like the trainer's); `law_gain`
+/// fills law.gain (the random policy's is 0).
 std::string writeModel(const std::string& name, Conditioning c, const std::string& metadata = "{}",
-                       const PolicyArch& arch = smallArch(), std::uint64_t seed = 7) {
+                       const PolicyArch& arch = smallArch(), std::uint64_t seed = 7, float law_gain = 0.0f) {
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   ModelHeader h;
   h.arch = arch;
@@ -69,7 +70,11 @@ std::string writeModel(const std::string& name, Conditioning c, const std::strin
   const fs::path dir = suiteDir();
   fs::create_directories(dir);
   const std::string path = (dir / name).string();
-  writeModelFile(path, h, test::makeRandomPolicy(arch, arm, seed).tensors);
+  std::vector<std::vector<float>> tensors = test::makeRandomPolicy(arch, arm, seed).tensors;
+  const std::vector<TensorSpec> manifest = policyManifest(arch);
+  for (std::size_t i = 0; i < manifest.size(); ++i)
+    if (manifest[i].name == "law.gain") std::fill(tensors[i].begin(), tensors[i].end(), law_gain);
+  writeModelFile(path, h, tensors);
   return path;
 }
 
@@ -129,7 +134,7 @@ std::vector<JointVector> elbowKeyPoses(const std::string& model) {
   const ModelFile file = readModelFile(model);
   std::vector<JointVector> centroids;
   const float* c = file.data(file.find("centroids"));
-  for (int k = 0; k < Dims::kClusters; ++k) {
+  for (int k = 0; k < file.header.arch.clusters; ++k) {
     JointVector q;
     for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];
     centroids.push_back(q);
@@ -147,14 +152,34 @@ TEST_CASE("ticks.csv's header is exactly the contract's columns, in order") {
   CHECK(rt::ticksCsvHeader() == expected);
 }
 
-TEST_CASE("the static weight storage holds exactly the 64-byte padded manifest") {
-  auto padded = [](const PolicyArch& a) {
-    std::size_t n = 0;
-    for (const TensorSpec& t : policyManifest(a)) n += (t.count() + 15) / 16 * 16;
-    return n;
-  };
-  CHECK(rt::policyStorageFloats<SmallPolicyDims>() == padded(smallArch()));
-  CHECK(rt::policyStorageFloats<PaperPolicyDims>() == padded(paperArch()));
+TEST_CASE("the weight storage of a --weights model holds its tensors 64-byte aligned, each padded to 64 bytes with zeros") {
+  PolicyArch bins = smallArch();
+  bins.chunk = 4;
+  bins.bins = 6;
+  for (const PolicyArch& arch : {smallArch(), bins}) {
+    CAPTURE(arch.bins);
+    const ModelFile model = readModelFile(writeModel("storage_" + std::to_string(arch.bins) + ".bin",
+                                                     Conditioning::kReference, "{}", arch));
+    std::size_t padded = 0;
+    for (const TensorSpec& t : policyManifest(arch)) padded += (t.count() + 15) / 16 * 16;
+    rt::WeightStorage storage;
+    const std::vector<const float*> p = rt::copyWeightFile(model, storage);
+    CHECK(storage.n_floats == padded);
+    REQUIRE(p.size() == model.tensors.size());
+    std::size_t at = 0;
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      const std::size_t n = model.tensors[i].spec.count(), n_pad = (n + 15) / 16 * 16;
+      CHECK(reinterpret_cast<std::uintptr_t>(p[i]) % kModelAlignment == 0);
+      CHECK(p[i] == storage.floats.get() + at);
+      CHECK(std::memcmp(p[i], model.data(i), n * sizeof(float)) == 0);
+      for (std::size_t k = n; k < n_pad; ++k) CHECK(p[i][k] == 0.0f);
+      at += n_pad;
+    }
+    // The storage binds as the model (views by name, the head's sizes from the header).
+    const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
+    CHECK(w.bins == arch.bins);
+    CHECK(w.chunk == arch.chunk);
+  }
 }
 
 TEST_CASE("a run writes ticks.csv, attention.bin and summary.json as the contract says") {
@@ -736,37 +761,29 @@ TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature targ
   CHECK(status == 2);
 }
 
-TEST_CASE("an autonomous model's phase grid (metadata training.phase_ticks) is read or refused with the key's name") {
-  CHECK(modelPhaseTicks("{}", "m") == 0);
-  CHECK(modelPhaseTicks(R"({"training":{"seed":1}})", "m") == 0);
-  CHECK(modelPhaseTicks(R"({"training":{"phase_ticks":150}})", "m") == 150);
-  for (const char* bad : {R"({"training":{"phase_ticks":0}})", R"({"training":{"phase_ticks":1.5}})",
-                          R"({"training":{"phase_ticks":"150"}})", R"({"training":{"phase_ticks":1000000}})"})
-    CHECK_THROWS_WITH_AS(modelPhaseTicks(bad, "model.bin"), doctest::Contains("training.phase_ticks"),
-                         std::runtime_error);
-}
-
-TEST_CASE("a reference model's residual gain (metadata training.residual_gain) adds G r to the policy's action") {
-  CHECK(modelResidualGain("{}", "m") == 0.0f);
-  CHECK(modelResidualGain(R"({"training":{"seed":1}})", "m") == 0.0f);
-  CHECK(modelResidualGain(R"({"training":{"residual_gain":1.5}})", "m") == 1.5f);
-  for (const char* bad : {R"({"training":{"residual_gain":-1}})", R"({"training":{"residual_gain":"1"}})",
-                          R"({"training":{"residual_gain":1e9}})"})
-    CHECK_THROWS_WITH_AS(modelResidualGain(bad, "model.bin"), doctest::Contains("training.residual_gain"),
-                         std::runtime_error);
-
-  // nao_rt binds it (PolicyWeights::residual_gain; what it adds is checked in test_policy) and
-  // records it in summary.json.
-  const std::string with = writeModel("residual.bin", Conditioning::kReference, R"({"training":{"residual_gain":1.5}})");
-  const fs::path d1 = tempDir("residual");
-  rt::RunOptions o1 = recorded(with, "wrist", d1);
-  o1.ticks = 3;
-  REQUIRE(run(o1).report.status == 0);
-  CHECK(nlohmann::json::parse(bytes(d1 / "summary.json"))["model"]["residual_gain"] == 1.5);
-  rt::RunOptions o0 = recorded(referenceModel(), "wrist", tempDir("residual_none"));
-  o0.ticks = 3;
-  REQUIRE(run(o0).report.status == 0);
-  CHECK(nlohmann::json::parse(bytes(fs::path(o0.log_dir) / "summary.json"))["model"]["residual_gain"] == 0.0);
+TEST_CASE("a reference model's law.gain is added by nao_rt: the first action is the net's plus gain times the policy's r") {
+  // Three files that differ in law.gain alone (0, 1.5, 3): at tick 0 the state and the policy's
+  // inputs are the same, so a(g) = net + g·r gives a(3) − a(0) = 2 (a(1.5) − a(0)) to float
+  // rounding, whatever r is.
+  std::vector<JointVector> first;
+  for (const float gain : {0.0f, 1.5f, 3.0f}) {
+    const std::string model =
+        writeModel("law_" + std::to_string(static_cast<int>(2 * gain)) + ".bin", Conditioning::kReference, "{}",
+                   smallArch(), 7, gain);
+    const fs::path dir = tempDir("law_" + std::to_string(static_cast<int>(2 * gain)));
+    rt::RunOptions o = recorded(model, "wrist", dir);
+    o.ticks = 3;
+    const Outcome r = run(o);
+    REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+    const auto t = test::readCsvColumns(dir / "ticks.csv");
+    JointVector a;
+    for (int j = 0; j < kNumJoints; ++j) a[j] = t.at("a_" + std::to_string(j))[0];
+    first.push_back(a);
+  }
+  const JointVector d1 = first[1] - first[0], d2 = first[2] - first[0];
+  MESSAGE("law 1.5 moves the first action by " << d1.transpose() << " rad");
+  CHECK(d1.cwiseAbs().minCoeff() > 1e-4);  // r is nonzero in every joint: the law acts
+  CHECK((d2 - 2.0 * d1).cwiseAbs().maxCoeff() < 1e-6);
 }
 
 TEST_CASE("the online reference is the offline one: nao_rt retargets with the demonstration's calibrated human scale, so the key poses it snaps and the feature target it blends are the trajectory it is scored against") {
@@ -819,51 +836,30 @@ TEST_CASE("the online reference is the offline one: nao_rt retargets with the de
   }
 }
 
-TEST_CASE("an autonomous model's linear AR base (metadata training.linear_ar) is read, checked, added and recorded") {
-  // 3 movements x 5 joints; joint j of movement m has order j + 1 and alpha_k = 0.1 m + 0.01 k.
-  const auto base = [](int movements, int bad_order) {
-    nlohmann::json ar = nlohmann::json::array();
-    for (int m = 0; m < movements; ++m) {
-      nlohmann::json joints = nlohmann::json::array();
-      for (int j = 0; j < 5; ++j) {
-        nlohmann::json alpha = nlohmann::json::array();
-        const int order = (m == 1 && j == 2 && bad_order > 0) ? bad_order : j + 1;
-        for (int k = 1; k <= order; ++k) alpha.push_back(0.1 * m + 0.01 * k);
-        joints.push_back({{"order", order}, {"c", 0.001 * j}, {"beta", -0.02 * (m + 1)}, {"alpha", alpha}});
-      }
-      ar.push_back(joints);
-    }
-    return nlohmann::json{{"training", {{"linear_ar", ar}}}}.dump();
-  };
-  CHECK(modelLinearAr("{}", 3, "m").empty());
-  const LinearArCoefficients k = modelLinearAr(base(3, 0), 3, "m");
-  REQUIRE(k.c.size() == 3);
-  CHECK(k.beta[2][4] == -0.06);
-  CHECK(k.c[0][3] == 0.003);
-  CHECK(k.alpha[1][2][3] == 0.1 + 0.03);  // movement 1, k = 3, joint 3 (order 4)
-  CHECK(k.alpha[1][4][3] == 0.0);         // past joint 3's order
-  const LinearArBase<3> b = linearArBase<3>(k);
-  CHECK(b.on);
-  CHECK(b.alpha[1][2][3] == static_cast<float>(0.13));
-  CHECK_FALSE(linearArBase<3>(LinearArCoefficients{}).on);
-  for (const std::string& bad : {base(2, 0), base(3, 13), std::string(R"({"training":{"linear_ar":[1,2,3]}})")})
-    CHECK_THROWS_WITH_AS(modelLinearAr(bad, 3, "model.bin"), doctest::Contains("model.bin: the model's metadata has an unusable training.linear_ar"),
-                         std::runtime_error);
-
-  // nao_rt adds it under the net's output (stepPolicy; libtorch parity in test_torch_parity) and
-  // records it: the same random net with and without the base gives other commands.
-  const std::string with = writeModel("autonomous_ar.bin", Conditioning::kAutonomous, startsMetadata(base(3, 0)));
-  const std::string without = writeModel("autonomous_no_ar.bin", Conditioning::kAutonomous, startsMetadata());
-  std::vector<std::vector<double>> commands;
-  for (const std::string& model : {with, without}) {
-    const fs::path dir = tempDir(fs::path(model).stem().string());
+TEST_CASE("an autonomous model with a bins head of chunk 5 runs in nao_rt, deterministically, and summary.json records its head") {
+  PolicyArch arch = smallArch();
+  arch.chunk = 5;
+  arch.bins = 8;
+  const std::string model = writeModel("autonomous_bins.bin", Conditioning::kAutonomous, startsMetadata(), arch, 9);
+  std::vector<std::string> ticks;
+  for (const char* name : {"bins_a", "bins_b"}) {
+    const fs::path dir = tempDir(name);
     rt::RunOptions o = options(model, "none", dir);
     o.movement = "elbow";
     o.ticks = 20;
+    o.zero_timing = true;
     const Outcome r = run(o);
     REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
-    CHECK(nlohmann::json::parse(bytes(dir / "summary.json"))["model"]["linear_ar_base"] == (model == with));
-    commands.push_back(test::readCsvColumns(dir / "ticks.csv").at("q_cmd_1"));
+    CHECK(r.report.ticks == 20);
+    const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
+    CHECK(s["model"]["chunk"] == 5);
+    CHECK(s["model"]["bins"] == 8);
+    CHECK(s["faults"]["policy_nonfinite"] == 0);
+    ticks.push_back(bytes(dir / "ticks.csv"));
   }
-  CHECK(commands[0] != commands[1]);
+  CHECK(ticks[0] == ticks[1]);
+  // The arm moves under the bins head's actions (not a held pose).
+  const auto t = test::readCsvColumns(suiteDir() / "bins_a" / "ticks.csv");
+  const std::vector<double>& q1 = t.at("q_cmd_1");
+  CHECK(*std::max_element(q1.begin(), q1.end()) - *std::min_element(q1.begin(), q1.end()) > 1e-4);
 }

@@ -1,18 +1,18 @@
 // Parity: the runtime's streaming fixed-size float inference (nao/policy.hpp: one tick at a time,
-// key/value rings of W ticks) and libtorch's whole-sequence forward of the training module
-// (toolchain/src/torch/: all T·J tokens at once under the sliding-window mask) agree within 1e-5
-// absolute on the actions, on every decoder layer's cross-attention per body part, on the raw
-// mass and the temporal profile, and (relative) on the norm-based score, at every tick of
-// sequences several windows long (the ring wraps), random and recorded, for the small
-// configuration (fresh weights, perturbed away from their initialisation) and the paper
-// configuration (the committed models).
-#include "nao/model_file.hpp"
+// key/value rings of W ticks, the chunk ring of C ticks) and libtorch's whole-sequence forward of
+// the training module (toolchain/src/torch/: all T·J tokens at once under the sliding-window mask;
+// PolicyNet::act) agree within 1e-5 absolute on the executed actions and the network's share of
+// them, on each tick's decoded chunk and bin, on every decoder layer's cross-attention per body
+// part, on the raw mass and the temporal profile, and (relative) on the norm-based score, at every
+// tick of sequences several windows long (the rings wrap), random and recorded, in both
+// conditionings (reference mode with a law), for the regression head (a chunk of 1 and of 5 with
+// the temporal ensemble) and the bins head, in the small configuration and the paper one (fresh
+// weights, perturbed away from their initialisation).
 #include "nao/policy.hpp"
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "policy_torch.hpp"
 #include "policy_train.hpp"
-#include "nao/model_metadata.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -22,6 +22,8 @@
 #include <cmath>
 #include <filesystem>
 #include <random>
+#include <string>
+#include <tuple>
 #include <vector>
 
 using namespace nao;
@@ -102,21 +104,45 @@ torch::Tensor stack(const Sequence& in, int what) {
   return t;
 }
 
+// [1,T,J] normalised with the net's norm.* buffers, as act() normalises (rn of the reference).
+tools::PolicyBatch normalised(const tools::PolicyNet& net, const Sequence& seq) {
+  tools::PolicyBatch b;
+  b.qn = (stack(seq, 0) - net->q_mean) / net->q_std;
+  b.an = (stack(seq, 1) - net->a_mean) / net->a_std;
+  b.rn = (stack(seq, 2) - net->r_mean) / net->r_std;
+  b.movement = torch::tensor({static_cast<long>(seq.front().movement)});
+  return b;
+}
+
 template <class Dims>
 void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights, const std::vector<Sequence>& seqs,
                  const std::string& what) {
   torch::NoGradGuard no_grad;
   auto ws = makePolicyWorkspace<Dims>();
-  double worst_action = 0.0, worst_alpha = 0.0, worst_mass = 0.0, worst_profile = 0.0, worst_score_rel = 0.0;
-  double largest_action = 0.0, oldest_mass = 0.0;
-  long ticks = 0;
+  const int C = weights.chunk, B = weights.bins;
+  REQUIRE(net->arch().chunk == C);
+  REQUIRE(net->arch().bins == B);
+  double worst_action = 0.0, worst_net = 0.0, worst_chunk = 0.0, worst_alpha = 0.0, worst_mass = 0.0;
+  double worst_profile = 0.0, worst_score_rel = 0.0, largest_action = 0.0, oldest_mass = 0.0, largest_law = 0.0;
+  double smallest_margin = INFINITY;
+  long ticks = 0, bins_differ = 0;
+  std::vector<long> bins_seen;
   for (const Sequence& seq : seqs) {
     tools::PolicyAttention att;
-    const torch::Tensor actions =
-        net->act(stack(seq, 0), stack(seq, 1), stack(seq, 2), torch::tensor({static_cast<long>(seq.front().movement)}),
-                 &att)
-            .contiguous();
+    torch::Tensor net_action;
+    const torch::Tensor actions = net->act(stack(seq, 0), stack(seq, 1), stack(seq, 2),
+                                           torch::tensor({static_cast<long>(seq.front().movement)}), &att, &net_action)
+                                      .contiguous();
+    net_action = net_action.contiguous();
+    // Each tick's decoded chunk in rad, and the logits it was picked by.
+    const tools::PolicyHeadOutput out = net->forward(normalised(net, seq));
+    const torch::Tensor chunk =
+        (net->decodeChunk(out) * net->a_std.view({1, 1, -1, 1}) + net->a_mean.view({1, 1, -1, 1})).contiguous();
+    torch::Tensor top, best;
+    if (B > 0) std::tie(top, best) = out.logits.topk(2, -1);
     auto ta = actions.accessor<float, 3>();
+    auto tn = net_action.accessor<float, 3>();
+    auto tc = chunk.accessor<float, 4>();
     std::vector<torch::Tensor> cross;
     for (const torch::Tensor& c : att.cross) cross.push_back(c.contiguous());
     const torch::Tensor mass = att.mass.contiguous(), profile = att.age_profile.contiguous(), score = att.score.contiguous();
@@ -129,10 +155,20 @@ void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights
       const auto& a = stepPolicy(weights, *ws, seq[n]);
       for (int j = 0; j < kNumJoints; ++j) {
         worst_action = std::max(worst_action, std::abs(static_cast<double>(a[j]) - ta[0][t][j]));
+        worst_net = std::max(worst_net, std::abs(static_cast<double>(ws->net_action[j]) - tn[0][t][j]));
         largest_action = std::max(largest_action, std::abs(static_cast<double>(a[j])));
+        largest_law = std::max(largest_law, std::abs(static_cast<double>(a[j]) - ws->net_action[j]));
+        for (int c = 0; c < C; ++c)
+          worst_chunk = std::max(worst_chunk, std::abs(static_cast<double>(ws->chunk(j, c)) - tc[0][t][j][c]));
         worst_mass = std::max(worst_mass, std::abs(static_cast<double>(ws->mass[j]) - tm[0][t][j]));
         const double s_torch = ts[0][t][j];
         worst_score_rel = std::max(worst_score_rel, std::abs(ws->score[j] - s_torch) / std::max(1.0, std::abs(s_torch)));
+      }
+      if (B > 0) {
+        const long torch_bin = best[0][t][0].item<long>();
+        smallest_margin = std::min(smallest_margin, static_cast<double>((top[0][t][0] - top[0][t][1]).item<float>()));
+        bins_differ += ws->bin != torch_bin;
+        if (std::find(bins_seen.begin(), bins_seen.end(), torch_bin) == bins_seen.end()) bins_seen.push_back(torch_bin);
       }
       for (int age = 0; age < Dims::kWindow; ++age)
         worst_profile = std::max(worst_profile, std::abs(static_cast<double>(ws->age_profile[age]) - tp[0][t][age]));
@@ -148,52 +184,31 @@ void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights
     }
   }
   MESSAGE(what << ": " << ticks << " ticks in " << seqs.size() << " sequences; worst |action difference| " << worst_action
-               << " rad (largest action " << largest_action << " rad), worst |alpha difference| " << worst_alpha
+               << " rad (largest action " << largest_action << " rad, law up to " << largest_law << " rad), net action "
+               << worst_net << ", chunk " << worst_chunk << ", worst |alpha difference| " << worst_alpha
                << ", |mass difference| " << worst_mass << ", |profile difference| " << worst_profile
-               << ", relative score difference " << worst_score_rel);
+               << ", relative score difference " << worst_score_rel
+               << (B > 0 ? ", smallest logit margin " + std::to_string(smallest_margin) : std::string()));
   CHECK(worst_action <= kTolerance);
+  CHECK(worst_net <= kTolerance);
+  CHECK(worst_chunk <= kTolerance);
   CHECK(worst_alpha <= kTolerance);
   CHECK(worst_mass <= kTolerance);
   CHECK(worst_profile <= kTolerance);
   CHECK(worst_score_rel <= kTolerance);
   // The comparison is not vacuous: the actions vary, and the oldest tick of a full window is
-  // attended (the ring wrapped and its far end is read).
+  // attended (the ring wrapped and its far end is read); reference mode's law acts.
   CHECK(largest_action > 1e-3);
   CHECK(oldest_mass > 1e-6);
-}
-
-// Loads model.bin tensors into a freshly built torch module of the same architecture.
-void loadInto(tools::PolicyNet& net, const ModelFile& model) {
-  torch::NoGradGuard no_grad;
-  const auto tensors = tools::manifestTensors(net);
-  REQUIRE(tensors.size() == model.tensors.size());
-  for (std::size_t i = 0; i < tensors.size(); ++i) {
-    const torch::Tensor src =
-        torch::from_blob(const_cast<float*>(model.data(i)), {static_cast<long>(model.tensors[i].spec.count())},
-                         torch::kFloat)
-            .clone();
-    torch::Tensor dst = tensors[i].second;
-    REQUIRE(dst.numel() == src.numel());
-    dst.view({-1}).copy_(src);
+  if (net->conditioning() == Conditioning::kReference) CHECK(largest_law > 1e-3);
+  if (net->conditioning() == Conditioning::kAutonomous) CHECK(largest_law == 0.0);
+  if (B > 0) {
+    // The argmax is clear of rounding at every tick (the weights are chosen so), the runtime
+    // picked libtorch's bin every time, and several bins were picked.
+    CHECK(smallest_margin > 1e-4);
+    CHECK(bins_differ == 0);
+    CHECK(bins_seen.size() >= 3);
   }
-}
-
-// The metadata's linear AR base as the trainer holds it (per movement; empty: none).
-std::vector<tools::LinearArModel> linearArModels(const LinearArCoefficients& k) {
-  std::vector<tools::LinearArModel> out;
-  for (std::size_t m = 0; m < k.c.size(); ++m) {
-    tools::LinearArModel model;
-    for (std::size_t j = 0; j < 5; ++j) {
-      tools::LinearArJoint& x = model.joints[j];
-      x.c = k.c[m][j];
-      x.beta = k.beta[m][j];
-      x.alpha.clear();
-      for (std::size_t i = 0; i < static_cast<std::size_t>(kPolicyArMaxOrder); ++i) x.alpha.push_back(k.alpha[m][i][j]);
-      x.order = kPolicyArMaxOrder;
-    }
-    out.push_back(model);
-  }
-  return out;
 }
 
 std::vector<const float*> pointers(const std::vector<std::vector<float>>& floats) {
@@ -202,108 +217,111 @@ std::vector<const float*> pointers(const std::vector<std::vector<float>>& floats
   return p;
 }
 
-}  // namespace
-
-TEST_CASE("small configuration: streaming runtime inference equals libtorch's whole-sequence forward within 1e-5 (random and recorded rollouts, both modes)") {
-  torch::set_num_threads(1);
-  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  // Key poses: k-means++ of the retargeted poses of one held-out demonstration per movement.
+// Key poses: k-means++ of the retargeted poses of one held-out demonstration per movement.
+std::vector<std::vector<JointVector>> syntheticKeyPoses(const ArmModel& arm) {
   std::vector<std::vector<JointVector>> centroids;
-  {
-    const tools::Movement ms[3] = {tools::Movement::kElbow, tools::Movement::kWholeArm, tools::Movement::kWrist};
-    for (tools::Movement m : ms) {
-      std::vector<JointVector> provisional(10, JointVector::Zero());
-      for (int k = 0; k < 10; ++k) provisional[static_cast<std::size_t>(k)][0] = -2.0 + 0.4 * k;
-      const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, m, 55, 0, provisional);
-      tools::KMeansOptions options;
-      centroids.push_back(tools::kmeansPlusPlus(ref.retargeted, options).centroids);
-    }
+  const tools::Movement ms[3] = {tools::Movement::kElbow, tools::Movement::kWholeArm, tools::Movement::kWrist};
+  for (tools::Movement m : ms) {
+    std::vector<JointVector> provisional(10, JointVector::Zero());
+    for (int k = 0; k < 10; ++k) provisional[static_cast<std::size_t>(k)][0] = -2.0 + 0.4 * k;
+    const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, m, 55, 0, provisional);
+    tools::KMeansOptions options;
+    centroids.push_back(tools::kmeansPlusPlus(ref.retargeted, options).centroids);
   }
-  // Longer than W (8) several times over: the ring wraps; steps run past nothing (T < max_steps).
-  const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 6, 200);
-  const std::vector<Sequence> random = randomSequences(arm, 3, 6, 3 * smallArch().window + 5, 12);
+  return centroids;
+}
 
+// A fresh net of `arch` moved away from its initialisation (LN gains 1, biases 0, zero step rows)
+// so every term counts: normalisation statistics, key poses, a law of 1.0894 (reference mode),
+// an ensemble decay of 0.3 (chunks), bin centers spread over the normalised range and logits of a
+// few units (bins: the argmax is clear of rounding).
+tools::PolicyNet perturbedNet(const PolicyArch& arch, Conditioning c, const std::vector<std::vector<JointVector>>& centroids,
+                              std::uint64_t seed) {
+  torch::manual_seed(seed);
+  tools::PolicyNet net(arch, c);
+  torch::NoGradGuard no_grad;
+  for (torch::Tensor& p : net->trainableParameters()) p.add_(torch::randn_like(p) * 0.05);
+  if (arch.bins > 0) {
+    net->head_logit_weight.mul_(5.0);
+    net->setBinCenters(torch::randn({arch.bins, arch.tokens, arch.chunk}) * 0.8);
+  }
+  tools::NormStats stats;
+  for (int j = 0; j < kNumJoints; ++j) {
+    stats.q_mean[j] = 0.1 * j;
+    stats.q_std[j] = 0.5 + 0.1 * j;
+    stats.a_mean[j] = 0.001 * j;
+    stats.a_std[j] = 0.02 + 0.01 * j;
+    stats.r_mean[j] = -0.1 * j;
+    stats.r_std[j] = 0.7;
+  }
+  net->setNormalisation(stats);
+  net->setCentroids(centroids);
+  net->setLawGain(1.0894);
+  net->setEnsembleDecay(0.3);
+  net->eval();
+  return net;
+}
+
+template <class Dims>
+void checkHead(const PolicyArch& arch, const std::vector<std::vector<JointVector>>& centroids,
+               const std::vector<Sequence>& random, const std::vector<Sequence>& recorded, const std::string& name,
+               std::uint64_t seed) {
   for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
-    torch::manual_seed(21);
-    tools::PolicyNet net(smallArch(), c);
-    {
-      // Away from the initialisation (LN gains 1, biases 0, zero step rows) so every term counts.
-      torch::NoGradGuard no_grad;
-      for (torch::Tensor& p : net->trainableParameters()) p.add_(torch::randn_like(p) * 0.05);
-      tools::NormStats stats;
-      for (int j = 0; j < kNumJoints; ++j) {
-        stats.q_mean[j] = 0.1 * j;
-        stats.q_std[j] = 0.5 + 0.1 * j;
-        stats.a_mean[j] = 0.001 * j;
-        stats.a_std[j] = 0.02 + 0.01 * j;
-        stats.r_mean[j] = -0.1 * j;
-        stats.r_std[j] = 0.7;
-      }
-      net->setNormalisation(stats);
-      net->setCentroids(centroids);
-    }
+    const tools::PolicyNet net = perturbedNet(arch, c, centroids, seed);
     const std::vector<std::vector<float>> floats = tools::manifestFloats(net);
     const std::vector<const float*> p = pointers(floats);
-    PolicyWeights<SmallPolicyDims> weights = bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), c);
-    // A residual gain (reference mode adds g·r to the action; autonomous mode ignores it): both
-    // sides must add it in the same place and precision.
-    net->residual_gain = 1.0894;
-    weights.residual_gain = 1.0894f;
-    // A linear AR base (autonomous mode adds it; reference mode ignores it): per movement and
-    // joint, orders 1..12, a mean-reverting β, the past actions' weights decaying.
-    {
-      std::mt19937_64 rng(5);
-      std::vector<tools::LinearArModel> ar(3);
-      for (std::size_t m = 0; m < 3; ++m)
-        for (std::size_t j = 0; j < 5; ++j) {
-          tools::LinearArJoint& x = ar[m].joints[j];
-          x.order = static_cast<int>(1 + (3 * m + j) % 12);
-          x.c = uniform(rng, -0.02, 0.02);
-          x.beta = uniform(rng, -0.1, 0.0);
-          x.alpha.clear();
-          for (int k = 0; k < x.order; ++k) x.alpha.push_back(uniform(rng, -0.9, 0.9) / static_cast<float>(1 + k));
-        }
-      net->setLinearAr(ar);
-      weights.linear_ar = linearArBase<SmallPolicyDims::kMovements>(tools::linearArCoefficients(ar));
-      REQUIRE(weights.linear_ar.on);
-    }
+    const PolicyWeights<Dims> weights = bindPolicyWeights<Dims>(p.data(), p.size(), arch, c);
+    // The law is the model's tensor: 1.0894 in reference mode, 0 in autonomous mode.
+    CHECK(weights.law_gain(2) == (c == Conditioning::kReference ? 1.0894f : 0.0f));
     const std::string mode = conditioningName(c);
-    checkParity(net, weights, random, "small/" + mode + "/random");
-    checkParity(net, weights, recorded, "small/" + mode + "/recorded");
+    checkParity(net, weights, random, name + "/" + mode + "/random");
+    if (!recorded.empty()) checkParity(net, weights, recorded, name + "/" + mode + "/recorded");
   }
 }
 
-TEST_CASE("paper configuration: the committed models agree with libtorch within 1e-5") {
+PolicyArch withHead(PolicyArch a, int chunk, int bins) {
+  a.chunk = chunk;
+  a.bins = bins;
+  return a;
+}
+
+}  // namespace
+
+TEST_CASE("small configuration, regression of one action: streaming runtime inference equals libtorch's act within 1e-5 (random and recorded rollouts, both modes)") {
   torch::set_num_threads(1);
   const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  const std::filesystem::path models = std::filesystem::path(NAO_TEST_DATA_DIR).parent_path().parent_path() / "models";
-  int checked = 0;
-  for (const char* name : {"default.bin", "autonomous.bin"}) {
-    const std::filesystem::path path = models / name;
-    INFO("model " << path.string());
-    REQUIRE_MESSAGE(std::filesystem::exists(path), "the committed model is missing");
-    const ModelFile model = readModelFile(path.string());
-    checkJointsMatch(model, arm, path.string());
-    checkPolicyArch<PaperPolicyDims>(model.header.arch);
-    tools::PolicyNet net(paperArch(), model.header.conditioning);
-    loadInto(net, model);
-    std::vector<const float*> p;
-    for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
-    PolicyWeights<PaperPolicyDims> weights =
-        bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.conditioning);
-    weights.residual_gain = modelResidualGain(model.header.metadata_json, path.string());
-    net->residual_gain = weights.residual_gain;
-    const LinearArCoefficients ar = modelLinearAr(model.header.metadata_json, 3, path.string());
-    weights.linear_ar = linearArBase<PaperPolicyDims::kMovements>(ar);
-    net->setLinearAr(linearArModels(ar));
-    std::vector<std::vector<JointVector>> centroids(3);
-    for (int m = 0; m < 3; ++m)
-      for (int k = 0; k < PaperPolicyDims::kClusters; ++k)
-        centroids[static_cast<std::size_t>(m)].push_back(centroid(weights, m, k).cast<double>());
-    // 60 ticks = 3 windows (the whole-sequence record needs (T·J)² · d floats: kept short).
-    checkParity(net, weights, randomSequences(arm, 3, 3, 60, 13), std::string(name) + "/random");
-    checkParity(net, weights, recordedSequences(arm, centroids, 3, 60), std::string(name) + "/recorded");
-    ++checked;
-  }
-  CHECK(checked == 2);
+  const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
+  // Longer than W (8) several times over: the ring wraps; steps run past nothing (T < max_steps).
+  const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 6, 200);
+  const std::vector<Sequence> random = randomSequences(arm, 3, 6, 3 * smallArch().window + 5, 12);
+  checkHead<SmallPolicyDims>(smallArch(), centroids, random, recorded, "small C1", 21);
+}
+
+TEST_CASE("small configuration, a regressed chunk of 5 with the temporal ensemble (decay 0.3): the runtime equals libtorch's act within 1e-5") {
+  torch::set_num_threads(1);
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
+  const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 3, 120);
+  const std::vector<Sequence> random = randomSequences(arm, 3, 6, 3 * smallArch().window + 5, 13);
+  checkHead<SmallPolicyDims>(withHead(smallArch(), 5, 0), centroids, random, recorded, "small C5", 22);
+}
+
+TEST_CASE("small configuration, 8 action bins of chunk 3: the runtime picks libtorch's bin and equals its act within 1e-5") {
+  torch::set_num_threads(1);
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
+  const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 3, 120);
+  const std::vector<Sequence> random = randomSequences(arm, 3, 6, 3 * smallArch().window + 5, 14);
+  checkHead<SmallPolicyDims>(withHead(smallArch(), 3, 8), centroids, random, recorded, "small B8 C3", 23);
+}
+
+TEST_CASE("paper configuration: the runtime equals libtorch's act within 1e-5, a chunk of 1 and a bins head of chunk 2") {
+  torch::set_num_threads(1);
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
+  // 60 ticks = 3 windows (the whole-sequence record needs (T·J)² · d floats: kept short).
+  const std::vector<Sequence> random = randomSequences(arm, 3, 3, 60, 15);
+  const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 3, 60);
+  checkHead<PaperPolicyDims>(paperArch(), centroids, random, recorded, "paper C1", 24);
+  checkHead<PaperPolicyDims>(withHead(paperArch(), 2, 16), centroids, random, {}, "paper B16 C2", 25);
 }

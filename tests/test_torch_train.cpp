@@ -1,8 +1,12 @@
 // Training the policy with libtorch: the module is the manifest, training is deterministic for a
 // seed, the exported file reads back to the module's tensors, the loss goes down, early
-// stopping exports the best epoch, the attention record follows docs/policy.md.
+// stopping exports the best epoch, the attention record follows docs/policy.md; the head's
+// training data (chunk targets, the action bins and their labels), models with a chunk and bins
+// that the runtime runs, the autonomous starts, and model selection on rollouts through the
+// runtime's own step.
 #include "nao/controller.hpp"
 #include "nao/model_file.hpp"
+#include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/policy_dataset.hpp"
@@ -10,14 +14,20 @@
 #include "policy_train.hpp"
 #include "support/small_policy_data.hpp"
 #include "support/test_util.hpp"
+#include "train_checkpoint.hpp"
+#include "train_data.hpp"
+#include "train_select.hpp"
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
+
+#include <unistd.h>
 
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <random>
 #include <set>
 
 using namespace nao;
@@ -29,15 +39,10 @@ using nao::test::smallData;
 using nao::test::smallOptions;
 using nao::test::smallSim;
 
-// The linear AR baseline evaluate fits for movement m: `data`'s training-split f, order chosen on
-// its validation split's.
-LinearArModel expectedLinearAr(const PolicyData& data, const PolicySplit& split, int m) {
-  std::vector<std::vector<JointVector>> tr, va;
-  for (int d : split.train)
-    if (data.demos[static_cast<std::size_t>(d)].movement == m) tr.push_back(data.demos[static_cast<std::size_t>(d)].f);
-  for (int d : split.val)
-    if (data.demos[static_cast<std::size_t>(d)].movement == m) va.push_back(data.demos[static_cast<std::size_t>(d)].f);
-  return fitLinearAr(tr, va, kMaxLinearArOrder);
+PolicyArch withHead(PolicyArch a, int chunk, int bins) {
+  a.chunk = chunk;
+  a.bins = bins;
+  return a;
 }
 
 std::vector<TrainedJoint> urdfJoints() { return trainedJoints(loadArmModel(nao::test::kUrdfPath)); }
@@ -52,8 +57,10 @@ std::vector<std::uint8_t> trainBytes(const TrainOptions& o, TrainResult* out = n
 }  // namespace
 
 TEST_CASE("the torch module's tensors are the manifest: same names, shapes and order, nothing else") {
-  for (const PolicyArch& arch : {smallArch(), paperArch()})
+  for (const PolicyArch& arch : {smallArch(), paperArch(), withHead(smallArch(), 5, 0), withHead(smallArch(), 3, 8)})
     for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
+      CAPTURE(arch.chunk);
+      CAPTURE(arch.bins);
       torch::manual_seed(1);
       const PolicyNet net(arch, c);
       const std::vector<TensorSpec> manifest = policyManifest(arch);
@@ -72,8 +79,13 @@ TEST_CASE("the torch module's tensors are the manifest: same names, shapes and o
       // Buffers are exactly the non-trained manifest tensors.
       std::set<std::string> buffers;
       for (const auto& b : net->named_buffers()) buffers.insert(b.key());
-      CHECK(buffers == std::set<std::string>{"norm.q_mean", "norm.q_std", "norm.a_mean", "norm.a_std", "norm.r_mean",
-                                             "norm.r_std", "centroids"});
+      std::set<std::string> expected{"norm.q_mean", "norm.q_std", "norm.a_mean", "norm.a_std", "norm.r_mean",
+                                     "norm.r_std",  "centroids",  "law.gain"};
+      if (arch.bins > 0) expected.insert("head.centers");
+      if (arch.chunk > 1) expected.insert("head.ensemble_decay");
+      CHECK(buffers == expected);
+      // A fresh net has no law: the trainer sets it (reference mode) or leaves it 0.
+      CHECK(net->law_gain.abs().max().item<float>() == 0.0f);
       const torch::Tensor step = net->step_emb;
       if (c == Conditioning::kReference) {
         CHECK_FALSE(step.requires_grad());
@@ -101,10 +113,11 @@ TEST_CASE("the attention record follows docs/policy.md: per-body-part rows sum t
   const std::int64_t n_batch = 2, n_ticks = arch.window + 4, n_joints = arch.tokens, d = arch.d_model,
                      n_heads = arch.heads, window = arch.window;
   PolicyBatch in{torch::randn({n_batch, n_ticks, n_joints}), torch::randn({n_batch, n_ticks, n_joints}),
-                 torch::randn({n_batch, n_ticks, n_joints}), torch::tensor({0, 2}, torch::kInt64), torch::Tensor()};
+                 torch::randn({n_batch, n_ticks, n_joints}), torch::tensor({0, 2}, torch::kInt64)};
   PolicyAttention att;
-  const torch::Tensor out = net->forward(in, &att);
-  CHECK(out.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_joints});
+  const PolicyHeadOutput out = net->forward(in, &att);
+  CHECK(out.chunk.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_joints, 1});
+  CHECK_FALSE(out.logits.defined());
   REQUIRE(att.cross.size() == static_cast<std::size_t>(arch.decoder_layers));
   for (const torch::Tensor& a : att.cross) {
     CHECK(a.sizes().vec() == std::vector<std::int64_t>{n_batch, n_ticks, n_heads, n_joints, n_joints});
@@ -147,11 +160,19 @@ TEST_CASE("a later tick never changes an earlier action (causal in time), a whol
   torch::NoGradGuard no_grad;
   const std::int64_t n_ticks = 2 * arch.window + 3;
   PolicyBatch in{torch::randn({1, n_ticks, 5}), torch::randn({1, n_ticks, 5}), torch::randn({1, n_ticks, 5}),
-                 torch::tensor({1}, torch::kInt64), torch::Tensor()};
-  const torch::Tensor full = net->forward(in);
+                 torch::tensor({1}, torch::kInt64)};
+  const torch::Tensor full = net->forward(in).chunk;
   const std::int64_t cut = arch.window + 1;
-  PolicyBatch prefix{in.qn.slice(1, 0, cut), in.an.slice(1, 0, cut), in.rn.slice(1, 0, cut), in.movement, torch::Tensor()};
-  CHECK((net->forward(prefix) - full.slice(1, 0, cut)).abs().max().item<float>() < 1e-5f);
+  PolicyBatch prefix{in.qn.slice(1, 0, cut), in.an.slice(1, 0, cut), in.rn.slice(1, 0, cut), in.movement};
+  CHECK((net->forward(prefix).chunk - full.slice(1, 0, cut)).abs().max().item<float>() < 1e-5f);
+  // The same for a bins head's logits and offsets.
+  torch::manual_seed(6);
+  const PolicyNet bins(withHead(arch, 3, 6), Conditioning::kAutonomous);
+  const PolicyHeadOutput b_full = bins->forward(in), b_prefix = bins->forward(prefix);
+  CHECK(b_full.logits.sizes().vec() == std::vector<std::int64_t>{1, n_ticks, 6});
+  CHECK(b_full.offsets.sizes().vec() == std::vector<std::int64_t>{1, n_ticks, 5, 6, 3});
+  CHECK((b_prefix.logits - b_full.logits.slice(1, 0, cut)).abs().max().item<float>() < 1e-5f);
+  CHECK((b_prefix.offsets - b_full.offsets.slice(1, 0, cut)).abs().max().item<float>() < 1e-5f);
 }
 
 TEST_CASE("the blocked layout of the window attention is the full one: outputs, gradients and the attention record") {
@@ -176,8 +197,8 @@ TEST_CASE("the blocked layout of the window attention is the full one: outputs, 
     for (const std::int64_t n_ticks : {std::int64_t{1}, std::max<std::int64_t>(w - 1, 1), w, w + 1, 2 * w + 3, 5 * w + 2}) {
       CAPTURE(n_ticks);
       PolicyBatch in{torch::randn({2, n_ticks, 5}), torch::randn({2, n_ticks, 5}), torch::randn({2, n_ticks, 5}),
-                     torch::tensor({0, 2}, torch::kInt64), torch::Tensor()};
-      const torch::Tensor target = torch::randn({2, n_ticks, 5});
+                     torch::tensor({0, 2}, torch::kInt64)};
+      const torch::Tensor target = torch::randn({2, n_ticks, 5, 1});
       torch::Tensor out[2];
       std::vector<torch::Tensor> grad[2];
       PolicyAttention att[2];
@@ -185,7 +206,7 @@ TEST_CASE("the blocked layout of the window attention is the full one: outputs, 
       for (int l = 0; l < 2; ++l) {
         net->window_layout = layouts[l];
         for (const torch::Tensor& p : params) p.mutable_grad() = torch::Tensor();
-        out[l] = net->forward(in);
+        out[l] = net->forward(in).chunk;
         (out[l] - target).square().mean().backward();
         for (const torch::Tensor& p : params) grad[l].push_back(p.grad().clone());
         torch::NoGradGuard no_grad;
@@ -225,17 +246,17 @@ TEST_CASE("reference mode ignores the step, autonomous mode ignores the referenc
   const PolicyNet ref(arch, Conditioning::kReference), aut(arch, Conditioning::kAutonomous);
   torch::NoGradGuard no_grad;
   PolicyBatch in{torch::randn({2, 6, 5}), torch::randn({2, 6, 5}), torch::randn({2, 6, 5}),
-                 torch::tensor({0, 2}, torch::kInt64), torch::Tensor()};
+                 torch::tensor({0, 2}, torch::kInt64)};
   PolicyBatch other_ref = in;
   other_ref.rn = torch::randn({2, 6, 5});
-  CHECK_FALSE(torch::equal(ref->forward(in), ref->forward(other_ref)));
-  CHECK(torch::equal(aut->forward(in), aut->forward(other_ref)));
+  CHECK_FALSE(torch::equal(ref->forward(in).chunk, ref->forward(other_ref).chunk));
+  CHECK(torch::equal(aut->forward(in).chunk, aut->forward(other_ref).chunk));
   // The step rows: zero and frozen in reference mode (see the manifest test), used in autonomous.
   CHECK(ref->step_emb.abs().max().item<float>() == 0.0f);
-  const torch::Tensor with_steps = aut->forward(in);
+  const torch::Tensor with_steps = aut->forward(in).chunk;
   const torch::Tensor saved = aut->step_emb.clone();
   aut->step_emb.zero_();
-  const torch::Tensor without_steps = aut->forward(in);
+  const torch::Tensor without_steps = aut->forward(in).chunk;
   aut->step_emb.copy_(saved);
   CHECK_FALSE(torch::equal(with_steps, without_steps));
 }
@@ -287,7 +308,17 @@ TEST_CASE("the written model.bin reads back: header, metadata and every tensor e
   CHECK(meta["result"]["epochs_run"] == 2);
   CHECK(meta["split"]["val"].size() == r.split.val.size());
   CHECK(meta["baselines_rad2"]["val"]["zero_action"].get<double>() == r.val_baselines.zero_action);
+  CHECK(meta["baselines_rad2"]["val"]["gain_law"].get<double>() == r.val_baselines.gain_law);
   CHECK(file.header.metadata_json.find("time") == std::string::npos);
+  // Reference mode's law: the servo inversion over one tick (1.0894 for the default servo), in
+  // the file as law.gain and in the metadata.
+  CHECK(r.law_gain == servoStepGain(smallSim().params));
+  CHECK(meta["training"]["law_gain"].get<double>() == r.law_gain);
+  const float* law = file.data(file.find("law.gain"));
+  for (int j = 0; j < kNumJoints; ++j) CHECK(law[j] == static_cast<float>(r.law_gain));
+  CHECK(meta["config"]["head"] == "regression");
+  CHECK(meta["config"]["chunk"] == 1);
+  CHECK(meta["config"]["bins"] == 0);
 }
 
 TEST_CASE("early stopping exports the best epoch's weights") {
@@ -299,398 +330,510 @@ TEST_CASE("early stopping exports the best epoch's weights") {
   double best = 1e300;
   for (const EpochStats& e : r.history) best = std::min(best, e.val_loss);
   CHECK(r.history[static_cast<std::size_t>(r.best_epoch - 1)].val_loss == best);
-  CHECK(r.val.normalised == r.history[static_cast<std::size_t>(r.best_epoch - 1)].val_loss);
+  CHECK(r.val.loss == r.history[static_cast<std::size_t>(r.best_epoch - 1)].val_loss);
   ExecutionOptions clean = o.execution;
   clean.noisy_rollouts = 0;
-  CHECK(evaluatePolicy(r.net, executeDemos(smallData(), r.split.val, smallSim(), clean, o.seed)).normalised ==
-        r.val.normalised);
+  CHECK(evaluateLoss(r.net, toTensors(r.net, executeDemos(smallData(), r.split.val, smallSim(), clean, o.seed)),
+                     o.offset_weight)
+            .loss == r.val.loss);
   CHECK(static_cast<int>(r.history.size()) <= std::min(o.max_epochs, r.best_epoch + o.patience));
 }
 
 namespace {
 
-torch::Tensor stacked(const std::vector<JointVector>& v) {
-  torch::Tensor t = torch::empty({1, static_cast<std::int64_t>(v.size()), kNumJoints}, torch::kFloat);
-  auto acc = t.accessor<float, 3>();
-  for (std::size_t i = 0; i < v.size(); ++i)
-    for (int j = 0; j < kNumJoints; ++j) acc[0][static_cast<std::int64_t>(i)][j] = static_cast<float>(v[i][j]);
-  return t;
+/// Hand-made sequences: values from a seeded generator, lengths `lengths`.
+std::vector<PolicySequence> randomSequences(const std::vector<int>& lengths, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  const auto u = [&rng](double lo, double hi) { return lo + (hi - lo) * static_cast<double>(rng() >> 11) * 0x1.0p-53; };
+  std::vector<PolicySequence> out;
+  for (std::size_t i = 0; i < lengths.size(); ++i) {
+    PolicySequence s;
+    s.demo = static_cast<int>(i);
+    s.movement = static_cast<int>(i % 3);
+    for (int t = 0; t < lengths[i]; ++t) {
+      JointVector q, a_prev, r, a;
+      for (int j = 0; j < kNumJoints; ++j) {
+        q[j] = u(-1.0, 1.0);
+        a_prev[j] = u(-0.05, 0.05);
+        r[j] = u(-0.1, 0.1);
+        a[j] = u(-0.08, 0.08);
+      }
+      s.q.push_back(q);
+      s.a_prev.push_back(a_prev);
+      s.r.push_back(r);
+      s.a.push_back(a);
+    }
+    out.push_back(s);
+  }
+  return out;
+}
+
+NormStats someStats() {
+  NormStats st;
+  for (int j = 0; j < kNumJoints; ++j) {
+    st.q_mean[j] = 0.1 * j;
+    st.q_std[j] = 0.5 + 0.1 * j;
+    st.a_mean[j] = 0.002 * (j - 2);
+    st.a_std[j] = 0.03 + 0.005 * j;
+    st.r_mean[j] = -0.01 * j;
+    st.r_std[j] = 0.06;
+  }
+  return st;
 }
 
 }  // namespace
 
-TEST_CASE("DAgger rollouts execute the net's own action (libtorch's forward on the recorded inputs, clamped as the controller does)") {
-  const ArmModel& arm = smallSim().arm;
-  const double period = smallSim().params.dt_s * smallSim().params.substeps_per_tick;
-  const std::vector<int> demos = {0, 5, 10};
-  ExecutionOptions clean;
-  clean.noisy_rollouts = 0;
-  const NormStats stats = normStats(executeDemos(smallData(), demos, smallSim(), clean, 1));
-  // Autonomous with phase steps too: the runtime's step rows (floor(t·P / L), L the
-  // demonstration's samples) must be the ones libtorch's forward uses.
-  const std::vector<std::pair<Conditioning, int>> cases = {
-      {Conditioning::kAutonomous, 0}, {Conditioning::kReference, 0}, {Conditioning::kAutonomous, 37}};
-  std::vector<std::vector<JointVector>> phase0_q;
-  for (const auto& [c, phase] : cases) {
-    INFO(std::string(conditioningName(c)) << ", phase steps " << phase);
-    torch::manual_seed(7);
-    PolicyNet net(smallArch(), c);
-    {
-      // Away from the initialisation so that the actions are large enough to reach the clamp.
-      torch::NoGradGuard no_grad;
-      for (auto& p : net->parameters())
-        if (p.requires_grad()) p.add_(torch::randn_like(p) * 0.2);
-    }
-    net->setNormalisation(stats);
-    net->setCentroids(smallData().centroids);
-    net->residual_gain = c == Conditioning::kReference ? 1.0894 : 0.0;
-    net->phase_ticks = phase;
-    net->eval();
-    const std::vector<PolicySequence> seqs = daggerRollouts(smallData(), demos, smallSim(), clean, net, 1);
-    if (c == Conditioning::kAutonomous && phase == 0)
-      for (const PolicySequence& s : seqs) phase0_q.push_back(s.q);
-    if (phase > 0)  // the phase changes what the net does
-      for (std::size_t i = 0; i < seqs.size(); ++i) CHECK(seqs[i].q != phase0_q.at(i));
-    REQUIRE(seqs.size() == demos.size());
-    torch::NoGradGuard no_grad;
-    double worst = 0.0, largest_action = 0.0, drift = 0.0;
-    std::size_t saturated = 0;
-    for (const PolicySequence& s : seqs) {
-      CHECK(s.rollout == -1);
-      const auto samples = static_cast<std::int64_t>(smallData().demos[static_cast<std::size_t>(s.demo)].f.size());
-      const torch::Tensor act = net->act(stacked(s.q), stacked(s.a_prev), stacked(s.r),
-                                         torch::tensor({static_cast<std::int64_t>(s.movement)}), nullptr,
-                                         torch::tensor({samples}))
-                                    .contiguous();
-      auto a = act.accessor<float, 3>();
-      for (std::size_t t = 0; t + 1 < s.ticks(); ++t)
+TEST_CASE("toTensors' chunk targets: entry (t, j, c) is (a(t+c) − law·r(t+c) − mean) / std, with a = r = 0 past the end") {
+  const std::vector<PolicySequence> seqs = randomSequences({7, 3, 12}, 5);
+  const NormStats st = someStats();
+  for (Conditioning cond : {Conditioning::kReference, Conditioning::kAutonomous}) {
+    CAPTURE(conditioningName(cond));
+    torch::manual_seed(1);
+    PolicyNet net(withHead(smallArch(), 4, 0), cond);
+    net->setNormalisation(st);
+    net->setLawGain(1.25);  // the law an autonomous model never has
+    const double law = cond == Conditioning::kReference ? 1.25 : 0.0;
+    const SequenceTensors t = toTensors(net, seqs);
+    REQUIRE(t.size() == seqs.size());
+    CHECK(t.ticks == 7 + 3 + 12);
+    CHECK(t.label.empty());  // labels only once there are bins
+    double worst = 0.0;
+    int past_end = 0;
+    for (std::size_t i = 0; i < seqs.size(); ++i) {
+      const PolicySequence& s = seqs[i];
+      const auto n = static_cast<std::int64_t>(s.ticks());
+      REQUIRE(t.target[i].sizes().vec() == std::vector<std::int64_t>{n, kNumJoints, 4});
+      CHECK(t.movement[i] == s.movement);
+      auto target = t.target[i].accessor<float, 3>();
+      auto qn = t.qn[i].accessor<float, 2>();
+      auto an = t.an[i].accessor<float, 2>();
+      auto rn = t.rn[i].accessor<float, 2>();
+      auto action = t.action[i].accessor<float, 2>();
+      auto r = t.r[i].accessor<float, 2>();
+      for (std::int64_t k = 0; k < n; ++k) {
+        const auto tk = static_cast<std::size_t>(k);
         for (int j = 0; j < kNumJoints; ++j) {
-          const double step = arm.v_max[j] * period;
-          const double lo = std::max(arm.q_min[j], s.q[t][j] - step), hi = std::min(arm.q_max[j], s.q[t][j] + step);
-          const double want = s.q[t][j] + a[0][static_cast<std::int64_t>(t)][j];
-          const double cmd = std::clamp(want, std::min(lo, hi), std::max(lo, hi));
-          if (cmd != want) ++saturated;
-          largest_action = std::max(largest_action, std::abs(static_cast<double>(a[0][static_cast<std::int64_t>(t)][j])));
-          worst = std::max(worst, std::abs(s.q[t][j] + s.a_prev[t + 1][j] - cmd));
+          worst = std::max({worst, std::abs(qn[k][j] - (s.q[tk][j] - st.q_mean[j]) / st.q_std[j]),
+                            std::abs(an[k][j] - (s.a_prev[tk][j] - st.a_mean[j]) / st.a_std[j]),
+                            std::abs(rn[k][j] - (s.r[tk][j] - st.r_mean[j]) / st.r_std[j]),
+                            std::abs(action[k][j] - s.a[tk][j]), std::abs(r[k][j] - s.r[tk][j])});
+          for (int c = 0; c < 4; ++c) {
+            const std::size_t at = tk + static_cast<std::size_t>(c);
+            const bool inside = at < s.ticks();
+            past_end += inside ? 0 : 1;
+            const double a = inside ? s.a[at][j] : 0.0, rr = inside ? s.r[at][j] : 0.0;
+            const double expected = (a - law * rr - st.a_mean[j]) / st.a_std[j];
+            worst = std::max(worst, std::abs(target[k][j][c] - expected) / std::max(1.0, std::abs(expected)));
+          }
         }
-      drift = std::max(drift, s.drift_rad);
+      }
     }
-    MESSAGE(std::string(conditioningName(c)) << ": executed vs libtorch's clamped action " << worst << " rad, largest action "
-                                << largest_action << " rad, " << saturated << " clamped joint-ticks, drift " << drift << " rad");
+    MESSAGE(conditioningName(cond) << ": worst relative difference " << worst << ", " << past_end << " entries past an end");
     CHECK(worst < 1e-5);
-    CHECK(largest_action > 1e-3);
-    CHECK(drift > 1e-3);
+    CHECK(past_end == 3 * 5 * (1 + 2 + 3));  // the last 3 ticks of each sequence reach past its end
   }
 }
 
-TEST_CASE("training with one DAgger round adds one policy rollout per training demonstration and stays deterministic") {
-  TrainOptions o = smallOptions(41, 3);
-  o.conditioning = Conditioning::kAutonomous;
-  o.dagger_rounds = 1;
-  o.dagger_start = 1;
-  TrainResult r;
-  const std::vector<std::uint8_t> a = trainBytes(o, &r);
-  REQUIRE(r.dagger.size() == 1);
-  const DaggerRound& round = r.dagger.front();
-  std::size_t demo_ticks = 0;
-  for (int d : r.split.train) demo_ticks += smallData().demos[static_cast<std::size_t>(d)].f.size() - 1;
-  MESSAGE("DAgger round (small config, " << round.sequences << " demos, " << round.ticks << " ticks): " << round.seconds
-                                         << " s, drift " << round.drift_rad << " rad");
-  CHECK(round.after_epoch == 1);
-  CHECK(round.sequences == r.split.train.size());
-  CHECK(round.ticks == demo_ticks);
-  // Epoch 1 trains on the executed rollouts, epochs 2 and 3 on those plus the round's.
-  REQUIRE(r.history.size() == 3);
-  CHECK(r.history[0].samples == r.train_samples);
-  CHECK(r.history[1].samples == r.train_samples + round.ticks);
-  CHECK(r.history[2].samples == r.train_samples + round.ticks);
-  const nlohmann::json meta = nlohmann::json::parse(modelMetadata(smallData(), o, r));
-  CHECK(meta["training"]["dagger"]["rounds"] == 1);
-  CHECK(meta["training"]["dagger"]["run"][0]["sequences"] == round.sequences);
-  CHECK(modelCard(smallData(), o, r, "test", "m.bin").find("| DAgger | 1 round") != std::string::npos);
+TEST_CASE("fitActionBins is deterministic and returns B distinct centers [B, J, C] that recover the centres the data were drawn around; labelBins picks the nearest center") {
+  // Four centres far apart in the J·C = 10 entries of a chunk of 2, 60 noisy targets each (σ 0.05).
+  constexpr int B = 4, C = 2;
+  std::mt19937_64 rng(17);
+  std::normal_distribution<double> noise(0.0, 0.05);  // the sample itself only: seeded, compared with tolerance
+  torch::Tensor truth = torch::zeros({B, kNumJoints, C});
+  for (int b = 0; b < B; ++b) truth[b][b % kNumJoints][b % C] = 2.0 * (b + 1);
+  SequenceTensors t;
+  for (int s = 0; s < 4; ++s) {
+    torch::Tensor y = torch::empty({60, kNumJoints, C});
+    auto acc = y.accessor<float, 3>();
+    for (int k = 0; k < 60; ++k) {
+      const int b = (k + s) % B;
+      for (int j = 0; j < kNumJoints; ++j)
+        for (int c = 0; c < C; ++c) acc[k][j][c] = truth[b][j][c].item<float>() + static_cast<float>(noise(rng));
+    }
+    t.target.push_back(y);
+  }
+  const torch::Tensor centers = fitActionBins(t, B, 3);
+  REQUIRE(centers.sizes().vec() == std::vector<std::int64_t>{B, kNumJoints, C});
+  CHECK(torch::equal(centers, fitActionBins(t, B, 3)));
+  // Each true centre has one recovered center within 0.03 (the mean of 60 draws of σ 0.05), a
+  // different one each.
+  std::set<std::int64_t> matched;
+  for (int b = 0; b < B; ++b) {
+    const torch::Tensor d = (centers - truth[b]).square().sum({1, 2}).sqrt();
+    const std::int64_t nearest = d.argmin().item<std::int64_t>();
+    CHECK_MESSAGE(d[nearest].item<double>() < 0.03, "true centre " << b << " is " << d[nearest].item<double>() << " away");
+    matched.insert(nearest);
+  }
+  CHECK(matched.size() == B);
+  // Another seed starts k-means++ elsewhere and lands on the same clusters here.
+  const torch::Tensor other = fitActionBins(t, B, 4);
+  CHECK(other.sizes() == centers.sizes());
+  // Fewer targets than bins cannot be binned.
+  SequenceTensors few;
+  few.target.push_back(torch::zeros({3, kNumJoints, C}));
+  CHECK_THROWS_WITH_AS(fitActionBins(few, B, 3), doctest::Contains("3 training ticks for 4 bins"), UserError);
 
-  const std::vector<std::uint8_t> b = trainBytes(o);
-  CHECK_MESSAGE(a == b, "two DAgger runs with seed 41 gave different bytes");
-  // Off: no DAgger key (older files keep their bytes) and other weights.
-  TrainOptions off = o;
-  off.dagger_rounds = 0;
-  TrainResult r_off;
-  const std::vector<std::uint8_t> c = trainBytes(off, &r_off);
-  CHECK(r_off.dagger.empty());
-  CHECK(modelMetadata(smallData(), off, r_off).find("dagger") == std::string::npos);
-  // Epoch 1 is the same run; epoch 2 trained on other data.
-  CHECK(r_off.history[0].val_loss == r.history[0].val_loss);
-  CHECK(r_off.history[1].val_loss != r.history[1].val_loss);
-  CHECK(a != c);
-  CHECK(round.expert_ticks == 0);  // pure: the policy executes every tick
-
-  // β-mixed: about half the round's ticks executed by the expert, recorded; other data again.
-  TrainOptions mixed = o;
-  mixed.execution.dagger_beta = 0.5;
-  TrainResult r_mixed;
-  const std::vector<std::uint8_t> m = trainBytes(mixed, &r_mixed);
-  REQUIRE(r_mixed.dagger.size() == 1);
-  const DaggerRound& mr = r_mixed.dagger.front();
-  MESSAGE("beta 0.5: " << mr.expert_ticks << " of " << mr.ticks << " ticks by the expert, drift " << mr.drift_rad
-                       << " rad (pure: " << round.drift_rad << " rad)");
-  CHECK(mr.ticks == round.ticks);
-  CHECK(mr.expert_ticks > mr.ticks / 4);
-  CHECK(mr.expert_ticks < mr.ticks * 3 / 4);
-  CHECK(r_mixed.history[0].val_loss == r.history[0].val_loss);
-  CHECK(m != a);
-  const nlohmann::json mm = nlohmann::json::parse(modelMetadata(smallData(), mixed, r_mixed));
-  CHECK(mm["training"]["dagger"]["beta"] == 0.5);
-  CHECK(mm["training"]["dagger"]["run"][0]["expert_ticks"] == mr.expert_ticks);
-  CHECK(meta["training"]["dagger"].find("beta") == meta["training"]["dagger"].end());
-  CHECK(modelCard(smallData(), mixed, r_mixed, "test", "m.bin").find("beta-mixed rollouts, beta 0.5^round") != std::string::npos);
-
-  // A drift bound: fewer ticks join, recorded.
-  TrainOptions bounded = mixed;
-  bounded.execution.dagger_max_drift_rad = 0.02;
-  TrainResult r_bounded;
-  const std::vector<std::uint8_t> bb = trainBytes(bounded, &r_bounded);
-  REQUIRE(r_bounded.dagger.size() == 1);
-  MESSAGE("max drift 0.02 rad: " << r_bounded.dagger.front().ticks << " of " << mr.ticks << " ticks kept");
-  CHECK(r_bounded.dagger.front().ticks < mr.ticks);
-  CHECK(r_bounded.dagger.front().ticks > 0);
-  CHECK(bb != m);
-  CHECK(nlohmann::json::parse(modelMetadata(smallData(), bounded, r_bounded))["training"]["dagger"]["max_drift_rad"] == 0.02);
-  CHECK(modelCard(smallData(), bounded, r_bounded, "test", "m.bin").find("each ended where its drift first exceeds 0.02 rad") !=
-        std::string::npos);
-
-  // Aligned labels (the pool is the training split): the same states as the pure round (no β,
-  // no bound), other labels, so other weights; recorded in the metadata and the card.
-  TrainOptions aligned = o;
-  aligned.execution.dagger_align_band = 3;
-  aligned.execution.dagger_return = 0.5;
-  TrainResult r_aligned;
-  const std::vector<std::uint8_t> al = trainBytes(aligned, &r_aligned);
-  REQUIRE(r_aligned.dagger.size() == 1);
-  CHECK(r_aligned.dagger.front().ticks == round.ticks);
-  CHECK(r_aligned.dagger.front().drift_rad == round.drift_rad);
-  CHECK(r_aligned.history[0].val_loss == r.history[0].val_loss);
-  CHECK(r_aligned.history[1].train_loss != r.history[1].train_loss);
-  CHECK(al != a);
-  const nlohmann::json ma = nlohmann::json::parse(modelMetadata(smallData(), aligned, r_aligned));
-  CHECK(ma["training"]["dagger"]["align_band_ticks"] == 3);
-  CHECK(ma["training"]["dagger"]["return"] == 0.5);
-  CHECK(meta["training"]["dagger"].find("align_band_ticks") == meta["training"]["dagger"].end());
-  CHECK(modelCard(smallData(), aligned, r_aligned, "test", "m.bin").find("within 3 ticks of the clock, returning 0.5") !=
-        std::string::npos);
-  // Aligned commands: other labels again.
-  TrainOptions commanded = aligned;
-  commanded.execution.dagger_align_label = ExecutionOptions::AlignLabel::kCommand;
-  TrainResult r_commanded;
-  const std::vector<std::uint8_t> co = trainBytes(commanded, &r_commanded);
-  CHECK(r_commanded.dagger.front().ticks == round.ticks);
-  CHECK(co != al);
-  CHECK(co != a);
-  const nlohmann::json mc = nlohmann::json::parse(modelMetadata(smallData(), commanded, r_commanded));
-  CHECK(mc["training"]["dagger"]["labels"].get<std::string>().find("command") != std::string::npos);
-  CHECK(modelCard(smallData(), commanded, r_commanded, "test", "m.bin").find("the clean execution's command") !=
-        std::string::npos);
-}
-
-TEST_CASE("DAgger is refused with --resume, a beta of 1 and for an architecture the runtime is not compiled for") {
-  TrainOptions o = smallOptions(1, 1);
-  o.dagger_rounds = 1;
-  TrainOptions resume = o;
-  resume.resume = "/nonexistent/checkpoint.pt";
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), resume, nullptr), doctest::Contains("--resume"), UserError);
-  TrainOptions window = o;
-  window.arch.window = 9;
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), window, nullptr), doctest::Contains("architecture"), UserError);
-  TrainOptions start = o;
-  start.dagger_start = 0;
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), start, nullptr), doctest::Contains("start"), UserError);
-  TrainOptions beta = o;
-  beta.execution.dagger_beta = 1.0;  // the policy would never act
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), beta, nullptr), doctest::Contains("beta"), UserError);
-  // Without DAgger the same window trains (the refusal is DAgger's).
-  window.dagger_rounds = 0;
-  CHECK_NOTHROW(trainPolicy(smallData(), smallSim(), window, nullptr));
-}
-
-TEST_CASE("over the linear AR base the untrained net is the baseline; rollout selection exports the epoch with the lowest rollout DTW") {
-  TrainOptions o = smallOptions(43, 3);
-  o.conditioning = Conditioning::kAutonomous;
-  o.ar_residual = true;
-  o.select_by_rollout = true;
-  TrainResult r;
-  const std::vector<std::uint8_t> a = trainBytes(o, &r);
-  REQUIRE(r.net->linearAr().size() == 3);
-
-  // The base is the baseline evaluate fits: the training split's f, order on the validation split's.
-  const PolicyData& data = smallData();
-  for (int m = 0; m < 3; ++m) {
-    const LinearArModel expect = expectedLinearAr(data, r.split, m);
-    for (int j = 0; j < kNumJoints; ++j) {
-      const LinearArJoint& got = r.net->linearAr()[static_cast<std::size_t>(m)].joints[static_cast<std::size_t>(j)];
-      CHECK(got.order == expect.joints[static_cast<std::size_t>(j)].order);
-      CHECK(got.c == expect.joints[static_cast<std::size_t>(j)].c);
-      CHECK(got.beta == expect.joints[static_cast<std::size_t>(j)].beta);
-      CHECK(got.alpha == expect.joints[static_cast<std::size_t>(j)].alpha);
+  // labelBins: the nearest center by squared distance over the J·C entries, brute force.
+  torch::manual_seed(2);
+  PolicyNet net(withHead(smallArch(), C, B), Conditioning::kReference);
+  net->setBinCenters(centers);
+  labelBins(net, t);
+  REQUIRE(t.label.size() == t.target.size());
+  int checked = 0;
+  for (std::size_t i = 0; i < t.target.size(); ++i) {
+    REQUIRE(t.label[i].sizes().vec() == std::vector<std::int64_t>{60});
+    for (std::int64_t k = 0; k < 60; ++k) {
+      std::int64_t best = -1;
+      double best_d = 0.0;
+      for (int b = 0; b < B; ++b) {
+        const double d = (t.target[i][k] - centers[b]).square().sum().item<double>();
+        if (best < 0 || d < best_d) {
+          best = b;
+          best_d = d;
+        }
+      }
+      CHECK(t.label[i][k].item<std::int64_t>() == best);
+      ++checked;
     }
   }
+  CHECK(checked == 240);
+  // A regression head has no bins to label with.
+  const PolicyNet regression(smallArch(), Conditioning::kReference);
+  CHECK_THROWS_AS(labelBins(regression, t), std::logic_error);
+}
 
-  // The base in libtorch is linearArAction (double, toolchain) in float: on a demonstration's f.
+TEST_CASE("lossSums of a bins head: the target bin's cross-entropy plus offset_weight times its offset's MSE, per real tick") {
+  // A second computation from the head's outputs: log-softmax picked at the label, the chosen
+  // bin's offset against target − center, masked to the real ticks of a padded batch.
+  constexpr int B = 5, C = 2;
+  torch::manual_seed(4);
+  PolicyNet net(withHead(smallArch(), C, B), Conditioning::kAutonomous);
+  net->setNormalisation(someStats());
   {
-    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(r.split.val.front())];
-    const std::int64_t n = static_cast<std::int64_t>(demo.f.size()) - 1;
-    torch::Tensor q = torch::empty({1, n, kNumJoints}), a_prev = torch::zeros({1, n, kNumJoints});
+    torch::NoGradGuard no_grad;
+    net->setBinCenters(torch::randn({B, kNumJoints, C}));
+  }
+  SequenceTensors t = toTensors(net, randomSequences({9, 4}, 6));
+  labelBins(net, t);
+  const Padded p = pad(t, {0, 1});
+  REQUIRE(p.ticks == 13);
+  CHECK(p.mask.sum().item<double>() == 13.0);
+  for (const double w : {0.0, 1.0, 2.5}) {
+    const LossSums s = lossSums(net, p, w);
+    torch::NoGradGuard no_grad;
+    const PolicyHeadOutput out = net->forward(p.in);
+    double expected = 0.0;
+    for (std::int64_t b = 0; b < 2; ++b)
+      for (std::int64_t k = 0; k < (b == 0 ? 9 : 4); ++k) {
+        const std::int64_t label = p.label[b][k].item<std::int64_t>();
+        const double ce = -torch::log_softmax(out.logits[b][k].to(torch::kFloat64), 0)[label].item<double>();
+        const torch::Tensor offset = out.offsets[b][k].select(1, label);  // [J, C]
+        const double mse = (offset - (p.target[b][k] - net->head_centers[label])).square().mean().item<double>();
+        expected += ce + w * mse;
+      }
+    CHECK(s.loss.item<double>() == doctest::Approx(expected).epsilon(1e-5));
+    CHECK(s.action_sse_rad2 > 0.0);
+  }
+}
+
+TEST_CASE("a bins head of chunk 3 and a regressed chunk of 5 train deterministically, load into the runtime, and stepPolicy runs them as libtorch's act") {
+  for (const auto& [chunk, bins] : {std::pair<int, int>{3, 8}, std::pair<int, int>{5, 0}}) {
+    CAPTURE(chunk);
+    CAPTURE(bins);
+    TrainOptions o = smallOptions(61, 1);
+    o.arch.chunk = chunk;
+    o.arch.bins = bins;
+    o.ensemble_decay = 0.4;
+    TrainResult r;
+    const std::vector<std::uint8_t> bytes = trainBytes(o, &r);
+    CHECK_MESSAGE(bytes == trainBytes(o), "two runs with seed 61 gave different bytes");
+    const ModelFile file = decodeModel(bytes, "trained.bin");
+    CHECK(file.header.arch.chunk == chunk);
+    CHECK(file.header.arch.bins == bins);
+    const nlohmann::json meta = nlohmann::json::parse(file.header.metadata_json);
+    CHECK(meta["config"]["head"] == (bins > 0 ? "bins" : "regression"));
+    CHECK(meta["training"]["ensemble_decay"] == 0.4);
+    if (bins > 0) {
+      CHECK(r.bin_coverage > 0.0);
+      CHECK(r.bin_coverage <= 1.0);
+      // The centers are the k-means++ bins of the training split's chunk targets.
+      CHECK(torch::equal(r.net->head_centers,
+                         fitActionBins(toTensors(r.net, executeDemos(smallData(), r.split.train, smallSim(), o.execution, o.seed)),
+                                       bins, o.seed)));
+    }
+    // The runtime binds the file and steps it: the same actions as libtorch's act on a validation
+    // demonstration's executed inputs.
+    std::vector<const float*> p;
+    for (std::size_t i = 0; i < file.tensors.size(); ++i) p.push_back(file.data(i));
+    const PolicyWeights<SmallPolicyDims> w =
+        bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), file.header.arch, file.header.conditioning);
+    CHECK(w.ensemble_weight[1][1] == doctest::Approx(std::exp(-0.4) / (1.0 + std::exp(-0.4))).epsilon(1e-6));
+    ExecutionOptions clean;
+    clean.noisy_rollouts = 0;
+    const PolicySequence seq = executeDemos(smallData(), {r.split.val.front()}, smallSim(), clean, o.seed).front();
+    const auto n = static_cast<std::int64_t>(seq.ticks());
+    torch::Tensor q = torch::empty({1, n, kNumJoints}), a_prev = torch::empty({1, n, kNumJoints}),
+                  rr = torch::empty({1, n, kNumJoints});
     for (std::int64_t t = 0; t < n; ++t)
       for (int j = 0; j < kNumJoints; ++j) {
-        q[0][t][j] = static_cast<float>(demo.f[static_cast<std::size_t>(t)][j]);
-        if (t > 0) a_prev[0][t][j] = static_cast<float>(demo.f[static_cast<std::size_t>(t)][j] - demo.f[static_cast<std::size_t>(t - 1)][j]);
+        q[0][t][j] = static_cast<float>(seq.q[static_cast<std::size_t>(t)][j]);
+        a_prev[0][t][j] = static_cast<float>(seq.a_prev[static_cast<std::size_t>(t)][j]);
+        rr[0][t][j] = static_cast<float>(seq.r[static_cast<std::size_t>(t)][j]);
       }
-    const torch::Tensor base =
-        r.net->linearArBase(q, a_prev, torch::tensor({static_cast<std::int64_t>(demo.movement)}, torch::kInt64));
+    torch::NoGradGuard no_grad;
+    const torch::Tensor act =
+        r.net->act(q, a_prev, rr, torch::tensor({static_cast<std::int64_t>(seq.movement)})).contiguous();
+    auto ws = makePolicyWorkspace<SmallPolicyDims>();
+    resetPolicyStream(*ws);
     double worst = 0.0, largest = 0.0;
-    std::vector<JointVector> past;
     for (std::int64_t t = 0; t < n; ++t) {
-      const JointVector expect = linearArAction(r.net->linearAr()[static_cast<std::size_t>(demo.movement)],
-                                                demo.f[static_cast<std::size_t>(t)], past);
+      PolicyInput in;
+      in.q = seq.q[static_cast<std::size_t>(t)].cast<float>();
+      in.a_prev = seq.a_prev[static_cast<std::size_t>(t)].cast<float>();
+      in.r = seq.r[static_cast<std::size_t>(t)].cast<float>();
+      in.movement = seq.movement;
+      in.step = static_cast<int>(t);
+      const Eigen::Matrix<float, 5, 1>& a = stepPolicy(w, *ws, in);
       for (int j = 0; j < kNumJoints; ++j) {
-        worst = std::max(worst, std::abs(static_cast<double>(base[0][t][j].item<float>()) - expect[j]));
-        largest = std::max(largest, std::abs(expect[j]));
+        worst = std::max(worst, std::abs(static_cast<double>(a[j]) - act[0][t][j].item<float>()));
+        largest = std::max(largest, std::abs(static_cast<double>(a[j])));
       }
-      past.insert(past.begin(), JointVector(demo.f[static_cast<std::size_t>(t + 1)] - demo.f[static_cast<std::size_t>(t)]));
     }
-    CHECK(worst < 1e-5);
+    MESSAGE("chunk " << chunk << ", bins " << bins << ": |runtime − libtorch| " << worst << " rad over " << n
+                     << " ticks, largest action " << largest << " rad");
+    CHECK(worst <= 1e-5);
     CHECK(largest > 1e-3);
   }
-
-  // Epoch 0 is scored (the untrained net: the baseline, reported, not exported), and the kept
-  // epoch is the argmin of the trained ones.
-  REQUIRE(r.epoch0.epoch == 0);
-  REQUIRE(std::isfinite(r.epoch0.rollout_dtw_m));
-  int argmin = 0;
-  double best = std::numeric_limits<double>::infinity();
-  for (const EpochStats& e : r.history) {
-    REQUIRE(e.rollout_dtw_per_movement_m.size() == 3);
-    if (e.rollout_dtw_m < best) {
-      best = e.rollout_dtw_m;
-      argmin = e.epoch;
-    }
-  }
-  CHECK(r.best_epoch == argmin);
-  // Epochs differ in their rollouts (the score can tell them apart).
-  CHECK(r.history.front().rollout_dtw_m != r.epoch0.rollout_dtw_m);
-
-  // The metadata carries the base nao_rt adds back, and the selection.
-  const nlohmann::json meta = nlohmann::json::parse(modelMetadata(data, o, r));
-  CHECK(meta["training"]["select"] == "rollout_dtw");
-  REQUIRE(meta["training"]["linear_ar"].size() == 3);
-  CHECK(meta["training"]["linear_ar"][1][2]["beta"].get<double>() == r.net->linearAr()[1].joints[2].beta);
-  CHECK(meta["result"]["val_nn_dtw_m"].size() == 3);
-  CHECK(meta["result"]["epoch0_rollout_dtw_m"].size() == 3);
-  CHECK(meta["result"]["rollout_dtw_m"].size() == 3);
-  const std::string card = modelCard(data, o, r, "test", "m.bin");
-  CHECK(card.find("| linear AR base |") != std::string::npos);
-  CHECK(card.find("| model selection | rollout DTW") != std::string::npos);
-
-  CHECK_MESSAGE(a == trainBytes(o), "two runs with seed 43 gave different bytes");
 }
 
-TEST_CASE("phase steps: the step row follows the demonstration's phase, recorded, and refused where they cannot hold") {
-  // The controller's rule, which the trainer's rollouts use too: floor(t·P / L), clamped.
-  ControllerParams pace;
-  CHECK(policyStep(5, pace, 256) == 5);
-  CHECK(policyStep(300, pace, 256) == 255);
-  pace.phase_ticks = 150;
-  pace.run_ticks = 100;
-  CHECK(policyStep(0, pace, 256) == 0);
-  CHECK(policyStep(1, pace, 256) == 1);    // 1.5
-  CHECK(policyStep(2, pace, 256) == 3);
-  CHECK(policyStep(99, pace, 256) == 148);  // 148.5
-  pace.run_ticks = 300;
-  CHECK(policyStep(299, pace, 256) == 149);
-  CHECK(policyStep(1, pace, 256) == 0);
-  pace.phase_ticks = 1000;
-  CHECK(policyStep(299, pace, 256) == 255);
-
-  TrainOptions o = smallOptions(53, 2);
+TEST_CASE("the law training uses: reference mode the servo inversion over one tick (or the given gain), autonomous mode none") {
+  TrainOptions o = smallOptions(1, 1);
+  CHECK(lawGain(o, smallSim()) == servoStepGain(smallSim().params));
+  CHECK(lawGain(o, smallSim()) == doctest::Approx(1.0894).epsilon(1e-4));
+  o.law_gain = 0.5;
+  CHECK(lawGain(o, smallSim()) == 0.5);
+  o.law_gain = 0.0;
+  CHECK(lawGain(o, smallSim()) == 0.0);
   o.conditioning = Conditioning::kAutonomous;
-  TrainResult r0;
-  const std::vector<std::uint8_t> a = trainBytes(o, &r0);
-  TrainOptions phased = o;
-  phased.phase_ticks = 40;
-  TrainResult r1;
-  const std::vector<std::uint8_t> b = trainBytes(phased, &r1);
-  CHECK(a != b);
-  CHECK(r1.history[0].val_loss != r0.history[0].val_loss);
-  CHECK(b == trainBytes(phased));  // deterministic
-  CHECK(nlohmann::json::parse(modelMetadata(smallData(), phased, r1))["training"]["phase_ticks"] == 40);
-  CHECK(modelMetadata(smallData(), o, r0).find("phase_ticks") == std::string::npos);
+  o.law_gain = -1.0;
+  CHECK(lawGain(o, smallSim()) == 0.0);
+}
 
-  TrainOptions reference = phased;
+namespace {
+
+// smallData() with every demonstration's start moved off its f(0) (a demonstrator's own first
+// pose, not the first key pose's blend).
+const PolicyData& startedData() {
+  static const PolicyData data = [] {
+    PolicyData d = smallData();
+    for (std::size_t i = 0; i < d.demos.size(); ++i)
+      for (int j = 0; j < kNumJoints; ++j) d.demos[i].start[j] = d.demos[i].f.front()[j] + 0.05 * ((i + j) % 3) - 0.05;
+    return d;
+  }();
+  return data;
+}
+
+}  // namespace
+
+TEST_CASE("an autonomous model's metadata carries the starts of its validation demonstrations: names, lengths and start poses") {
+  TrainOptions o = smallOptions(71, 1);
+  o.conditioning = Conditioning::kAutonomous;
+  const PolicyData& data = startedData();
+  const TrainResult r = trainPolicy(data, smallSim(), o, nullptr);
+  const std::string meta = modelMetadata(data, o, r);
+  const ModelStarts starts = modelStarts(meta, data.movement_names, "trained");
+  REQUIRE(starts.size() == 3);
+  std::size_t listed = 0;
+  for (int m = 0; m < 3; ++m) {
+    std::vector<int> val;
+    for (int d : r.split.val)
+      if (data.demos[static_cast<std::size_t>(d)].movement == m) val.push_back(d);
+    REQUIRE(starts[static_cast<std::size_t>(m)].size() == val.size());
+    for (std::size_t k = 0; k < val.size(); ++k) {
+      const PolicyDemo& demo = data.demos[static_cast<std::size_t>(val[k])];
+      const ModelStart& st = starts[static_cast<std::size_t>(m)][k];
+      CHECK(st.name == demo.name);
+      CHECK(st.ticks == static_cast<std::int64_t>(demo.f.size()));
+      CHECK(st.q == demo.start);  // written with all digits: the doubles themselves
+      CHECK(st.q != demo.f.front());
+      ++listed;
+    }
+  }
+  CHECK(listed == r.split.val.size());
+  CHECK(nlohmann::json::parse(meta)["training"]["starts"] == "each demonstration's retargeted first pose");
+  // It learnt from its demonstrators' own starts: other starts are other training data.
+  const TrainResult from_f0 = trainPolicy(smallData(), smallSim(), o, nullptr);
+  CHECK(from_f0.val_baselines.zero_action != r.val_baselines.zero_action);
+}
+
+TEST_CASE("netRuns drives the runtime's step from each start: its actions are libtorch's act on the states the run visited") {
+  torch::manual_seed(8);
+  PolicyNet net(withHead(smallArch(), 3, 6), Conditioning::kAutonomous);
+  {
+    torch::NoGradGuard no_grad;
+    for (torch::Tensor& p : net->trainableParameters()) p.add_(torch::randn_like(p) * 0.05);
+    net->head_logit_weight.mul_(5.0);
+    net->setBinCenters(torch::randn({6, kNumJoints, 3}));
+  }
+  ExecutionOptions clean;
+  clean.noisy_rollouts = 0;
+  const PolicyData data = fromOwnStarts(startedData());
+  net->setNormalisation(normStats(executeDemos(data, {0, 4, 8}, smallSim(), clean, 1)));
+  net->setCentroids(data.centroids);
+  net->setEnsembleDecay(0.2);
+  net->eval();
+  const std::vector<int> demos = {1, 6, 11};
+  const std::vector<PolicyRun> runs = netRuns(data, demos, smallSim(), net);
+  REQUIRE(runs.size() == demos.size());
+  const std::vector<PolicyRun> again = netRuns(data, demos, smallSim(), net);  // deterministic
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    CHECK(again[i].q == runs[i].q);
+    CHECK(again[i].a == runs[i].a);
+  }
+  const ArmModel& arm = smallSim().arm;
+  const double period = smallSim().params.dt_s * smallSim().params.substeps_per_tick;
+  torch::NoGradGuard no_grad;
+  double worst = 0.0, largest = 0.0;
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const PolicyRun& run = runs[i];
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(demos[i])];
+    CHECK(run.demo == demos[i]);
+    REQUIRE(run.q.size() == demo.f.size());
+    REQUIRE(run.a.size() == demo.f.size() - 1);
+    CHECK((run.q.front() - startedData().demos[static_cast<std::size_t>(demos[i])].start).cwiseAbs().maxCoeff() < 1e-9);
+    // The inputs the controller gave: q(t), the applied (limited) a(t−1), r = clamped f(t+1) − q.
+    const auto n = static_cast<std::int64_t>(run.a.size());
+    torch::Tensor q = torch::empty({1, n, kNumJoints}), a_prev = torch::zeros({1, n, kNumJoints}),
+                  r = torch::empty({1, n, kNumJoints});
+    for (std::int64_t t = 0; t < n; ++t) {
+      const auto tk = static_cast<std::size_t>(t);
+      const JointVector rr = clampToLimits(arm, demo.f[tk + 1]) - run.q[tk];
+      for (int j = 0; j < kNumJoints; ++j) {
+        q[0][t][j] = static_cast<float>(run.q[tk][j]);
+        r[0][t][j] = static_cast<float>(rr[j]);
+        if (t + 1 < n) {
+          const double step = arm.v_max[j] * period;
+          const double lo = std::max(arm.q_min[j], run.q[tk][j] - step), hi = std::min(arm.q_max[j], run.q[tk][j] + step);
+          a_prev[0][t + 1][j] = static_cast<float>(std::clamp(run.q[tk][j] + run.a[tk][j], lo, hi) - run.q[tk][j]);
+        }
+      }
+    }
+    const torch::Tensor act = net->act(q, a_prev, r, torch::tensor({static_cast<std::int64_t>(run.movement)})).contiguous();
+    for (std::int64_t t = 0; t < n; ++t)
+      for (int j = 0; j < kNumJoints; ++j) {
+        worst = std::max(worst, std::abs(run.a[static_cast<std::size_t>(t)][j] - act[0][t][j].item<float>()));
+        largest = std::max(largest, std::abs(run.a[static_cast<std::size_t>(t)][j]));
+      }
+  }
+  MESSAGE("netRuns vs libtorch's act on the visited states: worst " << worst << " rad, largest action " << largest << " rad");
+  CHECK(worst <= 1e-5);
+  CHECK(largest > 1e-3);
+  // Only the dimensions the runtime is compiled for.
+  CHECK(hasRuntimeStep(smallArch()));
+  CHECK(hasRuntimeStep(withHead(paperArch(), kPolicyMaxChunk, kPolicyMaxBins)));
+  CHECK_FALSE(hasRuntimeStep(withHead(smallArch(), kPolicyMaxChunk + 1, 0)));
+  PolicyArch window = smallArch();
+  window.window = 9;
+  CHECK_FALSE(hasRuntimeStep(window));
+  torch::manual_seed(9);
+  const PolicyNet other(window, Conditioning::kAutonomous);
+  CHECK_THROWS_AS(netRuns(data, demos, smallSim(), other), UserError);
+}
+
+TEST_CASE("betterEpoch prefers an epoch that makes the movement, then the lower rollout DTW; a NaN never wins; scoreRuns scores a non-finite run NaN") {
+  EpochStats moves, close, far, broken;
+  moves.rollout_dtw_m = 0.03;
+  moves.makes_movement = true;
+  close.rollout_dtw_m = 0.01;
+  far.rollout_dtw_m = 0.02;
+  broken.rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
+  CHECK(betterEpoch(moves, close));
+  CHECK_FALSE(betterEpoch(close, moves));
+  CHECK(betterEpoch(close, far));
+  CHECK_FALSE(betterEpoch(far, close));
+  CHECK(betterEpoch(far, broken));
+  CHECK_FALSE(betterEpoch(broken, far));
+  CHECK_FALSE(betterEpoch(broken, broken));
+
+  const PolicyData& data = smallData();
+  const std::vector<int> val = {1, 5, 9};  // one demonstration of each movement
+  const double period = ControllerParams{}.period_s;
+  const SelectionReference ref = selectionReference(data, val, smallSim().arm, period);
+  REQUIRE(ref.demos.size() == 3);
+  // The demonstrations themselves as runs: DTW 0 to the nearest (themselves), speed ratio 1.
+  std::vector<PolicyRun> runs;
+  for (int d : val) runs.push_back({d, data.demos[static_cast<std::size_t>(d)].movement, data.demos[static_cast<std::size_t>(d)].f, {}});
+  EpochStats st;
+  scoreRuns(runs, ref, smallSim().arm, period, st);
+  REQUIRE(st.rollouts.size() == 3);
+  CHECK(st.rollout_dtw_m == 0.0);
+  for (const MovementScore& m : st.rollouts) {
+    CHECK(m.speed_ratio == doctest::Approx(1.0));
+    CHECK(m.loops_run == m.loops_demo);
+    CHECK(m.range_excess_rad <= 0.0);
+  }
+  CHECK(st.makes_movement);
+  runs[1].q[4][2] = std::numeric_limits<double>::quiet_NaN();
+  EpochStats nan;
+  scoreRuns(runs, ref, smallSim().arm, period, nan);
+  CHECK(std::isnan(nan.rollouts[1].dtw_m));
+  CHECK(std::isnan(nan.rollout_dtw_m));
+  CHECK_FALSE(betterEpoch(nan, far));
+}
+
+TEST_CASE("rollout selection exports the best epoch by its autonomous rollouts, records their scores, and stays deterministic") {
+  TrainOptions o = smallOptions(43, 3);
+  o.conditioning = Conditioning::kAutonomous;
+  o.select_by_rollout = true;
+  TrainResult r;
+  const std::vector<std::uint8_t> a = trainBytes(o, &r);
+  REQUIRE(r.history.size() == 3);
+  int best = 0;
+  for (const EpochStats& e : r.history) {
+    REQUIRE(e.rollouts.size() == 3);
+    if (best == 0 || betterEpoch(e, r.history[static_cast<std::size_t>(best - 1)])) best = e.epoch;
+  }
+  CHECK(r.best_epoch == best);
+  REQUIRE(r.val_nn_dtw_m.size() == 3);
+  const nlohmann::json meta = nlohmann::json::parse(modelMetadata(smallData(), o, r));
+  CHECK(meta["training"]["select"] == "rollouts");
+  const EpochStats& kept = r.history[static_cast<std::size_t>(r.best_epoch - 1)];
+  for (int m = 0; m < 3; ++m) {
+    const std::string name = smallData().movement_names[static_cast<std::size_t>(m)];
+    CHECK(meta["result"]["rollouts"][name]["dtw_m"].get<double>() == kept.rollouts[static_cast<std::size_t>(m)].dtw_m);
+  }
+  CHECK(meta["result"]["makes_movement"] == kept.makes_movement);
+  CHECK(meta["result"]["val_nn_dtw_m"].size() == 3);
+  CHECK_MESSAGE(a == trainBytes(o), "two runs with seed 43 gave different bytes");
+
+  // Refused where it cannot hold: reference mode needs a human; the runtime's step is compiled
+  // for the paper and small computations only.
+  TrainOptions reference = o;
   reference.conditioning = Conditioning::kReference;
   CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), reference, nullptr), doctest::Contains("autonomous"), UserError);
-  TrainOptions cut = phased;
-  cut.dagger_rounds = 1;
-  cut.execution.dagger_max_drift_rad = 0.1;
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), cut, nullptr), doctest::Contains("--dagger-max-drift"), UserError);
+  TrainOptions window = o;
+  window.arch.window = 9;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), window, nullptr), doctest::Contains("runtime's step"), UserError);
 }
 
-TEST_CASE("canonical pace: trained on the paced demonstrations (AR base included), scored against them as they are") {
-  TrainOptions o = smallOptions(59, 1);
-  o.val_fraction = 0.5;  // two validation demonstrations per movement: a nearest neighbour each
-  o.conditioning = Conditioning::kAutonomous;
-  o.ar_residual = true;
-  o.select_by_rollout = true;
-  TrainOptions paced = o;
-  paced.canonical_pace = PaceMethod::kDtw;
-  TrainResult r0, r1;
-  const std::vector<std::uint8_t> a = trainBytes(o, &r0);
-  const std::vector<std::uint8_t> b = trainBytes(paced, &r1);
-  CHECK(a != b);
-  const PolicyData& data = smallData();
-  REQUIRE(r1.split.train == r0.split.train);
-  const std::vector<int> tmpl = paceTemplates(data, r1.split.train);
-  CHECK(r1.pace_templates == tmpl);
-  CHECK(r0.pace_templates.empty());
-  // The small set's demonstrations differ in length, so pacing changes something to learn.
-  bool longer = false;
-  for (int d : r1.split.train) {
-    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
-    longer = longer || demo.f.size() > data.demos[static_cast<std::size_t>(tmpl[static_cast<std::size_t>(demo.movement)])].f.size();
-  }
-  REQUIRE(longer);
-  // The AR base is fitted on the paced trajectories (as evaluate fits it for this model).
-  const PolicyData p = pacedData(data, tmpl, PaceMethod::kDtw);
-  for (int m = 0; m < 3; ++m) {
-    const LinearArModel expect = expectedLinearAr(p, r1.split, m);
-    for (int j = 0; j < kNumJoints; ++j) {
-      const LinearArJoint& got = r1.net->linearAr()[static_cast<std::size_t>(m)].joints[static_cast<std::size_t>(j)];
-      CHECK(got.beta == expect.joints[static_cast<std::size_t>(j)].beta);
-      CHECK(got.alpha == expect.joints[static_cast<std::size_t>(j)].alpha);
-    }
-  }
-  // Validation targets are paced too (other baselines), the rollouts' yardstick is not.
-  CHECK(r1.val_baselines.repeat_last != r0.val_baselines.repeat_last);
-  REQUIRE(r1.val_nn_dtw_m.size() == 3);
-  for (double x : r1.val_nn_dtw_m) CHECK(std::isfinite(x));
-  CHECK(r1.val_nn_dtw_m == r0.val_nn_dtw_m);
-  const nlohmann::json meta = nlohmann::json::parse(modelMetadata(data, paced, r1));
-  const nlohmann::json& cp = meta["training"]["canonical_pace"];
-  CHECK(cp["method"] == "dtw");
-  for (int m = 0; m < 3; ++m) {
-    const PolicyDemo& t = data.demos[static_cast<std::size_t>(tmpl[static_cast<std::size_t>(m)])];
-    CHECK(cp["templates"][m] == t.name);
-    CHECK(cp["ticks"][m].get<std::size_t>() == t.f.size());
-  }
-  CHECK(modelMetadata(data, o, r0).find("canonical_pace") == std::string::npos);
-  CHECK(modelCard(data, paced, r1, "test", "m.bin").find("| canonical pace | dtw") != std::string::npos);
-  CHECK(b == trainBytes(paced));  // deterministic
-  TrainOptions linear = paced;
-  linear.canonical_pace = PaceMethod::kLinear;
-  CHECK(trainBytes(linear) != b);
-
-  TrainOptions reference = paced;
-  reference.conditioning = Conditioning::kReference;
-  reference.ar_residual = reference.select_by_rollout = false;
-  CHECK_THROWS_WITH_AS(trainPolicy(data, smallSim(), reference, nullptr), doctest::Contains("autonomous"), UserError);
-  TrainOptions both = paced;
-  both.phase_ticks = 40;
-  CHECK_THROWS_WITH_AS(trainPolicy(data, smallSim(), both, nullptr), doctest::Contains("--phase-steps"), UserError);
+TEST_CASE("a checkpoint of a bins model resumes to the uninterrupted run's bytes (the bins are fitted again, the same)") {
+  const std::string dir = (std::filesystem::temp_directory_path() / "nao_rt_tests").string();
+  std::filesystem::create_directories(dir);
+  const std::string ck = dir + "/bins_checkpoint_" + std::to_string(::getpid()) + ".pt";
+  TrainOptions full = smallOptions(81, 2);
+  full.arch.chunk = 2;
+  full.arch.bins = 6;
+  const std::vector<std::uint8_t> uninterrupted = trainBytes(full);
+  TrainOptions first = full;
+  first.max_epochs = 1;
+  first.checkpoint = ck;
+  trainPolicy(smallData(), smallSim(), first, nullptr);
+  REQUIRE(std::filesystem::exists(ck));
+  TrainOptions rest = full;
+  rest.resume = ck;
+  TrainResult resumed;
+  const std::vector<std::uint8_t> bytes = trainBytes(rest, &resumed);
+  CHECK(resumed.resumed_after == 1);
+  CHECK_MESSAGE(bytes == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
+  std::filesystem::remove(ck);
 }

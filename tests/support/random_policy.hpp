@@ -68,8 +68,10 @@ inline RandomPolicy makeRandomPolicy(const PolicyArch& arch, const ArmModel& arm
         v[i] = uniform(arm.q_min[j], arm.q_max[j]);
       } else if (ends("_std")) {
         v[i] = n == "norm.a_std" ? 0.01f : 0.5f;
-      } else if (ends("_mean") || n == "embed.step") {
-        v[i] = 0.0f;
+      } else if (ends("_mean") || n == "embed.step" || n == "law.gain") {
+        v[i] = 0.0f;  // law.gain 0: the network alone acts, as a fresh reference-mode net over no law
+      } else if (n == "head.ensemble_decay") {
+        v[i] = 0.5f;
       } else if (ends(".gain")) {
         v[i] = 1.0f;
       } else if (t.shape.size() == 2) {
