@@ -762,10 +762,12 @@ TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature targ
 }
 
 TEST_CASE("a reference model's law.gain is added by nao_rt: the first action is the net's plus gain times the policy's r") {
-  // Three files that differ in law.gain alone (0, 1.5, 3): at tick 0 the state and the policy's
-  // inputs are the same, so a(g) = net + g·r gives a(3) − a(0) = 2 (a(1.5) − a(0)) to float
-  // rounding, whatever r is.
+  // Three files that differ in law.gain alone (0, 1.5, 3). The run starts on the reference's
+  // first pose, so r = 0 at tick 0 and the three first actions are equal; at tick 1 the state
+  // and the policy's inputs are then the same, so a(g) = net + g·r gives a(3) − a(0) =
+  // 2 (a(1.5) − a(0)) to float rounding, whatever r is.
   std::vector<JointVector> first;
+  std::vector<double> zero;  // tick 0's actions, joint-major per run
   for (const float gain : {0.0f, 1.5f, 3.0f}) {
     const std::string model =
         writeModel("law_" + std::to_string(static_cast<int>(2 * gain)) + ".bin", Conditioning::kReference, "{}",
@@ -777,11 +779,15 @@ TEST_CASE("a reference model's law.gain is added by nao_rt: the first action is 
     REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
     const auto t = test::readCsvColumns(dir / "ticks.csv");
     JointVector a;
-    for (int j = 0; j < kNumJoints; ++j) a[j] = t.at("a_" + std::to_string(j))[0];
+    for (int j = 0; j < kNumJoints; ++j) {
+      a[j] = t.at("a_" + std::to_string(j))[1];
+      zero.push_back(t.at("a_" + std::to_string(j))[0]);
+    }
     first.push_back(a);
   }
   const JointVector d1 = first[1] - first[0], d2 = first[2] - first[0];
-  MESSAGE("law 1.5 moves the first action by " << d1.transpose() << " rad");
+  for (int j = 0; j < kNumJoints; ++j) CHECK(zero[static_cast<std::size_t>(j)] == zero[static_cast<std::size_t>(kNumJoints + j)]);
+  MESSAGE("law 1.5 moves tick 1's action by " << d1.transpose() << " rad");
   CHECK(d1.cwiseAbs().minCoeff() > 1e-4);  // r is nonzero in every joint: the law acts
   CHECK((d2 - 2.0 * d1).cwiseAbs().maxCoeff() < 1e-6);
 }

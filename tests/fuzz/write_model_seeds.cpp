@@ -64,7 +64,7 @@ std::vector<std::uint8_t> deepMetadata() {
 // Joint j's lower/upper/velocity doubles sit after the fixed fields, the FFN widths and j
 // earlier joints (docs/policy.md); the checksum is redone so the reader gets past it.
 std::vector<std::uint8_t> withJointValue(std::vector<std::uint8_t> b, int joint, int field, double v) {
-  const std::size_t at = 64 + 4 * tinyArch().ffn_hidden.size() + 56 * static_cast<std::size_t>(joint) + 32 + 8 * field;
+  const std::size_t at = 72 + 4 * tinyArch().ffn_hidden.size() + 56 * static_cast<std::size_t>(joint) + 32 + 8 * field;
   std::memcpy(b.data() + at, &v, sizeof v);
   reseal(b);
   return b;

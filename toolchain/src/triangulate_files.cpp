@@ -60,7 +60,9 @@ std::string demoCalibration(const std::string& demo_dir) {
 }
 
 Skeleton triangulateDemo(const std::string& demo_dir, const TriangulateOptions& opt, TriangulationReport* report) {
-  return triangulateFolders(demoCameraDirs(demo_dir), demoCalibration(demo_dir), opt, report);
+  // The camera folders first: a folder without them is not a recording, whatever else it has.
+  const std::vector<std::string> cams = demoCameraDirs(demo_dir);
+  return triangulateFolders(cams, demoCalibration(demo_dir), opt, report);
 }
 
 TriangulateOptions recordingOptions() {
