@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# embedded_budget.sh: issue 14's budgets of nao_rt, measured in one command (docs/embedded.md).
+# embedded_budget.sh: the budgets of nao_rt, measured in one command (docs/embedded.md).
 # Re-run it whenever the policy or the loop changes; it rewrites bench/results/embedded.txt.
 #
 #   bench/embedded_budget.sh [--ticks N] [--out FILE]
@@ -96,7 +96,7 @@ def cpu_model():
             return l.split(":", 1)[1].strip()
     return "?"
 
-say("# nao_rt budgets (issue 14; docs/embedded.md explains every number)")
+say("# nao_rt budgets (docs/embedded.md explains every number)")
 say("command:  bench/embedded_budget.sh" + (" " + args if args else ""))
 say("date:     " + datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
 say("commit:   %s%s" % (git("rev-parse", "--short", "HEAD"), " (with uncommitted changes)" if git("status", "--porcelain", "--untracked-files=no") else ""))

@@ -145,7 +145,7 @@ TEST_CASE("a URDF whose chain is wired differently or lacks the hand link is ref
   CHECK_MESSAGE(no_hand.find("r_hand") != std::string::npos, no_hand);
 }
 
-TEST_CASE("URDF text that could crash or mislead the parser is refused before it (issue 16)") {
+TEST_CASE("URDF text that could crash or mislead the parser is refused before it") {
   // 60000 nested elements overflowed the stack inside TinyXML.
   const std::string deep = loadError("deep.urdf", "<?xml version=\"1.0\"?>\n<robot name=\"x\">" +
                                                        [] {
@@ -165,7 +165,7 @@ TEST_CASE("URDF text that could crash or mislead the parser is refused before it
   CHECK_NOTHROW(nao::parseArmModel("<!-- <a><a><a> -->" + nao::test::readFile(kUrdfPath), "commented.urdf"));
 }
 
-TEST_CASE("a URDF whose numbers are finite but absurd is refused naming the joint (issue 16)") {
+TEST_CASE("a URDF whose numbers are finite but absurd is refused naming the joint") {
   const std::string far = loadError("far.urdf", urdfWith("<origin xyz=\"0.105 -0.015 0\"", "<origin xyz=\"1e308 -0.015 0\""));
   CHECK_MESSAGE(far.find("joint 'RElbowYaw' origin xyz=\"1e+308 -0.015 0\" is not finite or not within 10 m") !=
                     std::string::npos,

@@ -192,7 +192,7 @@ TEST_CASE("malformed calibrations give one clear line each") {
   }
 }
 
-TEST_CASE("calibrations that parse but mean nothing are refused, naming the file (issue 16)") {
+TEST_CASE("calibrations that parse but mean nothing are refused, naming the file") {
   SUBCASE("a number that overflows a double (json out_of_range, not parse_error)") {
     expectJsonError(replaceField("translation", "[1e400, 0, 2]"), "calibration JSON does not parse");
   }

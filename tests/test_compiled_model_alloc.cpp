@@ -1,4 +1,4 @@
-// The compiled-in model (codegen/compiled, issue 14 item 1): the generated code is assembled and
+// The compiled-in model (codegen/compiled): the generated code is assembled and
 // linked into this test (nao_compiled_model: models/default.bin through nao_codegen), its views
 // are bound at the generated offsets with no allocation, and it computes bit for bit what the
 // --weights path computes from the same file. Built three times: test_compiled_model_alloc over

@@ -473,7 +473,7 @@ TEST_CASE("a paper-size model round-trips") {
   CHECK(std::memcmp(m.data(last), tensors[last].data(), tensors[last].size() * 4) == 0);
 }
 
-TEST_CASE("an empty file, unordered joint limits and non-positive velocity limits are refused (issue 16)") {
+TEST_CASE("an empty file, unordered joint limits and non-positive velocity limits are refused") {
   // memcmp on the null data() of an empty vector was undefined behaviour.
   CHECK(decodeError({}) == "x.bin: truncated (0 bytes, header needs at least 64)");
 

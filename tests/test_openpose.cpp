@@ -253,7 +253,7 @@ TEST_CASE("malformed OpenPose files give one clear line each") {
     pose[0] = "12";
     expectError(document({personWith("pose_keypoints_2d", pose)}), "expected a number");
   }
-  SUBCASE("a value nested a million deep: refused before the parser, and never dumped (issue 16)") {
+  SUBCASE("a value nested a million deep: refused before the parser, and never dumped") {
     const std::string deep = std::string(1000000, '[') + std::string(1000000, ']');
     expectError("{\"people\": [{\"pose_keypoints_2d\": " + deep + "}]}", "the JSON text nests deeper than 64 levels");
   }

@@ -1,4 +1,4 @@
-// The checks run on text before a recursive parser sees it (issue 16): nesting bounds that are
+// The checks run on text before a recursive parser sees it: nesting bounds that are
 // never below what the parser would reach, and a UTF-8 check that refuses every sequence a
 // lead-byte-trusting reader could follow past the end.
 #include "nao/text_guard.hpp"

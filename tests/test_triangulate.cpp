@@ -947,7 +947,7 @@ TEST_CASE("4-camera stress recordings: the right arm is kept through a crossing 
   CHECK(n_wrong > 100);
   CHECK(n_hidden > 100);
   CHECK(quantile(baseline_errors, 0.95) > 0.03);
-  // Done means of issue 12.
+  // The triangulation targets.
   CHECK(arm_rate >= 0.98);
   CHECK(quantile(errors, 0.5) <= 0.01);
   CHECK(quantile(errors, 0.95) <= 0.03);

@@ -30,7 +30,7 @@ using RtDims = nao::PaperPolicyDims;
 
 #if NAO_RT_COUNT_ALLOCATIONS
 // Counts one thread's allocations from activate to deactivate (the counter is per thread:
-// start and stop run on the thread counted).
+// start and stop run on the thread counted): the control thread's, allocations_after_activate.
 struct ThreadProbe : nao::rt::AllocationProbe {
   std::optional<nao::CountAllocations> counter;
   void start() override { counter.emplace(); }
@@ -41,10 +41,17 @@ struct ThreadProbe : nao::rt::AllocationProbe {
   }
 };
 
-// The control thread's, and the LoLA I/O thread's as its companion.
+// The control thread's, and the LoLA I/O thread's as its companion (lola.io_allocations).
 struct CountingProbe final : ThreadProbe {
   ThreadProbe io;
   nao::rt::AllocationProbe* companion() override { return &io; }
+};
+
+// The live camera reader thread's, readable from the control thread (camera.reader_allocations).
+struct ReaderCounter final : nao::rt::ThreadAllocationCounter {
+  nao::ThreadAllocations sink;
+  void attach() override { nao::countThreadAllocationsInto(&sink); }
+  std::int64_t count() const override { return sink.count.load(std::memory_order_relaxed); }
 };
 #endif
 
@@ -70,6 +77,8 @@ int main(int argc, char** argv) {
 
 #if NAO_RT_COUNT_ALLOCATIONS
     CountingProbe probe;
+    ReaderCounter reader;  // outlives the run, whose reader thread it is attached to
+    cl.run.reader_allocations = &reader;
     return nao::rt::runMain<RtDims>(cl.run, std::cout, std::cerr, &probe);
 #else
     return nao::rt::runMain<RtDims>(cl.run, std::cout, std::cerr, nullptr);

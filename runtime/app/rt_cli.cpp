@@ -38,8 +38,27 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
   app.add_option("--reference", o.reference,
                  "file:PATH  a recorded human: a 10 Hz skeleton CSV (nao_toolchain triangulate --rate 10)\n"
                  "none       autonomous-mode models: a rollout from one of the model's starts (--start)\n"
-                 "           or from --start-pose")
+                 "           or from --start-pose\n"
+                 "openpose:DIR0,DIR1[,...]  live cameras: the folders OpenPose --write_json fills, one per\n"
+                 "           camera in --calibration's order (they need not exist yet); the newest\n"
+                 "           triangulated skeleton each tick (docs/cameras.md). Needs --seconds or --ticks")
       ->type_name("SRC");
+  app.add_option("--calibration", o.calibration_path,
+                 "openpose: the cameras, our calibration JSON (nao_toolchain calibration --to-json\n"
+                 "converts an Anipose/OpenCV TOML)")
+      ->type_name("FILE");
+  app.add_option("--format", o.pose_format, "openpose: keypoint layout, body25 (default) or body25b")
+      ->check(CLI::IsMember({"body25", "body25b"}))
+      ->type_name("F");
+  app.add_option("--fps", o.fps, "openpose: the cameras' frame rate, Hz (default 30)")
+      ->type_name("F")
+      ->check(CLI::Range(1e-3, 1000.0));
+  app.add_option("--human-scale", o.human_scale_m,
+                 "openpose: the human's arm length d_h (shoulder to hand, m; 0.2-2). Default: estimated\n"
+                 "live, the median over the first 3 s with the arm seen (before that, over the frames\n"
+                 "so far)")
+      ->type_name("M")
+      ->check(CLI::Range(0.2, 2.0));
   app.add_option("--movement", o.movement, "Movement as named in model.bin (what the reference shows, or what to roll out)")
       ->type_name("M");
   app.add_option("--start", o.start_index,

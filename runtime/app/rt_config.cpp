@@ -1,6 +1,8 @@
 // Configure-time preparation of a nao_rt run (rt_config.hpp).
 #include "rt_config.hpp"
 
+#include "rt_live.hpp"
+
 #include <unistd.h>
 
 #include <cerrno>
@@ -8,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <utility>
 
 namespace nao::rt {
@@ -15,7 +18,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr const char* kReferenceHelp = "file:PATH (a 10 Hz skeleton CSV) or none (an autonomous rollout)";
+constexpr const char* kReferenceHelp =
+    "file:PATH (a 10 Hz skeleton CSV), none (an autonomous rollout) or openpose:DIR0,DIR1[,...] (live cameras)";
 constexpr const char* kMaxRunText = "36000 ticks (1 h at 10 Hz)";
 
 bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefix, 0) == 0; }
@@ -158,6 +162,26 @@ ReferenceSpec parseReferenceSpec(const std::string& reference, const std::string
     s.kind = ReferenceKind::kFile;
     s.path = reference.substr(5);
     if (s.path.empty()) throw UsageError("--reference file: needs a path (file:PATH)");
+  } else if (startsWith(reference, "openpose:")) {
+    s.kind = ReferenceKind::kOpenPose;
+    const std::string list = reference.substr(9);
+    for (std::size_t begin = 0;;) {
+      const std::size_t comma = list.find(',', begin);
+      s.dirs.push_back(list.substr(begin, comma == std::string::npos ? std::string::npos : comma - begin));
+      if (comma == std::string::npos) break;
+      begin = comma + 1;
+    }
+    for (std::size_t a = 0; a < s.dirs.size(); ++a) {
+      if (s.dirs[a].empty())
+        throw UsageError("--reference openpose: folder " + std::to_string(a) +
+                         " is empty (openpose:DIR0,DIR1[,...], one folder per camera)");
+      for (std::size_t b = 0; b < a; ++b)
+        if (fs::path(s.dirs[a]).lexically_normal() == fs::path(s.dirs[b]).lexically_normal())
+          throw UsageError("--reference openpose: folder " + s.dirs[a] + " is given for two cameras");
+    }
+    if (s.dirs.size() < 2)
+      throw UsageError("--reference openpose: needs a folder per camera and at least 2 cameras "
+                       "(openpose:DIR0,DIR1[,...])");
   } else {
     throw UsageError("unknown reference '" + reference + "' (" + kReferenceHelp + ")");
   }
@@ -212,6 +236,19 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   if (o.start_index >= 0 && !o.start_pose.empty())
     throw UsageError("--start and --start-pose exclude each other");
   if (!o.start_pose.empty()) startPose(o.start_pose);  // a bad pose is a usage error before any file is read
+  const bool live_run = p.spec.kind == ReferenceKind::kOpenPose;
+  if (!live_run) {
+    for (const auto& [given, flag] : {std::pair{!o.calibration_path.empty(), "--calibration"},
+                                      std::pair{!o.pose_format.empty(), "--format"}, std::pair{o.fps != 0.0, "--fps"},
+                                      std::pair{o.human_scale_m != 0.0, "--human-scale"}})
+      if (given) throw UsageError(std::string(flag) + " needs --reference openpose:DIR0,DIR1[,...] (live cameras)");
+  } else if (o.ticks <= 0 && o.seconds <= 0.0) {
+    throw UsageError("--reference openpose: a live run has no length of its own: give --seconds S or --ticks N");
+  }
+  // The live source's configuration (a bad flag value is a usage error before any file is read
+  // but the calibration).
+  std::optional<LiveCameraConfig> live_config;
+  if (live_run) live_config = liveCameraConfig(o, p.spec);
   checkSimPeriod(o.sim, o.controller.period_s);
 
   p.arm = loadArmModel(o.urdf_path);
@@ -222,6 +259,9 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
     throw std::runtime_error("the model (" + p.model_source + ") has no movement '" + p.spec.movement +
                              "' (it has: " + joined(h.movement_names) + ")");
   p.movement_index = static_cast<int>(it - h.movement_names.begin());
+  if (live_run && h.conditioning == Conditioning::kAutonomous)
+    throw std::runtime_error("--reference openpose: needs a reference-conditioned model; " + p.model_source +
+                             " is an autonomous-mode model (it ignores the human: use --reference none)");
   if (autonomous_run && h.conditioning != Conditioning::kAutonomous)
     throw std::runtime_error("--reference none needs an autonomous-mode model; " + p.model_source +
                              " is reference-conditioned (it imitates a reference: use file:PATH)");
@@ -254,6 +294,11 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
     case ReferenceKind::kNone:
       prepareAutonomousStart(o, p, default_ticks);
       break;
+    case ReferenceKind::kOpenPose:
+      // No recorded start: the arm starts at rest at home and is moved by the human it sees.
+      p.description = liveDescription(o, p.spec);
+      p.q_start = o.controller.home;
+      break;
   }
   if (o.ticks > 0)
     p.ticks = o.ticks;
@@ -273,6 +318,13 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
       throw std::runtime_error("cannot create the run directory " + o.log_dir + (ec ? ": " + ec.message() : ""));
     if (access(o.log_dir.c_str(), W_OK) != 0)
       throw std::runtime_error("cannot write into the run directory " + o.log_dir + ": " + std::strerror(errno));
+  }
+  if (live_config) {
+    // Started last, once everything else has been checked: its reader thread watches the
+    // folders from here on (files already in them are an earlier session's).
+    auto live = std::make_unique<LiveSource>(std::move(*live_config));
+    p.live = live.get();
+    p.human = std::move(live);
   }
   return p;
 }

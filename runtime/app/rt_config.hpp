@@ -7,9 +7,12 @@
 //              configure time into fixed buffers (nao/reference_stream.hpp) with its evaluation
 //              target, the demonstration's feature-extracted trajectory;
 //   none       an autonomous-mode rollout from one of the model's starts (model.bin metadata
-//              "starts", nao/model_file.hpp) or from --start-pose.
+//              "starts", nao/model_file.hpp) or from --start-pose;
+//   openpose:DIR0,DIR1[,...]  live cameras: OpenPose writing one folder per camera, read,
+//              triangulated and filtered on a reader thread (rt_live.hpp, nao/live_camera.hpp);
+//              the control thread takes the newest skeleton each tick.
 // A kind is a ReferenceKind, parsed by parseReferenceSpec and turned into a HumanSource by
-// prepareRun: a live source (cameras) is one more kind with its own HumanSource.
+// prepareRun.
 //
 // Configure-time code: allocates, reads files, throws UsageError (exit 2) or another
 // std::exception (exit 1) with a one-line message.
@@ -37,6 +40,15 @@
 
 namespace nao::rt {
 
+/// Counts the heap allocations of one helper thread of a run (the live camera's reader):
+/// attach() runs first on that thread, count() reads the total from any thread (nao_rt backs it
+/// with its counting allocator's ThreadAllocations).
+struct ThreadAllocationCounter {
+  virtual ~ThreadAllocationCounter() = default;
+  virtual void attach() = 0;
+  virtual std::int64_t count() const = 0;
+};
+
 /// Everything a run is told (the nao_rt command line, rt_cli.hpp).
 struct RunOptions {
   std::string weights_path;                ///< model.bin; empty: the compiled-in model
@@ -45,7 +57,7 @@ struct RunOptions {
   /// generated with when no --weights is given, else fp32.
   std::string precision;
   std::string urdf_path = NAO_DEFAULT_URDF;
-  std::string reference;       ///< file:PATH or none
+  std::string reference;       ///< file:PATH, none or openpose:DIR0,DIR1[,...]
   std::string movement;        ///< the movement, as named in model.bin (required)
   /// none only: the model's start of `movement` to roll out from (index into its "starts", 0-based);
   /// -1: not given (start 0 unless start_pose is).
@@ -70,7 +82,16 @@ struct RunOptions {
   /// benchmarks of the LoLA timing; not in tick_us).
   std::int64_t emulate_tick_ns = 0;
   ControllerClock* clock = nullptr;  ///< stage timings; nullptr: CLOCK_MONOTONIC (tests inject)
+  // openpose: only (rt_live.hpp).
+  std::string calibration_path;  ///< --calibration: the cameras, our JSON (nao/calibration_json.hpp)
+  std::string pose_format;       ///< --format: body25 or body25b; empty: body25
+  double fps = 0.0;              ///< --fps: capture rate, Hz; 0: 30
+  double human_scale_m = 0.0;    ///< --human-scale: d_h, m; 0: the live source's estimate
+  /// Counts the live camera reader thread's allocations (nao_rt: its counting allocator);
+  /// nullptr: not counted (summary.json camera.reader_allocations null).
+  ThreadAllocationCounter* reader_allocations = nullptr;
 };
+
 
 /// A command-line problem (unknown reference, missing --movement, ...): exit status 2.
 class UsageError : public std::runtime_error {
@@ -79,9 +100,10 @@ class UsageError : public std::runtime_error {
 };
 
 /// Counts heap allocations on the calling thread between start and stop (nao_rt and the
-/// *_alloc tests back it with CountAllocations; without one the summary says null). The LoLA
-/// backend's I/O thread (--lola-io-thread) is counted by the probe's companion(), started and
-/// stopped on that thread.
+/// *_alloc tests back it with CountAllocations; without one the summary says null): the control
+/// thread's, summary.json allocations_after_activate. The LoLA backend's I/O thread
+/// (--lola-io-thread) is counted apart by the probe's companion(), started and stopped on that
+/// thread (summary.json lola.io_allocations).
 using nao::AllocationProbe;
 
 /// Longest run: one hour of ticks (NAO's battery lasts about that). The run buffers are sized
@@ -95,28 +117,43 @@ std::string oneLine(std::string s);
 // References and robots.
 
 enum class ReferenceKind {
-  kFile,  ///< file:PATH, a recorded skeleton CSV
-  kNone,  ///< none, an autonomous rollout from a start
+  kFile,      ///< file:PATH, a recorded skeleton CSV
+  kNone,      ///< none, an autonomous rollout from a start
+  kOpenPose,  ///< openpose:DIR0,DIR1[,...], live cameras
 };
 
 struct ReferenceSpec {
   ReferenceKind kind = ReferenceKind::kFile;
-  std::string movement;  ///< movement name as in model.bin
-  std::string path;      ///< file: only
+  std::string movement;           ///< movement name as in model.bin
+  std::string path;               ///< file: only
+  std::vector<std::string> dirs;  ///< openpose: only, one folder per camera in calibration order
 };
 
 /// Parses --reference / --movement. Throws UsageError: no or an unknown reference, an empty
-/// file: path, no --movement.
+/// file: path, an openpose: list with fewer than 2 folders, an empty or repeated folder, no
+/// --movement.
 ReferenceSpec parseReferenceSpec(const std::string& reference, const std::string& movement);
 
-/// The human frames a run's ticks see. Built at configure time; frameAt runs on the control
-/// thread once per tick: real-time safe (no allocation, no lock, no I/O).
+/// The human scale a source measures live, to scale its last frame with.
+struct LiveHumanScale {
+  double scale_m = 0.0;  ///< d_h, m; 0: the run's configured scale
+  double hand_m = 0.0;   ///< hand segment, m; 0: the per-frame rule (HumanKinematicsConfig)
+};
+
+/// The human frames a run's ticks see. Built at configure time; frameAt and scaleOfLastFrame
+/// run on the control thread once per tick: real-time safe (no allocation, no lock, no I/O).
 class HumanSource {
  public:
   virtual ~HumanSource() = default;
   /// The human of tick `tick` (world frame), or nullptr when nobody is seen in it.
   virtual const SkeletonFrame* frameAt(std::int64_t tick) = 0;
+  /// The human scale to use with the frame frameAt last returned, for a source that estimates
+  /// it live (rt_live.hpp); scale_m 0 (the default): the run's configured scale (a recorded
+  /// reference's is calibrated at configure time from all its frames).
+  virtual LiveHumanScale scaleOfLastFrame() const { return {}; }
 };
+
+class LiveSource;
 
 /// The robot backend a run drives (--robot).
 struct RobotSpec {
@@ -150,6 +187,8 @@ struct PreparedRun {
   /// file: the recorded reference (owned by `human`, so it stays put when the run is moved);
   /// nullptr for none.
   const ReferenceStream* reference = nullptr;
+  /// openpose: the live source (owned by `human`; its camera's counters go to summary.json).
+  const LiveSource* live = nullptr;
   std::string description;             ///< what the ticks see, e.g. "file:x.csv" or "none (start 2 ...)"
   /// none: the model start the run begins from (its name and index) or "" / -1 for --start-pose.
   std::string start_name;
@@ -159,10 +198,11 @@ struct PreparedRun {
   bool has_targets = false;            ///< the reference has a feature-extracted target per tick
 };
 
-/// Configure-time checks and preparation, in the order that fails fastest: options, URDF, model
-/// (file checks, joints against the URDF, architecture against `compiled_arch`), movement,
-/// conditioning, then the reference (the file, or the start), the tick count and the run
-/// directory. Throws UsageError or another std::exception with a one-line message.
+/// Configure-time checks and preparation, in the order that fails fastest: options (openpose:
+/// also its calibration), URDF, model (file checks, joints against the URDF, architecture against
+/// `compiled_arch`), movement, conditioning, then the reference (the file, or the start), the
+/// tick count and the run directory; last, openpose: starts the live source (its reader thread).
+/// Throws UsageError or another std::exception with a one-line message.
 PreparedRun prepareRun(const RunOptions& options, const PolicyArch& compiled_arch);
 
 // ---------------------------------------------------------------------------------------------

@@ -47,7 +47,7 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source, con
   j["tensors"] = model.tensors.size();
   j["bytes"] = model.size();
   j["checksum"] = checksum;
-  // Issue 14's contract: where the weights come from and their precision.
+  // The contract: where the weights come from and their precision.
   j["weights"] = source == "compiled-in" ? "compiled" : "file";
   j["precision"] = precision;
   // The kernel stepPolicy would run here (CPU, NAO_POLICY_KERNEL): every kernel gives the same bits.

@@ -10,7 +10,10 @@
 // forward kinematics, and pushFromRT into preallocated memory — no allocation (counted through
 // AllocationProbe), no file I/O, no lock. With --robot lola the robot backend's socket I/O is on
 // this thread (the robot's packets are the clock), or with --lola-io-thread on the backend's own
-// thread (lola_backend.hpp says why and when).
+// thread (lola_backend.hpp says why and when). With --reference openpose the live camera's reader
+// thread parses and triangulates beside the loop (rt_live.hpp). Each helper thread's allocations
+// are counted apart from the control thread's (summary.json lola.io_allocations,
+// camera.reader_allocations).
 #pragma once
 
 #include "rt_config.hpp"
@@ -54,6 +57,17 @@ void leaveRealtime(const RealtimeScheduling& s);
 void sleepUntilNs(std::int64_t t_ns);
 /// Busy-waits ns nanoseconds (RunOptions::emulate_tick_ns): no syscall but the clock read.
 void spinForNs(std::int64_t ns);
+
+/// Puts a live source's human scale (HumanSource::scaleOfLastFrame) into the controller's human
+/// kinematics for the update of that frame; scale_m 0 leaves the configured one. The only part
+/// of the controller model a run changes after activate: a live d_h is not known at configure
+/// time (rt_live.hpp). Real-time safe.
+inline void applyLiveHumanScale(const LiveHumanScale& scale, HumanKinematicsConfig& human) {
+  if (scale.scale_m > 0.0) {
+    human.scale_m = scale.scale_m;
+    human.hand_length_m = scale.hand_m;
+  }
+}
 
 // ---------------------------------------------------------------------------------------------
 // The run.
@@ -169,7 +183,10 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // controller tracking another trajectory than the one it is scored against.
     if (controller_params.human.scale_m <= 0.0 && p.reference != nullptr && p.reference->human.scale_m > 0.0)
       controller_params.human = p.reference->human;
-    const ControllerModel<Dims> model = configureController(p.arm, weights, controller_params);
+    // A live reference: --human-scale, or each frame's scale from the source (applyLiveHumanScale).
+    if (p.live != nullptr && options.human_scale_m > 0.0) controller_params.human.scale_m = options.human_scale_m;
+    // Not const: a live source's d_h goes into model.params.human tick by tick.
+    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params);
     // The robot backend owns its hardware (STYLE 18): the in-process ODE arm, or LoLA's socket.
     std::unique_ptr<RobotBackend> robot_backend;
     LolaBackend* lola = nullptr;
@@ -183,6 +200,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       // The socket is opened here, before activate.
       LolaParams lola_params = options.lola;
       lola_params.socket_path = robot.socket_path;
+      // The I/O thread's own count (summary.json lola.io_allocations), not the control thread's.
       lola_params.io_probe = probe != nullptr ? probe->companion() : nullptr;
       if (options.lola_warm && !lola_params.io_thread) {
         lola_params.before_tick = [](void* c) {
@@ -236,6 +254,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       warmPolicy(model.policy, *data->policy, sink);
       warm.sink += sink;
     }
+    // The live camera reader thread's allocations from activate to deactivate.
+    ThreadAllocationCounter* const reader_counter = p.live != nullptr ? options.reader_allocations : nullptr;
+    const std::int64_t reader_allocations0 = reader_counter != nullptr ? reader_counter->count() : 0;
     // The loop: no allocation, no I/O, no exception from here to deactivate.
     if (probe != nullptr) probe->start();
     const std::int64_t wall0 = monotonicNs();
@@ -247,6 +268,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       if (options.emulate_tick_ns > 0) spinForNs(options.emulate_tick_ns);
       const std::size_t i = static_cast<std::size_t>(t);
       const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
+      if (frame != nullptr) applyLiveHumanScale(p.human->scaleOfLastFrame(), model.params.human);
       TickRecord& rec = records[i];
       rec = updateController(model, *data, frame);
       // Where the arm should be at the end of the tick: the reference's feature-extracted pose
@@ -281,9 +303,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     closeFromRT(ring);
     totals.wall_s = static_cast<double>(monotonicNs() - wall0) * 1e-9;
     if (probe != nullptr) totals.allocations = probe->stop();
-    // The LoLA I/O thread's own count (it stopped its probe before deactivate joined it).
-    if (lola && lola->counters().io_allocations > 0 && totals.allocations >= 0)
-      totals.allocations += lola->counters().io_allocations;
+    if (reader_counter != nullptr) totals.reader_allocations = reader_counter->count() - reader_allocations0;
     if (options.realtime) leaveRealtime(rt);
     records.resize(static_cast<std::size_t>(ticks_done));
     totals.stop = stop;

@@ -1,6 +1,8 @@
 // The run directory and the printed summary of a nao_rt run (rt_rundir.hpp).
 #include "rt_rundir.hpp"
 
+#include "rt_live.hpp"
+
 #include "nao/policy_kernels.hpp"
 
 #include <nlohmann/json.hpp>
@@ -10,8 +12,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <ostream>
 #include <sstream>
+#include <utility>
 
 namespace nao::rt {
 namespace {
@@ -228,6 +232,15 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
   } else {
     j["lola"] = nullptr;
   }
+  // The live source's counters, one per failure kind, and its latency (docs/formats.md "Live
+  // camera summary"); its reader thread's allocations from activate to deactivate.
+  if (p.live != nullptr) {
+    const std::optional<std::int64_t> reader =
+        totals.reader_allocations >= 0 ? std::optional<std::int64_t>(totals.reader_allocations) : std::nullopt;
+    j["camera"] = ordered_json::parse(p.live->camera().summaryJson(reader).dump());
+  } else {
+    j["camera"] = nullptr;
+  }
   j["wall_s"] = totals.wall_s;
   j["attention"] = {{"file", logging ? ordered_json("attention.bin") : ordered_json(nullptr)},
                     {"shm", o.attention_shm.empty() ? ordered_json(nullptr) : ordered_json(o.attention_shm)},
@@ -258,9 +271,31 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
   s << "  tick         p50 " << millis(report.tick_us.p50) << ", p99 " << millis(report.tick_us.p99) << ", max "
     << millis(report.tick_us.max) << " (policy p99 " << millis(report.policy_us.p99) << ", overruns "
     << report.overruns << ")\n";
+  if (p.live != nullptr) {
+    const LiveCameraCounters c = p.live->camera().counters();
+    const nao::LatencyStats l = p.live->camera().latencyStats();
+    std::snprintf(buf, sizeof buf,
+                  "  camera       %llu frames (%llu with nobody), %llu skeletons taken; latency p50 %.1f ms, p99 %.1f ms\n",
+                  static_cast<unsigned long long>(c.frames_complete + c.frames_incomplete),
+                  static_cast<unsigned long long>(c.frames_no_person), static_cast<unsigned long long>(c.takes_fresh),
+                  l.p50_ms, l.p99_ms);
+    s << buf;
+    std::string failures;
+    for (const auto& [name, n] :
+         {std::pair{"files_malformed", c.files_malformed}, std::pair{"files_late", c.files_late},
+          std::pair{"frames_skipped", c.frames_skipped}, std::pair{"folder_gone", c.folder_gone},
+          std::pair{"camera_stopped", c.camera_stopped}, std::pair{"capture_restarts", c.capture_restarts},
+          std::pair{"watch_overflows", c.watch_overflows}, std::pair{"reader_errors", c.reader_errors}})
+      if (n > 0) failures += (failures.empty() ? "" : ", ") + std::string(name) + " " + std::to_string(n);
+    s << "               camera failures " << (failures.empty() ? "none" : failures) << "\n";
+  }
   s << "  allocations  "
-    << (totals.allocations >= 0 ? std::to_string(totals.allocations) + " after activate" : std::string("not counted"))
-    << "\n";
+    << (totals.allocations >= 0 ? std::to_string(totals.allocations) + " after activate (control thread)"
+                                : std::string("not counted"));
+  if (totals.lola && totals.lola_counters.io_allocations >= 0)
+    s << "; LoLA I/O thread " << totals.lola_counters.io_allocations;
+  if (totals.reader_allocations >= 0) s << "; camera reader thread " << totals.reader_allocations;
+  s << "\n";
   if (logging)
     s << "  files        " << (dir / "ticks.csv").string() << ", " << (dir / "attention.bin").string() << " ("
       << attention.record_count << " records), " << (dir / "summary.json").string() << "\n";

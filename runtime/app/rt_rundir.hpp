@@ -32,7 +32,7 @@ struct RunReport {
   std::int64_t ticks = 0;
   std::int64_t overruns = 0;   ///< ticks that missed their deadline (--realtime only)
   std::array<std::int64_t, kNumControllerFaults> faults{};  ///< ticks with each fault bit
-  std::int64_t allocations_after_activate = -1;            ///< -1: not counted
+  std::int64_t allocations_after_activate = -1;            ///< control thread; -1: not counted
   double ee_rmse_m = std::numeric_limits<double>::quiet_NaN();  ///< against the reference's target
   LatencyStats tick_us, retarget_us, policy_us, sim_us;
   std::string summary_json;    ///< the text of summary.json (also without --log)
@@ -40,7 +40,8 @@ struct RunReport {
 
 /// What the loop measured beyond the records.
 struct LoopTotals {
-  std::int64_t allocations = -1;
+  std::int64_t allocations = -1;     ///< the control thread's, activate to deactivate (-1: not counted)
+  std::int64_t reader_allocations = -1;  ///< the live camera reader thread's, same window (-1: not counted)
   std::int64_t skipped_periods = 0;  ///< --realtime: whole periods skipped after overruns
   double wall_s = 0.0;
   std::string realtime_scheduling;   ///< "SCHED_FIFO + mlockall", or what was not permitted

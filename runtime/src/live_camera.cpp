@@ -355,6 +355,8 @@ struct LiveCamera::Reader {
     record.t_s = t_s;
     record.human_scale_m = skeleton.human_scale_m;
     record.hand_length_m = skeleton.hand_length_m;
+    record.current_scale_m = skeleton.current_scale_m;
+    record.current_hand_m = skeleton.current_hand_m;
     record.n_cameras = n_with_file;
     record.subject = 0;
     for (int i = 0; i < kNumSkeletonPoints; ++i) {

@@ -53,6 +53,8 @@ void resetLiveSkeleton(const LiveSkeletonParams& params, double fps, LiveSkeleto
   state.scale_window_end_s = kInf;
   state.human_scale_m = params.human_scale_m > 0.0 ? params.human_scale_m : 0.0;
   state.hand_length_m = 0.0;
+  state.current_scale_m = state.human_scale_m;
+  state.current_hand_m = 0.0;
 }
 
 LiveSkeletonStep advanceLiveSkeleton(const LiveSkeletonParams& params, LiveSkeletonState& state, SkeletonFrame& frame,
@@ -108,11 +110,20 @@ LiveSkeletonStep advanceLiveSkeleton(const LiveSkeletonParams& params, LiveSkele
       state.forearm_m.push_back(state.arm.l_forearm_m);
       if (state.arm.hand_seen) state.hand_m.push_back(state.arm.l_hand_m);
     }
+    if (state.arm.valid) {
+      // The estimate's rule over the frames so far: provisional until the window is over.
+      const double upper = medianOf(state.upper_m), forearm = medianOf(state.forearm_m);
+      const double hand = state.hand_m.empty() ? per_frame.hand_to_forearm * forearm : medianOf(state.hand_m);
+      state.current_scale_m = upper + forearm + hand;
+      state.current_hand_m = hand;
+    }
     if (t >= state.scale_window_end_s - kTimeEps && static_cast<int>(state.upper_m.size()) >= kMinScaleFrames) {
       const double upper = medianOf(state.upper_m), forearm = medianOf(state.forearm_m);
       const double hand = state.hand_m.empty() ? per_frame.hand_to_forearm * forearm : medianOf(state.hand_m);
       state.human_scale_m = upper + forearm + hand;
       state.hand_length_m = hand;
+      state.current_scale_m = state.human_scale_m;
+      state.current_hand_m = state.hand_length_m;
       step.scale_fixed = true;
     }
   }

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Hostile input through the release binaries (issue 16, docs/formats.md "Input handling").
+"""Hostile input through the release binaries (docs/formats.md "Input handling").
 
 Every input class fuzzing and bad command lines found must end in exit status 1 or 2 (never 0,
 never a signal: >= 128 or negative), with one line on stderr that names the file or the flag,

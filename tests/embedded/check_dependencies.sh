@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# nao_rt depends only on what the loop needs (issue 14 item 2, docs/embedded.md): its ELF names
+# nao_rt depends only on what the loop needs (docs/embedded.md): its ELF names
 # none of the offline toolchain's libraries, neither directly (NEEDED entries, readelf -d) nor
 # through another library (the loader's closure, ldd).
 #   usage: check_dependencies.sh EXECUTABLE...

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The robot build (preset nao, build-nao/; issue 14 item 3, docs/embedded.md) is what the NAO V6
+# The robot build (preset nao, build-nao/; docs/embedded.md) is what the NAO V6
 # can run:
 #   1. static: no program interpreter, no NEEDED library, no glibc symbol version requirement
 #      (so the robot's own glibc, whatever its version, is never asked for anything);

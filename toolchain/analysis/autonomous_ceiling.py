@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """What a deterministic autonomous policy could score at best: fixed trajectories from the data.
 
-Issue 13's autonomous bar compares a rollout's hand-path DTW to its nearest held-out
+The autonomous bar compares a rollout's hand-path DTW to its nearest held-out
 demonstration with the held-out demonstrations' own median nearest-neighbour DTW. A policy in
 autonomous mode sees only s_0, the movement and the tick, so from one start it plays one fixed
 trajectory. This script scores fixed trajectories built from the *training* demonstrations the

@@ -62,6 +62,10 @@ struct LiveSkeleton {
   double t_s = 0.0;                  ///< (frame_index - first index of the capture) / fps
   double human_scale_m = 0.0;        ///< d_h: given, or estimated (0 until the estimate is fixed)
   double hand_length_m = 0.0;        ///< hand segment of the estimate (0: given d_h or not yet)
+  /// d_h to scale this skeleton with (LiveSkeletonState::current_scale_m): human_scale_m once
+  /// fixed or given, before that the estimate's medians over the frames so far (0: no arm yet).
+  double current_scale_m = 0.0;
+  double current_hand_m = 0.0;       ///< its hand segment (0 with a given d_h: the per-frame rule)
   std::uint32_t n_cameras = 0;       ///< cameras that had a file for this frame
   std::uint32_t subject = 0;         ///< 1: a subject was triangulated or bridged (some point valid)
   double p_W[kNumSkeletonPoints][3] = {};         ///< world (calibration) frame, m

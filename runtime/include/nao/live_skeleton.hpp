@@ -15,7 +15,9 @@
 //     estimateHumanArmLengths over a window: per-segment medians (upper arm, forearm, hand) over
 //     the frames with a measured arm in the first reference_window_s after the first one (and
 //     at least kMinScaleFrames frames), d_h = their sum; the hand segment is 0.29 x forearm when
-//     the hand was never seen. Fixed from then on; 0 until then.
+//     the hand was never seen. Fixed from then on; 0 until then. Until it is fixed, the same
+//     medians over the frames so far are the provisional d_h a consumer may scale with
+//     (current_scale_m: nao_rt's live reference does, so it imitates from the first frame).
 // Not real-time code; allocation happens at configure time (resetLiveSkeleton reserves the
 // windows) and, beyond the reserve, on the reader thread.
 #pragma once
@@ -64,6 +66,10 @@ struct LiveSkeletonState {
   double scale_window_end_s = 0.0;  ///< inf until the first measured arm
   double human_scale_m = 0.0;       ///< d_h once fixed (or given), else 0
   double hand_length_m = 0.0;       ///< hand segment once fixed (or given: 0, the per-frame rule)
+  /// d_h to scale the last frame with: human_scale_m once fixed (or given); before that the
+  /// estimate's medians over the measured frames so far; 0 before the first measured arm.
+  double current_scale_m = 0.0;
+  double current_hand_m = 0.0;      ///< its hand segment (0 with a given d_h: the per-frame rule)
 };
 
 /// Forgets everything (a new capture); reserves the windows for `fps` frames per second.
