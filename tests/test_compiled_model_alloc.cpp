@@ -41,7 +41,7 @@ void checkVisitOrder() {
   const std::vector<TensorSpec> manifest = policyManifest(Dims::arch());
   const std::vector<std::string> names = visitedNames<Dims>();
   REQUIRE(names.size() == manifest.size());
-  CHECK(names.size() == detail::policyViewCount<Dims>());
+  CHECK(names.size() == detail::policyViewCount<Dims>(Dims::arch().bins, Dims::arch().chunk));
   for (std::size_t i = 0; i < names.size(); ++i) CHECK_MESSAGE(names[i] == manifest[i].name, "entry ", i);
 }
 
@@ -139,7 +139,7 @@ TEST_CASE("the compiled-in binding and the --weights path compute the same bits 
   const ModelFile file = readModelFile(NAO_COMPILED_MODEL_SOURCE);
   std::vector<const float*> ptrs;
   for (std::size_t i = 0; i < file.tensors.size(); ++i) ptrs.push_back(file.data(i));
-  PolicyWeights<Dims> by_name = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), file.header.conditioning);
+  PolicyWeights<Dims> by_name = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), file.header.arch, file.header.conditioning);
   // int8 generated code: the --weights path quantises the same file at start-up (nao_rt
   // --precision int8); both must be the same bytes and compute the same bits.
   AlignedBytes blob;
@@ -172,7 +172,7 @@ TEST_CASE("the compiled-in binding and the --weights path compute the same bits 
       in.a_prev[j] = delta(rng);
       in.r[j] = angle(rng);
     }
-    in.movement = t % Dims::kMovements;
+    in.movement = t % compiled::kMovements;
     in.step = t;
     const Eigen::Matrix<float, 5, 1> a = stepPolicy(by_name, *ws_a, in);
     const Eigen::Matrix<float, 5, 1> b = stepPolicy(at_offsets, *ws_b, in);

@@ -119,13 +119,14 @@ TEST_CASE("model.bin round trip: decode(encode(x)) gives the header, the tensors
 TEST_CASE("model.bin is little-endian with the documented fixed header") {
   const auto b = smallModelBytes();
   CHECK(std::memcmp(b.data(), "NAOPOLCY", 8) == 0);
-  CHECK(getU32(b, 8) == 2);
+  CHECK(getU32(b, 8) == 3);
   const nao::PolicyArch a = nao::smallArch();
-  const std::uint32_t fields[12] = {32, 4, 2, 2, 3, 5, 3, 3, 10, 256, 8, 0};  // ..., max_steps, window, conditioning
-  for (int i = 0; i < 12; ++i) CHECK(getU32(b, 16 + 4 * static_cast<std::size_t>(i)) == fields[i]);
-  CHECK(getU32(b, 64) == static_cast<std::uint32_t>(a.ffn_hidden[0]));
+  // ..., max_steps, window, chunk, bins, conditioning
+  const std::uint32_t fields[14] = {32, 4, 2, 2, 3, 5, 3, 3, 10, 256, 8, 1, 0, 0};
+  for (int i = 0; i < 14; ++i) CHECK(getU32(b, 16 + 4 * static_cast<std::size_t>(i)) == fields[i]);
+  CHECK(getU32(b, 72) == static_cast<std::uint32_t>(a.ffn_hidden[0]));
   // The first joint name follows the three FFN widths.
-  CHECK(std::string(reinterpret_cast<const char*>(b.data() + 76)) == "RShoulderPitch");
+  CHECK(std::string(reinterpret_cast<const char*>(b.data() + 84)) == "RShoulderPitch");
   // Tensor table: entry 0 is embed.in.weight [3,32] at the first 64-byte boundary after the header.
   const std::size_t n = nao::policyManifest(a).size();
   const std::size_t e0 = entryAt(b, 0, n);
@@ -190,7 +191,7 @@ TEST_CASE("decodeModel rejects a file that is not a model, or of another format 
   b = smallModelBytes();
   putU32(b, 8, 7);
   reseal(b);
-  CHECK(decodeError(b) == "x.bin: format version 7 is not supported (this build reads 2)");
+  CHECK(decodeError(b) == "x.bin: format version 7 is not supported (this build reads 3)");
 }
 
 TEST_CASE("decodeModel reports a file cut short, in the header or in the data, as truncated") {
@@ -204,10 +205,10 @@ TEST_CASE("decodeModel reports a file cut short, in the header or in the data, a
     const char* expect;
   };
   const Cut cuts[] = {
-      {0, "x.bin: truncated (0 bytes, header needs at least 64)"},
-      {5, "x.bin: truncated (5 bytes, header needs at least 64)"},
-      {10, "x.bin: truncated (10 bytes, header needs at least 64)"},
-      {20, "x.bin: truncated (20 bytes, header needs at least 64)"},
+      {0, "x.bin: truncated (0 bytes, header needs at least 72)"},
+      {5, "x.bin: truncated (5 bytes, header needs at least 72)"},
+      {10, "x.bin: truncated (10 bytes, header needs at least 72)"},
+      {20, "x.bin: truncated (20 bytes, header needs at least 72)"},
       {40, "x.bin: truncated (40 bytes, header needs "},
       {61, "x.bin: truncated (61 bytes, header needs "},
       {300, "x.bin: truncated (300 bytes, header needs "},
@@ -347,7 +348,7 @@ TEST_CASE("decodeModel rejects an unusable architecture, and encodeModel refuses
   CHECK(decodeError(b) == "x.bin: architecture: d_model 30 is not a multiple of heads 4");
 
   b = smallModelBytes();
-  putU32(b, 60, 2);  // conditioning
+  putU32(b, 68, 2);  // conditioning
   reseal(b);
   CHECK(decodeError(b) == "x.bin: header: conditioning 2 is neither 0 (reference) nor 1 (autonomous)");
 
@@ -449,6 +450,7 @@ TEST_CASE("the paper manifest's parameter count equals a hand count from docs/po
   const std::size_t dec_layer = 3 * ln + 2 * attn + age_bias + ffn;
   const std::size_t total = embed + 4 * enc_layer + ln + 4 * dec_layer + ln  //
                             + (d + 1)                                        // head
+                            + J                                              // law.gain
                             + 6 * J                                          // norm.{q,a,r}_{mean,std}
                             + M * K * J;                                     // centroids
   // The same sum with the numbers written out.
@@ -456,10 +458,11 @@ TEST_CASE("the paper manifest's parameter count equals a hand count from docs/po
   CHECK(ffn == 657024);
   CHECK(enc_layer == 723664);
   CHECK(dec_layer == 789968);
-  CHECK(total == 6090549);
+  CHECK(total == 6090554);
   CHECK(nao::parameterCount(nao::paperArch()) == total);
-  // 8 embeddings, 21 tensors per encoder layer, 31 per decoder layer, 2 norms, head 2, norm 6, centroids.
-  CHECK(nao::policyManifest(nao::paperArch()).size() == 8 + 4 * 21 + 2 + 4 * 31 + 2 + 2 + 6 + 1);
+  // 8 embeddings, 21 tensors per encoder layer, 31 per decoder layer, 2 norms, head 2, law 1, norm 6,
+  // centroids.
+  CHECK(nao::policyManifest(nao::paperArch()).size() == 8 + 4 * 21 + 2 + 4 * 31 + 2 + 2 + 1 + 6 + 1);
 }
 
 TEST_CASE("a paper-size model round-trips") {
@@ -475,12 +478,12 @@ TEST_CASE("a paper-size model round-trips") {
 
 TEST_CASE("an empty file, unordered joint limits and non-positive velocity limits are refused") {
   // memcmp on the null data() of an empty vector was undefined behaviour.
-  CHECK(decodeError({}) == "x.bin: truncated (0 bytes, header needs at least 64)");
+  CHECK(decodeError({}) == "x.bin: truncated (0 bytes, header needs at least 72)");
 
   // Joint j's lower/upper/velocity doubles follow the 64 fixed bytes, the FFN widths and the
   // 56-byte records of the joints before it (docs/policy.md).
   const std::vector<std::uint8_t> good = smallModelBytes();
-  const std::size_t joints = 64 + 4 * nao::smallArch().ffn_hidden.size();
+  const std::size_t joints = 72 + 4 * nao::smallArch().ffn_hidden.size();
   auto withJoint = [&](int j, int field, double v) {
     std::vector<std::uint8_t> b = good;
     std::uint64_t bits;

@@ -42,7 +42,7 @@ TEST_CASE("the middle stretch is the middle 60 % of the ticks") {
 }
 
 TEST_CASE("a circle drawn k times over the middle stretch counts k loops, either sense, in any plane") {
-  // 100 ticks: the middle 60 are 3 whole turns of 20 points each.
+  // 100 ticks: the middle 60 (ticks 20..79) are 59 steps of 1/20 turn each.
   for (const double sense : {1.0, -1.0}) {
     HandPath p;
     for (int i = 0; i < 100; ++i) {
@@ -52,19 +52,29 @@ TEST_CASE("a circle drawn k times over the middle stretch counts k loops, either
     const Eigen::Matrix<double, 3, 2> plane = loopPlane({p});
     // The plane is x-z: its normal is ±y.
     CHECK(std::abs(plane.col(0).cross(plane.col(1)).dot(kY)) == doctest::Approx(1.0).epsilon(1e-9));
-    CHECK(loopCount(p, plane) == doctest::Approx(3.0).epsilon(1e-9));
+    CHECK(loopCount(p, plane) == doctest::Approx(59.0 / 20.0).epsilon(1e-9));
   }
 }
 
 TEST_CASE("a stroke back and forth along an arc draws no loop") {
-  // ±60° of a circle, swept there and back four times.
-  HandPath p;
-  for (int i = 0; i < 120; ++i) {
-    const double a = M_PI / 3.0 * std::sin(2.0 * M_PI * i / 30.0);
-    p.push_back(0.05 * (std::cos(a) * kX + std::sin(a) * kZ));
-  }
+  // ±60° of a circle, swept there and back with a period of 30 ticks.
+  const auto strokes = [](int ticks) {
+    HandPath p;
+    for (int i = 0; i < ticks; ++i) {
+      const double a = M_PI / 3.0 * std::sin(2.0 * M_PI * i / 30.0);
+      p.push_back(0.05 * (std::cos(a) * kX + std::sin(a) * kZ));
+    }
+    return p;
+  };
   const Eigen::Matrix<double, 3, 2> plane = loopPlane({circle(Eigen::Vector3d::Zero(), kX, kZ, 0.05, 3, 20, 15)});
-  CHECK(loopCount(p, plane) < 0.05);
+  // 151 ticks: the middle stretch (ticks 30..120) is 3 whole strokes and ends where it began.
+  CHECK(loopCount(strokes(151), plane) < 1e-9);
+  // Ending mid-stroke counts at most the half turn the arc spans about its own centroid, whatever
+  // the number of strokes: never a loop.
+  for (const int ticks : {120, 300, 600}) {
+    CAPTURE(ticks);
+    CHECK(loopCount(strokes(ticks), plane) < 0.6);
+  }
 }
 
 TEST_CASE("the middle RMS speed of a circle is its chord per tick over the period") {
@@ -75,7 +85,7 @@ TEST_CASE("the middle RMS speed of a circle is its chord per tick over the perio
   CHECK(middleRmsSpeed(p, period) == doctest::Approx(chord / period).epsilon(1e-12));
   // Holding still in the middle: zero.
   CHECK(middleRmsSpeed(HandPath(50, Eigen::Vector3d(0.1, 0.2, 0.3)), period) == 0.0);
-  CHECK(std::isnan(middleRmsSpeed(HandPath(2, Eigen::Vector3d::Zero()), period)));
+  CHECK(std::isnan(middleRmsSpeed(HandPath(1, Eigen::Vector3d::Zero()), period)));  // no step
 }
 
 TEST_CASE("runs are distinct unless a near-copy of another run is closer than 1 mm") {

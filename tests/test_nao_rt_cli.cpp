@@ -74,7 +74,7 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(r.status == 0);
   CHECK(r.err.empty());
   const nlohmann::json j = nlohmann::json::parse(r.out);
-  CHECK(j["format_version"] == 2);
+  CHECK(j["format_version"] == 3);
   CHECK(j["d_model"] == 32);
   CHECK(j["heads"] == 4);
   CHECK(j["encoder_layers"] == 2);
