@@ -700,7 +700,9 @@ TEST_CASE("netRuns drives the runtime's step from each start: its actions are li
     CHECK(run.demo == demos[i]);
     REQUIRE(run.q.size() == demo.f.size());
     REQUIRE(run.a.size() == demo.f.size() - 1);
-    CHECK((run.q.front() - startedData().demos[static_cast<std::size_t>(demos[i])].start).cwiseAbs().maxCoeff() < 1e-9);
+    // The data's own start begins f; the run begins there (clamped to the limits, as resetSim).
+    CHECK((demo.f.front() - startedData().demos[static_cast<std::size_t>(demos[i])].start).cwiseAbs().maxCoeff() < 1e-12);
+    CHECK((run.q.front() - clampToLimits(arm, demo.f.front())).cwiseAbs().maxCoeff() < 1e-9);
     // The inputs the controller gave: q(t), the applied (limited) a(t−1), r = clamped f(t+1) − q.
     const auto n = static_cast<std::int64_t>(run.a.size());
     torch::Tensor q = torch::empty({1, n, kNumJoints}), a_prev = torch::zeros({1, n, kNumJoints}),
