@@ -1,4 +1,4 @@
-// Hardware-in-the-loop substitute for issue 5's quality bar: the committed default model
+// Hardware-in-the-loop substitute for the quality bar: the committed default model
 // (models/default.bin, paper configuration) drives the simulated arm through nao_rt's whole
 // loop — a recorded two-camera skeleton (file:), live retargeting, key-pose snap, policy, ODE
 // servos — on held-out demonstrations (run seeds 1,000,000 + s, never used for training), beside the
@@ -99,11 +99,11 @@ TEST_CASE("the default model imitates held-out demonstrations inside the limits 
         // policy holds RWristYaw on its limit). 1e-12 rad is far below any physical excess.
         CHECK(excess <= 1e-12);
       }
-      // Issue 13: the policy learns the residual of the first-order servo inversion from
+      // The policy learns the residual of the first-order servo inversion from
       // execution labels (docs/policy.md), and nao_rt retargets with the demonstration's
       // calibrated human scale (the target it tracks is the one it is scored against). Measured
       // on these 9 runs: 0.30-0.84 mm, the gain law 0.50-1.05 mm, the blend law 5.1-9.2 mm.
-      // Held to issue 13's 3 mm (and issue 11's 1 cm) on every run, and to beating both laws
+      // Held to 3 mm (and 1 cm) on every run, and to beating both laws
       // under the same servos: what the network adds beyond the closed form is measured here.
       CHECK_MESSAGE(rmse[0] < 3e-3, std::string(movement) << " seed " << seed << ": policy RMSE " << rmse[0] * 1e3
                                              << " mm (blend law " << rmse[1] * 1e3 << " mm, gain law "
