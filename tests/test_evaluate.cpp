@@ -127,6 +127,36 @@ TEST_CASE("limitCommand cuts q + a to the position limits and one period of the 
   CHECK(c2 == arm.q_min);
 }
 
+TEST_CASE("a workspace envelope keeps the command inside it within one period's reach, and pulls an arm outside back at full speed") {
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const double period = 0.1;
+  const JointVector mid = 0.5 * (arm.q_min + arm.q_max);
+  JointEnvelope env;
+  env.lo = mid - JointVector::Constant(0.02);
+  env.hi = mid + JointVector::Constant(0.02);
+  JointVector c;
+  // Inside: untouched.
+  CHECK(limitCommand(arm, period, mid, JointVector::Constant(0.01), c, &env) == 0u);
+  CHECK(c == mid + JointVector::Constant(0.01));
+  // A step past the envelope is cut to its edge.
+  CHECK(limitCommand(arm, period, mid, JointVector::Constant(0.05), c, &env) == kCommandEnveloped);
+  CHECK(c == env.hi);
+  // An arm 1 rad above the envelope: the envelope's edge where one period reaches it, else the end
+  // of the reach nearest to it.
+  const JointVector above = env.hi + JointVector::Constant(1.0);
+  const std::uint32_t flags = limitCommand(arm, period, above, JointVector::Constant(0.5), c, &env);
+  CHECK((flags & kCommandEnveloped) != 0u);
+  for (int j = 0; j < kNumJoints; ++j) {
+    CAPTURE(j);
+    JointVector lo, hi;
+    commandBounds(arm, period, above, lo, hi);
+    CHECK(c[j] == (env.hi[j] >= lo[j] ? env.hi[j] : lo[j]));
+    CHECK(c[j] < above[j]);
+  }
+  // Without an envelope the same command only meets the arm's own limits.
+  CHECK((limitCommand(arm, period, mid, JointVector::Constant(0.05), c) & kCommandEnveloped) == 0u);
+}
+
 TEST_CASE("a rollout of the zero action holds the simulated arm at s_0, one hand point per tick plus the start") {
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   const SimModel sim = makeSimModel(arm);

@@ -16,7 +16,7 @@ void commandBounds(const ArmModel& arm, double period_s, const JointVector& q, J
 }
 
 std::uint32_t limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
-                           JointVector& q_cmd) {
+                           JointVector& q_cmd, const JointEnvelope* envelope) {
   std::uint32_t flags = 0;
   // A NaN would pass std::clamp unchanged: hold instead.
   if (!a.allFinite()) {
@@ -31,6 +31,12 @@ std::uint32_t limitCommand(const ArmModel& arm, double period_s, const JointVect
     const double c = std::clamp(q_cmd[j], lo[j], hi[j]);
     if (c != q_cmd[j]) flags |= kCommandClamped;
     q_cmd[j] = c;
+    if (envelope == nullptr) continue;
+    // Inside the envelope where the reach allows; else the end of the reach nearest to it.
+    const double e = std::clamp(c, std::max(lo[j], std::min(envelope->lo[j], hi[j])),
+                                std::min(hi[j], std::max(envelope->hi[j], lo[j])));
+    if (e != c) flags |= kCommandEnveloped;
+    q_cmd[j] = e;
   }
   return flags;
 }
@@ -43,9 +49,9 @@ JointVector limitCommand(const ArmModel& arm, double period_s, const JointVector
 }
 
 const JointVector& rolloutStep(const ArmModel& arm, double period_s, RobotBackend& robot, const JointVector& a,
-                               RolloutStep& step) {
+                               RolloutStep& step, const JointEnvelope* envelope) {
   step.q = robot.measured();
-  step.limit = limitCommand(arm, period_s, step.q, a, step.q_cmd);
+  step.limit = limitCommand(arm, period_s, step.q, a, step.q_cmd, envelope);
   step.a_applied = step.q_cmd - step.q;
   return robot.command(step.q_cmd);
 }

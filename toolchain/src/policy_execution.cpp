@@ -2,6 +2,7 @@
 // every tick with the command ending it on f(t+1), the clean and noisy executions of the training
 // data, and a policy's runs from the demonstrations' starts.
 #include "nao/tools/command.hpp"
+#include "nao/rollout.hpp"
 #include "nao/tools/policy_dataset.hpp"
 #include "nao/tools/splitmix.hpp"
 
@@ -181,7 +182,7 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
 }
 
 std::vector<PolicyRun> rolloutPolicy(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim_model,
-                                     const RolloutPolicy& policy) {
+                                     const RolloutPolicy& policy, const std::vector<JointEnvelope>* workspace) {
   checkDemos(data, demos);
   if (!policy) throw UserError("execution: no policy to roll out");
   const ArmModel& arm = sim_model.arm;
@@ -201,10 +202,10 @@ std::vector<PolicyRun> rolloutPolicy(const PolicyData& data, const std::vector<i
       JointVector a = policy(demo.movement, static_cast<int>(t), q, a_prev, r);
       if (!a.allFinite()) a.setZero();  // as the controller does (kFaultPolicyNonFinite)
       run.a.push_back(a);
-      JointVector lo, hi;
-      commandBounds(sim_model, q, lo, hi);
-      JointVector c = q + a;
-      for (int j = 0; j < kNumJoints; ++j) c[j] = std::clamp(c[j], lo[j], hi[j]);
+      // The controller's limiter, with the autonomous workspace envelope where given.
+      JointVector c;
+      limitCommand(arm, sim_model.params.dt_s * sim_model.params.substeps_per_tick, q, a, c,
+                   workspace == nullptr ? nullptr : &(*workspace)[static_cast<std::size_t>(demo.movement)]);
       a_prev = c - q;
       q = stepSim(sim_model, sim, c);
       run.q.push_back(q);

@@ -23,10 +23,13 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <memory>
+#include <vector>
 
 namespace nao {
 
@@ -76,12 +79,15 @@ enum ControllerFault : std::uint32_t {
   /// ControllerParams::human_bridge_ticks ticks. The last reference is held (as for
   /// kFaultNoHuman, which this tick does not set).
   kFaultHumanBridged = 1u << 14,
+  /// Autonomous mode: the policy's command left the demonstrated workspace (the movement's key
+  /// poses' joint range ± ControllerParams::workspace_margin_rad) and was cut to it.
+  kFaultOutsideWorkspace = 1u << 15,
 };
-inline constexpr int kNumControllerFaults = 15;
+inline constexpr int kNumControllerFaults = 16;
 inline constexpr std::array<const char*, kNumControllerFaults> kControllerFaultNames = {
     "no_human", "human_timeout", "nonfinite_keypoints", "ik_not_converged", "policy_nonfinite", "overrun",
     "command_limited", "retarget_fallback", "robot_link_lost", "robot_packet_gap", "robot_malformed_packet",
-    "joint_hot", "tracking_error", "safe_stop", "human_bridged"};
+    "joint_hot", "tracking_error", "safe_stop", "human_bridged", "outside_workspace"};
 
 /// Injected monotonic clock (STYLE 6): the real one reads CLOCK_MONOTONIC, tests drive time.
 struct ControllerClock {
@@ -126,6 +132,10 @@ struct ControllerParams {
   /// Pole of the online feature-extracted reference the policy is fed in reference mode (the
   /// blend of the snapped key poses, as the training data's f; must equal the data's).
   double feature_pole = kFeatureBlendPole;
+  /// Autonomous mode: commands stay within the movement's key poses' joint range widened by this
+  /// margin (rad): where no demonstration went, the arm does not go (kFaultOutsideWorkspace counts
+  /// the ticks cut). Negative: no envelope, the arm's limits alone.
+  double workspace_margin_rad = 0.1;
 };
 
 /// One tick as recorded (ticks.csv; angles rad, positions m in the torso frame).
@@ -156,6 +166,9 @@ struct ControllerModel {
   ControllerParams params;
   double d_r_m = 0.0;             ///< robot scale (paper eq. 1)
   JointVector home = JointVector::Zero();  ///< params.home clamped
+  /// Per movement, the autonomous workspace envelope (empty: none, reference mode or a
+  /// negative margin).
+  std::vector<JointEnvelope> workspace;
 };
 
 /// Everything a tick writes. Built at configure time, beside the robot backend it drives.
@@ -185,6 +198,28 @@ struct ControllerData {
   TickRecord record;                     ///< the last tick
 };
 
+/// Per movement, the joint range of the model's key poses widened by `margin_rad`: the
+/// demonstrated workspace an autonomous run's commands stay in (configure time, allocates).
+template <class Dims>
+std::vector<JointEnvelope> workspaceEnvelopes(const PolicyWeights<Dims>& policy, double margin_rad) {
+  std::vector<JointEnvelope> out;
+  const int K = policy.clusters;
+  for (int mv = 0; mv < policy.movements; ++mv) {
+    JointEnvelope e;
+    for (int j = 0; j < kNumJoints; ++j) e.lo[j] = e.hi[j] = static_cast<double>(policy.centroids(j, mv * K));
+    for (int k = 1; k < K; ++k)
+      for (int j = 0; j < kNumJoints; ++j) {
+        const double c = static_cast<double>(policy.centroids(j, mv * K + k));
+        e.lo[j] = std::min(e.lo[j], c);
+        e.hi[j] = std::max(e.hi[j], c);
+      }
+    e.lo.array() -= margin_rad;
+    e.hi.array() += margin_rad;
+    out.push_back(e);
+  }
+  return out;
+}
+
 /// Builds the model (configure time, allocates; throws std::invalid_argument for bad
 /// parameters). `policy` must already be bound; the arm is the one the policy was checked
 /// against.
@@ -194,7 +229,9 @@ ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeigh
   if (!(params.period_s > 0.0)) throw std::invalid_argument("controller: period must be positive");
   if (!(params.no_human_timeout_s >= 0.0)) throw std::invalid_argument("controller: negative no-human timeout");
   if (params.human_bridge_ticks < 0) throw std::invalid_argument("controller: negative human bridge");
-  ControllerModel<Dims> m{arm, policy, params, robotScale(arm), clampToLimits(arm, params.home)};
+  ControllerModel<Dims> m{arm, policy, params, robotScale(arm), clampToLimits(arm, params.home), {}};
+  if (policy.conditioning == Conditioning::kAutonomous && params.workspace_margin_rad >= 0.0)
+    m.workspace = workspaceEnvelopes(policy, params.workspace_margin_rad);
   return m;
 }
 
@@ -336,13 +373,16 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
 
   // 4. Command q + a inside the position limits and what the servos can do in one period (a
   // non-finite action holds), 5. the arm advances one period.
-  rec.q = rolloutStep(model.arm, p.period_s, *data.robot, a, data.step);
+  const JointEnvelope* envelope =
+      model.workspace.empty() ? nullptr : &model.workspace[static_cast<std::size_t>(data.movement)];
+  rec.q = rolloutStep(model.arm, p.period_s, *data.robot, a, data.step, envelope);
   const RolloutStep& step = data.step;
   if (step.limit & kCommandNonFinite) {
     rec.fault |= kFaultPolicyNonFinite;
     a.setZero();
   }
   if (step.limit & kCommandClamped) rec.fault |= kFaultCommandLimited;
+  if (step.limit & kCommandEnveloped) rec.fault |= kFaultOutsideWorkspace;
   rec.a = a;
   rec.q_cmd = step.q_cmd;
   rec.q_ref = data.q_ref;

@@ -15,6 +15,7 @@
 #include "nao/robot_backend.hpp"
 
 #include <cstdint>
+#include <limits>
 
 namespace nao {
 
@@ -22,6 +23,15 @@ namespace nao {
 enum CommandLimitFlags : std::uint32_t {
   kCommandClamped = 1u << 0,    ///< a joint was cut to its position limit or to one period's reach
   kCommandNonFinite = 1u << 1,  ///< the action had a NaN/Inf: replaced by 0 (hold where the arm is)
+  kCommandEnveloped = 1u << 2,  ///< a joint was cut to the workspace envelope
+};
+
+/// A joint-space box the commands stay in besides the arm's own limits, rad: an autonomous
+/// run's demonstrated workspace (the controller's, from the model's key poses). The default
+/// box is everything: the arm's limits alone.
+struct JointEnvelope {
+  JointVector lo = JointVector::Constant(-std::numeric_limits<double>::infinity());
+  JointVector hi = JointVector::Constant(std::numeric_limits<double>::infinity());
 };
 
 /// The command interval of joint j at q: [lo_j, hi_j] = [q_min_j, q_max_j] ∩ [q_j − v_max_j T,
@@ -30,9 +40,11 @@ enum CommandLimitFlags : std::uint32_t {
 void commandBounds(const ArmModel& arm, double period_s, const JointVector& q, JointVector& lo, JointVector& hi);
 
 /// q + a clamped into commandBounds(q), written to q_cmd (rad). A non-finite a (any joint) is
-/// taken as a = 0: the arm holds (still inside the bounds). Returns CommandLimitFlags.
+/// taken as a = 0: the arm holds (still inside the bounds). With an envelope the command is also
+/// kept inside it, within one period's reach: an arm outside the envelope is moved back toward
+/// it as fast as the servos allow. Returns CommandLimitFlags.
 std::uint32_t limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
-                           JointVector& q_cmd);
+                           JointVector& q_cmd, const JointEnvelope* envelope = nullptr);
 
 /// The same, returning q_cmd; `limited` is true when the command differs from q + a.
 JointVector limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
@@ -50,6 +62,6 @@ struct RolloutStep {
 /// robot.command(q_cmd) for one period. Fills `step` and returns the measured angles at the end
 /// of the period (the robot's, valid until its next command).
 const JointVector& rolloutStep(const ArmModel& arm, double period_s, RobotBackend& robot, const JointVector& a,
-                               RolloutStep& step);
+                               RolloutStep& step, const JointEnvelope* envelope = nullptr);
 
 }  // namespace nao

@@ -1,5 +1,6 @@
 #include "train_select.hpp"
 
+#include "nao/controller.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
@@ -34,7 +35,11 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
     in.step = t;
     return stepPolicy(weights, *ws, in).template cast<double>();
   };
-  return rolloutPolicy(data, demos, sim, policy);
+  // An autonomous model's runs keep to its workspace envelope, as nao_rt's controller does.
+  std::vector<JointEnvelope> workspace;
+  if (net->conditioning() == Conditioning::kAutonomous && ControllerParams{}.workspace_margin_rad >= 0.0)
+    workspace = workspaceEnvelopes(weights, ControllerParams{}.workspace_margin_rad);
+  return rolloutPolicy(data, demos, sim, policy, workspace.empty() ? nullptr : &workspace);
 }
 
 bool sameComputation(const PolicyArch& a, const PolicyArch& b) {

@@ -6,6 +6,8 @@
 // Offline code without libtorch: allocates and may throw (UserError for bad input).
 #pragma once
 
+#include "nao/rollout.hpp"
+
 #include "nao/arm_model.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/tools/kmeans.hpp"
@@ -161,10 +163,12 @@ struct PolicyRun {
 /// fromOwnStarts), the policy's action applied as the controller applies it (q + a inside the
 /// position limits and v_max·period; a non-finite action is 0; the applied action is the next
 /// a(t−1)), for as many ticks as f has successors. r is the demonstration's clamped f(t+1) − q
-/// (what a reference-mode policy sees). Deterministic for a deterministic policy; one thread, in
-/// list order (the policy may be stateful). Throws UserError for an index out of range.
+/// (what a reference-mode policy sees). `workspace` (per movement; nullptr: none) keeps the
+/// commands in an autonomous model's workspace envelope, as the controller does. Deterministic
+/// for a deterministic policy; one thread, in list order (the policy may be stateful). Throws
+/// UserError for an index out of range.
 std::vector<PolicyRun> rolloutPolicy(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim_model,
-                                     const RolloutPolicy& policy);
+                                     const RolloutPolicy& policy, const std::vector<JointEnvelope>* workspace = nullptr);
 
 /// Normalisation statistics over every tick of `sequences` (q, the labels a, r). Throws UserError
 /// when there is no tick.
