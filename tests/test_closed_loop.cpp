@@ -56,7 +56,7 @@ constexpr std::size_t kNoHuman = 0, kLimited = 6, kBridged = 14;
 
 // The one-tick inverse of the simulated first-order servo (sim_arm.hpp).
 const double kServoInversionGain = servoStepGain(SimParams{});
-static_assert(kNumControllerFaults == 15, "fault bits renumbered: update the indices above");
+static_assert(kNumControllerFaults == 16 && kFaultHumanBridged == 1u << kBridged, "fault bits renumbered: update the indices above");
 
 }  // namespace
 

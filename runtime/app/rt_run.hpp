@@ -186,7 +186,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // A live reference: --human-scale, or each frame's scale from the source (applyLiveHumanScale).
     if (p.live != nullptr && options.human_scale_m > 0.0) controller_params.human.scale_m = options.human_scale_m;
     // Not const: a live source's d_h goes into model.params.human tick by tick.
-    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params);
+    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, p.workspace);
     // The robot backend owns its hardware (STYLE 18): the in-process ODE arm, or LoLA's socket.
     std::unique_ptr<RobotBackend> robot_backend;
     LolaBackend* lola = nullptr;

@@ -82,4 +82,60 @@ std::string withModelStarts(const std::string& metadata_json, const std::vector<
   return j.dump();
 }
 
+namespace {
+
+JointVector jointsOf(const Json& v, const std::string& origin, const std::string& where) {
+  if (!v.is_array() || v.size() != static_cast<std::size_t>(kNumJoints))
+    throw ModelFileError(origin + ": metadata \"workspace\" " + where + " is not " + std::to_string(kNumJoints) +
+                         " joint angles");
+  JointVector q;
+  for (int k = 0; k < kNumJoints; ++k) {
+    const Json& x = v[static_cast<std::size_t>(k)];
+    if (!x.is_number() || !std::isfinite(x.get<double>()))
+      throw ModelFileError(origin + ": metadata \"workspace\" " + where + " is not finite numbers");
+    q[k] = x.get<double>();
+  }
+  return q;
+}
+
+}  // namespace
+
+std::vector<ModelWorkspace> modelWorkspace(const std::string& metadata_json,
+                                           const std::vector<std::string>& movement_names, const std::string& origin) {
+  std::vector<ModelWorkspace> out;
+  const Json j = Json::parse(metadata_json, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object() || !j.contains("workspace")) return out;
+  const Json& w = j["workspace"];
+  if (!w.is_object()) throw ModelFileError(origin + ": metadata \"workspace\" is not an object of movements");
+  for (auto it = w.begin(); it != w.end(); ++it)
+    if (std::find(movement_names.begin(), movement_names.end(), it.key()) == movement_names.end())
+      throw ModelFileError(origin + ": metadata \"workspace\" names '" + it.key() + "', which is not a movement of the model");
+  for (const std::string& movement : movement_names) {
+    if (!w.contains(movement) || !w[movement].is_object() || !w[movement].contains("lo") || !w[movement].contains("hi"))
+      throw ModelFileError(origin + ": metadata \"workspace\" has no {lo, hi} for movement '" + movement + "'");
+    ModelWorkspace e;
+    e.lo = jointsOf(w[movement]["lo"], origin, "lo of '" + movement + "'");
+    e.hi = jointsOf(w[movement]["hi"], origin, "hi of '" + movement + "'");
+    if ((e.lo.array() > e.hi.array()).any())
+      throw ModelFileError(origin + ": metadata \"workspace\" of '" + movement + "' has lo above hi");
+    out.push_back(e);
+  }
+  return out;
+}
+
+std::string withModelWorkspace(const std::string& metadata_json, const std::vector<std::string>& movement_names,
+                               const std::vector<ModelWorkspace>& workspace) {
+  Json j = metadata_json.empty() ? Json::object() : Json::parse(metadata_json, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object()) throw ModelFileError("the model's metadata is not a JSON object: cannot add \"workspace\"");
+  if (workspace.size() != movement_names.size())
+    throw ModelFileError("a workspace for " + std::to_string(workspace.size()) + " movements, the model has " +
+                         std::to_string(movement_names.size()));
+  Json w = Json::object();
+  for (std::size_t m = 0; m < movement_names.size(); ++m)
+    w[movement_names[m]] = {{"lo", std::vector<double>(workspace[m].lo.data(), workspace[m].lo.data() + kNumJoints)},
+                            {"hi", std::vector<double>(workspace[m].hi.data(), workspace[m].hi.data() + kNumJoints)}};
+  j["workspace"] = std::move(w);
+  return j.dump();
+}
+
 }  // namespace nao

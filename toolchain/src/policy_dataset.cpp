@@ -196,6 +196,22 @@ PolicyData fromOwnStarts(const PolicyData& data) {
   return out;
 }
 
+std::vector<ModelWorkspace> demonstratedWorkspace(const PolicyData& data) {
+  std::vector<ModelWorkspace> out(data.movement_names.size());
+  std::vector<bool> seen(out.size(), false);
+  for (const PolicyDemo& d : data.demos)
+    for (const JointVector& q : d.f) {
+      ModelWorkspace& w = out[static_cast<std::size_t>(d.movement)];
+      if (!seen[static_cast<std::size_t>(d.movement)]) {
+        w.lo = w.hi = q;
+        seen[static_cast<std::size_t>(d.movement)] = true;
+      }
+      w.lo = w.lo.cwiseMin(q);
+      w.hi = w.hi.cwiseMax(q);
+    }
+  return out;
+}
+
 PolicyData loadPolicyData(const std::string& dir) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw UserError(dir + ": not a directory");

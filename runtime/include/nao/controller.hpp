@@ -16,6 +16,7 @@
 #include "nao/feature_trajectory.hpp"
 #include "nao/human_kinematics.hpp"
 #include "nao/kinematics.hpp"
+#include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/retarget.hpp"
 #include "nao/robot_backend.hpp"
@@ -198,11 +199,23 @@ struct ControllerData {
   TickRecord record;                     ///< the last tick
 };
 
-/// Per movement, the joint range of the model's key poses widened by `margin_rad`: the
-/// demonstrated workspace an autonomous run's commands stay in (configure time, allocates).
+/// Per movement, the demonstrated joint range widened by `margin_rad`: the workspace an
+/// autonomous run's commands stay in (configure time, allocates). The range is the model's
+/// "workspace" metadata (`demonstrated`, one entry per movement); a model without it falls back
+/// to its key poses' range.
 template <class Dims>
-std::vector<JointEnvelope> workspaceEnvelopes(const PolicyWeights<Dims>& policy, double margin_rad) {
+std::vector<JointEnvelope> workspaceEnvelopes(const PolicyWeights<Dims>& policy, double margin_rad,
+                                              const std::vector<ModelWorkspace>& demonstrated = {}) {
   std::vector<JointEnvelope> out;
+  if (static_cast<int>(demonstrated.size()) == policy.movements) {
+    for (const ModelWorkspace& w : demonstrated) {
+      JointEnvelope e;
+      e.lo = w.lo.array() - margin_rad;
+      e.hi = w.hi.array() + margin_rad;
+      out.push_back(e);
+    }
+    return out;
+  }
   const int K = policy.clusters;
   for (int mv = 0; mv < policy.movements; ++mv) {
     JointEnvelope e;
@@ -222,16 +235,18 @@ std::vector<JointEnvelope> workspaceEnvelopes(const PolicyWeights<Dims>& policy,
 
 /// Builds the model (configure time, allocates; throws std::invalid_argument for bad
 /// parameters). `policy` must already be bound; the arm is the one the policy was checked
-/// against.
+/// against. `demonstrated`: the model's "workspace" metadata (modelWorkspace), the range an
+/// autonomous model's envelope widens (empty: its key poses').
 template <class Dims>
 ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeights<Dims>& policy,
-                                          const ControllerParams& params) {
+                                          const ControllerParams& params,
+                                          const std::vector<ModelWorkspace>& demonstrated = {}) {
   if (!(params.period_s > 0.0)) throw std::invalid_argument("controller: period must be positive");
   if (!(params.no_human_timeout_s >= 0.0)) throw std::invalid_argument("controller: negative no-human timeout");
   if (params.human_bridge_ticks < 0) throw std::invalid_argument("controller: negative human bridge");
   ControllerModel<Dims> m{arm, policy, params, robotScale(arm), clampToLimits(arm, params.home), {}};
   if (policy.conditioning == Conditioning::kAutonomous && params.workspace_margin_rad >= 0.0)
-    m.workspace = workspaceEnvelopes(policy, params.workspace_margin_rad);
+    m.workspace = workspaceEnvelopes(policy, params.workspace_margin_rad, demonstrated);
   return m;
 }
 

@@ -171,6 +171,25 @@ inline constexpr std::int64_t kMaxStartTicks = 36000;
 ModelStarts modelStarts(const std::string& metadata_json, const std::vector<std::string>& movement_names,
                         const std::string& origin);
 
+/// The joint range a movement's demonstrations cover (their feature trajectories' min and max,
+/// rad): where an autonomous run of it may go (the controller's workspace envelope).
+struct ModelWorkspace {
+  JointVector lo = JointVector::Zero();
+  JointVector hi = JointVector::Zero();
+};
+
+/// The "workspace" of a model's metadata, {movement: {"lo": [5], "hi": [5]}}, one entry per
+/// movement of `movement_names`; empty when the key is absent (models that predate it). Throws
+/// ModelFileError "<origin>: ..." when present but unusable (a movement missing or unknown, not 5
+/// finite numbers, lo above hi).
+std::vector<ModelWorkspace> modelWorkspace(const std::string& metadata_json,
+                                           const std::vector<std::string>& movement_names, const std::string& origin);
+
+/// `metadata_json` with "workspace" set (one entry per movement, in that order). Throws
+/// ModelFileError when the metadata is not a JSON object or the lists do not match.
+std::string withModelWorkspace(const std::string& metadata_json, const std::vector<std::string>& movement_names,
+                               const std::vector<ModelWorkspace>& workspace);
+
 /// `metadata_json` (an object, or empty for {}) with "starts" set to `starts` (one list per
 /// movement of `movement_names`, keys in that order); every other key kept in place. The
 /// serialiser the trainer and nao_toolchain model-starts write with. Throws ModelFileError when

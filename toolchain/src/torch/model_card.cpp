@@ -128,7 +128,10 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
     b[name]["repeat_last"] = bl->repeat_last;
     b[name]["gain_law"] = bl->gain_law;
   }
-  return withModelStarts(j.dump(), data.movement_names, heldOutStarts(data, r));
+  const std::string with_starts = withModelStarts(j.dump(), data.movement_names, heldOutStarts(data, r));
+  if (o.conditioning != Conditioning::kAutonomous) return with_starts;
+  // Where an autonomous run may go: the demonstrations' joint range (the controller's envelope).
+  return withModelWorkspace(with_starts, data.movement_names, demonstratedWorkspace(data));
 }
 
 ModelHeader modelHeader(const PolicyData& data, const TrainOptions& o, const TrainResult& r,

@@ -38,7 +38,7 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
   // An autonomous model's runs keep to its workspace envelope, as nao_rt's controller does.
   std::vector<JointEnvelope> workspace;
   if (net->conditioning() == Conditioning::kAutonomous && ControllerParams{}.workspace_margin_rad >= 0.0)
-    workspace = workspaceEnvelopes(weights, ControllerParams{}.workspace_margin_rad);
+    workspace = workspaceEnvelopes(weights, ControllerParams{}.workspace_margin_rad, demonstratedWorkspace(data));
   return rolloutPolicy(data, demos, sim, policy, workspace.empty() ? nullptr : &workspace);
 }
 

@@ -6,6 +6,7 @@
 // Offline code without libtorch: allocates and may throw (UserError for bad input).
 #pragma once
 
+#include "nao/model_file.hpp"
 #include "nao/rollout.hpp"
 
 #include "nao/arm_model.hpp"
@@ -89,6 +90,10 @@ PolicyData loadPolicyData(const std::string& dir);
 /// instead of the first key pose. An autonomous run starts where its demonstrator did; after a
 /// few ticks the trajectory is f again (docs/policy.md "Data").
 PolicyData fromOwnStarts(const PolicyData& data);
+
+/// Per movement (data.movement_names order), the joint range its demonstrations' feature
+/// trajectories cover, rad: the "workspace" an autonomous model carries (modelWorkspace).
+std::vector<ModelWorkspace> demonstratedWorkspace(const PolicyData& data);
 
 /// Builds a data set from memory: the movements are the keys of `centroids` (sorted, so the
 /// movement index is the position in name order), each demo's movement is the part of its name
