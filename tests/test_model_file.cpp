@@ -590,3 +590,27 @@ TEST_CASE("unusable autonomous starts are refused with the origin and what is wr
   CHECK_THROWS_AS(nao::withModelStarts("{}", movements, wrong), ModelFileError);
   CHECK_THROWS_AS(nao::withModelStarts("[1]", movements, nao::ModelStarts(3)), ModelFileError);
 }
+
+TEST_CASE("an autonomous model's workspace round-trips through its metadata; a malformed one is refused naming the movement") {
+  const std::vector<std::string> movements = {"elbow", "wave"};
+  std::vector<nao::ModelWorkspace> w(2);
+  w[0].lo << -1.0, -0.5, 0.1, 0.2, -1.5;
+  w[0].hi << 1.0, 0.3, 1.1, 1.2, 1.5;
+  w[1].lo = w[0].lo * 0.5;
+  w[1].hi = w[0].hi * 0.5 + nao::JointVector::Constant(0.125);
+  const std::string with = nao::withModelWorkspace(R"({"seed":3})", movements, w);
+  const std::vector<nao::ModelWorkspace> back = nao::modelWorkspace(with, movements, "m.bin");
+  REQUIRE(back.size() == 2);
+  for (std::size_t m = 0; m < 2; ++m) {
+    CHECK(back[m].lo == w[m].lo);  // exact: the doubles are written round-trip
+    CHECK(back[m].hi == w[m].hi);
+  }
+  CHECK(nao::modelWorkspace(R"({"seed":3})", movements, "m.bin").empty());  // older models: none
+  CHECK_THROWS_WITH_AS(nao::modelWorkspace(nao::withModelWorkspace("{}", movements, {w[1], w[0]}), {"elbow"}, "m.bin"),
+                       doctest::Contains("'wave', which is not a movement"), ModelFileError);
+  std::vector<nao::ModelWorkspace> bad = w;
+  bad[1].lo[3] = bad[1].hi[3] + 0.5;
+  CHECK_THROWS_WITH_AS(nao::modelWorkspace(nao::withModelWorkspace("{}", movements, bad), movements, "m.bin"),
+                       doctest::Contains("'wave' has lo above hi"), ModelFileError);
+  CHECK_THROWS_AS(nao::withModelWorkspace("{}", movements, {w[0]}), ModelFileError);
+}

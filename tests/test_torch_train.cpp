@@ -713,11 +713,17 @@ TEST_CASE("netRuns drives the runtime's step from each start: its actions are li
       for (int j = 0; j < kNumJoints; ++j) {
         q[0][t][j] = static_cast<float>(run.q[tk][j]);
         r[0][t][j] = static_cast<float>(rr[j]);
-        if (t + 1 < n) {
-          const double step = arm.v_max[j] * period;
-          const double lo = std::max(arm.q_min[j], run.q[tk][j] - step), hi = std::min(arm.q_max[j], run.q[tk][j] + step);
-          a_prev[0][t + 1][j] = static_cast<float>(std::clamp(run.q[tk][j] + run.a[tk][j], lo, hi) - run.q[tk][j]);
-        }
+      }
+      if (t + 1 < n) {
+        // The controller's limiter with the autonomous workspace: the demonstrations' joint
+        // range widened by the controller's margin.
+        JointEnvelope env;
+        const ModelWorkspace w = demonstratedWorkspace(data)[static_cast<std::size_t>(run.movement)];
+        env.lo = w.lo.array() - ControllerParams{}.workspace_margin_rad;
+        env.hi = w.hi.array() + ControllerParams{}.workspace_margin_rad;
+        JointVector c;
+        limitCommand(arm, period, run.q[tk], run.a[tk], c, &env);
+        for (int j = 0; j < kNumJoints; ++j) a_prev[0][t + 1][j] = static_cast<float>(c[j] - run.q[tk][j]);
       }
     }
     const torch::Tensor act = net->act(q, a_prev, r, torch::tensor({static_cast<std::int64_t>(run.movement)})).contiguous();
