@@ -120,6 +120,13 @@ std::vector<ModelWorkspace> modelWorkspace(const std::string& metadata_json,
       throw ModelFileError(origin + ": metadata \"workspace\" of '" + movement + "' has lo above hi");
     out.push_back(e);
   }
+  // A demonstration begins at its start (the retargeted first pose): that is demonstrated too.
+  const ModelStarts starts = modelStarts(metadata_json, movement_names, origin);
+  for (std::size_t m = 0; m < out.size(); ++m)
+    for (const ModelStart& st : starts[m]) {
+      out[m].lo = out[m].lo.cwiseMin(st.q);
+      out[m].hi = out[m].hi.cwiseMax(st.q);
+    }
   return out;
 }
 

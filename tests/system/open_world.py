@@ -78,10 +78,16 @@ class OpenWorld(unittest.TestCase):
                 continue
             movement = name.rsplit("_", 1)[0]
             with open(path) as f:
-                for row in csv.DictReader(f):
-                    q = [float(row["f_%d" % j]) for j in range(5)]
-                    lo, hi = ranges.get(movement, (q[:], q[:]))
-                    ranges[movement] = ([min(a, b) for a, b in zip(lo, q)], [max(a, b) for a, b in zip(hi, q)])
+                rows = list(csv.DictReader(f))
+            # The recording's trajectory, and the start it begins at: q_r at its first measured sample.
+            points = [[float(row["f_%d" % j]) for j in range(5)] for row in rows]
+            t0 = float(next((r for r in rows if r["measured"] == "1"), rows[0])["t_s"])
+            with open(os.path.join(work, name, "retarget.csv")) as f:
+                points += [[float(r["qr_%d" % j]) for j in range(5)] for r in csv.DictReader(f)
+                           if abs(float(r["t_s"]) - t0) <= 1e-6]
+            for q in points:
+                lo, hi = ranges.get(movement, (q[:], q[:]))
+                ranges[movement] = ([min(a, b) for a, b in zip(lo, q)], [max(a, b) for a, b in zip(hi, q)])
         meta = json.loads(run([self.nao_rt, "--weights", self.model, "--info"]))
         for m in MOVEMENTS:
             starts = meta["starts"][m]

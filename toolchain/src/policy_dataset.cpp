@@ -209,6 +209,12 @@ std::vector<ModelWorkspace> demonstratedWorkspace(const PolicyData& data) {
       w.lo = w.lo.cwiseMin(q);
       w.hi = w.hi.cwiseMax(q);
     }
+  // A demonstration begins at its start, the retargeted first pose: demonstrated too.
+  for (const PolicyDemo& d : data.demos) {
+    ModelWorkspace& w = out[static_cast<std::size_t>(d.movement)];
+    w.lo = w.lo.cwiseMin(d.start);
+    w.hi = w.hi.cwiseMax(d.start);
+  }
   return out;
 }
 

@@ -179,7 +179,8 @@ struct ModelWorkspace {
 };
 
 /// The "workspace" of a model's metadata, {movement: {"lo": [5], "hi": [5]}}, one entry per
-/// movement of `movement_names`; empty when the key is absent (models that predate it). Throws
+/// movement of `movement_names`, widened to the metadata's starts of the movement (a
+/// demonstration begins at its start); empty when the key is absent (models that predate it). Throws
 /// ModelFileError "<origin>: ..." when present but unusable (a movement missing or unknown, not 5
 /// finite numbers, lo above hi).
 std::vector<ModelWorkspace> modelWorkspace(const std::string& metadata_json,

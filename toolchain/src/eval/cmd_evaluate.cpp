@@ -288,14 +288,20 @@ void evaluate(const Args& a) {
               "speed", "loops r/d", "share", "distinct", "ref mm");
   for (const MovementWork& w : work) {
     const fs::path mdir = out / w.name;
-    // The demonstrations' joint range (held out and training) and the plane loops are counted in.
+    // The demonstrations' joint range (held out and training: their trajectories and the starts
+    // they begin at) and the plane loops are counted in.
     JointVector lo = JointVector::Constant(1e9), hi = JointVector::Constant(-1e9);
-    for (const DemoSet* s : {&w.held, &w.train})
+    for (const DemoSet* s : {&w.held, &w.train}) {
       for (const auto& f : s->f)
         for (const JointVector& q : f) {
           lo = lo.cwiseMin(q);
           hi = hi.cwiseMax(q);
         }
+      for (const JointVector& q : s->start) {
+        lo = lo.cwiseMin(q);
+        hi = hi.cwiseMax(q);
+      }
+    }
     const Eigen::Matrix<double, 3, 2> plane = loopPlane(w.held.hand);
     std::vector<double> nn_dtw, demo_speed, demo_loops;
     for (std::size_t i = 0; i < w.held.size(); ++i) {

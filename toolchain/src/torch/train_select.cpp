@@ -78,11 +78,12 @@ SelectionReference selectionReference(const PolicyData& data, const std::vector<
     const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
     ref.demos[static_cast<std::size_t>(demo.movement)].push_back(handPath(arm, demo.f));
   }
-  for (const PolicyDemo& demo : data.demos)
-    for (const JointVector& q : demo.f) {
-      ref.q_min[static_cast<std::size_t>(demo.movement)] = ref.q_min[static_cast<std::size_t>(demo.movement)].cwiseMin(q);
-      ref.q_max[static_cast<std::size_t>(demo.movement)] = ref.q_max[static_cast<std::size_t>(demo.movement)].cwiseMax(q);
-    }
+  // The demonstrated joint range: the trajectories and the starts they begin at.
+  const std::vector<ModelWorkspace> range = demonstratedWorkspace(data);
+  for (std::size_t m = 0; m < range.size() && m < nm; ++m) {
+    ref.q_min[m] = range[m].lo;
+    ref.q_max[m] = range[m].hi;
+  }
   for (std::size_t m = 0; m < nm; ++m) {
     const std::vector<HandPath>& paths = ref.demos[m];
     std::vector<double> speed, loops, nn;

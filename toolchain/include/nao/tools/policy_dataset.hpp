@@ -91,8 +91,9 @@ PolicyData loadPolicyData(const std::string& dir);
 /// few ticks the trajectory is f again (docs/policy.md "Data").
 PolicyData fromOwnStarts(const PolicyData& data);
 
-/// Per movement (data.movement_names order), the joint range its demonstrations' feature
-/// trajectories cover, rad: the "workspace" an autonomous model carries (modelWorkspace).
+/// Per movement (data.movement_names order), the joint range its demonstrations cover (their
+/// feature trajectories and their starts), rad: the "workspace" an autonomous model carries
+/// (modelWorkspace).
 std::vector<ModelWorkspace> demonstratedWorkspace(const PolicyData& data);
 
 /// Builds a data set from memory: the movements are the keys of `centroids` (sorted, so the
