@@ -133,10 +133,11 @@ struct ControllerParams {
   /// Pole of the online feature-extracted reference the policy is fed in reference mode (the
   /// blend of the snapped key poses, as the training data's f; must equal the data's).
   double feature_pole = kFeatureBlendPole;
-  /// Autonomous mode: commands stay within the movement's key poses' joint range widened by this
-  /// margin (rad): where no demonstration went, the arm does not go (kFaultOutsideWorkspace counts
-  /// the ticks cut). Negative: no envelope, the arm's limits alone.
-  double workspace_margin_rad = 0.1;
+  /// Autonomous mode: commands stay within the movement's demonstrated joint range widened by
+  /// this margin (rad): where no demonstration went, the arm does not go (kFaultOutsideWorkspace
+  /// counts the ticks cut). 0.09: the arm's measured angles then stay within 0.1 rad of the range
+  /// (the servo settles up to ~2 mrad past a command). Negative: the arm's limits alone.
+  double workspace_margin_rad = 0.09;
 };
 
 /// One tick as recorded (ticks.csv; angles rad, positions m in the torso frame).
