@@ -1,4 +1,5 @@
 #include "nao/live_skeleton.hpp"
+#include "nao/median.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -10,22 +11,11 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kTimeEps = 1e-9;
 
-// Median of `v` (the mean of the two middle values for an even count); 0 for an empty `v`.
-double medianOf(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const std::size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
-  const double upper = v[mid];
-  if (v.size() % 2 == 1) return upper;
-  const double lower = *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid));
-  return 0.5 * (lower + upper);
-}
-
 // Bone references from the window's samples (BoneLengths' rule).
 void updateBoneReferences(LiveSkeletonState& state) {
   for (std::size_t b = 0; b < kSkeletonBones.size(); ++b) {
     const std::vector<double>& samples = state.bone_samples[b];
-    state.bones.median_m[b] = medianOf(samples);
+    state.bones.median_m[b] = median(samples);
     state.bones.n_samples[b] = static_cast<int>(samples.size());
     state.bones.checked[b] =
         static_cast<int>(samples.size()) >= kMinBoneSamples && state.bones.median_m[b] >= kMinBoneLength_m;
@@ -112,14 +102,14 @@ LiveSkeletonStep advanceLiveSkeleton(const LiveSkeletonParams& params, LiveSkele
     }
     if (state.arm.valid) {
       // The estimate's rule over the frames so far: provisional until the window is over.
-      const double upper = medianOf(state.upper_m), forearm = medianOf(state.forearm_m);
-      const double hand = state.hand_m.empty() ? per_frame.hand_to_forearm * forearm : medianOf(state.hand_m);
+      const double upper = median(state.upper_m), forearm = median(state.forearm_m);
+      const double hand = state.hand_m.empty() ? per_frame.hand_to_forearm * forearm : median(state.hand_m);
       state.current_scale_m = upper + forearm + hand;
       state.current_hand_m = hand;
     }
     if (t >= state.scale_window_end_s - kTimeEps && static_cast<int>(state.upper_m.size()) >= kMinScaleFrames) {
-      const double upper = medianOf(state.upper_m), forearm = medianOf(state.forearm_m);
-      const double hand = state.hand_m.empty() ? per_frame.hand_to_forearm * forearm : medianOf(state.hand_m);
+      const double upper = median(state.upper_m), forearm = median(state.forearm_m);
+      const double hand = state.hand_m.empty() ? per_frame.hand_to_forearm * forearm : median(state.hand_m);
       state.human_scale_m = upper + forearm + hand;
       state.hand_length_m = hand;
       state.current_scale_m = state.human_scale_m;

@@ -1,4 +1,5 @@
 #include "nao/triangulation.hpp"
+#include "nao/median.hpp"
 
 #include <Eigen/LU>
 #include <Eigen/SVD>
@@ -14,17 +15,6 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kTimeEps = 1e-9;  // s; two times closer than this are the same sample
-
-// Median of `v` (the mean of the two middle values for an even count); 0 for an empty `v`.
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const std::size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid), v.end());
-  const double upper = v[mid];
-  if (v.size() % 2 == 1) return upper;
-  const double lower = *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(mid));
-  return 0.5 * (lower + upper);
-}
 
 // Points that identify a person across cameras (upper body, present in both layouts).
 constexpr std::array<int, 11> kSubjectPoints = {kNose,      kNeck,   kRShoulder, kRElbow, kRWrist, kLShoulder,
