@@ -129,19 +129,6 @@ std::string bytes(const fs::path& p) {
   return s.str();
 }
 
-/// The key poses of movement 0 (elbow) of a model file written by writeModel.
-std::vector<JointVector> elbowKeyPoses(const std::string& model) {
-  const ModelFile file = readModelFile(model);
-  std::vector<JointVector> centroids;
-  const float* c = file.data(file.find("centroids"));
-  for (int k = 0; k < file.header.arch.clusters; ++k) {
-    JointVector q;
-    for (int j = 0; j < kNumJoints; ++j) q[j] = c[k * kNumJoints + j];
-    centroids.push_back(q);
-  }
-  return centroids;
-}
-
 }  // namespace
 
 TEST_CASE("ticks.csv's header is exactly the contract's columns, in order") {
@@ -771,28 +758,60 @@ TEST_CASE("a reference model's law.gain is added by nao_rt: the first action is 
   // 2 (a(1.5) − a(0)) to float rounding, whatever r is.
   std::vector<JointVector> first;
   std::vector<double> zero;  // tick 0's actions, joint-major per run
+  std::vector<double> share, action_sq;  // summary.json's network_share; Σ|a|² over the 2 ticks
   for (const float gain : {0.0f, 1.5f, 3.0f}) {
     const std::string model =
         writeModel("law_" + std::to_string(static_cast<int>(2 * gain)) + ".bin", Conditioning::kReference, "{}",
                    smallArch(), 7, gain);
     const fs::path dir = tempDir("law_" + std::to_string(static_cast<int>(2 * gain)));
     rt::RunOptions o = recorded(model, "wrist", dir);
-    o.ticks = 3;
+    o.ticks = 2;
     const Outcome r = run(o);
     REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
     const auto t = test::readCsvColumns(dir / "ticks.csv");
-    JointVector a;
+    JointVector a, a0;
     for (int j = 0; j < kNumJoints; ++j) {
       a[j] = t.at("a_" + std::to_string(j))[1];
-      zero.push_back(t.at("a_" + std::to_string(j))[0]);
+      a0[j] = t.at("a_" + std::to_string(j))[0];
+      zero.push_back(a0[j]);
     }
     first.push_back(a);
+    action_sq.push_back(a0.squaredNorm() + a.squaredNorm());
+    const nlohmann::json summary = nlohmann::json::parse(bytes(dir / "summary.json"));
+    REQUIRE(summary["policy_ticks"] == 2);
+    share.push_back(summary["network_share"].get<double>());
   }
   const JointVector d1 = first[1] - first[0], d2 = first[2] - first[0];
   for (int j = 0; j < kNumJoints; ++j) CHECK(zero[static_cast<std::size_t>(j)] == zero[static_cast<std::size_t>(kNumJoints + j)]);
   MESSAGE("law 1.5 moves tick 1's action by " << d1.transpose() << " rad");
   CHECK(d1.cwiseAbs().minCoeff() > 1e-4);  // r is nonzero in every joint: the law acts
   CHECK((d2 - 2.0 * d1).cwiseAbs().maxCoeff() < 1e-6);
+  // The network share: both ticks have the same state and inputs in the three runs, so the
+  // network's part is the law-free run's action; nao_rt's figure is recomputed from that.
+  CHECK(share[0] == 1.0);
+  for (std::size_t k = 1; k < 3; ++k) {
+    CHECK(share[k] == doctest::Approx(std::sqrt(action_sq[0] / action_sq[k])).epsilon(1e-12));
+    CHECK(share[k] != 1.0);
+  }
+}
+
+TEST_CASE("summary.json's network share: 1 for an autonomous model, null when an evaluation law replaces the policy") {
+  const fs::path auto_dir = tempDir("share_auto");
+  const Outcome a = run(rollout("elbow", auto_dir));
+  REQUIRE_MESSAGE(a.report.status == 0, a.report.error);
+  const nlohmann::json sa = nlohmann::json::parse(bytes(auto_dir / "summary.json"));
+  CHECK(sa["policy_ticks"] == sa["ticks"]);
+  CHECK(sa["network_share"].get<double>() == 1.0);  // a = the network's, bit for bit
+
+  const fs::path law_dir = tempDir("share_law");
+  rt::RunOptions o = recorded(writeModel("share_law.bin", Conditioning::kReference), "elbow", law_dir);
+  o.controller.gain_law = 1.0894;
+  o.ticks = 5;
+  const Outcome l = run(o);
+  REQUIRE_MESSAGE(l.report.status == 0, l.report.error);
+  const nlohmann::json sl = nlohmann::json::parse(bytes(law_dir / "summary.json"));
+  CHECK(sl["policy_ticks"] == 0);
+  CHECK(sl["network_share"].is_null());
 }
 
 TEST_CASE("the online reference is the offline one: nao_rt retargets with the demonstration's calibrated human scale, so the key poses it snaps and the feature target it blends are the trajectory it is scored against") {

@@ -124,9 +124,16 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
   report.allocations_after_activate = totals.allocations;
   report.faults.fill(0);
   std::vector<double> tick_us, retarget_us, policy_us, sim_us;
-  double sum_sq = 0.0;
-  std::int64_t n_ref = 0, slow = 0;
+  double sum_sq = 0.0, net_sq = 0.0, act_sq = 0.0;
+  std::int64_t n_ref = 0, slow = 0, n_policy = 0;
   for (const TickRecord& r : records) {
+    // The network's share of the action (docs/evaluate.md): over the ticks the policy ran with a
+    // finite action, RMS of its own part over RMS of the action before the limiter.
+    if (r.a_net.allFinite() && r.a.allFinite()) {
+      net_sq += r.a_net.squaredNorm();
+      act_sq += r.a.squaredNorm();
+      ++n_policy;
+    }
     for (int b = 0; b < kNumControllerFaults; ++b)
       if (r.fault & (1u << b)) ++report.faults[static_cast<std::size_t>(b)];
     tick_us.push_back(r.tick_us);
@@ -176,6 +183,8 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
   j["slow_ticks"] = slow;
   j["ee_rmse_m"] = numberOrNull(report.ee_rmse_m);
   j["ee_rmse_ticks"] = n_ref;
+  j["network_share"] = n_policy > 0 && act_sq > 0.0 ? ordered_json(std::sqrt(net_sq / act_sq)) : ordered_json(nullptr);
+  j["policy_ticks"] = n_policy;
   // The pose the arm started from at rest (a(−1) = 0): a model start, --start-pose, or a recorded
   // reference's first target pose.
   j["start_q"] = std::vector<double>(p.q_start.data(), p.q_start.data() + kNumJoints);

@@ -147,6 +147,9 @@ struct TickRecord {
   JointVector q_ref = JointVector::Zero();   ///< retargeted reference (q_r of Algorithm 1)
   JointVector r = JointVector::Zero();       ///< snapped key pose fed to the policy
   JointVector a = JointVector::Zero();       ///< policy action a_t (0 when bypassed)
+  /// The network's part of a (the decoded chunk or bin + offset, before any law the model adds);
+  /// NaN on ticks the policy did not run (return home, evaluation laws)
+  JointVector a_net = JointVector::Constant(std::numeric_limits<double>::quiet_NaN());
   JointVector q_cmd = JointVector::Zero();   ///< command sent to the servos
   JointVector q = JointVector::Zero();       ///< measured joint angles at the end of the tick (LoLA: as measured)
   Eigen::Vector3d ee = Eigen::Vector3d::Zero();  ///< hand point of q
@@ -301,6 +304,7 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   rec.t_s = static_cast<double>(data.tick) * p.period_s;
   rec.fault = 0;
   rec.a.setZero();
+  rec.a_net.setConstant(std::numeric_limits<double>::quiet_NaN());
 
   // 1. Reference: human kinematics -> scaled hand target -> Algorithm 1 (reference mode).
   const bool autonomous = model.policy.conditioning == Conditioning::kAutonomous;
@@ -378,6 +382,7 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
     in.movement = data.movement;
     in.step = static_cast<int>(std::min<std::int64_t>(data.tick, model.policy.max_steps - 1));
     a = stepPolicy(model.policy, *data.policy, in).template cast<double>();
+    rec.a_net = data.policy->net_action.template cast<double>();
     if (data.tick >= p.inject_policy_nan_first && data.tick <= p.inject_policy_nan_last)
       a[0] = std::nan("");
     for (int j = 0; j < kNumJoints; ++j) {

@@ -367,7 +367,7 @@ void evaluate(const Args& a) {
       runs.push_back(r);
     }
     const std::size_t distinct = distinctRuns(run_hands);
-    std::vector<double> ref_rmse, law_rmse, gain_rmse;
+    std::vector<double> ref_rmse, law_rmse, gain_rmse, ref_share;
     json ref_runs = json::array();
     for (std::size_t k = 0; k < w.ref_jobs.size(); ++k)
       for (int law = 0; law < 3; ++law) {
@@ -378,10 +378,16 @@ void evaluate(const Args& a) {
           throw UserError((job.dir / "summary.json").string() + ": no number 'ee_rmse_m'");
         const double rmse = s["ee_rmse_m"].get<double>();
         (law == 0 ? ref_rmse : law == 1 ? law_rmse : gain_rmse).push_back(rmse);
-        ref_runs.push_back({{"law", law == 0 ? "policy" : law == 1 ? "blend" : "gain"},
-                            {"seed", a.seeds[k]},
-                            {"run_dir", fs::relative(job.dir, out).string()},
-                            {"ee_rmse_m", rmse}});
+        json run = {{"law", law == 0 ? "policy" : law == 1 ? "blend" : "gain"},
+                    {"seed", a.seeds[k]},
+                    {"run_dir", fs::relative(job.dir, out).string()},
+                    {"ee_rmse_m", rmse}};
+        // The policy's runs: nao_rt's own network share (the evaluation laws have none).
+        if (law == 0 && s.contains("network_share") && s["network_share"].is_number()) {
+          ref_share.push_back(s["network_share"].get<double>());
+          run["network_share"] = ref_share.back();
+        }
+        ref_runs.push_back(run);
       }
 
     json m;
@@ -402,6 +408,7 @@ void evaluate(const Args& a) {
       m["reference_rmse_m"] = numberOrNull(median(ref_rmse));
       m["blend_law_rmse_m"] = numberOrNull(median(law_rmse));
       m["gain_law_rmse_m"] = numberOrNull(median(gain_rmse));
+      m["reference_network_share"] = ref_share.empty() ? json(nullptr) : numberOrNull(median(ref_share));
       m["reference_rmse_per_seed_m"] = ref_rmse;
       m["blend_law_rmse_per_seed_m"] = law_rmse;
       m["gain_law_rmse_per_seed_m"] = gain_rmse;
