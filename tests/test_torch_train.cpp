@@ -845,3 +845,60 @@ TEST_CASE("a checkpoint of a bins model resumes to the uninterrupted run's bytes
   CHECK_MESSAGE(bytes == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
   std::filesystem::remove(ck);
 }
+
+TEST_CASE("without the previous action the net's a(t-1) weights stay zero through training, and the runtime's action ignores a(t-1)") {
+  // The same training with and without the input: only the latter must be blind to a(t-1).
+  for (const bool previous_action : {true, false}) {
+    CAPTURE(previous_action);
+    TrainOptions o = smallOptions(81, 2);
+    o.conditioning = Conditioning::kAutonomous;
+    o.arch.chunk = 3;
+    o.previous_action = previous_action;
+    TrainResult r;
+    const std::vector<std::uint8_t> bytes = trainBytes(o, &r);
+    const ModelFile file = decodeModel(bytes, "trained.bin");
+    const int d = file.header.arch.d_model;
+    const float* in_w = file.data(file.find("embed.in.weight"));  // [features, d]: rows q, a, r
+    const float* act_w = file.data(file.find("embed.act.weight"));
+    double q_row = 0.0, a_row = 0.0, act = 0.0;
+    for (int k = 0; k < d; ++k) {
+      q_row += std::abs(in_w[k]);
+      a_row += std::abs(in_w[d + k]);
+      act += std::abs(act_w[k]);
+    }
+    CHECK(q_row > 0.0);
+    CHECK((a_row == 0.0) == !previous_action);
+    CHECK((act == 0.0) == !previous_action);
+    const nlohmann::json meta = nlohmann::json::parse(file.header.metadata_json);
+    CHECK(meta["training"].value("previous_action_input", true) == previous_action);
+
+    // Two streams of the runtime on the same joint angles, one fed the previous actions and the
+    // other zeros: bit-equal actions exactly when the net does not see them.
+    std::vector<const float*> p;
+    for (std::size_t i = 0; i < file.tensors.size(); ++i) p.push_back(file.data(i));
+    const PolicyWeights<SmallPolicyDims> w =
+        bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), file.header.arch, file.header.conditioning);
+    ExecutionOptions clean;
+    clean.noisy_rollouts = 0;
+    const PolicySequence seq = executeDemos(smallData(), {r.split.val.front()}, smallSim(), clean, o.seed).front();
+    auto fed = makePolicyWorkspace<SmallPolicyDims>(), blind = makePolicyWorkspace<SmallPolicyDims>();
+    resetPolicyStream(*fed);
+    resetPolicyStream(*blind);
+    bool all_equal = true;
+    double largest = 0.0;
+    for (std::size_t t = 0; t < seq.ticks(); ++t) {
+      PolicyInput in;
+      in.q = seq.q[t].cast<float>();
+      in.a_prev = seq.a_prev[t].cast<float>();
+      in.movement = seq.movement;
+      in.step = static_cast<int>(t);
+      const Eigen::Matrix<float, 5, 1> a = stepPolicy(w, *fed, in);
+      in.a_prev.setZero();
+      const Eigen::Matrix<float, 5, 1> b = stepPolicy(w, *blind, in);
+      all_equal = all_equal && a == b;
+      largest = std::max(largest, static_cast<double>(a.cwiseAbs().maxCoeff()));
+    }
+    CHECK(all_equal == !previous_action);
+    CHECK(largest > 1e-3);
+  }
+}

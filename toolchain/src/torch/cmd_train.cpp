@@ -27,6 +27,7 @@ struct TrainArgs {
   int noisy_rollouts = ExecutionOptions{}.noisy_rollouts;
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
   double law_gain = -1.0, offset_weight = TrainOptions{}.offset_weight, ensemble_decay = TrainOptions{}.ensemble_decay;
+  bool no_previous_action = false;
   std::string select = "val-loss";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
@@ -82,6 +83,7 @@ void run(const TrainArgs& a) {
   o.law_gain = a.law_gain;
   o.offset_weight = a.offset_weight;
   o.ensemble_decay = a.ensemble_decay;
+  o.previous_action = !a.no_previous_action;
   if (a.window > 0) o.arch.window = a.window;
   if (a.chunk > 0) o.arch.chunk = a.chunk;
   if (a.bins >= 0) o.arch.bins = a.bins;
@@ -239,6 +241,9 @@ void setup(CLI::App& app) {
                   "Chunks: a chunk made k ticks ago weighs exp(-decay k) in the executed action (0: equal weights)")
       ->check(CLI::Range(0.0, 20.0))
       ->capture_default_str();
+  cmd->add_flag("--no-previous-action", args->no_previous_action,
+               "The net does not see its previous action a(t-1), only the joint angles over the window (their "
+               "input weights are held at zero, so nao_rt runs the model unchanged)");
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "
                   "Another W needs a nao_rt built for it (toolchain/nao build --model FILE)")

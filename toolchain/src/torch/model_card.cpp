@@ -74,6 +74,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["loss"] = o.arch.bins == 0 ? "mse of the normalised chunk" : "cross-entropy of the bin + offset_weight x offset mse";
   if (o.arch.bins > 0) t["offset_weight"] = o.offset_weight;
   if (o.arch.chunk > 1) t["ensemble_decay"] = o.ensemble_decay;
+  if (!o.previous_action) t["previous_action_input"] = false;
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"
                                                             : "the first key pose";

@@ -52,6 +52,11 @@ struct TrainOptions {
   /// streaming inference, no human input) and scored (RolloutScore); the exported epoch is the
   /// best that makes the movement (selectionKey). Patience counts on it too.
   bool select_by_rollout = false;
+  /// False: the net does not see the previous action a(t-1) (its input weights, the encoder's
+  /// a-feature row and the decoder's action embedding, are held at zero), only q over the window.
+  /// A policy fed its own last action can learn to copy it, and in closed loop its errors then
+  /// persist instead of being corrected (behaviour cloning's copycat problem).
+  bool previous_action = true;
 };
 
 /// How the rollouts of one movement went (train_select.hpp): medians over its validation

@@ -18,6 +18,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
     << o.execution.expert_tol_rad;
   for (double q : o.execution.noise_std_rad) k << " " << q;
   k << "; batches " << o.max_batches << "; law " << o.law_gain;
+  if (!o.previous_action) k << "; no previous action";
   if (o.select_by_rollout) k << "; select rollout";
   return k.str();
 }

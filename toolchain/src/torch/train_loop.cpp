@@ -182,6 +182,15 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   res.law_gain = lawGain(o, sim);
   net->setLawGain(res.law_gain);
   net->setEnsembleDecay(o.ensemble_decay);
+  // Without the previous action its input weights stay zero: the runtime multiplies a(t-1) by
+  // them, so model.bin needs no other mark and nao_rt runs it unchanged.
+  const auto dropPreviousAction = [&] {
+    if (o.previous_action) return;
+    torch::NoGradGuard no_grad;
+    net->embed_in->weight[1].zero_();
+    net->embed_act->weight.zero_();
+  };
+  dropPreviousAction();
   SequenceTensors train = toTensors(net, train_seqs);
   SequenceTensors val = toTensors(net, val_seqs);
   if (o.arch.bins > 0) {
@@ -269,6 +278,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       }
       if (group) group->sumGradients(params);
       optimiser.step();
+      dropPreviousAction();
       seen += global_ticks;
       if (live && secondsSince(t_live) >= 0.5) {
         t_live = Clock::now();
