@@ -858,19 +858,14 @@ TEST_CASE("without the previous action the net's a(t-1) weights stay zero throug
     const std::vector<std::uint8_t> bytes = trainBytes(o, &r);
     const ModelFile file = decodeModel(bytes, "trained.bin");
     const int d = file.header.arch.d_model;
-    const float* in_w = file.data(file.find("embed.in.weight"));  // [features, d]: rows q, a, r
-    const float* act_w = file.data(file.find("embed.act.weight"));
-    double q_row = 0.0, a_row = 0.0, act = 0.0;
-    for (int k = 0; k < d; ++k) {
-      q_row += std::abs(in_w[k]);
-      a_row += std::abs(in_w[d + k]);
-      act += std::abs(act_w[k]);
-    }
-    CHECK(q_row > 0.0);
-    CHECK((a_row == 0.0) == !previous_action);
-    CHECK((act == 0.0) == !previous_action);
-    const nlohmann::json meta = nlohmann::json::parse(file.header.metadata_json);
-    CHECK(meta["training"].value("previous_action_input", true) == previous_action);
+    // embed.in.weight [features, d] row-major is column-major [d, features]: column 1 is a(t-1)'s.
+    const Eigen::Map<const Eigen::MatrixXf> in_w(file.data(file.find("embed.in.weight")), d, file.header.arch.features);
+    const Eigen::Map<const Eigen::VectorXf> act_w(file.data(file.find("embed.act.weight")), d);
+    CHECK(in_w.col(0).cwiseAbs().sum() > 0.0f);
+    CHECK((in_w.col(1).cwiseAbs().sum() == 0.0f) == !previous_action);
+    CHECK((act_w.cwiseAbs().sum() == 0.0f) == !previous_action);
+    CHECK(nlohmann::json::parse(file.header.metadata_json)["training"].value("previous_action_input", true) ==
+          previous_action);
 
     // Two streams of the runtime on the same joint angles, one fed the previous actions and the
     // other zeros: bit-equal actions exactly when the net does not see them.
