@@ -15,8 +15,10 @@ start and are scored against it. Then `nao_toolchain cluster --data DST` and the
 usage: toolchain/analysis/demo_as_movement.py SRC DST N COPIES
 """
 import os
-import shutil
 import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from nao_analysis.dataset import copy_demonstration  # noqa: E402
 
 
 def main():
@@ -37,10 +39,7 @@ def main():
         for name in names[:per]:
             for c in range(copies):
                 out = os.path.join(dst, "%s%s_%03d" % (movement.replace("_", ""), name.rsplit("_", 1)[1], c))
-                os.makedirs(out, exist_ok=True)
-                for f in ("retarget.csv", "skeleton.csv", "calibration.json", "meta.json", ".done"):
-                    if os.path.exists(os.path.join(src, name, f)):
-                        shutil.copy(os.path.join(src, name, f), out)
+                copy_demonstration(os.path.join(src, name), out)
         print("%s: %d of %d demonstrations, %d copies each" % (movement, min(per, len(names)), len(names), copies))
 
 

@@ -16,10 +16,12 @@ usage: toolchain/analysis/split_by_sense.py SRC DST
 import csv
 import json
 import os
-import shutil
 import sys
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from nao_analysis.dataset import copy_demonstration  # noqa: E402
 
 
 def middle_stretch(path):
@@ -53,10 +55,7 @@ def main():
             sense = "p" if area > 0 else "n"
             counts[sense] += 1
             out = os.path.join(dst, "%s%s_%s" % (movement, sense, name.rsplit("_", 1)[1]))
-            os.makedirs(out, exist_ok=True)
-            for f in ("retarget.csv", "skeleton.csv", "calibration.json", "meta.json", ".done"):
-                if os.path.exists(os.path.join(src, name, f)):
-                    shutil.copy(os.path.join(src, name, f), out)
+            copy_demonstration(os.path.join(src, name), out)
             meta = os.path.join(src, name, "meta.json")
             if os.path.isfile(meta):
                 direction = json.load(open(meta)).get("motion", {}).get("direction")
