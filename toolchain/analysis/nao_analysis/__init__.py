@@ -10,6 +10,7 @@ Modules, one topic each:
   report      table2.md and the self-contained report.html
   paper       the paper's own Table 2 numbers, for docs/reproduction.md
   cli         `toolchain/nao analyze`
+  dataset     copying a prepared data set's demonstration (the data-set scripts beside the package)
 """
 
 JOINT_NAMES = ("RShoulderPitch", "RShoulderRoll", "RElbowYaw", "RElbowRoll", "RWristYaw")
