@@ -222,6 +222,7 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
     j["lola"] = {{"socket", totals.lola_socket},
                  {"cycles", c.cycles},
                  {"late", c.late},
+                 {"late_descheduled", c.late_descheduled},
                  {"malformed", c.malformed},
                  {"gaps", c.gaps},
                  {"hot_cycles", c.hot_cycles},

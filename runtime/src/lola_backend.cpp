@@ -19,6 +19,14 @@
 namespace nao {
 namespace {
 
+// CPU time of the calling thread: what separates a late answer the thread's own work made from
+// one it spent waiting for a CPU.
+std::int64_t threadCpuNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
 // Lock-free, so async-signal-safe, and read by the I/O thread too (--lola-io-thread).
 std::atomic<int> g_stop_signal{0};
 static_assert(std::atomic<int>::is_always_lock_free);
@@ -201,6 +209,7 @@ bool LolaBackend::cycle(bool defer) {
     faults_ |= kFaultRobotMalformedPacket;
   }
   const std::int64_t t_in = monotonicNs();
+  cpu_in_ns_ = threadCpuNs();
   // The packet waited for us (no blocking wait was needed) and the previous answer is more than
   // a cycle and a half ago: this answer comes after the packet's cycle ended.
   const bool waited = wait_ns_ - wait_before > 200'000;
@@ -310,10 +319,14 @@ void LolaBackend::respond(std::int64_t t_in_ns, bool waited) {
   const std::int64_t t_out = monotonicNs();
   ++counters_.cycles;
   if (latency_ns_.size() < latency_ns_.capacity()) latency_ns_.push_back(t_out - t_in_ns);
-  if (t_out - t_in_ns > lola::kCycleNs ||
-      (!waited && last_send_ns_ != 0 && t_out - last_send_ns_ > lola::kCycleNs * 3 / 2))
+  const std::int64_t cpu_out = threadCpuNs();
+  const bool late_in = t_out - t_in_ns > lola::kCycleNs;
+  if (late_in || (!waited && last_send_ns_ != 0 && t_out - last_send_ns_ > lola::kCycleNs * 3 / 2)) {
     ++counters_.late;
+    if (cpu_out - (late_in ? cpu_in_ns_ : last_send_cpu_ns_) <= lola::kCycleNs) ++counters_.late_descheduled;
+  }
   last_send_ns_ = t_out;
+  last_send_cpu_ns_ = cpu_out;
 }
 
 const JointVector& LolaBackend::activate(const JointVector& q0) {

@@ -126,14 +126,22 @@ def stiff(row, i):
     return float(row["stiff_" + JOINTS[i]])
 
 
-def check_answers(rows, label):
-    """>= 99 % of the sensor packets between the first and the last answer answered within their cycle."""
+def own_late(lola):
+    """nao_rt's late answers that its own work made: the others (late_descheduled) waited for a
+    CPU, which measures the machine's load, not the code (docs/lola.md)."""
+    return lola["late"] - lola["late_descheduled"]
+
+
+def check_answers(rows, label, lola):
+    """>= 99 % of the sensor packets between the first and the last answer answered within their
+    cycle, not counting those nao_rt answered late while it waited for a CPU."""
     cycles = [int(r["cycle"]) for r in rows]
     first, last = min(cycles), max(cycles)
     in_cycle = sum(int(r["in_cycle"]) for r in rows)
     total = last - first + 1
-    check(in_cycle >= 0.99 * total,
-          f"{label}: {in_cycle} of {total} sensor packets answered within their 12 ms cycle (>= 99 %)")
+    check(in_cycle + lola["late_descheduled"] >= 0.99 * total,
+          f"{label}: {in_cycle} of {total} sensor packets answered within their 12 ms cycle, "
+          f"{lola['late_descheduled']} late for want of a CPU (>= 99 % together)")
 
 
 def check_start_and_stop(rows, label, expect_stop_ramp=True):
@@ -194,13 +202,15 @@ def case_movement(a, movement, tmp, flags=()):
               f"the I/O thread ran, counted 0 allocations of its own and no tick overran: {lola}")
     check(lola["malformed"] == 0 and lola["gaps"] == 0 and lola["tracking_cycles"] == 0 and lola["hot_cycles"] == 0
           and lola["cycles"] > ticks * 8, f"no robot fault counted without an injected one: {lola}")
-    check(lola["late"] <= 0.01 * lola["cycles"], f"nao_rt counts <= 1 % late answers ({lola['late']} of {lola['cycles']})")
+    check(own_late(lola) <= 0.01 * lola["cycles"],
+          f"nao_rt counts <= 1 % late answers of its own making ({own_late(lola)} of {lola['cycles']}; "
+          f"{lola['late_descheduled']} more waited for a CPU)")
     if "--lola-io-thread" not in flags:
         # One thread: the cache is warmed before every tick's packet unless that packet came
         # first (the sim's 12 ms clock; a late previous packet makes the next one early).
         check(lola["warm"] and lola["warm_skipped"] <= 0.5 * ticks,
               f"the policy's memory warmed before most ticks' packets (skipped {lola['warm_skipped']} of {ticks})")
-    check_answers(rows, movement)
+    check_answers(rows, movement, lola)
     check_start_and_stop(rows, movement)
 
 
@@ -429,12 +439,15 @@ def case_slow(a, tmp):
     s, rows, in_cycle, total = results["one thread"]
     # The premise: without the thread a tick this long makes answers late (this check failing
     # would mean the emulated tick no longer emulates anything).
-    check(s["lola"]["late"] >= 0.05 * s["lola"]["cycles"] and in_cycle < 0.97 * total,
-          f"one thread: a {SLOW_TICK_MS} ms tick makes answers late ({s['lola']['late']} late, "
-          f"{in_cycle} of {total} within the cycle)")
+    # The busy-waited tick is the thread's own work, so its late answers are its own.
+    check(own_late(s["lola"]) >= 0.05 * s["lola"]["cycles"] and in_cycle < 0.97 * total,
+          f"one thread: a {SLOW_TICK_MS} ms tick makes answers late of its own making ({own_late(s['lola'])} "
+          f"late, {s['lola']['late_descheduled']} more waited for a CPU, {in_cycle} of {total} within the cycle)")
     s, rows, in_cycle, total = results["io thread"]
-    check(in_cycle >= 0.99 * total, f"io thread: {in_cycle} of {total} answered within their 12 ms cycle (>= 99 %)")
-    check(s["lola"]["late"] <= 0.01 * s["lola"]["cycles"], f"io thread: <= 1 % late answers ({s['lola']['late']})")
+    check_answers(rows, "io thread", s["lola"])
+    check(own_late(s["lola"]) <= 0.01 * s["lola"]["cycles"],
+          f"io thread: <= 1 % late answers of its own making ({own_late(s['lola'])}; "
+          f"{s['lola']['late_descheduled']} more waited for a CPU)")
     check(s["lola"]["io_thread"] and s["allocations_after_activate"] == 0 and s["lola"]["io_allocations"] == 0,
           f"io thread: 0 allocations after activate on either thread ({s['allocations_after_activate']}, "
           f"{s['lola']['io_allocations']})")

@@ -90,6 +90,9 @@ struct LolaParams {
 struct LolaCounters {
   std::int64_t cycles = 0;     ///< sensor packets answered
   std::int64_t late = 0;       ///< answered after their cycle (the packet waited for us)
+  /// of those, the answers whose thread spent under a cycle of its own CPU time over the delay:
+  /// it waited for a CPU (the machine's load), not for its work
+  std::int64_t late_descheduled = 0;
   std::int64_t malformed = 0;  ///< packets skipped: not MessagePack, wrong keys or lengths
   std::int64_t gaps = 0;       ///< times no packet came for more than gap_cycles
   std::int64_t hot_cycles = 0; ///< cycles with a joint above hot_c
@@ -183,10 +186,12 @@ class LolaBackend final : public RobotBackend {
   std::int64_t ticks_ = 0;
   std::int64_t last_packet_ns_ = 0;
   std::int64_t last_send_ns_ = 0;
+  std::int64_t last_send_cpu_ns_ = 0;    // this thread's CPU time at the last send
   bool in_gap_ = false;
   bool pending_ = false;                 // the last packet is not answered yet (tick boundary)
   std::int64_t pending_t_in_ns_ = 0;
   bool pending_waited_ = false;
+  std::int64_t cpu_in_ns_ = 0;           // this thread's CPU time when the packet to answer came
   std::uint32_t faults_ = 0;
   std::int64_t wait_ns_ = 0;
   RobotStop stop_ = RobotStop::kNone;
