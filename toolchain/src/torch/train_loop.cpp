@@ -325,6 +325,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       writeCheckpoint(o.checkpoint, key, params, optimiser, best, res.best_epoch, res.history);
     if (progress) {
       char line[320];
+      std::string text;  // the per-movement scores have no length bound: kept out of the buffer
       if (o.select_by_rollout) {
         std::string moves;
         for (std::size_t m = 0; m < st.rollouts.size(); ++m) {
@@ -334,15 +335,20 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
                         st.rollouts[m].loops_run, st.rollouts[m].loops_demo);
           moves += part;
         }
-        std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g  rollouts %.1f mm%s (%s)  best @ %d  %.1f s (rollouts %.1f s)  ",
+        std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g  rollouts %.1f mm%s (",
                       live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, 1e3 * st.rollout_dtw_m,
-                      st.makes_movement ? " moves" : "", moves.c_str(), res.best_epoch, st.seconds, score_seconds);
+                      st.makes_movement ? " moves" : "");
+        text = line + moves;
+        std::snprintf(line, sizeof line, ")  best @ %d  %.1f s (rollouts %.1f s)  ", res.best_epoch, st.seconds,
+                      score_seconds);
+        text += line;
       } else {
         std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  %.0f samples/s  ",
                       live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, best_stats.val_loss,
                       res.best_epoch, st.seconds, static_cast<double>(st.samples) / st.seconds);
+        text = line;
       }
-      *progress << line
+      *progress << text
                 << (stop ? std::string(epoch == o.max_epochs ? "epoch cap reached" : "early stop")
                          : "~" + duration(epoch_seconds_sum / (epoch - first_epoch + 1) * (o.max_epochs - epoch)) + " left")
                 << std::endl;
