@@ -188,7 +188,7 @@ def main(argv):
         demos = {}
         for path in sorted(glob.glob(os.path.join(a.data_dir, "*_[0-9][0-9][0-9]", "features.csv"))):
             demos[os.path.basename(os.path.dirname(path))] = read_features(path)
-        heldouts = {m: [r["start_demo"] for r in detail[m]["autonomous"]] for m in MOVEMENTS}
+        heldouts = {m: [r["start"] for r in detail[m]["runs"]] for m in MOVEMENTS}
     except (OSError, ValueError, KeyError, AnalysisError) as e:
         print("autonomous_ceiling: %s" % e, file=sys.stderr)
         return 1
@@ -204,7 +204,7 @@ def main(argv):
     print("|---|---|---|---|---|---|---|---|---|")
     for m in MOVEMENTS:
         row = movement_ceiling(arm, demos, m, heldouts[m])
-        row["policy_m"] = float(np.median([r["dtw_nearest_m"] for r in detail[m]["autonomous"]]))
+        row["policy_m"] = float(np.median([r["dtw_nearest_m"] for r in detail[m]["runs"]]))
         report["evaluation"][m] = row
         print("| %s | %s |" % (m, " | ".join("%.1f" % (1e3 * row[k]) for k in (
             "demo_nn_m", "mean_m", "warped_mean_m", "warped_mean_shortest_m", "medoid_m", "replay_m", "best_replay_m",
