@@ -156,6 +156,21 @@ TEST_CASE("the split is by demonstration: every demo in exactly one part, round(
   CHECK_THROWS_AS(splitByDemonstration(data, 1.0, 7), UserError);
 }
 
+TEST_CASE("a split by name validates exactly the named demonstrations and refuses what it cannot honour") {
+  const PolicyData data = standardSet(3);
+  const PolicySplit split = splitByNames(data, {"wrist_002", "elbow_001"});
+  std::vector<std::string> val;
+  for (int d : split.val) val.push_back(data.demos[static_cast<std::size_t>(d)].name);
+  std::sort(val.begin(), val.end());
+  CHECK(val == std::vector<std::string>{"elbow_001", "wrist_002"});
+  CHECK(split.train.size() == data.demos.size() - 2);
+  for (int d : split.train) CHECK(std::find(split.val.begin(), split.val.end(), d) == split.val.end());
+  CHECK_THROWS_AS(splitByNames(data, {"elbow_009"}), UserError);               // not in the data
+  CHECK_THROWS_AS(splitByNames(data, {"elbow_001", "elbow_001"}), UserError);  // twice
+  CHECK_THROWS_AS(splitByNames(data, {"wrist_000", "wrist_001", "wrist_002"}), UserError);  // no wrist left to train
+  CHECK(splitByNames(data, {}).val.empty());
+}
+
 TEST_CASE("the split is a function of the seed: equal seeds give equal splits, the seed changes it") {
   const PolicyData data = standardSet(10);
   const PolicySplit a = splitByDemonstration(data, 0.2, 42), b = splitByDemonstration(data, 0.2, 42);

@@ -30,6 +30,7 @@ struct TrainArgs {
   bool no_previous_action = false;
   std::string select = "val-loss";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
+  std::vector<std::string> val_demos;
 };
 
 // The process's own argv (Linux), shell-quoted where needed; empty if unavailable.
@@ -76,6 +77,7 @@ void run(const TrainArgs& a) {
   o.max_epochs = a.epochs;
   o.patience = a.patience;
   o.val_fraction = a.val_fraction;
+  o.val_demos = a.val_demos;
   o.batch = a.batch;
   o.lr = a.lr;
   o.execution.noisy_rollouts = a.noisy_rollouts;
@@ -199,9 +201,15 @@ void setup(CLI::App& app) {
   cmd->add_option("--patience", args->patience, "Epochs without a new best validation loss before stopping")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
-  cmd->add_option("--val-fraction", args->val_fraction, "Validation share of each movement's demonstrations")
-      ->check(CLI::Range(0.01, 0.99))
-      ->capture_default_str();
+  auto* val_fraction = cmd->add_option("--val-fraction", args->val_fraction, "Validation share of each movement's demonstrations")
+                           ->check(CLI::Range(0.01, 0.99))
+                           ->capture_default_str();
+  cmd->add_option("--val-demos", args->val_demos,
+                  "Validation demonstrations by name (NAME,NAME,... of the data set's folders), instead of\n"
+                  "a seeded --val-fraction: e.g. a recording session held out. Every movement keeps at\n"
+                  "least one training demonstration")
+      ->delimiter(',')
+      ->excludes(val_fraction);
   cmd->add_option("--batch", args->batch, "Sequences (executed rollouts of whole demonstrations) per optimiser step")
       ->check(CLI::Range(1, 1 << 20))
       ->capture_default_str();

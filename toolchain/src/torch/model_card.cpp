@@ -68,6 +68,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["max_epochs"] = o.max_epochs;
   t["patience"] = o.patience;
   t["val_fraction"] = o.val_fraction;
+  if (!o.val_demos.empty()) t["val_demos"] = o.val_demos;
   t["batch"] = o.batch;
   t["optimizer"] = "adam";
   t["lr"] = o.lr;
@@ -230,8 +231,12 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "- fingerprint " << hex64(r.fingerprint) << ", movements";
   for (std::size_t m = 0; m < data.movement_names.size(); ++m) s << (m ? ", " : " ") << m << " = " << data.movement_names[m];
   s << "\n- " << data.demos.size() << " demonstrations: " << r.split.train.size() << " training (" << r.train_samples
-    << " samples), " << r.split.val.size() << " validation (" << r.val_samples << " samples, val fraction "
-    << o.val_fraction << "); the validation demonstrations' starts are the model's autonomous starts\n";
+    << " samples), " << r.split.val.size() << " validation (" << r.val_samples << " samples, ";
+  if (o.val_demos.empty())
+    s << "val fraction " << o.val_fraction;
+  else
+    s << "named by --val-demos";
+  s << "); the validation demonstrations' starts are the model's autonomous starts\n";
   s << "- validation demonstrations:";
   for (const std::string& n : demoNames(data, r.split.val)) s << ' ' << n;
   s << "\n\n";

@@ -27,6 +27,7 @@ struct TrainOptions {
   int max_epochs = 200;               ///< iteration cap; early stopping usually ends sooner
   int patience = 10;                  ///< epochs without a new best before stopping
   double val_fraction = 0.2;          ///< of each movement's demonstrations
+  std::vector<std::string> val_demos; ///< if not empty: the validation demonstrations by name (val_fraction unused)
   int batch = 2;                      ///< sequences (whole executed rollouts) per optimiser step
   double lr = 6e-5;                   ///< Adam
   ExecutionOptions execution;         ///< how the demonstrations are executed and labelled

@@ -12,7 +12,9 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   k.precision(17);
   k << "nao-rt checkpoint 2; data " << hex64(fingerprint) << "; config " << o.config_name << " "
     << parameterCount(o.arch) << "; " << conditioningName(o.conditioning) << "; seed " << o.seed << "; val "
-    << o.val_fraction << "; batch " << o.batch << "; lr " << o.lr << "; window " << o.arch.window << "; head "
+    << o.val_fraction;
+  for (const std::string& n : o.val_demos) k << " " << n;
+  k << "; batch " << o.batch << "; lr " << o.lr << "; window " << o.arch.window << "; head "
     << o.arch.chunk << " " << o.arch.bins << " " << o.offset_weight << " " << o.ensemble_decay << "; execution "
     << o.execution.noisy_rollouts << " " << o.execution.noise_corr << " " << o.execution.expert_iterations << " "
     << o.execution.expert_tol_rad;

@@ -120,7 +120,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   res.world_size = o.dist.world_size;
   res.threads_per_rank = torch::get_num_threads();
   res.fingerprint = dataFingerprint(data);
-  res.split = splitByDemonstration(data, o.val_fraction, o.seed);
+  res.split = o.val_demos.empty() ? splitByDemonstration(data, o.val_fraction, o.seed) : splitByNames(data, o.val_demos);
   if (res.split.val.empty())
     throw UserError("no validation demonstration: model selection needs a movement with at least 2 demonstrations "
                     "and a positive validation fraction");

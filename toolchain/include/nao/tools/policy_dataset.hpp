@@ -192,6 +192,11 @@ std::size_t tickCount(const std::vector<PolicySequence>& sequences);
 /// val_fraction > 0, and at most n - 1. Throws UserError unless 0 <= val_fraction < 1.
 PolicySplit splitByDemonstration(const PolicyData& data, double val_fraction, std::uint64_t seed);
 
+/// Split by name: the demonstrations named in `val_names` validate, the others train (a user's
+/// held-out session, or demonstrations an experiment must keep out). Throws UserError for a name
+/// not in the data, a name given twice, or a movement left without a training demonstration.
+PolicySplit splitByNames(const PolicyData& data, const std::vector<std::string>& val_names);
+
 /// 0..n-1 in a seeded random order (Fisher-Yates with a local splitmix64 generator): the same
 /// on every platform and standard library.
 std::vector<std::size_t> shuffledIndices(std::size_t n, std::uint64_t seed);
