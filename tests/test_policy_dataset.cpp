@@ -16,8 +16,8 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <map>
 #include <limits>
+#include <map>
 #include <random>
 #include <set>
 
@@ -617,6 +617,103 @@ TEST_CASE("executed rollouts: the expert's labels put the servo-lagged arm on f(
   bad.noise_corr = 1.0;
   CHECK_THROWS_WITH_AS(executeDemos(data, demos, model, bad, 1), doctest::Contains("noise_corr"), UserError);
   CHECK_THROWS_WITH_AS(executeDemos(data, {99}, model, o, 1), doctest::Contains("out of range"), UserError);
+}
+
+TEST_CASE("noisy rollouts aimed at the path: from other demonstrations' starts, each target the pose after the nearest one ahead, never back") {
+  const auto& [blend, arm, same_starts, model, period] = ReachableArm{};
+  // Each demonstration from a start of its own (0.1 rad apart on every joint), as recorded ones.
+  PolicyData moved = same_starts;
+  for (std::size_t i = 0; i < moved.demos.size(); ++i)
+    moved.demos[i].start = moved.demos[i].f.front() + JointVector::Constant(0.1 * (static_cast<double>(i % 3) - 1.0));
+  const PolicyData data = fromOwnStarts(moved);
+  ExecutionOptions o;
+  o.noisy_rollouts = 2;
+  o.noisy_target = ExecutionOptions::Target::kPath;
+  o.other_starts = true;
+  // Three elbow demonstrations and one whole_arm demonstration alone of its movement.
+  const std::vector<int> demos = {0, 1, 2, 3};
+  const std::vector<PolicySequence> a = executeDemos(data, demos, model, o, 5);
+  REQUIRE(a.size() == 12);
+  int re_indexed = 0;
+  for (const PolicySequence& s : a) {
+    INFO("demo " << s.demo << " rollout " << s.rollout);
+    const PolicyDemo& d = data.demos[static_cast<std::size_t>(s.demo)];
+    const auto at = [&](int e) {
+      return (s.q.front() - data.demos[static_cast<std::size_t>(e)].f.front()).cwiseAbs().maxCoeff() < 1e-9;
+    };
+    if (s.rollout == 0) {
+      CHECK(at(s.demo));
+      continue;
+    }
+    // The start: another listed demonstration's of the same movement; its own when none is listed.
+    if (s.demo == 3) {
+      CHECK(at(3));
+    } else {
+      CHECK_FALSE(at(s.demo));
+      CHECK((at(0) || at(1) || at(2)));
+    }
+    // Each tick's target (q + r) is a pose f(i) of the demonstration, i one after the pose
+    // nearest q(t) among the last one and the path_search poses after it.
+    std::size_t nearest = 0;
+    for (std::size_t t = 0; t < s.ticks(); ++t) {
+      const JointVector target = s.q[t] + s.r[t];
+      std::size_t i = 0;
+      double best = std::numeric_limits<double>::infinity();
+      for (std::size_t k = 0; k < d.f.size(); ++k) {
+        const double e = (clampToLimits(arm, d.f[k]) - target).cwiseAbs().maxCoeff();
+        if (e < best) {
+          best = e;
+          i = k;
+        }
+      }
+      REQUIRE(best < 1e-12);
+      // The rule: squared distance plus 1e-4 rad² per tick squared off one pose per tick.
+      const double nominal = t == 0 ? 0.0 : static_cast<double>(nearest) + 1.0;
+      const auto cost = [&](std::size_t k) {
+        const double lag = static_cast<double>(k) - nominal;
+        return (d.f[k] - s.q[t]).squaredNorm() + 1e-4 * lag * lag;
+      };
+      std::size_t expect = nearest;
+      const std::size_t end = std::min(d.f.size() - 1, nearest + static_cast<std::size_t>(o.path_search));
+      for (std::size_t k = nearest + 1; k <= end; ++k)
+        if (cost(k) < cost(expect)) expect = k;
+      // (A pose repeated in f matches at its first index: compare the poses, not the indices.)
+      const std::size_t want = std::min(d.f.size() - 1, expect + 1);
+      CHECK((clampToLimits(arm, d.f[want]) - target).cwiseAbs().maxCoeff() < 1e-12);
+      i = (clampToLimits(arm, d.f[i]) - clampToLimits(arm, d.f[want])).cwiseAbs().maxCoeff() == 0.0 ? want : i;
+      CHECK(expect >= nearest);  // never back along the path
+      nearest = expect;
+      if (i != t + 1) ++re_indexed;
+    }
+    // The labels still end the tick at the target where it is within reach (the expert's job).
+    SimData sim(model, s.q.front());
+    SimSnapshot snap;
+    std::size_t on_target = 0;
+    for (std::size_t t = 0; t < s.ticks(); ++t) {
+      captureSim(sim, snap);
+      if ((stepSim(model, sim, sim.q + s.a[t]) - (s.q[t] + s.r[t])).cwiseAbs().maxCoeff() < 1e-5) ++on_target;
+      restoreSim(sim, snap);
+      stepSim(model, sim, t + 1 < s.ticks() ? JointVector(s.q[t] + s.a_prev[t + 1]) : JointVector(sim.q + s.a[t]));
+      if (t + 1 < s.ticks()) CHECK((sim.q - s.q[t + 1]).cwiseAbs().maxCoeff() < 1e-9);
+    }
+    CHECK(on_target >= s.ticks() * 8 / 10);
+  }
+  // The clock is not the target: runs that start elsewhere or lag aim at other poses than f(t+1).
+  MESSAGE(re_indexed << " noisy ticks aimed elsewhere than f(t+1)");
+  CHECK(re_indexed > 20);
+
+  // On the path (no noise, own start) the path target is the tick's: the labels are the clean ones.
+  ExecutionOptions still = o;
+  still.other_starts = false;
+  still.noise_std_rad = {0.0};
+  const std::vector<PolicySequence> b = executeDemos(data, {1}, model, still, 5);
+  REQUIRE(b.size() == 3);
+  CHECK(b[1].q == b[0].q);
+  CHECK(b[1].a == b[0].a);
+
+  ExecutionOptions bad = o;
+  bad.path_search = 0;
+  CHECK_THROWS_WITH_AS(executeDemos(data, demos, model, bad, 1), doctest::Contains("path_search"), UserError);
 }
 
 namespace {

@@ -10,12 +10,18 @@
 #include <atomic>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <mutex>
 #include <ostream>
 #include <thread>
 
 namespace nao::tools {
 namespace {
+
+// kPath's cost of one tick off the nominal progress (one pose per tick), rad²: as much as 0.01 rad
+// of distance, so where f hardly moves (a dwell) the arm's pose keeps the demonstration's
+// timing, and where it moves the distance decides.
+constexpr double kPathTickCost = 1e-4;
 
 // The controller's per-tick command bounds at q: the position limits and one period's reach.
 void commandBounds(const SimModel& sim_model, const JointVector& q, JointVector& lo, JointVector& hi) {
@@ -79,7 +85,7 @@ JointVector expertCommand(const SimModel& model, SimData& sim, const SimSnapshot
 // poses) - as a difference: in normalised units the label needs r − q to ~1e-3 of the angles'
 // spread, which the net learnt only slowly as f(t+1) itself.
 PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimModel& sim_model, SimData& sim,
-                              const ExecutionOptions& o, std::uint64_t seed) {
+                              const ExecutionOptions& o, std::uint64_t seed, const std::vector<int>& same_movement) {
   const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(d));
   PolicySequence s;
   s.demo = d;
@@ -94,13 +100,42 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
     return std::sqrt(-2.0 * std::log(u1)) * std::cos(6.283185307179586 * u2);
   };
   SimSnapshot snap;
-  resetSim(sim_model, sim, demo.f.front());
+  JointVector start = demo.f.front();
+  if (k > 0 && o.other_starts) {
+    // Another listed demonstration of the movement (its own start if it is the only one).
+    std::vector<int> others;
+    for (int e : same_movement)
+      if (e != d) others.push_back(e);
+    if (!others.empty())
+      start = data.demos[static_cast<std::size_t>(others[static_cast<std::size_t>(rng.uniform() * static_cast<double>(others.size())) %
+                                                         others.size()])]
+                  .f.front();
+  }
+  resetSim(sim_model, sim, start);
   JointVector q = sim.q, a_prev = JointVector::Zero(), noise = JointVector::Zero();
   const double innovation = sd * std::sqrt(1.0 - o.noise_corr * o.noise_corr);
+  const bool by_path = k > 0 && o.noisy_target == ExecutionOptions::Target::kPath;
+  const std::size_t last = demo.f.size() - 1;
+  std::size_t p = 0;  // kPath: the pose of f the arm is at
   for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
     JointVector lo, hi;
     double miss = 0.0;
-    const JointVector target = clampToLimits(sim_model.arm, demo.f[t + 1]);
+    std::size_t next = t + 1;
+    if (by_path) {
+      const std::size_t from = p, nominal = t == 0 ? 0 : p + 1;
+      const std::size_t end = std::min(last, from + static_cast<std::size_t>(o.path_search));
+      double best = std::numeric_limits<double>::infinity();
+      for (std::size_t i = from; i <= end; ++i) {
+        const double lag = static_cast<double>(i) - static_cast<double>(nominal);
+        const double cost = (demo.f[i] - q).squaredNorm() + kPathTickCost * lag * lag;
+        if (cost < best) {
+          best = cost;
+          p = i;
+        }
+      }
+      next = std::min(last, p + 1);
+    }
+    const JointVector target = clampToLimits(sim_model.arm, demo.f[next]);
     commandBounds(sim_model, q, lo, hi);
     captureSim(sim, snap);
     const JointVector c = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
@@ -134,6 +169,7 @@ void checkExecution(const PolicyData& data, const std::vector<int>& demos, const
     if (!(sd >= 0.0)) throw UserError("execution: noise standard deviation " + std::to_string(sd) + " is negative");
   if (!(o.noise_corr >= 0.0 && o.noise_corr < 1.0)) throw UserError("execution: noise_corr must be in [0, 1)");
   if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
+  if (o.path_search < 1) throw UserError("execution: path_search must be at least 1");
   if (o.threads < 1) throw UserError("execution: threads must be at least 1");
   checkDemos(data, demos);
 }
@@ -147,6 +183,8 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
   const std::size_t per_demo = static_cast<std::size_t>(1 + o.noisy_rollouts);
   const std::size_t total = demos.size() * per_demo;
   std::vector<PolicySequence> out(total);
+  std::vector<std::vector<int>> by_movement(static_cast<std::size_t>(data.movements()));
+  for (int d : demos) by_movement[static_cast<std::size_t>(data.demos[static_cast<std::size_t>(d)].movement)].push_back(d);
   // Rollouts are independent (own seed stream, reset arm): threads take them in turn and each
   // result goes to its own slot, so the output does not depend on the thread count.
   std::atomic<std::size_t> next{0}, done{0};
@@ -157,7 +195,9 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
     try {
       SimData sim(sim_model, JointVector::Zero());  // ODE data per thread: built on this thread
       for (std::size_t i = next++; i < total; i = next++) {
-        out[i] = executeRollout(data, demos[i / per_demo], static_cast<int>(i % per_demo), sim_model, sim, o, seed);
+        const int d = demos[i / per_demo];
+        out[i] = executeRollout(data, d, static_cast<int>(i % per_demo), sim_model, sim, o, seed,
+                                by_movement[static_cast<std::size_t>(data.demos[static_cast<std::size_t>(d)].movement)]);
         const std::size_t n = ++done;
         if (progress) {
           const std::lock_guard<std::mutex> lock(report);

@@ -28,7 +28,7 @@ struct TrainArgs {
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
   double law_gain = -1.0, offset_weight = TrainOptions{}.offset_weight, ensemble_decay = TrainOptions{}.ensemble_decay;
   bool no_previous_action = false;
-  std::string select = "val-loss";
+  std::string select = "val-loss", noisy_target = "tick", noisy_starts = "own";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
   std::vector<std::string> val_demos;
 };
@@ -82,6 +82,8 @@ void run(const TrainArgs& a) {
   o.lr = a.lr;
   o.execution.noisy_rollouts = a.noisy_rollouts;
   o.execution.noise_std_rad = a.noise_std;
+  o.execution.noisy_target = a.noisy_target == "path" ? ExecutionOptions::Target::kPath : ExecutionOptions::Target::kTick;
+  o.execution.other_starts = a.noisy_starts == "others";
   o.law_gain = a.law_gain;
   o.offset_weight = a.offset_weight;
   o.ensemble_decay = a.ensemble_decay;
@@ -225,6 +227,19 @@ void setup(CLI::App& app) {
                   "the demonstration (where an autonomous rollout drifts to), labelled back by the expert")
       ->delimiter(',')
       ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  cmd->add_option("--noisy-target", args->noisy_target,
+                  "What the expert labelling the noisy rollouts aims at: tick (f(t+1), the demonstration's pose of "
+                  "the same tick, reached in one tick if the bounds allow) or path (the pose after the one nearest "
+                  "the arm, searched forward from the last: the demonstrated path ahead of the arm, whatever the "
+                  "clock; for autonomous runs that start off the demonstrations' timing)")
+      ->check(CLI::IsMember({"tick", "path"}))
+      ->capture_default_str();
+  cmd->add_option("--noisy-starts", args->noisy_starts,
+                  "Where the noisy rollouts start: own (the demonstration's start) or others (from rest at another "
+                  "training demonstration's start of the same movement, a seeded choice: the way onto the "
+                  "demonstration from starts it does not begin at)")
+      ->check(CLI::IsMember({"own", "others"}))
       ->capture_default_str();
   cmd->add_option("--law-gain", args->law_gain,
                   "Reference mode: nao_rt adds G r to the network's action (r = f(t+1) - q: the first-order servo "

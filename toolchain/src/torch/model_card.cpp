@@ -93,6 +93,9 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   ex["noise_corr"] = o.execution.noise_corr;
   ex["expert_iterations"] = o.execution.expert_iterations;
   ex["expert_tol_rad"] = o.execution.expert_tol_rad;
+  ex["noisy_target"] = o.execution.noisy_target == ExecutionOptions::Target::kPath ? "path" : "tick";
+  ex["path_search"] = o.execution.path_search;
+  ex["noisy_starts"] = o.execution.other_starts ? "others" : "own";
   auto& d = j["data"];
   d["fingerprint"] = hex64(r.fingerprint);
   // nao_rt retargets the live human the same way (it reads this back).
@@ -185,7 +188,12 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   for (std::size_t i = 0; i < o.execution.noise_std_rad.size(); ++i) s << (i ? ", " : "") << o.execution.noise_std_rad[i];
   s << "} rad) on the servo-lagged ODE arm"
     << (o.conditioning == Conditioning::kAutonomous ? ", each from its demonstration's own start" : "")
-    << "; labels: the expert's command ending each tick at f(t+1) (worst miss ";
+    << (o.execution.other_starts ? "; the noisy ones from other training demonstrations' starts" : "")
+    << "; labels: the expert's command ending each tick at f(t+1)"
+    << (o.execution.noisy_target == ExecutionOptions::Target::kPath
+            ? " (noisy rollouts: at the pose after the nearest one on f ahead of the arm)"
+            : "")
+    << " (worst miss ";
   std::snprintf(buf, sizeof buf, "%.2g rad", r.expert_worst_miss_rad);
   s << buf << "; " << r.train_sequences << " training sequences, executed in ";
   std::snprintf(buf, sizeof buf, "%.0f s", r.execution_seconds);

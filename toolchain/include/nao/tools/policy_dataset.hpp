@@ -123,6 +123,20 @@ struct ExecutionOptions {
   double noise_corr = 0.8;                         ///< ρ of the AR(1) noise, per tick
   int expert_iterations = 8;                       ///< secant steps per tick (iteration cap)
   double expert_tol_rad = 1e-7;                    ///< stop when every joint ends this close to f(t+1)
+  /// What the noisy rollouts' expert aims at (the clean rollout always follows f(t+1)).
+  /// kTick: f(t+1), the demonstration's pose of the same tick: a state that fell behind or
+  /// aside is asked to catch up in one tick. kPath: f(p+1), p the pose of f nearest q(t)
+  /// (joint-space L2, plus 1e-4 rad² per tick squared off p(t−1) + 1, so dwells keep their
+  /// timing) among the previous tick's p and the path_search poses after it: the
+  /// demonstrated path ahead of where the arm is, whatever the clock - what a run that lost the
+  /// demonstration's timing (an autonomous run from a start it has not seen) needs to be shown.
+  enum class Target { kTick, kPath };
+  Target noisy_target = Target::kTick;
+  int path_search = 10;                            ///< kPath: poses after the previous p searched per tick
+  /// Noisy rollouts start from rest at another training demonstration's start of the same
+  /// movement (a seeded choice among the listed ones) instead of their own: the states on the
+  /// way from a start onto the demonstration. The result then depends on the listed demos.
+  bool other_starts = false;
   /// Worker threads (the result does not depend on it). 1: Debian's ODE 0.16 crashed (segfault
   /// in libode) with two worlds stepped on two threads here; more only with an ODE built for it.
   int threads = 1;
