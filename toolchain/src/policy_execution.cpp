@@ -106,10 +106,10 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
     std::vector<int> others;
     for (int e : same_movement)
       if (e != d) others.push_back(e);
-    if (!others.empty())
-      start = data.demos[static_cast<std::size_t>(others[static_cast<std::size_t>(rng.uniform() * static_cast<double>(others.size())) %
-                                                         others.size()])]
-                  .f.front();
+    if (!others.empty()) {
+      const auto pick = static_cast<std::size_t>(rng.uniform() * static_cast<double>(others.size())) % others.size();
+      start = data.demos[static_cast<std::size_t>(others[pick])].f.front();
+    }
   }
   resetSim(sim_model, sim, start);
   JointVector q = sim.q, a_prev = JointVector::Zero(), noise = JointVector::Zero();
@@ -122,10 +122,10 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
     double miss = 0.0;
     std::size_t next = t + 1;
     if (by_path) {
-      const std::size_t from = p, nominal = t == 0 ? 0 : p + 1;
-      const std::size_t end = std::min(last, from + static_cast<std::size_t>(o.path_search));
+      const std::size_t nominal = t == 0 ? 0 : p + 1;
+      const std::size_t end = std::min(last, p + static_cast<std::size_t>(o.path_search));
       double best = std::numeric_limits<double>::infinity();
-      for (std::size_t i = from; i <= end; ++i) {
+      for (std::size_t i = p; i <= end; ++i) {
         const double lag = static_cast<double>(i) - static_cast<double>(nominal);
         const double cost = (demo.f[i] - q).squaredNorm() + kPathTickCost * lag * lag;
         if (cost < best) {

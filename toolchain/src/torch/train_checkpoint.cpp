@@ -7,6 +7,13 @@
 
 namespace nao::tools {
 
+void writeExecutionKey(std::ostream& k, const ExecutionOptions& e) {
+  k << e.noisy_rollouts << " " << e.noise_corr << " " << e.expert_iterations << " " << e.expert_tol_rad;
+  for (double q : e.noise_std_rad) k << " " << q;
+  if (e.noisy_target == ExecutionOptions::Target::kPath) k << " path " << e.path_search;
+  if (e.other_starts) k << " other starts";
+}
+
 std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   std::ostringstream k;
   k.precision(17);
@@ -15,13 +22,8 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
     << o.val_fraction;
   for (const std::string& n : o.val_demos) k << " " << n;
   k << "; batch " << o.batch << "; lr " << o.lr << "; window " << o.arch.window << "; head "
-    << o.arch.chunk << " " << o.arch.bins << " " << o.offset_weight << " " << o.ensemble_decay << "; execution "
-    << o.execution.noisy_rollouts << " " << o.execution.noise_corr << " " << o.execution.expert_iterations << " "
-    << o.execution.expert_tol_rad;
-  for (double q : o.execution.noise_std_rad) k << " " << q;
-  // Keys of runs with the default execution are unchanged (their caches and checkpoints stay valid).
-  if (o.execution.noisy_target == ExecutionOptions::Target::kPath) k << " path 2 " << o.execution.path_search;
-  if (o.execution.other_starts) k << " other starts";
+    << o.arch.chunk << " " << o.arch.bins << " " << o.offset_weight << " " << o.ensemble_decay << "; execution ";
+  writeExecutionKey(k, o.execution);
   k << "; batches " << o.max_batches << "; law " << o.law_gain;
   if (!o.previous_action) k << "; no previous action";
   if (o.select_by_rollout) k << "; select rollout";

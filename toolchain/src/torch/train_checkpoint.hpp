@@ -6,6 +6,7 @@
 
 #include "policy_train.hpp"
 
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,10 @@ namespace nao::tools {
 
 /// The key a checkpoint must match to be resumed by a run of `o` on data `fingerprint`.
 std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint);
+
+/// The execution options' part of the checkpoint and execution-cache keys, written to `k`
+/// (whose precision the caller sets). Options at their defaults add nothing, so older keys stay.
+void writeExecutionKey(std::ostream& k, const ExecutionOptions& e);
 
 struct Checkpoint {
   std::vector<torch::Tensor> best;

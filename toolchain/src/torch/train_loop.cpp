@@ -82,12 +82,8 @@ std::string executionCacheFile(const TrainOptions& o, std::uint64_t fingerprint,
   std::ostringstream k;
   k.precision(17);
   k << "nao-rt execution 1; data " << hex64(fingerprint) << "; " << conditioningName(o.conditioning) << "; seed "
-    << o.seed << "; " << o.execution.noisy_rollouts << " " << o.execution.noise_corr << " "
-    << o.execution.expert_iterations << " " << o.execution.expert_tol_rad;
-  for (double q : o.execution.noise_std_rad) k << " " << q;
-  // Keys of runs with the default execution are unchanged (their caches and checkpoints stay valid).
-  if (o.execution.noisy_target == ExecutionOptions::Target::kPath) k << " path 2 " << o.execution.path_search;
-  if (o.execution.other_starts) k << " other starts";
+    << o.seed << "; ";
+  writeExecutionKey(k, o.execution);
   k << "; train";
   for (int d : split.train) k << " " << d;
   k << "; val";
