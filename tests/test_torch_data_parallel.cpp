@@ -243,6 +243,31 @@ TEST_CASE("the Gloo-summed shard gradients equal the single-process gradient of 
   CHECK(params.front().grad().abs().max().item<double>() > 0.0);
 }
 
+namespace {
+
+// The largest difference of two model.bin files' weights, attention key biases aside, and where.
+std::pair<double, std::string> largestWeightDifference(const std::vector<std::uint8_t>& a,
+                                                       const std::vector<std::uint8_t>& b) {
+  const ModelFile f1 = decodeModel(a, "first"), f2 = decodeModel(b, "second");
+  REQUIRE(f1.tensors.size() == f2.tensors.size());
+  double worst = 0.0;
+  std::string worst_name;
+  for (std::size_t i = 0; i < f1.tensors.size(); ++i) {
+    const std::string& name = f1.tensors[i].spec.name;
+    if (name.size() > 3 && name.compare(name.size() - 3, 3, ".bk") == 0) continue;
+    for (std::size_t k = 0; k < f1.tensors[i].spec.count(); ++k) {
+      const double d = std::abs(static_cast<double>(f1.data(i)[k]) - f2.data(i)[k]);
+      if (d > worst) {
+        worst = d;
+        worst_name = name;
+      }
+    }
+  }
+  return {worst, worst_name};
+}
+
+}  // namespace
+
 TEST_CASE("world size 2 twice gives byte-identical model.bin bytes on every rank, and agrees with world size 1") {
   torch::set_num_threads(1);
   const TrainOptions o = smallOptions(11, 1);
@@ -263,26 +288,24 @@ TEST_CASE("world size 2 twice gives byte-identical model.bin bytes on every rank
   // invariant to a shift of all keys, so their gradient is 0 in exact arithmetic and pure
   // rounding noise in float, which Adam turns into steps of ~lr in any direction; they do not
   // change any output (docs/training.md).
-  const ModelFile f1 = decodeModel(one, "world 1"), f2 = decodeModel(a[0], "world 2");
-  REQUIRE(f1.tensors.size() == f2.tensors.size());
-  double worst = 0.0;
-  std::string worst_name;
-  for (std::size_t i = 0; i < f1.tensors.size(); ++i) {
-    const std::string& name = f1.tensors[i].spec.name;
-    if (name.size() > 3 && name.compare(name.size() - 3, 3, ".bk") == 0) continue;
-    for (std::size_t k = 0; k < f1.tensors[i].spec.count(); ++k) {
-      const double d = std::abs(static_cast<double>(f1.data(i)[k]) - f2.data(i)[k]);
-      if (d > worst) {
-        worst = d;
-        worst_name = name;
-      }
-    }
-  }
+  const auto [worst, worst_name] = largestWeightDifference(one, a[0]);
   MESSAGE("max |w(world 2) - w(world 1)| after one epoch, key biases aside: " << worst << " (" << worst_name << ")");
   CHECK(worst <= 1e-5);
   const double val1 = single.val.mse_rad2, val2 = meta["result"]["val_mse_rad2"].get<double>();
   MESSAGE("validation MSE world 1 " << val1 << ", world 2 " << val2);
   CHECK(std::abs(val2 - val1) <= 0.02 * val1);
+}
+
+TEST_CASE("a run latent draws the same noise for every world size: world size 2 agrees with world size 1") {
+  torch::set_num_threads(1);
+  TrainOptions o = smallOptions(13, 1);
+  o.conditioning = Conditioning::kAutonomous;
+  o.latent_dims = 4;
+  const std::vector<std::vector<std::uint8_t>> two = trainRanks(o, 2, TempDir().path);
+  const std::vector<std::uint8_t> one = modelBytes(o, trainPolicy(smallData(), smallSim(), o, nullptr));
+  const auto [worst, worst_name] = largestWeightDifference(one, two[0]);
+  MESSAGE("with a run latent, max |w(world 2) - w(world 1)| after one epoch: " << worst << " (" << worst_name << ")");
+  CHECK(worst <= 1e-5);
 }
 
 namespace {

@@ -38,6 +38,7 @@ namespace {
 using nao::test::smallData;
 using nao::test::smallOptions;
 using nao::test::smallSim;
+using nao::test::trainBytes;
 
 PolicyArch withHead(PolicyArch a, int chunk, int bins) {
   a.chunk = chunk;
@@ -46,13 +47,6 @@ PolicyArch withHead(PolicyArch a, int chunk, int bins) {
 }
 
 std::vector<TrainedJoint> urdfJoints() { return trainedJoints(loadArmModel(nao::test::kUrdfPath)); }
-
-std::vector<std::uint8_t> trainBytes(const TrainOptions& o, TrainResult* out = nullptr) {
-  TrainResult r = trainPolicy(smallData(), smallSim(), o, nullptr);
-  std::vector<std::uint8_t> bytes = encodeModel(modelHeader(smallData(), o, r, urdfJoints()), manifestFloats(r.net));
-  if (out) *out = r;
-  return bytes;
-}
 
 }  // namespace
 
@@ -627,7 +621,7 @@ const PolicyData& startedData() {
   static const PolicyData data = [] {
     PolicyData d = smallData();
     for (std::size_t i = 0; i < d.demos.size(); ++i)
-      for (int j = 0; j < kNumJoints; ++j) d.demos[i].start[j] = d.demos[i].f.front()[j] + 0.05 * ((i + j) % 3) - 0.05;
+      for (int j = 0; j < kNumJoints; ++j) d.demos[i].start[j] = d.demos[i].f.front()[j] + 0.05 * static_cast<double>((i + static_cast<std::size_t>(j)) % 3) - 0.05;
     return d;
   }();
   return data;
@@ -844,56 +838,4 @@ TEST_CASE("a checkpoint of a bins model resumes to the uninterrupted run's bytes
   CHECK(resumed.resumed_after == 1);
   CHECK_MESSAGE(bytes == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
   std::filesystem::remove(ck);
-}
-
-TEST_CASE("without the previous action the net's a(t-1) weights stay zero through training, and the runtime's action ignores a(t-1)") {
-  // The same training with and without the input: only the latter must be blind to a(t-1).
-  for (const bool previous_action : {true, false}) {
-    CAPTURE(previous_action);
-    TrainOptions o = smallOptions(81, 2);
-    o.conditioning = Conditioning::kAutonomous;
-    o.arch.chunk = 3;
-    o.previous_action = previous_action;
-    TrainResult r;
-    const std::vector<std::uint8_t> bytes = trainBytes(o, &r);
-    const ModelFile file = decodeModel(bytes, "trained.bin");
-    const int d = file.header.arch.d_model;
-    // embed.in.weight [features, d] row-major is column-major [d, features]: column 1 is a(t-1)'s.
-    const Eigen::Map<const Eigen::MatrixXf> in_w(file.data(file.find("embed.in.weight")), d, file.header.arch.features);
-    const Eigen::Map<const Eigen::VectorXf> act_w(file.data(file.find("embed.act.weight")), d);
-    CHECK(in_w.col(0).cwiseAbs().sum() > 0.0f);
-    CHECK((in_w.col(1).cwiseAbs().sum() == 0.0f) == !previous_action);
-    CHECK((act_w.cwiseAbs().sum() == 0.0f) == !previous_action);
-    CHECK(nlohmann::json::parse(file.header.metadata_json)["training"].value("previous_action_input", true) ==
-          previous_action);
-
-    // Two streams of the runtime on the same joint angles, one fed the previous actions and the
-    // other zeros: bit-equal actions exactly when the net does not see them.
-    std::vector<const float*> p;
-    for (std::size_t i = 0; i < file.tensors.size(); ++i) p.push_back(file.data(i));
-    const PolicyWeights<SmallPolicyDims> w =
-        bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), file.header.arch, file.header.conditioning);
-    ExecutionOptions clean;
-    clean.noisy_rollouts = 0;
-    const PolicySequence seq = executeDemos(smallData(), {r.split.val.front()}, smallSim(), clean, o.seed).front();
-    auto fed = makePolicyWorkspace<SmallPolicyDims>(), blind = makePolicyWorkspace<SmallPolicyDims>();
-    resetPolicyStream(*fed);
-    resetPolicyStream(*blind);
-    bool all_equal = true;
-    double largest = 0.0;
-    for (std::size_t t = 0; t < seq.ticks(); ++t) {
-      PolicyInput in;
-      in.q = seq.q[t].cast<float>();
-      in.a_prev = seq.a_prev[t].cast<float>();
-      in.movement = seq.movement;
-      in.step = static_cast<int>(t);
-      const Eigen::Matrix<float, 5, 1> a = stepPolicy(w, *fed, in);
-      in.a_prev.setZero();
-      const Eigen::Matrix<float, 5, 1> b = stepPolicy(w, *blind, in);
-      all_equal = all_equal && a == b;
-      largest = std::max(largest, static_cast<double>(a.cwiseAbs().maxCoeff()));
-    }
-    CHECK(all_equal == !previous_action);
-    CHECK(largest > 1e-3);
-  }
 }

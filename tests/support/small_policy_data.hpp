@@ -1,8 +1,10 @@
 // The small clustered policy data set the libtorch training tests share (test_torch_*.cpp).
 #pragma once
 
+#include "nao/model_file.hpp"
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/policy_dataset.hpp"
+#include "policy_torch.hpp"
 #include "policy_train.hpp"
 #include "support/test_util.hpp"
 
@@ -78,6 +80,16 @@ inline nao::tools::TrainOptions smallOptions(std::uint64_t seed, int epochs) {
   o.val_fraction = 0.25;
   o.lr = 1e-3;
   return o;
+}
+
+// model.bin of a training on smallData() with `o` (the URDF's joints), and the result.
+inline std::vector<std::uint8_t> trainBytes(const nao::tools::TrainOptions& o, nao::tools::TrainResult* out = nullptr) {
+  nao::tools::TrainResult r = nao::tools::trainPolicy(smallData(), smallSim(), o, nullptr);
+  std::vector<std::uint8_t> bytes =
+      nao::encodeModel(nao::tools::modelHeader(smallData(), o, r, nao::trainedJoints(nao::loadArmModel(kUrdfPath))),
+                       nao::tools::manifestFloats(r.net));
+  if (out) *out = r;
+  return bytes;
 }
 
 }  // namespace nao::test

@@ -28,6 +28,9 @@ struct TrainArgs {
   std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
   double law_gain = -1.0, offset_weight = TrainOptions{}.offset_weight, ensemble_decay = TrainOptions{}.ensemble_decay;
   bool no_previous_action = false;
+  int step_ticks = 1;
+  int latent_dims = 0;
+  double latent_kl = 1e-2;
   std::string select = "val-loss", noisy_target = "tick", noisy_starts = "own";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
   std::vector<std::string> val_demos;
@@ -88,6 +91,9 @@ void run(const TrainArgs& a) {
   o.offset_weight = a.offset_weight;
   o.ensemble_decay = a.ensemble_decay;
   o.previous_action = !a.no_previous_action;
+  o.step_ticks = a.step_ticks;
+  o.latent_dims = a.latent_dims;
+  o.latent_kl = a.latent_kl;
   if (a.window > 0) o.arch.window = a.window;
   if (a.chunk > 0) o.arch.chunk = a.chunk;
   if (a.bins >= 0) o.arch.bins = a.bins;
@@ -267,6 +273,20 @@ void setup(CLI::App& app) {
   cmd->add_flag("--no-previous-action", args->no_previous_action,
                "The net does not see its previous action a(t-1), only the joint angles over the window (their "
                "input weights are held at zero, so nao_rt runs the model unchanged)");
+  cmd->add_option("--step-ticks", args->step_ticks,
+                  "Autonomous: resolution of the clock the net sees. 1: every tick has its own step embedding; "
+                  "G > 1: blocks of G ticks share one, so the clock says how far the movement is but not the "
+                  "phase of a cycle shorter than G; 0: no clock, the phase is read off the joint angles alone")
+      ->check(CLI::Range(0, 100000))
+      ->capture_default_str();
+  cmd->add_option("--run-latent", args->latent_dims,
+                  "Autonomous: K > 0 trains with a per-run latent of K dimensions (a conditional VAE's encoder "
+                  "reads the whole run and tells the net which demonstrated variant it follows); at run time "
+                  "the latent is 0, so model.bin and nao_rt are unchanged (default: 0, none)")
+      ->check(CLI::Range(0, 256));
+  cmd->add_option("--latent-kl", args->latent_kl, "Weight of the latent's KL divergence per tick in the loss")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "
                   "Another W needs a nao_rt built for it (toolchain/nao build --model FILE)")

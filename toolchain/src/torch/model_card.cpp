@@ -76,6 +76,8 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   if (o.arch.bins > 0) t["offset_weight"] = o.offset_weight;
   if (o.arch.chunk > 1) t["ensemble_decay"] = o.ensemble_decay;
   if (!o.previous_action) t["previous_action_input"] = false;
+  if (o.step_ticks != 1) t["step_ticks"] = o.step_ticks;
+  if (o.latent_dims > 0) t["run_latent"] = {{"dims", o.latent_dims}, {"kl_weight", o.latent_kl}};
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"
                                                             : "the first key pose";

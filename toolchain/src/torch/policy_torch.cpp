@@ -304,6 +304,7 @@ PolicyHeadOutput PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttentio
   const torch::Tensor step_rows = step_emb.index_select(0, tick.clamp_max(arch_.max_steps - 1)).view({1, n_ticks, 1, d});
   torch::Tensor x = embed_in->forward(torch::stack({batch.qn, batch.an, rn}, -1));  // [B,T,J,d]
   x = x + joint_enc + movement_emb.index_select(0, batch.movement).view({n_batch, 1, 1, d}) + step_rows;
+  if (batch.z.defined()) x = x + batch.z.view({n_batch, 1, 1, d});
   x = x.reshape({n_batch, n_ticks * n_joints, d});
   const WindowMask mask = windowMask(n_ticks, static_cast<int>(n_joints), static_cast<int>(window), window_layout);
   for (const EncoderLayer& layer : enc) x = layer->forward(x, mask);

@@ -58,6 +58,17 @@ struct TrainOptions {
   /// A policy fed its own last action can learn to copy it, and in closed loop its errors then
   /// persist instead of being corrected (behaviour cloning's copycat problem).
   bool previous_action = true;
+  /// Resolution of the clock the net sees (autonomous): 1, every tick has its own step row;
+  /// G > 1, blocks of G ticks share one row (the rows are averaged after every optimiser step),
+  /// so the clock tells how far the movement is but not the phase of a cycle shorter than G;
+  /// 0, the step rows are held at zero. A per-tick clock lets a regression fall back on the
+  /// demonstrations' mean pose at that tick, which damps cycles whose phase varies between
+  /// demonstrations; without one, the phase must be read off the joint angles over the window.
+  int step_ticks = 1;
+  /// K > 0: a per-run latent of K dimensions (RunLatent, training only; z = 0 at run time) with
+  /// `latent_kl` × its KL divergence per tick in the loss.
+  int latent_dims = 0;
+  double latent_kl = 1e-2;
 };
 
 /// How the rollouts of one movement went (train_select.hpp): medians over its validation

@@ -26,6 +26,8 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   writeExecutionKey(k, o.execution);
   k << "; batches " << o.max_batches << "; law " << o.law_gain;
   if (!o.previous_action) k << "; no previous action";
+  if (o.step_ticks != 1) k << "; step ticks " << o.step_ticks;
+  if (o.latent_dims > 0) k << "; latent " << o.latent_dims << " " << o.latent_kl;
   if (o.select_by_rollout) k << "; select rollout";
   return k.str();
 }

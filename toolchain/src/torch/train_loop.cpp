@@ -2,9 +2,12 @@
 #include "nao/controller.hpp"
 #include "nao/tools/command.hpp"
 #include "policy_train.hpp"
+#include "run_latent.hpp"
 #include "train_checkpoint.hpp"
 #include "train_data.hpp"
 #include "train_select.hpp"
+
+#include <ATen/CPUGeneratorImpl.h>
 
 #include <algorithm>
 #include <chrono>
@@ -181,15 +184,26 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   res.law_gain = lawGain(o, sim);
   net->setLawGain(res.law_gain);
   net->setEnsembleDecay(o.ensemble_decay);
-  // Without the previous action its input weights stay zero: the runtime multiplies a(t-1) by
-  // them, so model.bin needs no other mark and nao_rt runs it unchanged.
-  const auto dropPreviousAction = [&] {
-    if (o.previous_action) return;
+  // Constraints on the input weights, restored after every optimiser step: a dropped input's
+  // weights stay zero, a coarse clock's blocks of step rows stay equal. The runtime multiplies
+  // a(t-1) by those weights and adds the tick's step row, so model.bin needs no other mark and
+  // nao_rt runs it unchanged.
+  const auto holdInputConstraints = [&] {
     torch::NoGradGuard no_grad;
-    net->embed_in->weight[1].zero_();
-    net->embed_act->weight.zero_();
+    if (!o.previous_action) {
+      net->embed_in->weight[1].zero_();
+      net->embed_act->weight.zero_();
+    }
+    if (o.step_ticks == 0) net->step_emb.zero_();
+    if (o.step_ticks > 1) {
+      const std::int64_t rows = net->step_emb.size(0), g = o.step_ticks;
+      for (std::int64_t b = 0; b < rows; b += g) {
+        torch::Tensor block = net->step_emb.slice(0, b, std::min(b + g, rows));
+        block.copy_(block.mean(0, true).expand_as(block));
+      }
+    }
   };
-  dropPreviousAction();
+  holdInputConstraints();
   SequenceTensors train = toTensors(net, train_seqs);
   SequenceTensors val = toTensors(net, val_seqs);
   if (o.arch.bins > 0) {
@@ -212,6 +226,11 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   }
 
   std::vector<torch::Tensor> params = net->trainableParameters();
+  RunLatent latent{nullptr};
+  if (o.latent_dims > 0) {
+    latent = RunLatent(o.latent_dims, o.arch.d_model);
+    for (const torch::Tensor& t : latent->parameters()) params.push_back(t);
+  }
   torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
   std::vector<torch::Tensor> best;
   EpochStats best_stats;
@@ -271,13 +290,30 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
         for (std::int64_t i = b + lo; i < b + hi; ++i) index.push_back(order[static_cast<std::size_t>(i)]);
         // This rank's share of the global batch's mean over real ticks: the all-reduced sum of
         // the gradients is the gradient of that mean.
-        const LossSums s = lossSums(net, pad(train, index), o.offset_weight);
+        Padded p = pad(train, index);
+        torch::Tensor kl;
+        if (latent) {
+          // ε of the global batch from (seed, epoch, batch), this rank's rows: the same draws on a
+          // resumed run and for every world size.
+          const torch::Tensor eps =
+              torch::randn({e - b, o.latent_dims},
+                           at::detail::createCPUGenerator(o.seed * 0x9e3779b97f4a7c15ull +
+                                                          static_cast<std::uint64_t>(epoch) * 1000003ull +
+                                                          static_cast<std::uint64_t>(k)),
+                           torch::kFloat32)
+                  .slice(0, lo, hi);
+          const RunLatentImpl::Draw draw = latent->forward(p, eps);
+          p.in.z = draw.z_embedded;
+          kl = o.latent_kl * (draw.kl * p.mask.sum(1)).sum();
+        }
+        LossSums s = lossSums(net, p, o.offset_weight);
+        if (kl.defined()) s.loss = s.loss + kl;
         (s.loss / static_cast<double>(global_ticks)).backward();
         loss_sum += s.loss.item<double>();
       }
       if (group) group->sumGradients(params);
       optimiser.step();
-      dropPreviousAction();
+      holdInputConstraints();
       seen += global_ticks;
       if (live && secondsSince(t_live) >= 0.5) {
         t_live = Clock::now();

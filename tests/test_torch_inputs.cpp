@@ -1,0 +1,168 @@
+// What the net is allowed to read, in training: the previous action, the clock's resolution and
+// a per-run latent. Each is a training-time constraint, so model.bin and nao_rt stay unchanged.
+#include "nao/model_file.hpp"
+#include "nao/policy.hpp"
+#include "nao/tools/policy_dataset.hpp"
+#include "policy_torch.hpp"
+#include "policy_train.hpp"
+#include "run_latent.hpp"
+#include "support/small_policy_data.hpp"
+#include "train_data.hpp"
+
+#include <doctest/doctest.h>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <set>
+#include <vector>
+
+using namespace nao;
+using namespace nao::tools;
+
+namespace {
+
+using nao::test::smallData;
+using nao::test::smallOptions;
+using nao::test::smallSim;
+using nao::test::trainBytes;
+
+}  // namespace
+
+TEST_CASE("without the previous action the net's a(t-1) weights stay zero through training, and the runtime's action ignores a(t-1)") {
+  // The same training with and without the input: only the latter must be blind to a(t-1).
+  for (const bool previous_action : {true, false}) {
+    CAPTURE(previous_action);
+    TrainOptions o = smallOptions(81, 2);
+    o.conditioning = Conditioning::kAutonomous;
+    o.arch.chunk = 3;
+    o.previous_action = previous_action;
+    TrainResult r;
+    const std::vector<std::uint8_t> bytes = trainBytes(o, &r);
+    const ModelFile file = decodeModel(bytes, "trained.bin");
+    const int d = file.header.arch.d_model;
+    // embed.in.weight [features, d] row-major is column-major [d, features]: column 1 is a(t-1)'s.
+    const Eigen::Map<const Eigen::MatrixXf> in_w(file.data(file.find("embed.in.weight")), d, file.header.arch.features);
+    const Eigen::Map<const Eigen::VectorXf> act_w(file.data(file.find("embed.act.weight")), d);
+    CHECK(in_w.col(0).cwiseAbs().sum() > 0.0f);
+    CHECK((in_w.col(1).cwiseAbs().sum() == 0.0f) == !previous_action);
+    CHECK((act_w.cwiseAbs().sum() == 0.0f) == !previous_action);
+    CHECK(nlohmann::json::parse(file.header.metadata_json)["training"].value("previous_action_input", true) ==
+          previous_action);
+
+    // Two streams of the runtime on the same joint angles, one fed the previous actions and the
+    // other zeros: bit-equal actions exactly when the net does not see them.
+    std::vector<const float*> p;
+    for (std::size_t i = 0; i < file.tensors.size(); ++i) p.push_back(file.data(i));
+    const PolicyWeights<SmallPolicyDims> w =
+        bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), file.header.arch, file.header.conditioning);
+    ExecutionOptions clean;
+    clean.noisy_rollouts = 0;
+    const PolicySequence seq = executeDemos(smallData(), {r.split.val.front()}, smallSim(), clean, o.seed).front();
+    auto fed = makePolicyWorkspace<SmallPolicyDims>(), blind = makePolicyWorkspace<SmallPolicyDims>();
+    resetPolicyStream(*fed);
+    resetPolicyStream(*blind);
+    bool all_equal = true;
+    double largest = 0.0;
+    for (std::size_t t = 0; t < seq.ticks(); ++t) {
+      PolicyInput in;
+      in.q = seq.q[t].cast<float>();
+      in.a_prev = seq.a_prev[t].cast<float>();
+      in.movement = seq.movement;
+      in.step = static_cast<int>(t);
+      const Eigen::Matrix<float, 5, 1> a = stepPolicy(w, *fed, in);
+      in.a_prev.setZero();
+      const Eigen::Matrix<float, 5, 1> b = stepPolicy(w, *blind, in);
+      all_equal = all_equal && a == b;
+      largest = std::max(largest, static_cast<double>(a.cwiseAbs().maxCoeff()));
+    }
+    CHECK(all_equal == !previous_action);
+    CHECK(largest > 1e-3);
+  }
+}
+
+TEST_CASE("the clock's resolution: step rows equal within blocks of G ticks, all zero without a clock") {
+  for (const int g : {0, 1, 4}) {
+    CAPTURE(g);
+    TrainOptions o = smallOptions(83, 2);
+    o.conditioning = Conditioning::kAutonomous;
+    o.step_ticks = g;
+    const ModelFile file = decodeModel(trainBytes(o), "trained.bin");
+    const int d = file.header.arch.d_model, rows = file.header.arch.max_steps;
+    // embed.step [rows, d] row-major: column t of the column-major view is tick t's row.
+    const Eigen::Map<const Eigen::MatrixXf> step(file.data(file.find("embed.step")), d, rows);
+    int equal_within = 0, differ_across = 0, blocks = 0;
+    for (int t = 1; t < rows; ++t) {
+      const bool same = step.col(t) == step.col(t - 1);
+      if (g > 1 && t % g != 0) equal_within += same ? 1 : 0;
+      if (g > 1 && t % g == 0) {
+        ++blocks;
+        differ_across += same ? 0 : 1;
+      }
+      if (g == 1) differ_across += same ? 0 : 1;
+    }
+    if (g == 0) CHECK(step.cwiseAbs().maxCoeff() == 0.0f);
+    if (g == 1) CHECK(differ_across == rows - 1);
+    if (g > 1) {
+      CHECK(equal_within == rows - 1 - blocks);
+      CHECK(differ_across == blocks);
+    }
+    CHECK(nlohmann::json::parse(file.header.metadata_json)["training"].value("step_ticks", 1) == g);
+  }
+}
+
+TEST_CASE("the run latent reads the run at every stride-th tick up to its last, and is the prior's mean at run time") {
+  torch::manual_seed(5);
+  RunLatent latent(4, 16);
+  constexpr std::int64_t kLong = 250, kShort = 30;
+  Padded p;
+  p.in.qn = torch::randn({2, kLong, kNumJoints}).requires_grad_(true);
+  p.mask = torch::zeros({2, kLong});
+  p.mask[0].fill_(1.0);
+  p.mask[1].slice(0, 0, kShort).fill_(1.0);
+  const RunLatentImpl::Draw draw = latent->forward(p, torch::randn({2, 4}));
+  REQUIRE(draw.z_embedded.sizes() == torch::IntArrayRef({2, 16}));
+  REQUIRE(draw.kl.sizes() == torch::IntArrayRef({2}));
+  CHECK(draw.kl.min().item<float>() > 0.0f);
+  (draw.z_embedded.sum() + draw.kl.sum()).backward();
+  // The ticks that reach z: the run's ticks k·stride for k < samples, held at its last tick.
+  const torch::Tensor reached = p.in.qn.grad().abs().sum(2) > 0;  // [2, T]
+  for (std::int64_t b = 0; b < 2; ++b) {
+    const std::int64_t len = b == 0 ? kLong : kShort;
+    std::set<std::int64_t> expected;
+    for (std::int64_t k = 0; k < RunLatentImpl::kSamples; ++k)
+      expected.insert(std::min(k * RunLatentImpl::kStride, len - 1));
+    for (std::int64_t t = 0; t < kLong; ++t) {
+      CAPTURE(b);
+      CAPTURE(t);
+      CHECK(reached[b][t].item<bool>() == (expected.count(t) == 1));
+    }
+  }
+  SUBCASE("at the prior (μ 0, σ 1) the KL is zero and z is the projected ε") {
+    torch::NoGradGuard no_grad;
+    latent->moments->weight.zero_();
+    latent->moments->bias.zero_();
+    const torch::Tensor eps = torch::randn({2, 4});
+    const RunLatentImpl::Draw a = latent->forward(p, eps);
+    CHECK(a.kl.abs().max().item<float>() == 0.0f);
+    // z = ε, projected without a bias: z = 0 (run time) adds nothing to the tokens.
+    CHECK(torch::allclose(a.z_embedded, eps.matmul(latent->project->weight.t()), 1e-6, 1e-7));
+    CHECK(latent->forward(p, torch::zeros({2, 4})).z_embedded.abs().max().item<float>() == 0.0f);
+  }
+}
+
+TEST_CASE("training with a run latent: deterministic, another result, the same model.bin tensors") {
+  TrainOptions o = smallOptions(85, 2);
+  o.conditioning = Conditioning::kAutonomous;
+  const std::vector<std::uint8_t> none = trainBytes(o);
+  o.latent_dims = 4;
+  TrainResult r;
+  const std::vector<std::uint8_t> a = trainBytes(o, &r), b = trainBytes(o);
+  CHECK_MESSAGE(a == b, "two runs with the same seed and latent gave different bytes");
+  CHECK_MESSAGE(a != none, "the latent changed nothing in training");
+  const ModelFile with = decodeModel(a, "latent.bin"), without = decodeModel(none, "none.bin");
+  REQUIRE(with.tensors.size() == without.tensors.size());
+  for (std::size_t i = 0; i < with.tensors.size(); ++i) CHECK(with.tensors[i].spec.name == without.tensors[i].spec.name);
+  const nlohmann::json meta = nlohmann::json::parse(with.header.metadata_json)["training"];
+  CHECK(meta["run_latent"]["dims"] == 4);
+  CHECK(r.history.back().train_loss < r.history.front().train_loss);
+}
