@@ -742,7 +742,7 @@ TEST_CASE("netRuns drives the runtime's step from each start: its actions are li
   CHECK_THROWS_AS(netRuns(data, demos, smallSim(), other), UserError);
 }
 
-TEST_CASE("betterEpoch prefers an epoch that makes the movement, then the lower rollout DTW; a NaN never wins; scoreRuns scores a non-finite run NaN") {
+TEST_CASE("betterEpoch prefers an epoch that makes the movement, then one that makes more movements, then the lower rollout DTW; a NaN never wins; scoreRuns scores a non-finite run NaN") {
   EpochStats moves, close, far, broken;
   moves.rollout_dtw_m = 0.03;
   moves.makes_movement = true;
@@ -756,6 +756,12 @@ TEST_CASE("betterEpoch prefers an epoch that makes the movement, then the lower 
   CHECK(betterEpoch(far, broken));
   CHECK_FALSE(betterEpoch(broken, far));
   CHECK_FALSE(betterEpoch(broken, broken));
+  EpochStats two = far, one = close;
+  two.movements_made = 2;
+  one.movements_made = 1;
+  CHECK(betterEpoch(two, one));  // more movements made wins over a lower DTW
+  CHECK_FALSE(betterEpoch(one, two));
+  CHECK(betterEpoch(moves, two));
 
   const PolicyData& data = smallData();
   const std::vector<int> val = {1, 5, 9};  // one demonstration of each movement
@@ -775,6 +781,7 @@ TEST_CASE("betterEpoch prefers an epoch that makes the movement, then the lower 
     CHECK(m.range_excess_rad <= 0.0);
   }
   CHECK(st.makes_movement);
+  CHECK(st.movements_made == 3);
   runs[1].q[4][2] = std::numeric_limits<double>::quiet_NaN();
   EpochStats nan;
   scoreRuns(runs, ref, smallSim().arm, period, nan);

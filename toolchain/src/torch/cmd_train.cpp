@@ -330,9 +330,9 @@ void setup(CLI::App& app) {
                   "Which epoch is exported (and what patience counts on): val-loss (the validation loss) or "
                   "rollouts (autonomous: after every epoch the net is rolled out on the simulated arm from each "
                   "validation demonstration's start, as nao_rt's autonomous runs; among the epochs whose runs make "
-                  "the movement - middle-phase hand speed 0.7-1.3x the demonstrations', loops within ±1 - the "
-                  "lowest mean over movements of the median hand-path DTW to the nearest validation demonstration "
-                  "wins; paper or small dimensions)")
+                  "the most movements - middle-phase hand speed 0.7-1.3x the demonstrations', loops within ±1 - "
+                  "the lowest mean over movements of the median hand-path DTW to the nearest validation "
+                  "demonstration wins; paper or small dimensions)")
       ->check(CLI::IsMember({"val-loss", "rollouts"}))
       ->capture_default_str();
   cmd->callback([args] { run(*args); });

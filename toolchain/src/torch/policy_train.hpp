@@ -51,7 +51,7 @@ struct TrainOptions {
   /// Model selection on rollouts (autonomous mode, paper §4.1): after every epoch the net is
   /// rolled out on the simulated arm from each validation demonstration's start (the runtime's
   /// streaming inference, no human input) and scored (RolloutScore); the exported epoch is the
-  /// best that makes the movement (selectionKey). Patience counts on it too.
+  /// one that makes the most movements, then the lowest DTW (betterEpoch). Patience counts on it too.
   bool select_by_rollout = false;
   /// False: the net does not see the previous action a(t-1) (its input weights, the encoder's
   /// a-feature row and the decoder's action embedding, are held at zero), only q over the window.
@@ -92,6 +92,7 @@ struct EpochStats {
   /// the scores (not kept by checkpoints); NaN / empty when off.
   double rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
   bool makes_movement = false;  ///< every movement's speed ratio in 0.7-1.3 and loops within ±1 of the demonstrations'
+  int movements_made = 0;       ///< movements whose runs meet those bars and stay in range
   std::vector<MovementScore> rollouts;
 };
 

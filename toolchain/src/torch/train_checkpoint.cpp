@@ -17,7 +17,7 @@ void writeExecutionKey(std::ostream& k, const ExecutionOptions& e) {
 std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   std::ostringstream k;
   k.precision(17);
-  k << "nao-rt checkpoint 2; data " << hex64(fingerprint) << "; config " << o.config_name << " "
+  k << "nao-rt checkpoint 3; data " << hex64(fingerprint) << "; config " << o.config_name << " "
     << parameterCount(o.arch) << "; " << conditioningName(o.conditioning) << "; seed " << o.seed << "; val "
     << o.val_fraction;
   for (const std::string& n : o.val_demos) k << " " << n;
@@ -35,7 +35,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
 namespace {
 
 // Columns of the history tensor (the per-movement rollout scores are not kept).
-constexpr std::int64_t kHistoryColumns = 8;
+constexpr std::int64_t kHistoryColumns = 9;
 
 }  // namespace
 
@@ -60,7 +60,7 @@ void writeCheckpoint(const std::string& path, const std::string& key, const std:
     const EpochStats& e = history[i];
     const double row[kHistoryColumns] = {static_cast<double>(e.epoch), e.train_loss, e.val_loss, e.val_mse_rad2,
                                          e.seconds, static_cast<double>(e.samples), e.rollout_dtw_m,
-                                         e.makes_movement ? 1.0 : 0.0};
+                                         e.makes_movement ? 1.0 : 0.0, static_cast<double>(e.movements_made)};
     for (std::int64_t c = 0; c < kHistoryColumns; ++c) h[static_cast<std::int64_t>(i)][c] = row[c];
   }
   archive.write("history", h);
@@ -111,6 +111,7 @@ Checkpoint readCheckpoint(const std::string& path, const std::string& key, std::
       e.samples = static_cast<std::size_t>(h[i][5].item<double>());
       e.rollout_dtw_m = h[i][6].item<double>();
       e.makes_movement = h[i][7].item<double>() != 0.0;
+      e.movements_made = static_cast<int>(h[i][8].item<double>());
       ck.history.push_back(e);
     }
   } catch (const UserError&) {
