@@ -1,6 +1,5 @@
 #include "run_latent.hpp"
 
-
 namespace nao::tools {
 
 RunLatentImpl::RunLatentImpl(std::int64_t latent_dims, std::int64_t d_model) : dims(latent_dims) {
