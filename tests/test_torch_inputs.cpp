@@ -1,5 +1,6 @@
 // What the net is allowed to read, in training: the previous action, the clock's resolution and
-// a per-run latent. Each is a training-time constraint, so model.bin and nao_rt stay unchanged.
+// a per-run latent; and the moving average of the weights that training may keep instead. Each
+// is a training-time choice, so model.bin and nao_rt stay unchanged.
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/policy_dataset.hpp"
@@ -12,8 +13,12 @@
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <filesystem>
 #include <set>
+#include <string>
 #include <vector>
 
 using namespace nao;
@@ -165,4 +170,54 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
   const nlohmann::json meta = nlohmann::json::parse(with.header.metadata_json)["training"];
   CHECK(meta["run_latent"]["dims"] == 4);
   CHECK(r.history.back().train_loss < r.history.front().train_loss);
+}
+
+TEST_CASE("the moving average of the weights: after one step 0.1 of the start plus 0.9 of the trained weights, and resumable") {
+  // One optimiser step per epoch. The start's weights are those after a step of lr 1e-12 (Adam
+  // moves no weight by more than about the learning rate).
+  const std::string dir = (std::filesystem::temp_directory_path() / "nao_rt_tests").string();
+  const std::string cache = dir + "/ema_execution_" + std::to_string(::getpid());
+  std::filesystem::create_directories(cache);
+  TrainOptions o = smallOptions(87, 1);
+  o.conditioning = Conditioning::kAutonomous;
+  o.max_batches = 1;
+  o.execution_cache = cache;  // the six trainings execute the demonstrations once
+  TrainOptions still = o;
+  still.lr = 1e-12;
+  const ModelFile start = decodeModel(trainBytes(still), "start.bin");
+  const ModelFile stepped = decodeModel(trainBytes(o), "stepped.bin");
+  TrainOptions averaged = o;
+  averaged.ema_decay = 0.5;  // the first step's decay is min(D, 1/10)
+  const std::vector<std::uint8_t> average_bytes = trainBytes(averaged);
+  const ModelFile average = decodeModel(average_bytes, "average.bin");
+  REQUIRE(average.tensors.size() == stepped.tensors.size());
+  double worst = 0.0, moved = 0.0;
+  for (std::size_t i = 0; i < average.tensors.size(); ++i) {
+    for (std::size_t k = 0; k < average.tensors[i].spec.count(); ++k) {
+      const double s0 = start.data(i)[k], s1 = stepped.data(i)[k];
+      worst = std::max(worst, std::abs(average.data(i)[k] - (0.1 * s0 + 0.9 * s1)) / (1.0 + std::abs(s1)));
+      moved = std::max(moved, std::abs(s1 - s0));
+    }
+  }
+  CHECK(moved > 1e-4);  // the step changed the weights, so the blend is not trivially met
+  CHECK(worst <= 1e-6);
+  CHECK(nlohmann::json::parse(average.header.metadata_json)["training"].value("ema_decay", 0.0) == 0.5);
+
+  // Two epochs straight, or one and a resume from its checkpoint: the same bytes, so the
+  // checkpoint carries the average and its step count.
+  const std::string ck = dir + "/ema_checkpoint_" + std::to_string(::getpid()) + ".pt";
+  TrainOptions full = averaged;
+  full.max_epochs = full.patience = 2;
+  const std::vector<std::uint8_t> uninterrupted = trainBytes(full);
+  CHECK(uninterrupted != average_bytes);
+  TrainOptions first = averaged;
+  first.patience = 2;
+  first.checkpoint = ck;
+  trainPolicy(smallData(), smallSim(), first, nullptr);
+  REQUIRE(std::filesystem::exists(ck));
+  TrainOptions rest = full;
+  rest.resume = ck;
+  CHECK_MESSAGE(trainBytes(rest) == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
+  std::filesystem::remove(ck);
+  std::filesystem::remove_all(cache);
 }

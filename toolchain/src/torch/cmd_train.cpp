@@ -31,6 +31,7 @@ struct TrainArgs {
   int step_ticks = 1;
   int latent_dims = 0;
   double latent_kl = 1e-2;
+  double ema = 0.0;
   std::string select = "val-loss", noisy_target = "tick", noisy_starts = "own";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
   std::vector<std::string> val_demos;
@@ -94,6 +95,7 @@ void run(const TrainArgs& a) {
   o.step_ticks = a.step_ticks;
   o.latent_dims = a.latent_dims;
   o.latent_kl = a.latent_kl;
+  o.ema_decay = a.ema;
   if (a.window > 0) o.arch.window = a.window;
   if (a.chunk > 0) o.arch.chunk = a.chunk;
   if (a.bins >= 0) o.arch.bins = a.bins;
@@ -286,6 +288,12 @@ void setup(CLI::App& app) {
       ->check(CLI::Range(0, 256));
   cmd->add_option("--latent-kl", args->latent_kl, "Weight of the latent's KL divergence per tick in the loss")
       ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
+  cmd->add_option("--ema", args->ema,
+                  "Decay D of an exponential moving average of the weights (updated after every optimiser "
+                  "step): the average is what is scored each epoch, kept and written; it smooths the "
+                  "epoch-to-epoch swings of the rollouts. 0: the trained weights themselves")
+      ->check(CLI::Range(0.0, 0.99999))
       ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "

@@ -77,6 +77,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   if (o.arch.chunk > 1) t["ensemble_decay"] = o.ensemble_decay;
   if (!o.previous_action) t["previous_action_input"] = false;
   if (o.step_ticks != 1) t["step_ticks"] = o.step_ticks;
+  if (o.ema_decay > 0.0) t["ema_decay"] = o.ema_decay;
   if (o.latent_dims > 0) t["run_latent"] = {{"dims", o.latent_dims}, {"kl_weight", o.latent_kl}};
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"

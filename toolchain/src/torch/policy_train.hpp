@@ -69,6 +69,10 @@ struct TrainOptions {
   /// `latent_kl` × its KL divergence per tick in the loss.
   int latent_dims = 0;
   double latent_kl = 1e-2;
+  /// D > 0: the weights scored, kept and written are an exponential moving average of the
+  /// trained ones, updated after every optimiser step with decay min(D, (1 + n) / (10 + n)) at
+  /// step n; the optimiser trains the raw weights. 0: no average.
+  double ema_decay = 0.0;
 };
 
 /// How the rollouts of one movement went (train_select.hpp): medians over its validation

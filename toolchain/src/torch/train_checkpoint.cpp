@@ -28,6 +28,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   if (!o.previous_action) k << "; no previous action";
   if (o.step_ticks != 1) k << "; step ticks " << o.step_ticks;
   if (o.latent_dims > 0) k << "; latent " << o.latent_dims << " " << o.latent_kl;
+  if (o.ema_decay > 0.0) k << "; ema " << o.ema_decay;
   if (o.select_by_rollout) k << "; select rollout";
   return k.str();
 }
@@ -41,7 +42,8 @@ constexpr std::int64_t kHistoryColumns = 9;
 
 void writeCheckpoint(const std::string& path, const std::string& key, const std::vector<torch::Tensor>& params,
                      torch::optim::Adam& optimiser, const std::vector<torch::Tensor>& best, int best_epoch,
-                     const std::vector<EpochStats>& history) {
+                     const std::vector<EpochStats>& history, const std::vector<torch::Tensor>& ema,
+                     std::int64_t ema_steps) {
   torch::serialize::OutputArchive archive;
   archive.write("key", c10::IValue(key));
   torch::serialize::OutputArchive p, b, adam;
@@ -64,6 +66,12 @@ void writeCheckpoint(const std::string& path, const std::string& key, const std:
     for (std::int64_t c = 0; c < kHistoryColumns; ++c) h[static_cast<std::int64_t>(i)][c] = row[c];
   }
   archive.write("history", h);
+  if (!ema.empty()) {
+    torch::serialize::OutputArchive a;
+    for (std::size_t i = 0; i < ema.size(); ++i) a.write(std::to_string(i), ema[i]);
+    archive.write("ema", a);
+    archive.write("ema_steps", c10::IValue(ema_steps));
+  }
   const std::string tmp = path + ".tmp";
   try {
     archive.save_to(tmp);
@@ -113,6 +121,17 @@ Checkpoint readCheckpoint(const std::string& path, const std::string& key, std::
       e.makes_movement = h[i][7].item<double>() != 0.0;
       e.movements_made = static_cast<int>(h[i][8].item<double>());
       ck.history.push_back(e);
+    }
+    // The key names the moving average when the run has one, so only such runs find it here.
+    torch::serialize::InputArchive a;
+    if (archive.try_read("ema", a)) {
+      for (std::size_t i = 0; i < params.size(); ++i) {
+        torch::Tensor t;
+        a.read(std::to_string(i), t);
+        ck.ema.push_back(t);
+      }
+      archive.read("ema_steps", v);
+      ck.ema_steps = v.toInt();
     }
   } catch (const UserError&) {
     throw;

@@ -23,13 +23,17 @@ struct Checkpoint {
   std::vector<torch::Tensor> best;
   int best_epoch = 0;
   std::vector<EpochStats> history;
+  std::vector<torch::Tensor> ema;  ///< the moving average of the weights, empty without one
+  std::int64_t ema_steps = 0;
 };
 
 /// Writes the state aside and renames it over `path` (a run killed while saving leaves the
-/// previous checkpoint whole). Throws UserError when it cannot.
+/// previous checkpoint whole). `ema` (empty: none) is the moving average of the weights after
+/// `ema_steps` updates. Throws UserError when it cannot.
 void writeCheckpoint(const std::string& path, const std::string& key, const std::vector<torch::Tensor>& params,
                      torch::optim::Adam& optimiser, const std::vector<torch::Tensor>& best, int best_epoch,
-                     const std::vector<EpochStats>& history);
+                     const std::vector<EpochStats>& history, const std::vector<torch::Tensor>& ema = {},
+                     std::int64_t ema_steps = 0);
 
 /// Reads `path` into `params` and `optimiser`; returns the best weights and the history. Throws
 /// UserError for another run's checkpoint, an unreadable file or one without a finished epoch.

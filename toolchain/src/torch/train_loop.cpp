@@ -232,6 +232,21 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     for (const torch::Tensor& t : latent->parameters()) params.push_back(t);
   }
   torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
+  // The moving average of the weights (--ema): scored, kept and written in place of the trained
+  // weights, which the optimiser goes on training. The input constraints are linear, so the
+  // average of constrained weights meets them too.
+  std::vector<torch::Tensor> ema;
+  std::int64_t ema_steps = 0;
+  if (o.ema_decay > 0.0)
+    for (const torch::Tensor& p : params) ema.push_back(p.detach().clone());
+  const auto swapAverage = [&] {
+    torch::NoGradGuard no_grad;
+    for (std::size_t i = 0; i < ema.size(); ++i) {
+      torch::Tensor trained = params[i].detach().clone();
+      params[i].copy_(ema[i]);
+      ema[i] = trained;
+    }
+  };
   std::vector<torch::Tensor> best;
   EpochStats best_stats;
   best_stats.rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
@@ -241,6 +256,11 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   if (!o.resume.empty()) {
     Checkpoint ck = readCheckpoint(o.resume, key, params, optimiser);
     best = std::move(ck.best);
+    if (!ema.empty()) {
+      if (ck.ema.size() != ema.size()) throw UserError("checkpoint " + o.resume + " holds no moving average");
+      ema = std::move(ck.ema);
+      ema_steps = ck.ema_steps;
+    }
     res.best_epoch = ck.best_epoch;
     res.history = std::move(ck.history);
     for (const EpochStats& e : res.history) {
@@ -314,6 +334,12 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       if (group) group->sumGradients(params);
       optimiser.step();
       holdInputConstraints();
+      if (!ema.empty()) {
+        torch::NoGradGuard no_grad;
+        const double d = std::min(o.ema_decay, static_cast<double>(1 + ema_steps) / static_cast<double>(10 + ema_steps));
+        for (std::size_t i = 0; i < ema.size(); ++i) ema[i].mul_(d).add_(params[i].detach(), 1.0 - d);
+        ++ema_steps;
+      }
       seen += global_ticks;
       if (live && secondsSince(t_live) >= 0.5) {
         t_live = Clock::now();
@@ -332,6 +358,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       loss_sum = total.item<double>();
     }
     net->eval();
+    swapAverage();  // score the average; the trained weights come back before the next epoch
     EpochStats st;
     st.epoch = epoch;
     st.samples = static_cast<std::size_t>(seen);
@@ -350,6 +377,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       best.clear();
       for (const torch::Tensor& p : params) best.push_back(p.detach().clone());
     }
+    swapAverage();
     // Every rank applied the same summed gradients: a difference is a bug or a mixed group.
     if (group) group->checkInSync(params);
     st.seconds = secondsSince(t_epoch);
@@ -357,7 +385,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     res.history.push_back(st);
     const bool stop = epoch - res.best_epoch >= o.patience || epoch == o.max_epochs;
     if (!o.checkpoint.empty() && o.dist.rank == 0)
-      writeCheckpoint(o.checkpoint, key, params, optimiser, best, res.best_epoch, res.history);
+      writeCheckpoint(o.checkpoint, key, params, optimiser, best, res.best_epoch, res.history, ema, ema_steps);
     if (progress) {
       char line[320];
       std::string text;  // the per-movement scores have no length bound: kept out of the buffer
