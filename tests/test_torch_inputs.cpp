@@ -28,6 +28,7 @@ namespace {
 
 using nao::test::smallData;
 using nao::test::smallOptions;
+using nao::test::resumedBytes;
 using nao::test::smallSim;
 using nao::test::trainBytes;
 
@@ -210,14 +211,6 @@ TEST_CASE("the moving average of the weights: after one step 0.1 of the start pl
   full.max_epochs = full.patience = 2;
   const std::vector<std::uint8_t> uninterrupted = trainBytes(full);
   CHECK(uninterrupted != average_bytes);
-  TrainOptions first = averaged;
-  first.patience = 2;
-  first.checkpoint = ck;
-  trainPolicy(smallData(), smallSim(), first, nullptr);
-  REQUIRE(std::filesystem::exists(ck));
-  TrainOptions rest = full;
-  rest.resume = ck;
-  CHECK_MESSAGE(trainBytes(rest) == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
-  std::filesystem::remove(ck);
+  CHECK_MESSAGE(resumedBytes(full, ck) == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
   std::filesystem::remove_all(cache);
 }

@@ -8,8 +8,11 @@
 #include "policy_train.hpp"
 #include "support/test_util.hpp"
 
+#include <doctest/doctest.h>
+
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <string>
 #include <vector>
@@ -89,6 +92,23 @@ inline std::vector<std::uint8_t> trainBytes(const nao::tools::TrainOptions& o, n
       nao::encodeModel(nao::tools::modelHeader(smallData(), o, r, nao::trainedJoints(nao::loadArmModel(kUrdfPath))),
                        nao::tools::manifestFloats(r.net));
   if (out) *out = r;
+  return bytes;
+}
+
+// model.bin of `full` (2 epochs) trained as one epoch, checkpointed at `checkpoint`, and resumed
+// from it for the second; the checkpoint is removed afterwards. Equal to trainBytes(full) when the
+// checkpoint holds everything the run carries over.
+inline std::vector<std::uint8_t> resumedBytes(const nao::tools::TrainOptions& full, const std::string& checkpoint,
+                                              nao::tools::TrainResult* out = nullptr) {
+  nao::tools::TrainOptions first = full;
+  first.max_epochs = 1;
+  first.checkpoint = checkpoint;
+  nao::tools::trainPolicy(smallData(), smallSim(), first, nullptr);
+  REQUIRE(std::filesystem::exists(checkpoint));
+  nao::tools::TrainOptions rest = full;
+  rest.resume = checkpoint;
+  std::vector<std::uint8_t> bytes = trainBytes(rest, out);
+  std::filesystem::remove(checkpoint);
   return bytes;
 }
 
