@@ -2,6 +2,7 @@
 // a per-run latent; and the moving average of the weights that training may keep instead. Each
 // is a training-time choice, so model.bin and nao_rt stay unchanged.
 #include "nao/model_file.hpp"
+#include "nao/tools/command.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/policy_dataset.hpp"
 #include "policy_torch.hpp"
@@ -213,4 +214,25 @@ TEST_CASE("the moving average of the weights: after one step 0.1 of the start pl
   CHECK(uninterrupted != average_bytes);
   CHECK_MESSAGE(resumedBytes(full, ck) == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
   std::filesystem::remove_all(cache);
+}
+
+TEST_CASE("the inputs' options are refused where they mean nothing: reference mode, negative sizes, a decay of 1") {
+  TrainOptions o = smallOptions(89, 1);
+  o.conditioning = Conditioning::kReference;
+  TrainOptions clock = o;
+  clock.step_ticks = 30;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), clock, nullptr), doctest::Contains("no clock"), UserError);
+  TrainOptions latent = o;
+  latent.latent_dims = 8;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), latent, nullptr), doctest::Contains("autonomous"), UserError);
+  o.conditioning = Conditioning::kAutonomous;
+  TrainOptions negative = o;
+  negative.step_ticks = -1;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), negative, nullptr), doctest::Contains("negative"), UserError);
+  negative = o;
+  negative.latent_dims = -1;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), negative, nullptr), doctest::Contains("negative"), UserError);
+  TrainOptions decay = o;
+  decay.ema_decay = 1.0;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), decay, nullptr), doctest::Contains("[0, 1)"), UserError);
 }

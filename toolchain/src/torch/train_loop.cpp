@@ -51,6 +51,15 @@ void check(const PolicyData& data, const TrainOptions& o) {
   if (!(o.lr > 0.0)) throw UserError("learning rate must be positive");
   if (!(o.offset_weight >= 0.0)) throw UserError("the offset weight must not be negative");
   if (!(o.ensemble_decay >= 0.0 && o.ensemble_decay <= 20.0)) throw UserError("the ensemble decay must be in [0, 20]");
+  if (o.step_ticks < 0) throw UserError("the clock's resolution must not be negative (0: no clock)");
+  if (o.latent_dims < 0) throw UserError("the run latent's dimensions must not be negative (0: none)");
+  if (!(o.ema_decay >= 0.0 && o.ema_decay < 1.0)) throw UserError("the moving average's decay must be in [0, 1)");
+  // Reference mode has no clock (its step rows are zero) and its action follows the human, so a
+  // coarser clock or a run latent would change nothing but the model's key: refused.
+  if (o.conditioning != Conditioning::kAutonomous && o.step_ticks != 1)
+    throw UserError("the clock's resolution (--step-ticks) is for autonomous mode: reference mode has no clock");
+  if (o.conditioning != Conditioning::kAutonomous && o.latent_dims > 0)
+    throw UserError("a run latent (--run-latent) is for autonomous mode: in reference mode the human gives the variant");
   if (o.select_by_rollout && o.conditioning != Conditioning::kAutonomous)
     throw UserError("model selection on rollouts is for autonomous mode (a reference-mode run needs a human)");
   if (o.select_by_rollout && !hasRuntimeStep(o.arch))
