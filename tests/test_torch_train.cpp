@@ -813,6 +813,7 @@ TEST_CASE("rollout selection exports the best epoch by its autonomous rollouts, 
     CHECK(meta["result"]["rollouts"][name]["dtw_m"].get<double>() == kept.rollouts[static_cast<std::size_t>(m)].dtw_m);
   }
   CHECK(meta["result"]["makes_movement"] == kept.makes_movement);
+  CHECK(meta["result"]["movements_made"] == kept.movements_made);
   CHECK(meta["result"]["val_nn_dtw_m"].size() == 3);
   CHECK_MESSAGE(a == trainBytes(o), "two runs with seed 43 gave different bytes");
 

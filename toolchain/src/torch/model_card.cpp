@@ -126,6 +126,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
                                          {"loops_demo", e.rollouts[m].loops_demo}};
         res["rollouts"] = per;
         res["makes_movement"] = e.makes_movement;
+        res["movements_made"] = e.movements_made;
       }
     res["val_nn_dtw_m"] = r.val_nn_dtw_m;
   }
@@ -271,14 +272,14 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "## Per epoch\n\n";
   const bool rollouts = o.select_by_rollout;
   s << "| epoch | train loss | val loss | val MSE (rad^2) |"
-    << (rollouts ? " rollout DTW mm (per movement: DTW, speed ratio, loops run / demos) |" : "")
+    << (rollouts ? " rollout DTW mm (movements made of all; per movement: DTW, speed ratio, loops run / demos) |" : "")
     << " s | samples/s |\n|---|---|---|---|" << (rollouts ? "---|" : "") << "---|---|\n";
   for (const EpochStats& e : r.history) {
     std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e |", e.epoch, e.epoch == r.best_epoch ? " *" : "",
                   e.train_loss, e.val_loss, e.val_mse_rad2);
     s << buf;
     if (rollouts) {
-      std::snprintf(buf, sizeof buf, " %.1f%s", 1e3 * e.rollout_dtw_m, e.makes_movement ? " (moves)" : "");
+      std::snprintf(buf, sizeof buf, " %.1f (makes %d of %zu)", 1e3 * e.rollout_dtw_m, e.movements_made, e.rollouts.size());
       s << buf;
       for (std::size_t m = 0; m < e.rollouts.size(); ++m) {
         std::snprintf(buf, sizeof buf, "%s%s %.1f, %.2f, %.1f/%.1f", m == 0 ? "; " : "; ", data.movement_names[m].c_str(),
