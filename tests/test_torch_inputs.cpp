@@ -174,7 +174,7 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
   CHECK(r.history.back().train_loss < r.history.front().train_loss);
 }
 
-TEST_CASE("the moving average of the weights: after one step 0.1 of the start plus 0.9 of the trained weights, and resumable") {
+TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the start plus the rest of the trained weights; training goes on from the trained weights; resumable") {
   // One optimiser step per epoch. The start's weights are those after a step of lr 1e-12 (Adam
   // moves no weight by more than about the learning rate).
   const std::string dir = (std::filesystem::temp_directory_path() / "nao_rt_tests").string();
@@ -183,36 +183,52 @@ TEST_CASE("the moving average of the weights: after one step 0.1 of the start pl
   TrainOptions o = smallOptions(87, 1);
   o.conditioning = Conditioning::kAutonomous;
   o.max_batches = 1;
-  o.execution_cache = cache;  // the six trainings execute the demonstrations once
+  o.execution_cache = cache;  // the trainings below execute the demonstrations once
   TrainOptions still = o;
   still.lr = 1e-12;
   const ModelFile start = decodeModel(trainBytes(still), "start.bin");
   const ModelFile stepped = decodeModel(trainBytes(o), "stepped.bin");
-  TrainOptions averaged = o;
-  averaged.ema_decay = 0.5;  // the first step's decay is min(D, 1/10)
-  const std::vector<std::uint8_t> average_bytes = trainBytes(averaged);
-  const ModelFile average = decodeModel(average_bytes, "average.bin");
-  REQUIRE(average.tensors.size() == stepped.tensors.size());
-  double worst = 0.0, moved = 0.0;
-  for (std::size_t i = 0; i < average.tensors.size(); ++i) {
-    for (std::size_t k = 0; k < average.tensors[i].spec.count(); ++k) {
-      const double s0 = start.data(i)[k], s1 = stepped.data(i)[k];
-      worst = std::max(worst, std::abs(average.data(i)[k] - (0.1 * s0 + 0.9 * s1)) / (1.0 + std::abs(s1)));
-      moved = std::max(moved, std::abs(s1 - s0));
+  // D 0.5: the first step's decay is the warm-up's 1/10; D 0.05: the decay itself.
+  for (const double decay : {0.5, 0.05}) {
+    CAPTURE(decay);
+    const double d = std::min(decay, 0.1);
+    TrainOptions averaged = o;
+    averaged.ema_decay = decay;
+    const ModelFile average = decodeModel(trainBytes(averaged), "average.bin");
+    REQUIRE(average.tensors.size() == stepped.tensors.size());
+    double worst = 0.0, moved = 0.0;
+    for (std::size_t i = 0; i < average.tensors.size(); ++i) {
+      for (std::size_t k = 0; k < average.tensors[i].spec.count(); ++k) {
+        const double s0 = start.data(i)[k], s1 = stepped.data(i)[k];
+        worst = std::max(worst, std::abs(average.data(i)[k] - (d * s0 + (1.0 - d) * s1)) / (1.0 + std::abs(s1)));
+        moved = std::max(moved, std::abs(s1 - s0));
+      }
     }
+    CHECK(moved > 1e-4);  // the step changed the weights, so the blend is not trivially met
+    CHECK(worst <= 1e-6);
+    CHECK(nlohmann::json::parse(average.header.metadata_json)["training"].value("ema_decay", 0.0) == decay);
   }
-  CHECK(moved > 1e-4);  // the step changed the weights, so the blend is not trivially met
-  CHECK(worst <= 1e-6);
-  CHECK(nlohmann::json::parse(average.header.metadata_json)["training"].value("ema_decay", 0.0) == 0.5);
 
-  // Two epochs straight, or one and a resume from its checkpoint: the same bytes, so the
-  // checkpoint carries the average and its step count.
-  const std::string ck = dir + "/ema_checkpoint_" + std::to_string(::getpid()) + ".pt";
-  TrainOptions full = averaged;
+  // Two epochs: the optimiser trains the same weights with and without the average (it is only
+  // scored and kept), so the training losses are equal bit for bit.
+  TrainOptions full = o;
   full.max_epochs = full.patience = 2;
-  const std::vector<std::uint8_t> uninterrupted = trainBytes(full);
-  CHECK(uninterrupted != average_bytes);
-  CHECK_MESSAGE(resumedBytes(full, ck) == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
+  TrainResult plain, averaged;
+  trainBytes(full, &plain);
+  full.ema_decay = 0.5;
+  const std::vector<std::uint8_t> uninterrupted = trainBytes(full, &averaged);
+  REQUIRE(plain.history.size() == 2);
+  REQUIRE(averaged.history.size() == 2);
+  for (std::size_t e = 0; e < 2; ++e) CHECK(averaged.history[e].train_loss == plain.history[e].train_loss);
+  // One epoch and a resume from its checkpoint: the same bytes when the second epoch is kept, so
+  // the checkpoint carries the trained weights, the average and its step count.
+  const std::string ck = dir + "/ema_checkpoint_" + std::to_string(::getpid()) + ".pt";
+  TrainResult resumed;
+  const std::vector<std::uint8_t> bytes = resumedBytes(full, ck, &resumed);
+  CHECK(resumed.resumed_after == 1);
+  REQUIRE(averaged.best_epoch == 2);
+  CHECK(resumed.best_epoch == 2);
+  CHECK_MESSAGE(bytes == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
   std::filesystem::remove_all(cache);
 }
 

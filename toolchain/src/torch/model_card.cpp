@@ -279,7 +279,8 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
                   e.train_loss, e.val_loss, e.val_mse_rad2);
     s << buf;
     if (rollouts) {
-      std::snprintf(buf, sizeof buf, " %.1f (makes %d of %zu)", 1e3 * e.rollout_dtw_m, e.movements_made, e.rollouts.size());
+      std::snprintf(buf, sizeof buf, " %.1f (makes %d of %zu)", 1e3 * e.rollout_dtw_m, e.movements_made,
+                    data.movement_names.size());  // resumed epochs keep the count, not the rollouts
       s << buf;
       for (std::size_t m = 0; m < e.rollouts.size(); ++m) {
         std::snprintf(buf, sizeof buf, "%s%s %.1f, %.2f, %.1f/%.1f", m == 0 ? "; " : "; ", data.movement_names[m].c_str(),
