@@ -174,7 +174,7 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
   CHECK(r.history.back().train_loss < r.history.front().train_loss);
 }
 
-TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the start plus the rest of the trained weights; training goes on from the trained weights; resumable") {
+TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the start plus the rest of the trained weights; training goes on from the trained weights; what is scored is the average; resumable") {
   // One optimiser step per epoch. The start's weights are those after a step of lr 1e-12 (Adam
   // moves no weight by more than about the learning rate).
   const std::string dir = (std::filesystem::temp_directory_path() / "nao_rt_tests").string();
@@ -220,14 +220,19 @@ TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the 
   REQUIRE(plain.history.size() == 2);
   REQUIRE(averaged.history.size() == 2);
   for (std::size_t e = 0; e < 2; ++e) CHECK(averaged.history[e].train_loss == plain.history[e].train_loss);
-  // One epoch and a resume from its checkpoint: the same bytes when the second epoch is kept, so
-  // the checkpoint carries the trained weights, the average and its step count.
+  // What is scored is the average: its validation loss is not the trained weights'.
+  CHECK(averaged.history[1].val_loss != plain.history[1].val_loss);
+  // One epoch and a resume from its checkpoint: the second epoch's average scores the same bits
+  // (so the checkpoint carries the trained weights, the average and its step count), the same
+  // epoch is kept and the same bytes are written.
   const std::string ck = dir + "/ema_checkpoint_" + std::to_string(::getpid()) + ".pt";
   TrainResult resumed;
   const std::vector<std::uint8_t> bytes = resumedBytes(full, ck, &resumed);
   CHECK(resumed.resumed_after == 1);
-  REQUIRE(averaged.best_epoch == 2);
-  CHECK(resumed.best_epoch == 2);
+  REQUIRE(resumed.history.size() == 2);
+  CHECK(resumed.history[1].val_loss == averaged.history[1].val_loss);
+  CHECK(resumed.history[1].train_loss == averaged.history[1].train_loss);
+  CHECK(resumed.best_epoch == averaged.best_epoch);
   CHECK_MESSAGE(bytes == uninterrupted, "resumed after epoch 1 of 2, the bytes differ");
   std::filesystem::remove_all(cache);
 }
