@@ -29,7 +29,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -70,22 +69,6 @@ void score(const Skeleton& est, const Skeleton& truth, Metrics& m) {
     if (est_arm.valid && truth_arm.valid)
       m.elbow_deg.push_back(std::abs(est_arm.q[kHumanElbowRoll] - truth_arm.q[kHumanElbowRoll]) * kDeg);
   }
-}
-
-// The detector regime: confidences redrawn, pixel error growing as confidence falls.
-void detectorNoise(StressScene& scene, std::uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> conf(0.2, 0.95);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  for (CameraKeypoints& cam : scene.keypoints)
-    for (KeypointFrame& frame : cam.frames)
-      for (Person2d& p : frame.people)
-        for (int i = 0; i < kNumSkeletonPoints; ++i) {
-          const double c = conf(rng), nx = normal(rng), ny = normal(rng);
-          if (!p.detected(i)) continue;
-          p.confidence[i] = c;
-          p.px[i] += 12.0 * (1.0 - c) * Eigen::Vector2d(nx, ny);
-        }
 }
 
 // Confidence weights c^power (0: all 1, unweighted; 1: as detected).
@@ -179,7 +162,7 @@ int main(int argc, char** argv) {
       so.seed = 7 + static_cast<std::uint64_t>(3 * d + m);
       StressScene s = renderStressScene(demo, so);
       scenes[0].push_back(s);
-      detectorNoise(s, 1000 + static_cast<std::uint64_t>(3 * d + m));
+      addDetectorNoise(s, 1000 + static_cast<std::uint64_t>(3 * d + m));
       scenes[1].push_back(std::move(s));
     }
   fs::remove_all(scratch);

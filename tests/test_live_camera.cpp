@@ -21,7 +21,6 @@
 #include <cmath>
 #include <fstream>
 #include <map>
-#include <random>
 #include <thread>
 
 namespace {
@@ -459,8 +458,8 @@ TEST_CASE("the gap bridge holds a point across a short gap, flagged, and lets a 
 }
 
 TEST_CASE("the live defaults (bone fit, One Euro low-pass) cut the plain live elbow error on a noisy 4-camera recording, causally") {
-  // Stress recordings with a detector whose confidence says how far off it is (as in
-  // bench/triangulation_accuracy.cpp), fed frame by frame through the live path.
+  // Stress recordings with a detector whose confidence says how far off it is (addDetectorNoise,
+  // as in bench/triangulation_accuracy.cpp), fed frame by frame through the live path.
   std::vector<double> plain_deg, default_deg;
   int plain_out = 0, default_out = 0, n_forearm = 0;
   for (int m = 0; m < 3; ++m) {
@@ -469,18 +468,7 @@ TEST_CASE("the live defaults (bone fit, One Euro low-pass) cut the plain live el
     so.seed = 31 + static_cast<std::uint64_t>(m);
     so.n_frames = 360;
     tools::StressScene scene = tools::renderStressScene(demo, so);
-    std::mt19937_64 rng(91 + static_cast<std::uint64_t>(m));
-    std::uniform_real_distribution<double> conf(0.2, 0.95);
-    std::normal_distribution<double> normal(0.0, 1.0);
-    for (tools::CameraKeypoints& cam : scene.keypoints)
-      for (tools::KeypointFrame& frame : cam.frames)
-        for (Person2d& p : frame.people)
-          for (int i = 0; i < kNumSkeletonPoints; ++i) {
-            const double c = conf(rng), nx = normal(rng), ny = normal(rng);
-            if (!p.detected(i)) continue;
-            p.confidence[i] = c;
-            p.px[i] += 12.0 * (1.0 - c) * Eigen::Vector2d(nx, ny);
-          }
+    tools::addDetectorNoise(scene, 91 + static_cast<std::uint64_t>(m));
     LiveSkeletonParams plain;
     plain.bone_fit_px_per_m = 0.0;
     plain.low_pass.min_cutoff_hz = 0.0;

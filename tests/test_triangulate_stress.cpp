@@ -98,23 +98,6 @@ TEST_CASE("4-camera stress recordings: the right arm is kept through a crossing 
 
 namespace {
 
-// A detector whose confidence says how far off it is: every detection's confidence redrawn in
-// [0.2, 0.95], its pixel moved by N(0, (12 px (1 - c))^2) per axis (seeded).
-void confidenceTellingNoise(StressScene& scene, std::uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> conf(0.2, 0.95);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  for (CameraKeypoints& cam : scene.keypoints)
-    for (KeypointFrame& frame : cam.frames)
-      for (Person2d& p : frame.people)
-        for (int i = 0; i < kNumSkeletonPoints; ++i) {
-          const double c = conf(rng), nx = normal(rng), ny = normal(rng);
-          if (!p.detected(i)) continue;
-          p.confidence[i] = c;
-          p.px[i] += 12.0 * (1.0 - c) * Eigen::Vector2d(nx, ny);
-        }
-}
-
 struct ArmScore {
   std::vector<double> elbow_deg;  // |elbow flexion - truth's| per frame with the arm valid
   int n_frames = 0, n_arm = 0, n_forearm = 0, n_out_of_band = 0;
@@ -239,7 +222,7 @@ TEST_CASE("on stress recordings with a confidence-telling detector, smoothing an
     so.seed = 21 + static_cast<std::uint64_t>(m);
     so.n_frames = 360;
     StressScene scene = renderStressScene(demo, so);
-    confidenceTellingNoise(scene, 77 + static_cast<std::uint64_t>(m));
+    addDetectorNoise(scene, 77 + static_cast<std::uint64_t>(m));
     TriangulateOptions opt;
     opt.fps = scene.fps;
     opt.rate_hz = scene.fps;

@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <utility>
 
 namespace nao::tools {
@@ -296,6 +297,21 @@ void writeStressScene(const StressScene& scene, const std::string& out_dir) {
   }
   writeText(dir / "calibration.json", calib.dump(2) + "\n");
   writeSkeletonCsv((dir / "truth.csv").string(), scene.truth);
+}
+
+void addDetectorNoise(StressScene& scene, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> conf(0.2, 0.95);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  for (CameraKeypoints& cam : scene.keypoints)
+    for (KeypointFrame& frame : cam.frames)
+      for (Person2d& p : frame.people)
+        for (int i = 0; i < kNumSkeletonPoints; ++i) {
+          const double c = conf(rng), nx = normal(rng), ny = normal(rng);
+          if (!p.detected(i)) continue;
+          p.confidence[i] = c;
+          p.px[i] += 12.0 * (1.0 - c) * Eigen::Vector2d(nx, ny);
+        }
 }
 
 }  // namespace nao::tools

@@ -59,6 +59,12 @@ struct StressScene {
 /// fault camera index >= n_cameras, or a non-positive fps.
 StressScene renderStressScene(const SynthDemo& demo, const StressOptions& opt);
 
+/// The regime of a real detector, whose confidence says how far off it is: every detection's
+/// confidence redrawn uniformly in [0.2, 0.95] and its pixel moved by N(0, (12 px (1 - c))^2) per
+/// axis, seeded. Undetected points keep their state (the draws are made for them too, so the
+/// noise of a point does not depend on which others were detected).
+void addDetectorNoise(StressScene& scene, std::uint64_t seed);
+
 /// Writes DIR/<scene.name>/: cam0/ .. camN/ (OpenPose JSON, BODY_25, all people of a frame),
 /// calibration.json and truth.csv (the subject, skeleton CSV). Throws UserError on I/O failure.
 void writeStressScene(const StressScene& scene, const std::string& out_dir);
