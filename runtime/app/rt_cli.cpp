@@ -100,7 +100,8 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                "Pace ticks on absolute 100 ms deadlines (clock_nanosleep, CLOCK_MONOTONIC), with\n"
                "SCHED_FIFO + mlockall when permitted (one warning line when not); a missed deadline\n"
                "is an overrun and the loop skips to the next grid point. Without it ticks run back\n"
-               "to back with identical results");
+               "to back with identical results. With --robot lola the robot's packets are the clock:\n"
+               "only SCHED_FIFO + mlockall, taken before the LoLA I/O thread starts so it inherits them");
   app.add_option("--robot", o.robot,
                  "ode          the in-process ODE arm (deterministic)\n"
                  "lola[:PATH]  a NAO V6 (or nao_lola_sim) through LoLA's Unix socket (default\n"

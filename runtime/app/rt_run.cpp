@@ -43,17 +43,19 @@ RealtimeScheduling enterRealtime() {
   else
     problems += (problems.empty() ? "" : "; ") + std::string("mlockall: ") + std::strerror(errno);
   if (!problems.empty())
-    s.warning = "real-time scheduling not permitted (" + problems + "); running on absolute deadlines without it";
+    s.warning = "real-time scheduling not permitted (" + problems + ")";
   return s;
 }
 
-void leaveRealtime(const RealtimeScheduling& s) {
+void leaveRealtime(RealtimeScheduling& s) {
   if (s.locked) munlockall();
   if (s.fifo) {
     sched_param old{};
     old.sched_priority = s.old_priority;
     sched_setscheduler(0, s.old_policy, &old);
   }
+  s.locked = false;
+  s.fifo = false;
 }
 
 }  // namespace nao::rt

@@ -51,7 +51,8 @@ struct RealtimeScheduling {
   std::string warning;  ///< one line when something was not permitted
 };
 RealtimeScheduling enterRealtime();
-void leaveRealtime(const RealtimeScheduling& s);
+/// Restores what enterRealtime changed; a second call does nothing.
+void leaveRealtime(RealtimeScheduling& s);
 /// Sleeps until the absolute CLOCK_MONOTONIC time t_ns (clock_nanosleep TIMER_ABSTIME; resumes
 /// after signals). Real-time safe.
 void sleepUntilNs(std::int64_t t_ns);
@@ -124,8 +125,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
   try {
     // Configure: everything that can fail or allocate.
     const RobotSpec robot = parseRobotSpec(options.robot, options.lola.socket_path);
-    if (robot.lola && options.realtime)
-      throw UsageError("--realtime paces the in-process arm; with --robot lola the robot's packets are the clock");
+    // --realtime paces the in-process arm on 100 ms deadlines; on LoLA the robot's packets are
+    // the clock, and --realtime only asks for SCHED_FIFO + mlockall.
+    const bool paced = options.realtime && !robot.lola;
     PreparedRun p = prepareRun(options, Dims::arch());
     WeightStorage weight_storage;
     // The compiled-in model: views at the generated offsets into .rodata (no lookup, no copy);
@@ -196,6 +198,22 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       const PolicyWorkspace<Dims>* workspace;
       std::uint64_t sink;
     } warm{&model.policy, nullptr, 0};
+    LoopTotals totals;
+    RealtimeScheduling rt;
+    // Left on every way out, an exception included (runController also runs inside tests).
+    struct LeaveRealtime {
+      RealtimeScheduling& s;
+      ~LeaveRealtime() { leaveRealtime(s); }
+    } leave_realtime{rt};
+    // Before the backend: its I/O thread (--lola-io-thread), started at configure time, inherits
+    // the control thread's SCHED_FIFO; mlockall covers the whole process either way.
+    if (options.realtime) {
+      rt = enterRealtime();
+      if (!rt.warning.empty())
+        err << "nao_rt: warning: " << rt.warning
+            << (paced ? "; running on absolute deadlines without it\n" : "; running on LoLA's clock without it\n");
+      totals.realtime_scheduling = rt.warning.empty() ? "SCHED_FIFO + mlockall" : rt.warning;
+    }
     if (robot.lola) {
       // The socket is opened here, before activate.
       LolaParams lola_params = options.lola;
@@ -212,6 +230,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       installLolaStopSignals();
       auto backend = std::make_unique<LolaBackend>(p.arm, lola_params);
       lola = backend.get();
+      totals.lola_io_scheduling = backend->ioThreadScheduling();
       robot_backend = std::move(backend);
     } else {
       robot_backend = std::make_unique<OdeArmBackend>(p.arm, options.sim, clampToLimits(p.arm, p.q_start));
@@ -235,16 +254,10 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     const std::size_t n_targets = target != nullptr ? target->size() : 0;
     const std::int64_t period_ns = static_cast<std::int64_t>(options.controller.period_s * 1e9 + 0.5);
 
-    LoopTotals totals;
-    RealtimeScheduling rt;
-    if (options.realtime) {
-      rt = enterRealtime();
-      if (!rt.warning.empty()) err << "nao_rt: warning: " << rt.warning << "\n";
-      totals.realtime_scheduling = rt.warning.empty() ? "SCHED_FIFO + mlockall" : rt.warning;
-    }
     out << "nao_rt: " << p.description << " -> movement " << p.spec.movement << ", model " << p.model_source << ", " << p.ticks << " ticks ("
         << static_cast<double>(p.ticks) * options.controller.period_s << " s), "
-        << (robot.lola ? "on LoLA " + robot.socket_path : options.realtime ? "real time" : "back to back") << "\n";
+        << (robot.lola ? "on LoLA " + robot.socket_path : paced ? "real time" : "back to back")
+        << (robot.lola && options.realtime ? " (" + totals.realtime_scheduling + ")" : "") << "\n";
     out.flush();
 
     // Every page the step reads resident before the loop (a released image's, a --weights
@@ -264,7 +277,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     std::int64_t next_ns = monotonicNs();
     std::int64_t ticks_done = 0;
     for (std::int64_t t = 0; t < p.ticks && data->robot->stopReason() == RobotStop::kNone; ++t) {
-      if (options.realtime) sleepUntilNs(next_ns);
+      if (paced) sleepUntilNs(next_ns);
       if (options.emulate_tick_ns > 0) spinForNs(options.emulate_tick_ns);
       const std::size_t i = static_cast<std::size_t>(t);
       const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
@@ -277,7 +290,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
         rec.ee_ref = forwardKinematics(p.arm, kin_ref, (*target)[std::min(i + 1, n_targets - 1)]);
       else
         rec.ee_ref.setConstant(std::numeric_limits<double>::quiet_NaN());
-      if (options.realtime) {
+      if (paced) {
         // Overrun: the tick ended after the next grid point. Stay on the grid: the next tick
         // starts at the first grid point still ahead.
         const std::int64_t deadline = next_ns + period_ns;
@@ -304,7 +317,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     totals.wall_s = static_cast<double>(monotonicNs() - wall0) * 1e-9;
     if (probe != nullptr) totals.allocations = probe->stop();
     if (reader_counter != nullptr) totals.reader_allocations = reader_counter->count() - reader_allocations0;
-    if (options.realtime) leaveRealtime(rt);
+    leaveRealtime(rt);
     records.resize(static_cast<std::size_t>(ticks_done));
     totals.stop = stop;
     if (lola) {

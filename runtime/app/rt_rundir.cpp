@@ -228,6 +228,8 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
                  {"hot_cycles", c.hot_cycles},
                  {"tracking_cycles", c.tracking_cycles},
                  {"io_thread", o.lola.io_thread},
+                 {"io_thread_scheduling", totals.lola_io_scheduling.empty() ? ordered_json(nullptr)
+                                                                            : ordered_json(totals.lola_io_scheduling)},
                  {"overrun_ticks", c.overrun_ticks},
                  {"warm", c.before_tick_calls > 0},
                  {"warm_skipped", c.before_tick_skipped},

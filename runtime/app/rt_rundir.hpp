@@ -47,6 +47,7 @@ struct LoopTotals {
   std::string realtime_scheduling;   ///< "SCHED_FIFO + mlockall", or what was not permitted
   bool lola = false;                 ///< the robot was LoLA (summary.json "robot", "lola")
   std::string lola_socket;
+  std::string lola_io_scheduling;    ///< the I/O thread's policy and priority; empty without one
   LolaCounters lola_counters;
   std::vector<std::int64_t> lola_latency_ns;  ///< per answered cycle
   RobotStop stop = RobotStop::kNone;          ///< the backend ended the run early

@@ -3,6 +3,8 @@
 #include "nao/controller.hpp"
 
 #include <poll.h>
+#include <pthread.h>
+#include <sched.h>
 #include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -106,6 +108,16 @@ LolaBackend::LolaBackend(const ArmModel& arm, const LolaParams& params) : arm_(a
       throw;
     }
   }
+}
+
+std::string LolaBackend::ioThreadScheduling() const {
+  if (!io_.joinable()) return {};
+  int policy = 0;
+  sched_param param{};
+  // native_handle() is not const; the query changes nothing.
+  if (pthread_getschedparam(const_cast<std::thread&>(io_).native_handle(), &policy, &param) != 0) return "unknown";
+  const char* name = policy == SCHED_FIFO ? "SCHED_FIFO" : policy == SCHED_RR ? "SCHED_RR" : "SCHED_OTHER";
+  return std::string(name) + " " + std::to_string(param.sched_priority);
 }
 
 LolaBackend::~LolaBackend() {

@@ -16,7 +16,8 @@ CASE:
                of nao_lola_sim: keys, lengths, joint order.
   peer:client  python3-msgpack as the LoLA robot that nao_rt talks to: keys, lengths, joint
                order, and a malformed packet counted and skipped.
-  io:M         movement:M with --lola-io-thread (the I/O on a thread of its own).
+  io:M         movement:M with --lola-io-thread (the I/O on a thread of its own) and --realtime
+               (SCHED_FIFO + mlockall, inherited by the I/O thread).
   iofault:F    fault:F with --lola-io-thread.
   slow:io_thread  30 ms ticks (--emulate-tick-ms): late answers on one thread, none with
                --lola-io-thread.
@@ -171,6 +172,23 @@ def check_start_and_stop(rows, label, expect_stop_ramp=True):
         check(hold, f"{label}: the arm holds its position while the stiffness ramps down")
 
 
+def check_realtime(s, asked):
+    """--realtime on LoLA: SCHED_FIFO + mlockall taken before the I/O thread starts, so the I/O
+    thread runs SCHED_FIFO too; where the machine refuses it, both stay as they were and the run
+    goes on (one warning). Without --realtime nothing is changed."""
+    check(s["realtime"] == asked, f"summary.json realtime {s['realtime']} (asked: {asked})")
+    io = s["lola"]["io_thread_scheduling"]
+    if not asked:
+        check(io in (None, "SCHED_OTHER 0"), f"without --realtime the I/O thread is SCHED_OTHER ({io})")
+        return
+    granted = s["realtime_scheduling"] == "SCHED_FIFO + mlockall"
+    print(f"info  --realtime on LoLA: {s['realtime_scheduling']}; I/O thread {io}")
+    check(s["skipped_periods"] == 0, "LoLA's clock paces the run: no 100 ms grid, no skipped period")
+    if s["lola"]["io_thread"]:
+        want = "SCHED_FIFO 50" if granted else "SCHED_OTHER 0"
+        check(io == want, f"the I/O thread inherits the control thread's scheduling: {io} (expected {want})")
+
+
 def case_movement(a, movement, tmp, flags=()):
     ode_dir, hil_dir = os.path.join(tmp, "ode"), os.path.join(tmp, "hil")
     rc, _ = run_rt(a.nao_rt, [*reference(a, tmp, movement), "--log", ode_dir], 300)
@@ -200,6 +218,9 @@ def case_movement(a, movement, tmp, flags=()):
     if "--lola-io-thread" in flags:
         check(lola["io_thread"] and lola["io_allocations"] == 0 and lola["overrun_ticks"] == 0,
               f"the I/O thread ran, counted 0 allocations of its own and no tick overran: {lola}")
+    else:
+        check(lola["io_thread_scheduling"] is None, "one thread: no I/O thread scheduling reported")
+    check_realtime(hil, "--realtime" in flags)
     check(lola["malformed"] == 0 and lola["gaps"] == 0 and lola["tracking_cycles"] == 0 and lola["hot_cycles"] == 0
           and lola["cycles"] > ticks * 8, f"no robot fault counted without an injected one: {lola}")
     check(own_late(lola) <= 0.01 * lola["cycles"],
@@ -469,7 +490,7 @@ def main():
         if kind == "movement":
             case_movement(a, arg, tmp)
         elif kind == "io":
-            case_movement(a, arg, tmp, ["--lola-io-thread"])
+            case_movement(a, arg, tmp, ["--lola-io-thread", "--realtime"])
         elif kind == "iofault":
             case_fault(a, arg, tmp, ["--lola-io-thread"])
         elif kind == "slow" and arg == "io_thread":
