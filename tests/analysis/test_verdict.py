@@ -85,6 +85,9 @@ class Rule(unittest.TestCase):
         self.assertEqual(verdict.row_holds(row("wrist", "RElbowYaw", *WEAK), 1)[1], "not strong: below 0.5")
         self.assertEqual(verdict.row_holds(row("wrist", "RElbowYaw", *WIDE), 1)[1], "interval not above 0")
         self.assertIn("opposite sign", verdict.row_holds(row("wrist", "RElbowYaw", *NEGATIVE), 1)[1])
+        # A strong ρ of the wrong sign fails on its sign and interval, not on its strength.
+        self.assertEqual(verdict.row_holds(row("wrist", "RElbowYaw", -0.6, -0.7, -0.5), 1),
+                         (False, "opposite sign, interval not above 0"))
         self.assertTrue(verdict.row_holds(row("wrist", "RElbowYaw", *NEGATIVE), -1)[0])
         nan = float("nan")
         self.assertEqual(verdict.row_holds(row("wrist", "RElbowYaw", 0.7, nan, nan), 1), (False, "no interval"))

@@ -35,7 +35,8 @@ def row_holds(row, sign):
     reasons = []
     if sign * rho <= 0:
         reasons.append("opposite sign")
-    if sign * rho < STRONG_RHO:
+    # Strength is the magnitude: a strong ρ of the other sign fails on its sign alone.
+    if abs(rho) < STRONG_RHO:
         reasons.append("not strong: below %.1f" % STRONG_RHO)
     bound = lo if sign > 0 else hi
     if not math.isfinite(bound):
