@@ -210,8 +210,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     if (options.realtime) {
       rt = enterRealtime();
       if (!rt.warning.empty())
-        err << "nao_rt: warning: " << rt.warning
-            << (paced ? "; running on absolute deadlines without it\n" : "; running on LoLA's clock without it\n");
+        err << "nao_rt: warning: " << rt.warning << "; running on " << (paced ? "absolute deadlines" : "LoLA's clock")
+            << " without it\n";
       totals.realtime_scheduling = rt.warning.empty() ? "SCHED_FIFO + mlockall" : rt.warning;
     }
     if (robot.lola) {

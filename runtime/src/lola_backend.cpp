@@ -110,12 +110,11 @@ LolaBackend::LolaBackend(const ArmModel& arm, const LolaParams& params) : arm_(a
   }
 }
 
-std::string LolaBackend::ioThreadScheduling() const {
+std::string LolaBackend::ioThreadScheduling() {
   if (!io_.joinable()) return {};
   int policy = 0;
   sched_param param{};
-  // native_handle() is not const; the query changes nothing.
-  if (pthread_getschedparam(const_cast<std::thread&>(io_).native_handle(), &policy, &param) != 0) return "unknown";
+  if (pthread_getschedparam(io_.native_handle(), &policy, &param) != 0) return "unknown";
   const char* name = policy == SCHED_FIFO ? "SCHED_FIFO" : policy == SCHED_RR ? "SCHED_RR" : "SCHED_OTHER";
   return std::string(name) + " " + std::to_string(param.sched_priority);
 }

@@ -130,7 +130,7 @@ class LolaBackend final : public RobotBackend {
   const std::vector<std::int64_t>& latenciesNs() const { return latency_ns_; }
   /// The I/O thread's scheduling policy and priority ("SCHED_FIFO 50", "SCHED_OTHER 0"); empty
   /// without one. It inherits the thread's that constructed the backend. Configure time.
-  std::string ioThreadScheduling() const;
+  std::string ioThreadScheduling();
 
  private:
   enum class Phase { kRamp, kToStart, kSettle, kRun, kStop };
