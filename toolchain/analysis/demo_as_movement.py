@@ -1,7 +1,7 @@
 #!/usr/bin/python3
-"""A prepared data set in which each demonstration is a movement of its own (docs/policy.md,
-"Autonomous mode: what was tried"): can the policy make one demonstration's movement in closed
-loop when nothing about it is ambiguous?
+"""A prepared data set in which each demonstration is a movement of its own (docs/autonomous.md):
+can the policy make one demonstration's movement in closed loop when nothing about it is
+ambiguous?
 
 The first N demonstrations (sorted by name) of each movement of SRC become the movements
 <movement><index> of DST, each with COPIES identical copies <movement><index>_000 .. (retarget.csv,

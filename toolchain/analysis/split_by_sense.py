@@ -1,6 +1,5 @@
 #!/usr/bin/python3
-"""A prepared data set with every movement split in two by its rotation sense (docs/policy.md,
-"Autonomous mode: what was tried").
+"""A prepared data set with every movement split in two by its rotation sense (docs/autonomous.md).
 
 The sense is read from the joints alone, so it works on any recording: per movement, the
 principal plane of all demonstrations' middle stretches (20-80 % of each retarget.csv's qr_0..qr_4,
