@@ -8,7 +8,10 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <random>
+#include <string>
 #include <vector>
 
 using namespace nao;
@@ -76,4 +79,62 @@ TEST_CASE("6,000 controller ticks with a small bins head of chunk 5 (the tempora
   arch.chunk = 5;
   arch.bins = 8;
   checkNoAllocation<SmallPolicyDims>(6, arch);
+}
+
+TEST_CASE("an autonomous run that chooses its run code at activate allocates nothing, and the code moves its actions") {
+  using Dims = SmallPolicyDims;
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const test::RandomPolicy random = test::makeRandomPolicy(Dims::arch(), arm, 8);
+  const PolicyWeights<Dims> weights =
+      bindPolicyWeights<Dims>(random.pointers.data(), random.pointers.size(), Dims::arch(), Conditioning::kAutonomous);
+  // 40 demonstrations per movement: starts around home, random codes, a symmetric DTW table.
+  std::mt19937_64 rng(11);
+  const auto uniform = [&](double lo, double hi) { return static_cast<double>(test::uniformFloat(rng, lo, hi)); };
+  std::vector<ModelRunCodes> codes(static_cast<std::size_t>(weights.movements));
+  for (ModelRunCodes& c : codes) {
+    constexpr std::size_t n = 40;
+    c.d = Dims::kDModel;
+    for (std::size_t i = 0; i < n; ++i) {
+      c.names.push_back("demo_" + std::to_string(i));
+      c.q.push_back(ControllerParams{}.home + 0.3 * JointVector::NullaryExpr([&] { return uniform(-1.0, 1.0); }));
+    }
+    for (std::size_t i = 0; i < n * Dims::kDModel; ++i) c.code.push_back(static_cast<float>(uniform(-1.0, 1.0)));
+    c.dtw_m.assign(n * n, 0.0);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t k = i + 1; k < n; ++k) c.dtw_m[i * n + k] = c.dtw_m[k * n + i] = uniform(0.0, 0.05);
+  }
+  const ControllerModel<Dims> with = configureController(arm, weights, ControllerParams{}, {}, codes);
+  const ControllerModel<Dims> without = configureController(arm, weights, ControllerParams{});
+  const JointVector start = ControllerParams{}.home + JointVector::Constant(0.05);
+  constexpr int kTicks = 600;
+  std::vector<JointVector> q_with, q_without;
+  for (const ControllerModel<Dims>* model : {&with, &without}) {
+    OdeArmBackend robot(model->arm, SimParams{}, start);
+    ControllerData<Dims> data(robot);
+    SteadyClock clock;
+    std::vector<JointVector>& q = model == &with ? q_with : q_without;
+    q.resize(kTicks);
+    std::int64_t allocations = 0;
+    {
+      nao::test::CountAllocations count;
+      activateController(*model, data, start, 1, clock);
+      for (int t = 0; t < kTicks; ++t) q[static_cast<std::size_t>(t)] = updateController(*model, data, nullptr).q;
+      deactivateController(*model, data);
+      allocations = count.count();
+    }
+    CHECK(allocations == 0);
+    if (model == &with) {
+      const int i = runCodeIndex(codes[1], clampToLimits(arm, start));
+      REQUIRE(i >= 0);
+      CHECK(data.run_code == i);
+      for (int k = 0; k < Dims::kDModel; ++k)
+        CHECK(data.policy->run_code[k] == codes[1].code[static_cast<std::size_t>(i * Dims::kDModel + k)]);
+    } else {
+      CHECK(data.run_code == -1);
+      CHECK(data.policy->run_code.isZero(0.0f));
+    }
+  }
+  double moved = 0.0;
+  for (int t = 0; t < kTicks; ++t) moved = std::max(moved, (q_with[static_cast<std::size_t>(t)] - q_without[static_cast<std::size_t>(t)]).norm());
+  CHECK(moved > 1e-3);
 }

@@ -614,3 +614,49 @@ TEST_CASE("an autonomous model's workspace round-trips through its metadata; a m
                        doctest::Contains("'wave' has lo above hi"), ModelFileError);
   CHECK_THROWS_AS(nao::withModelWorkspace("{}", movements, {w[0]}), ModelFileError);
 }
+
+TEST_CASE("run codes round-trip through the metadata bit for bit; malformed ones are refused naming what is wrong") {
+  const std::vector<std::string> movements = {"elbow", "wave"};
+  std::vector<nao::ModelRunCodes> codes(2);
+  for (std::size_t m = 0; m < 2; ++m) {
+    nao::ModelRunCodes& c = codes[m];
+    c.d = 4;
+    for (int i = 0; i < 3 - static_cast<int>(m); ++i) {
+      c.names.push_back(movements[m] + "_" + std::to_string(i));
+      c.q.push_back(nao::JointVector::Constant(1.0 / (3.0 + i)));
+      for (int k = 0; k < c.d; ++k) c.code.push_back(static_cast<float>(k - i) / 7.0f);
+    }
+    const std::size_t n = c.size();
+    c.dtw_m.assign(n * n, 0.0);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t k = i + 1; k < n; ++k) c.dtw_m[i * n + k] = c.dtw_m[k * n + i] = 0.01 / static_cast<double>(i + k + 3);
+  }
+  const std::string with = nao::withModelRunCodes(R"({"seed":3})", movements, codes);
+  const std::vector<nao::ModelRunCodes> back = nao::modelRunCodes(with, movements, 4, "m.bin");
+  REQUIRE(back.size() == 2);
+  for (std::size_t m = 0; m < 2; ++m) {
+    CHECK(back[m].names == codes[m].names);
+    CHECK(back[m].q == codes[m].q);
+    CHECK(back[m].code == codes[m].code);
+    CHECK(back[m].dtw_m == codes[m].dtw_m);
+    CHECK(back[m].d == 4);
+  }
+  CHECK(nao::modelRunCodes(R"({"seed":3})", movements, 4, "m.bin").empty());  // no run latent: none
+  CHECK_THROWS_WITH_AS(nao::modelRunCodes(with, movements, 8, "m.bin"), doctest::Contains("code (d_model 8)"), ModelFileError);
+  CHECK_THROWS_WITH_AS(nao::modelRunCodes(with, {"elbow"}, 4, "m.bin"), doctest::Contains("'wave', which is not a movement"),
+                       ModelFileError);
+  CHECK_THROWS_WITH_AS(nao::modelRunCodes(with, {"elbow", "wave", "wrist"}, 4, "m.bin"),
+                       doctest::Contains("no entry for movement 'wrist'"), ModelFileError);
+  std::vector<nao::ModelRunCodes> bad = codes;
+  bad[0].dtw_m[1] += 1e-3;  // no longer symmetric
+  CHECK_THROWS_WITH_AS(nao::modelRunCodes(nao::withModelRunCodes("{}", movements, bad), movements, 4, "m.bin"),
+                       doctest::Contains("not symmetric"), ModelFileError);
+  bad = codes;
+  bad[1].q[0][2] = std::nan("");
+  CHECK_THROWS_WITH_AS(nao::modelRunCodes(nao::withModelRunCodes("{}", movements, bad), movements, 4, "m.bin"),
+                       doctest::Contains("'wave' entry 0's q"), ModelFileError);
+  bad = codes;
+  bad[0].code.pop_back();
+  CHECK_THROWS_AS(nao::withModelRunCodes("{}", movements, bad), ModelFileError);
+  CHECK_THROWS_AS(nao::withModelRunCodes("{}", movements, {codes[0]}), ModelFileError);
+}

@@ -2,12 +2,16 @@
 // on paths whose answers are known in closed form: circles drawn a known number of times at a
 // known speed, back-and-forth strokes that draw no loop, copies and shifted copies of a path.
 #include "nao/tools/command.hpp"
+#include "nao/model_file.hpp"
 #include "nao/tools/movement_metrics.hpp"
+#include "rt_metrics.hpp"
 #include <Eigen/Geometry>
 
 #include <doctest/doctest.h>
 
 #include <cmath>
+#include <random>
+#include <string>
 
 using namespace nao;
 using namespace nao::tools;
@@ -121,6 +125,45 @@ TEST_CASE("nearest starts come nearest first, ties to the lower index") {
   CHECK(n[1] == 3);
   CHECK(n[2] == 2);
   CHECK(nearestStarts(starts, JointVector::Zero(), 10).size() == 5);
+}
+
+TEST_CASE("a run's code is the medoid replay's demonstration: the runtime's choice against nearestStarts + medoid") {
+  // 30 demonstrations with random starts (some equal, for ties) and circles of random centres;
+  // the runtime chooses from the table of their DTWs, the evaluator from the paths themselves.
+  std::mt19937_64 rng(5);
+  const auto u = [&](double lo, double hi) { return lo + (hi - lo) * (static_cast<double>(rng() >> 11) * 0x1.0p-53); };
+  ModelRunCodes codes;
+  codes.d = 1;
+  std::vector<HandPath> paths;
+  for (int i = 0; i < 30; ++i) {
+    codes.names.push_back("d" + std::to_string(i));
+    codes.q.push_back(i % 7 == 3 ? codes.q[static_cast<std::size_t>(i - 1)] : JointVector(JointVector::Zero()));
+    if (i % 7 != 3)
+      for (int k = 0; k < kNumJoints; ++k) codes.q.back()[k] = u(-1.0, 1.0);
+    codes.code.push_back(static_cast<float>(i));
+    paths.push_back(circle(Eigen::Vector3d(u(-0.05, 0.05), u(-0.05, 0.05), 0.0), kX, kY, u(0.03, 0.06), u(0.5, 2.0), 24));
+  }
+  const std::size_t n = paths.size();
+  codes.dtw_m.assign(n * n, 0.0);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t k = i + 1; k < n; ++k) codes.dtw_m[i * n + k] = codes.dtw_m[k * n + i] = rt::dtwMeanDistance(paths[i], paths[k]);
+  int differs_from_nearest = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    JointVector q0;
+    for (int k = 0; k < kNumJoints; ++k) q0[k] = u(-1.2, 1.2);
+    if (trial % 10 == 0) q0 = codes.q[static_cast<std::size_t>(trial % 30)];  // on a start, and on the tied pairs
+    const std::vector<int> near = nearestStarts(codes.q, q0, kRunCodeNearest);
+    const int expected = medoid(paths, near);
+    CHECK(runCodeIndex(codes, q0) == expected);
+    differs_from_nearest += expected != near.front() ? 1 : 0;
+  }
+  CHECK(differs_from_nearest > 50);  // the medoid is not merely the nearest start
+  CHECK(runCodeIndex(ModelRunCodes{}, JointVector::Zero()) == -1);
+  ModelRunCodes three = codes;  // fewer demonstrations than kRunCodeNearest: the medoid of all
+  three.names.resize(3);
+  three.q.resize(3);
+  three.dtw_m = {0.0, codes.dtw_m[1], codes.dtw_m[2], codes.dtw_m[n], 0.0, codes.dtw_m[n + 2], codes.dtw_m[2 * n], codes.dtw_m[2 * n + 1], 0.0};
+  CHECK(runCodeIndex(three, JointVector::Zero()) == medoid(paths, nearestStarts(three.q, JointVector::Zero(), 5)));
 }
 
 TEST_CASE("the RMS of a sequence of joint vectors runs over every tick and joint") {

@@ -565,6 +565,55 @@ TEST_CASE("--reference none rolls an autonomous model out from its I-th start of
   CHECK(rw.report.ticks == 30);
 }
 
+TEST_CASE("a model with run codes: each run takes the code of the medoid of the starts nearest its own, named in summary.json") {
+  // Per movement 6 training demonstrations around the test starts, codes of the small d_model.
+  const int d = smallArch().d_model;
+  std::vector<ModelRunCodes> codes(3);
+  for (std::size_t m = 0; m < 3; ++m) {
+    ModelRunCodes& c = codes[m];
+    c.d = d;
+    for (int i = 0; i < 6; ++i) {
+      c.names.push_back("train_" + std::to_string(m) + "_" + std::to_string(i));
+      c.q.push_back(kStartC + JointVector::Constant(0.05 * (i - 2)) + (i % 2 ? kStartA - kStartC : kStartB - kStartC) * 0.5);
+      for (int k = 0; k < d; ++k) c.code.push_back(0.4f * std::sin(0.7f * static_cast<float>(k + 3 * i + 11 * static_cast<int>(m))));
+    }
+    c.dtw_m.assign(36, 0.0);
+    for (std::size_t i = 0; i < 6; ++i)
+      for (std::size_t k = i + 1; k < 6; ++k) c.dtw_m[i * 6 + k] = c.dtw_m[k * 6 + i] = 0.001 * static_cast<double>((i * 7 + k * 3) % 11 + 1);
+  }
+  const std::string path = writeModel("autonomous_codes.bin", Conditioning::kAutonomous,
+                                      withModelRunCodes(startsMetadata(), {"elbow", "whole_arm", "wrist"}, codes));
+  for (int start = 0; start < 2; ++start) {
+    CAPTURE(start);
+    const fs::path with_dir = tempDir("codes_" + std::to_string(start)), without_dir = tempDir("nocodes_" + std::to_string(start));
+    rt::RunOptions with = options(path, "none", with_dir);
+    with.movement = "elbow";
+    with.zero_timing = true;
+    with.start_index = start;
+    rt::RunOptions without = rollout("elbow", without_dir);
+    without.start_index = start;
+    const Outcome rw = run(with), rn = run(without);
+    REQUIRE_MESSAGE(rw.report.status == 0, rw.report.error);
+    REQUIRE_MESSAGE(rn.report.status == 0, rn.report.error);
+    const int expected = runCodeIndex(codes[0], start == 0 ? kStartA : kStartB);
+    REQUIRE(expected >= 0);
+    CHECK(nlohmann::json::parse(rw.report.summary_json)["run_code"] == codes[0].names[static_cast<std::size_t>(expected)]);
+    CHECK(nlohmann::json::parse(rn.report.summary_json)["run_code"].is_null());
+    CHECK(bytes(with_dir / "ticks.csv") != bytes(without_dir / "ticks.csv"));  // the code changes the run
+  }
+  // A malformed table is refused at load, naming the key.
+  rt::RunOptions bad = options(writeModel("autonomous_badcodes.bin", Conditioning::kAutonomous,
+                                          R"({"run_codes":{"elbow":{"names":["a"],"q":[[0,0,0,0,0]],"code":[[1]],"dtw_m":[[0]]}}})"),
+                               "none");
+  bad.movement = "elbow";
+  bad.start_pose = {1.0, -0.2, 1.0, 0.5, 0.0};
+  bad.ticks = 5;
+  int status = 0;
+  const std::string line = errorLine(bad, status);
+  CHECK(line.find("\"run_codes\"") != std::string::npos);
+  CHECK(status == 1);
+}
+
 TEST_CASE("--reference none without a usable start, or --start/--start-pose without it, is refused with one line") {
   struct Case {
     const char* what;

@@ -1,6 +1,7 @@
 // What the net is allowed to read, in training: the previous action, the clock's resolution and
 // a per-run latent; and the moving average of the weights that training may keep instead. Each
-// is a training-time choice, so model.bin and nao_rt stay unchanged.
+// is a training-time choice: model.bin's tensors and nao_rt stay unchanged (a run latent adds
+// its run codes to the metadata).
 #include "nao/model_file.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/policy.hpp"
@@ -117,7 +118,7 @@ TEST_CASE("the clock's resolution: step rows equal within blocks of G ticks, all
   }
 }
 
-TEST_CASE("the run latent reads the run at every stride-th tick up to its last, and is the prior's mean at run time") {
+TEST_CASE("the run latent reads the run at every stride-th tick up to its last; at ε = 0 it is the projected mean") {
   torch::manual_seed(5);
   RunLatent latent(4, 16);
   constexpr std::int64_t kLong = 250, kShort = 30;
@@ -151,13 +152,13 @@ TEST_CASE("the run latent reads the run at every stride-th tick up to its last, 
     const torch::Tensor eps = torch::randn({2, 4});
     const RunLatentImpl::Draw a = latent->forward(p, eps);
     CHECK(a.kl.abs().max().item<float>() == 0.0f);
-    // z = ε, projected without a bias: z = 0 (run time) adds nothing to the tokens.
+    // z = ε, projected without a bias: z = 0 (a model without run codes) adds nothing to the tokens.
     CHECK(torch::allclose(a.z_embedded, eps.matmul(latent->project->weight.t()), 1e-6, 1e-7));
     CHECK(latent->forward(p, torch::zeros({2, 4})).z_embedded.abs().max().item<float>() == 0.0f);
   }
 }
 
-TEST_CASE("training with a run latent: deterministic, another result, the same model.bin tensors") {
+TEST_CASE("training with a run latent: deterministic, another result, the same model.bin tensors, the run codes in its metadata") {
   TrainOptions o = smallOptions(85, 2);
   o.conditioning = Conditioning::kAutonomous;
   const std::vector<std::uint8_t> none = trainBytes(o);
@@ -172,6 +173,31 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
   const nlohmann::json meta = nlohmann::json::parse(with.header.metadata_json)["training"];
   CHECK(meta["run_latent"]["dims"] == 4);
   CHECK(r.history.back().train_loss < r.history.front().train_loss);
+  // The codes a run chooses from travel in the metadata: one per training demonstration, with
+  // its start and the kept weights' P μ of its clean rollout, bit for bit.
+  const PolicyData& data = smallData();
+  const std::vector<ModelRunCodes> codes =
+      modelRunCodes(with.header.metadata_json, with.header.movement_names, o.arch.d_model, "latent.bin");
+  REQUIRE(codes.size() == static_cast<std::size_t>(data.movements()));
+  REQUIRE(r.run_codes.size() == codes.size());
+  std::size_t n = 0;
+  for (std::size_t m = 0; m < codes.size(); ++m) {
+    const ModelRunCodes& c = codes[m];
+    n += c.size();
+    CHECK(c.code == r.run_codes[m].code);
+    float spread = 0.0f;
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      const auto demo = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& d) { return d.name == c.names[i]; });
+      REQUIRE(demo != data.demos.end());
+      CHECK(demo->movement == static_cast<int>(m));
+      CHECK(c.q[i] == demo->start);
+      for (int k = 0; k < c.d; ++k)
+        spread = std::max(spread, std::abs(c.code[i * static_cast<std::size_t>(c.d) + static_cast<std::size_t>(k)] - c.code[static_cast<std::size_t>(k)]));
+    }
+    CHECK(spread > 1e-4f);  // the encoder tells the demonstrations apart
+  }
+  CHECK(n == r.split.train.size());
+  CHECK(modelRunCodes(without.header.metadata_json, without.header.movement_names, o.arch.d_model, "none.bin").empty());
 }
 
 TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the start plus the rest of the trained weights; training goes on from the trained weights; what is scored is the average; resumable") {

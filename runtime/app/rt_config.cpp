@@ -273,6 +273,7 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
                      " is an autonomous-mode model (the gain law needs the feature-extracted reference)");
   p.centroids = modelKeyPoses(p.model, p.movement_index);
   p.workspace = modelWorkspace(h.metadata_json, h.movement_names, p.model_source);
+  p.run_codes = modelRunCodes(h.metadata_json, h.movement_names, static_cast<int>(h.arch.d_model), p.model_source);
   // The reference is retargeted the way the model's training data was.
   p.retarget = modelRetargetSetting(h.metadata_json, o.controller.retarget, p.model_source);
 

@@ -188,7 +188,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // A live reference: --human-scale, or each frame's scale from the source (applyLiveHumanScale).
     if (p.live != nullptr && options.human_scale_m > 0.0) controller_params.human.scale_m = options.human_scale_m;
     // Not const: a live source's d_h goes into model.params.human tick by tick.
-    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, p.workspace);
+    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, p.workspace, p.run_codes);
     // The robot backend owns its hardware (STYLE 18): the in-process ODE arm, or LoLA's socket.
     std::unique_ptr<RobotBackend> robot_backend;
     LolaBackend* lola = nullptr;
@@ -320,6 +320,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     leaveRealtime(rt);
     records.resize(static_cast<std::size_t>(ticks_done));
     totals.stop = stop;
+    if (data->run_code >= 0)
+      totals.run_code = p.run_codes[static_cast<std::size_t>(p.movement_index)].names[static_cast<std::size_t>(data->run_code)];
     if (lola) {
       totals.lola = true;
       totals.lola_socket = robot.socket_path;

@@ -191,6 +191,8 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
   if (p.spec.kind == ReferenceKind::kNone) {
     j["start_name"] = p.start_index >= 0 ? ordered_json(p.start_name) : ordered_json(nullptr);
     j["start_index"] = p.start_index >= 0 ? ordered_json(p.start_index) : ordered_json(nullptr);
+    // The training demonstration whose code the run followed (a model with run codes).
+    j["run_code"] = totals.run_code.empty() ? ordered_json(nullptr) : ordered_json(totals.run_code);
   }
   if (o.controller.blend_law_pole > 0.0) j["blend_law_pole"] = o.controller.blend_law_pole;
   if (o.controller.gain_law > 0.0) j["gain_law"] = o.controller.gain_law;

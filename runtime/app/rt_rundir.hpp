@@ -51,6 +51,9 @@ struct LoopTotals {
   LolaCounters lola_counters;
   std::vector<std::int64_t> lola_latency_ns;  ///< per answered cycle
   RobotStop stop = RobotStop::kNone;          ///< the backend ended the run early
+  /// The training demonstration whose run code the policy ran with (summary.json "run_code");
+  /// empty: none (the zero code, or a model without run codes).
+  std::string run_code;
 };
 
 /// ticks.csv's header line (no newline): the contract's columns in order.

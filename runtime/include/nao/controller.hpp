@@ -174,6 +174,8 @@ struct ControllerModel {
   /// Per movement, the autonomous workspace envelope (empty: none, reference mode or a
   /// negative margin).
   std::vector<JointEnvelope> workspace;
+  /// Per movement, the run codes a run chooses from at activate (empty: the zero code).
+  std::vector<ModelRunCodes> run_codes;
 };
 
 /// Everything a tick writes. Built at configure time, beside the robot backend it drives.
@@ -190,6 +192,8 @@ struct ControllerData {
   std::unique_ptr<PolicyWorkspace<Dims>> policy = makePolicyWorkspace<Dims>();
   ControllerClock* clock = nullptr;
   int movement = 0;
+  /// The run code in use: index into model.run_codes[movement] (-1: the zero code).
+  int run_code = -1;
   bool active = false;
   std::int64_t tick = 0;
   std::int64_t last_human_tick = -1;     ///< last tick with a usable human (-1: none yet)
@@ -240,17 +244,29 @@ std::vector<JointEnvelope> workspaceEnvelopes(const PolicyWeights<Dims>& policy,
 /// Builds the model (configure time, allocates; throws std::invalid_argument for bad
 /// parameters). `policy` must already be bound; the arm is the one the policy was checked
 /// against. `demonstrated`: the model's "workspace" metadata (modelWorkspace), the range an
-/// autonomous model's envelope widens (empty: its key poses').
+/// autonomous model's envelope widens (empty: its key poses'). `run_codes`: the model's
+/// "run_codes" metadata (modelRunCodes; empty: none), one entry per movement of d_model floats.
 template <class Dims>
 ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeights<Dims>& policy,
                                           const ControllerParams& params,
-                                          const std::vector<ModelWorkspace>& demonstrated = {}) {
+                                          const std::vector<ModelWorkspace>& demonstrated = {},
+                                          const std::vector<ModelRunCodes>& run_codes = {}) {
   if (!(params.period_s > 0.0)) throw std::invalid_argument("controller: period must be positive");
   if (!(params.no_human_timeout_s >= 0.0)) throw std::invalid_argument("controller: negative no-human timeout");
   if (params.human_bridge_ticks < 0) throw std::invalid_argument("controller: negative human bridge");
-  ControllerModel<Dims> m{arm, policy, params, robotScale(arm), clampToLimits(arm, params.home), {}};
+  ControllerModel<Dims> m{arm, policy, params, robotScale(arm), clampToLimits(arm, params.home), {}, {}};
   if (policy.conditioning == Conditioning::kAutonomous && params.workspace_margin_rad >= 0.0)
     m.workspace = workspaceEnvelopes(policy, params.workspace_margin_rad, demonstrated);
+  if (!run_codes.empty()) {
+    if (policy.conditioning != Conditioning::kAutonomous)
+      throw std::invalid_argument("controller: run codes are for autonomous-mode models");
+    if (static_cast<int>(run_codes.size()) != policy.movements)
+      throw std::invalid_argument("controller: run codes for another number of movements than the model's");
+    for (const ModelRunCodes& c : run_codes)
+      if (c.d != Dims::kDModel || c.code.size() != c.size() * static_cast<std::size_t>(c.d))
+        throw std::invalid_argument("controller: run codes of another width than the model's d_model");
+    m.run_codes = run_codes;
+  }
   return m;
 }
 
@@ -269,7 +285,8 @@ inline double microseconds(std::int64_t from_ns, std::int64_t to_ns) {
 
 /// Puts the arm at rest at q0 (clamped), resets the retargeting warm start to it, clears the
 /// counters and the previous action, and selects `movement` (index into the model's movement
-/// names) and the clock. Real-time safe (no allocation): may be called again to restart.
+/// names), the clock and, for a model with run codes, the code of the run from that start
+/// (runCodeIndex). Real-time safe (no allocation): may be called again to restart.
 template <class Dims>
 void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q0,
                         int movement, ControllerClock& clock) {
@@ -286,6 +303,14 @@ void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>
   data.feature_v.setZero();
   data.feature_started = false;
   resetPolicyStream(*data.policy);  // a new rollout: the policy's window starts empty
+  data.run_code = -1;
+  if (movement >= 0 && static_cast<std::size_t>(movement) < model.run_codes.size()) {
+    const ModelRunCodes& codes = model.run_codes[static_cast<std::size_t>(movement)];
+    data.run_code = runCodeIndex(codes, q);
+  }
+  setPolicyRunCode(*data.policy, data.run_code < 0 ? nullptr
+                                                   : model.run_codes[static_cast<std::size_t>(movement)].code.data() +
+                                                         static_cast<std::size_t>(data.run_code) * Dims::kDModel);
   data.fault_counts.fill(0);
   data.record = TickRecord{};
   data.active = true;

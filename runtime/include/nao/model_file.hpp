@@ -191,6 +191,46 @@ std::vector<ModelWorkspace> modelWorkspace(const std::string& metadata_json,
 std::string withModelWorkspace(const std::string& metadata_json, const std::vector<std::string>& movement_names,
                                const std::vector<ModelWorkspace>& workspace);
 
+// ---------------------------------------------------------------------------------------------
+// Run codes (docs/autonomous.md "A demonstrated run's code"): a model trained with a per-run
+// latent carries, per movement, its training demonstrations' start poses, the code of each (the
+// latent encoder's mean for the demonstration's clean rollout, projected to d_model: what is
+// added to every encoder token) and the hand-path DTW between every two of them, under
+//   "run_codes": {"<movement>": {"names": [...], "q": [[5]...], "code": [[d]...], "dtw_m": [[n]...]}, ...}
+// A run from q0 takes the code of the medoid of the kRunCodeNearest starts nearest q0 (the
+// demonstration the evaluator's medoid replay tracks). Code: model_run_codes.cpp.
+
+/// One movement's run codes; n demonstrations, codes of d floats.
+struct ModelRunCodes {
+  std::vector<std::string> names;  ///< the training demonstrations
+  std::vector<JointVector> q;      ///< their start poses, rad
+  std::vector<float> code;         ///< n × d, row i the code of demonstration i
+  std::vector<double> dtw_m;       ///< n × n, symmetric, zero diagonal: hand-path DTW, m
+  int d = 0;
+  std::size_t size() const { return names.size(); }
+};
+
+/// Starts a run-code choice looks at (as the medoid replay: the 5 nearest).
+inline constexpr int kRunCodeNearest = 5;
+
+/// The "run_codes" of a model's metadata, one entry per movement of `movement_names` (empty
+/// when the key is absent: a model without a run latent runs with the zero code). Throws
+/// ModelFileError "<origin>: ..." when present but unusable: a movement missing or unknown,
+/// lists of different lengths, a q that is not 5 finite numbers, a code that is not `d_model`
+/// finite numbers, a DTW table that is not n × n finite, non-negative and symmetric.
+std::vector<ModelRunCodes> modelRunCodes(const std::string& metadata_json, const std::vector<std::string>& movement_names,
+                                         int d_model, const std::string& origin);
+
+/// `metadata_json` with "run_codes" set (one entry per movement, in that order). Throws
+/// ModelFileError when the metadata is not a JSON object or the lists do not match.
+std::string withModelRunCodes(const std::string& metadata_json, const std::vector<std::string>& movement_names,
+                              const std::vector<ModelRunCodes>& codes);
+
+/// The demonstration whose code a run from `q0` takes: of the kRunCodeNearest starts nearest q0
+/// (Euclidean, rad; ties to the lower index), the one with the smallest summed DTW to the others
+/// (ties to the nearer). -1 when `codes` is empty. Real-time safe (no allocation).
+int runCodeIndex(const ModelRunCodes& codes, const JointVector& q0);
+
 /// `metadata_json` (an object, or empty for {}) with "starts" set to `starts` (one list per
 /// movement of `movement_names`, keys in that order); every other key kept in place. The
 /// serialiser the trainer and nao_toolchain model-starts write with. Throws ModelFileError when

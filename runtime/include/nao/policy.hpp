@@ -72,6 +72,10 @@ struct PolicyWorkspace {
   JointVec qn = JointVec::Zero(), an = JointVec::Zero(), rn = JointVec::Zero();
   int movement = 0;
   int step = 0;
+  /// The run's code, added to every encoder token (a model trained with a per-run latent: the
+  /// code of the demonstration the run follows, setPolicyRunCode; zero: the latent's prior mean).
+  /// Kept by resetPolicyStream.
+  Eigen::Matrix<float, D, 1> run_code = Eigen::Matrix<float, D, 1>::Zero();
 
   Tokens x = Tokens::Zero();       ///< encoder residual stream of the new tick
   Tokens memory = Tokens::Zero();  ///< LN_enc(x): the new tick's memory tokens
@@ -556,6 +560,16 @@ void resetPolicyStream(PolicyWorkspace<Dims>& ws) {
   ws.ticks = 0;
 }
 
+/// Sets the run's code (d_model floats, added to every encoder token from the next step on);
+/// nullptr: zero. Real-time safe.
+template <class Dims>
+void setPolicyRunCode(PolicyWorkspace<Dims>& ws, const float* code) {
+  if (code == nullptr)
+    ws.run_code.setZero();
+  else
+    ws.run_code = Eigen::Map<const Eigen::Matrix<float, Dims::kDModel, 1>>(code);
+}
+
 /// The first part of a policy step (docs/policy.md) at the stream's next tick: normalise the
 /// inputs, make the tick's J encoder tokens, run them through the encoder layers attending to the
 /// window (their keys/values enter the rings at the tick's slot) and add their memory to the
@@ -582,7 +596,7 @@ void encodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, c
   for (int j = 0; j < J; ++j)
     ws.x.col(j) = w.embed_in_weight.col(0) * ws.qn[j] + w.embed_in_weight.col(1) * ws.an[j] +
                   w.embed_in_weight.col(2) * ws.rn[j] + w.embed_in_bias + w.embed_joint_enc.col(j) +
-                  w.embed_movement.col(ws.movement) + w.embed_step.col(ws.step);
+                  w.embed_movement.col(ws.movement) + w.embed_step.col(ws.step) + ws.run_code;
 
   for (int l = 0; l < Dims::kEncoderLayers; ++l) {
     const EncoderLayerWeights<Dims>& L = w.enc[static_cast<std::size_t>(l)];

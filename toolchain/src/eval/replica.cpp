@@ -28,8 +28,10 @@ std::vector<ReplicaTick> replay(const ModelFile& model, const ArmModel& arm, con
   for (std::size_t i = 0; i < model.tensors.size(); ++i) tensors.push_back(model.data(i));
   const PolicyWeights<Dims> weights =
       bindPolicyWeights<Dims>(tensors.data(), tensors.size(), model.header.arch, model.header.conditioning);
-  const ControllerModel<Dims> cm = configureController(
-      arm, weights, ControllerParams{}, modelWorkspace(model.header.metadata_json, model.header.movement_names, "model"));
+  const ModelHeader& h = model.header;
+  const ControllerModel<Dims> cm =
+      configureController(arm, weights, ControllerParams{}, modelWorkspace(h.metadata_json, h.movement_names, "model"),
+                          modelRunCodes(h.metadata_json, h.movement_names, static_cast<int>(h.arch.d_model), "model"));
   OdeArmBackend robot(arm, sim_params, clampToLimits(arm, start));
   ControllerData<Dims> data(robot);
   ZeroClock clock;

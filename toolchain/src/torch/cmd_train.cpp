@@ -283,8 +283,9 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--run-latent", args->latent_dims,
                   "Autonomous: K > 0 trains with a per-run latent of K dimensions (a conditional VAE's encoder "
-                  "reads the whole run and tells the net which demonstrated variant it follows); at run time "
-                  "the latent is 0, so model.bin and nao_rt are unchanged (default: 0, none)")
+                  "reads the whole run and tells the net which demonstrated variant it follows); model.bin "
+                  "carries each training demonstration's code, and a run takes the code of the medoid of the 5 "
+                  "demonstrations whose starts are nearest its own (default: 0, none)")
       ->check(CLI::Range(0, 256));
   cmd->add_option("--latent-kl", args->latent_kl, "Weight of the latent's KL divergence per tick in the loss")
       ->check(CLI::Range(0.0, 1e6))

@@ -140,7 +140,8 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   const std::string with_starts = withModelStarts(j.dump(), data.movement_names, heldOutStarts(data, r));
   if (o.conditioning != Conditioning::kAutonomous) return with_starts;
   // Where an autonomous run may go: the demonstrations' joint range (the controller's envelope).
-  return withModelWorkspace(with_starts, data.movement_names, demonstratedWorkspace(data));
+  const std::string with_workspace = withModelWorkspace(with_starts, data.movement_names, demonstratedWorkspace(data));
+  return r.run_codes.empty() ? with_workspace : withModelRunCodes(with_workspace, data.movement_names, r.run_codes);
 }
 
 ModelHeader modelHeader(const PolicyData& data, const TrainOptions& o, const TrainResult& r,

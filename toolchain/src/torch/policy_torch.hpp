@@ -32,7 +32,7 @@ struct PolicyBatch {
   torch::Tensor an;        ///< [B,T,J] float, normalised a(t-1)
   torch::Tensor rn;        ///< [B,T,J] float (ignored in autonomous mode: taken as 0)
   torch::Tensor movement;  ///< [B] int64
-  torch::Tensor z = {};    ///< [B,d] float, a per-run latent added to every encoder token (training only; undefined = 0, as at run time)
+  torch::Tensor z = {};    ///< [B,d] float, a per-run code added to every encoder token (the runtime's run_code; undefined = 0)
 };
 
 /// The head's output for every tick of a batch (docs/policy.md "Head"), normalised units.

@@ -123,6 +123,9 @@ struct TrainResult {
   /// Per movement, the median over its validation demonstrations of the DTW to the nearest
   /// other one (what a rollout is compared with), m; empty without rollout selection.
   std::vector<double> val_nn_dtw_m;
+  /// A run latent's codes of the kept weights, per movement (model.bin's "run_codes"); empty
+  /// without --run-latent.
+  std::vector<ModelRunCodes> run_codes;
 };
 
 /// Trains a policy on `data`: executes the training split's demonstrations on the simulated arm

@@ -1,5 +1,8 @@
 #include "run_latent.hpp"
 
+#include "nao/tools/evaluate.hpp"
+#include "rt_metrics.hpp"
+
 namespace nao::tools {
 
 RunLatentImpl::RunLatentImpl(std::int64_t latent_dims, std::int64_t d_model) : dims(latent_dims) {
@@ -21,6 +24,45 @@ RunLatentImpl::Draw RunLatentImpl::forward(const Padded& p, const torch::Tensor&
   d.z_embedded = project->forward(mu + (0.5 * log_var).exp() * eps);
   d.kl = 0.5 * (mu.square() + log_var.exp() - 1.0 - log_var).sum(1);
   return d;
+}
+
+RunCodeSource runCodeSource(const PolicyData& data, const std::vector<PolicySequence>& train, const ArmModel& arm,
+                            int d_model) {
+  RunCodeSource s;
+  s.codes.resize(static_cast<std::size_t>(data.movements()));
+  s.sequence.resize(s.codes.size());
+  std::vector<std::vector<HandPath>> paths(s.codes.size());
+  for (std::size_t i = 0; i < train.size(); ++i) {
+    if (train[i].rollout != 0) continue;
+    const PolicyDemo& demo = data.demos.at(static_cast<std::size_t>(train[i].demo));
+    const auto m = static_cast<std::size_t>(demo.movement);
+    s.codes[m].names.push_back(demo.name);
+    s.codes[m].q.push_back(demo.start);
+    s.sequence[m].push_back(i);
+    paths[m].push_back(handPath(arm, demo.f));
+  }
+  for (std::size_t m = 0; m < s.codes.size(); ++m) {
+    ModelRunCodes& c = s.codes[m];
+    const std::size_t n = c.size();
+    c.d = d_model;
+    c.code.assign(n * static_cast<std::size_t>(d_model), 0.0f);
+    c.dtw_m.assign(n * n, 0.0);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t k = i + 1; k < n; ++k) c.dtw_m[i * n + k] = c.dtw_m[k * n + i] = rt::dtwMeanDistance(paths[m][i], paths[m][k]);
+  }
+  return s;
+}
+
+void updateRunCodes(RunCodeSource& source, const SequenceTensors& t, RunLatentImpl& latent) {
+  torch::NoGradGuard no_grad;
+  for (std::size_t m = 0; m < source.codes.size(); ++m) {
+    if (source.sequence[m].empty()) continue;
+    const Padded p = pad(t, source.sequence[m]);
+    const torch::Tensor z = latent.forward(p, torch::zeros({p.in.qn.size(0), latent.dims})).z_embedded.contiguous();
+    std::vector<float>& code = source.codes[m].code;
+    if (static_cast<std::size_t>(z.numel()) != code.size()) throw std::logic_error("run codes: width mismatch");
+    std::copy(z.data_ptr<float>(), z.data_ptr<float>() + z.numel(), code.begin());
+  }
 }
 
 }  // namespace nao::tools

@@ -69,10 +69,10 @@ void check(const PolicyData& data, const TrainOptions& o) {
 
 // Runs carried between ranks as sequences (q and a; the rest unused).
 std::vector<PolicyRun> sharedRuns(ProcessGroup* g, const std::vector<int>& demos, const PolicyData& data,
-                                  const SimModel& sim, const PolicyNet& net) {
+                                  const SimModel& sim, const PolicyNet& net, const std::vector<ModelRunCodes>* codes) {
   const std::vector<PolicySequence> seqs = sharedSequences(g, demos, [&](const std::vector<int>& d) {
     std::vector<PolicySequence> out;
-    for (PolicyRun& r : netRuns(data, d, sim, net)) {
+    for (PolicyRun& r : netRuns(data, d, sim, net, codes)) {
       PolicySequence s;
       s.demo = r.demo;
       s.movement = r.movement;
@@ -240,6 +240,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     latent = RunLatent(o.latent_dims, o.arch.d_model);
     for (const torch::Tensor& t : latent->parameters()) params.push_back(t);
   }
+  // The codes a run takes at run time (model.bin's "run_codes"), scored with every epoch.
+  RunCodeSource codes;
+  if (latent) codes = runCodeSource(data, train_seqs, sim.arm, o.arch.d_model);
   torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
   // The moving average of the weights (--ema): scored, kept and written in place of the trained
   // weights, which the optimiser goes on training. The input constraints are linear, so the
@@ -377,7 +380,11 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     st.val_mse_rad2 = v.mse_rad2;
     const Clock::time_point t_score = Clock::now();
     // Each rank rolls out its share of the validation demonstrations; all score all of them.
-    if (o.select_by_rollout) scoreRuns(sharedRuns(group.get(), res.split.val, executed, sim, net), ref, sim.arm, period_s, st);
+    if (o.select_by_rollout) {
+      if (latent) updateRunCodes(codes, train, *latent);
+      scoreRuns(sharedRuns(group.get(), res.split.val, executed, sim, net, latent ? &codes.codes : nullptr), ref, sim.arm,
+                period_s, st);
+    }
     const double score_seconds = secondsSince(t_score);
     const bool better = o.select_by_rollout ? (best.empty() || betterEpoch(st, best_stats)) : st.val_loss < best_stats.val_loss;
     if (better) {
@@ -434,6 +441,10 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   }
   net->eval();
   res.net = net;
+  if (latent) {
+    updateRunCodes(codes, train, *latent);
+    res.run_codes = std::move(codes.codes);
+  }
   res.train = evaluateLoss(net, train, o.offset_weight, group.get());
   res.val = evaluateLoss(net, val, o.offset_weight, group.get());
   res.seconds = secondsSince(t_start);

@@ -17,7 +17,7 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 template <class Dims>
 std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                                const PolicyNet& net) {
+                                const PolicyNet& net, const std::vector<ModelRunCodes>* codes) {
   const std::vector<std::vector<float>> floats = manifestFloats(net);
   std::vector<const float*> pointers;
   for (const std::vector<float>& f : floats) pointers.push_back(f.data());
@@ -26,7 +26,15 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
   const auto ws = makePolicyWorkspace<Dims>();
   const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
                                    const JointVector& r) -> JointVector {
-    if (t == 0) resetPolicyStream(*ws);
+    if (t == 0) {
+      resetPolicyStream(*ws);
+      // The run's code, as the controller chooses it at activate.
+      const ModelRunCodes* c = codes != nullptr && movement < static_cast<int>(codes->size())
+                                   ? &(*codes)[static_cast<std::size_t>(movement)]
+                                   : nullptr;
+      const int i = c != nullptr ? runCodeIndex(*c, q) : -1;
+      setPolicyRunCode(*ws, i < 0 ? nullptr : c->code.data() + static_cast<std::size_t>(i) * Dims::kDModel);
+    }
     PolicyInput in;
     in.q = q.cast<float>();
     in.a_prev = a_prev.cast<float>();
@@ -56,12 +64,12 @@ bool hasRuntimeStep(const PolicyArch& arch) {
 }
 
 std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                               const PolicyNet& net) {
+                               const PolicyNet& net, const std::vector<ModelRunCodes>* codes) {
   const PolicyArch& arch = net->arch();
   if (hasRuntimeStep(arch) && sameComputation(arch, PaperPolicyDims::arch()))
-    return runsWith<PaperPolicyDims>(data, demos, sim, net);
+    return runsWith<PaperPolicyDims>(data, demos, sim, net, codes);
   if (hasRuntimeStep(arch) && sameComputation(arch, SmallPolicyDims::arch()))
-    return runsWith<SmallPolicyDims>(data, demos, sim, net);
+    return runsWith<SmallPolicyDims>(data, demos, sim, net, codes);
   throw UserError("rollouts through the runtime's step need the paper or small dimensions (d_model, heads, layers, "
                   "FFN, window); other architectures are rolled out by the nao_rt built for them "
                   "(toolchain/nao build --model FILE)");

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "nao/arm_model.hpp"
+#include "nao/model_file.hpp"
 #include "nao/tools/movement_metrics.hpp"
 #include "nao/tools/policy_dataset.hpp"
 #include "policy_torch.hpp"
@@ -23,9 +24,11 @@ bool hasRuntimeStep(const PolicyArch& arch);
 
 /// `net`'s runs from each listed demonstration's start (rolloutPolicy over `data`, whose f(0) are
 /// the starts), its present weights bound to the runtime's stepPolicy as nao_rt binds them; the
-/// step row is the tick. Throws UserError unless hasRuntimeStep(net->arch()).
+/// step row is the tick; with `codes` (per movement, nullptr: none) each run takes the code the
+/// controller would give it (runCodeIndex of its start). Throws UserError unless
+/// hasRuntimeStep(net->arch()).
 std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                               const PolicyNet& net);
+                               const PolicyNet& net, const std::vector<ModelRunCodes>* codes = nullptr);
 
 /// What runs of each movement are measured against: its validation demonstrations' hand paths,
 /// the plane loops are counted in, their middle-phase speeds and loops, and the joint range of
