@@ -102,6 +102,7 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(j["precision"] == "fp32");
   CHECK(j["kernel"] == nao::policyKernelName(nao::defaultPolicyKernel()));
   CHECK(j["starts"] == nlohmann::json::parse(R"({"elbow":[],"whole_arm":[],"wrist":[]})"));  // none in this model
+  CHECK(j["run_codes"] == nlohmann::json::parse(R"({"elbow":0,"whole_arm":0,"wrist":0})"));
   nao::rt::InfoOptions o8 = withWeights(path);
   o8.precision = "int8";
   CHECK(nlohmann::json::parse(info(o8).out)["precision"] == "int8");
@@ -216,6 +217,24 @@ TEST_CASE("nao_rt --info lists the autonomous starts per movement (name, ticks),
   CHECK(j["starts"] == nlohmann::json::parse(
                            R"({"elbow":[{"name":"elbow_003","ticks":117}],"whole_arm":[],"wrist":[{"name":"wrist_002","ticks":98}]})"));
   CHECK(j["metadata"]["starts"]["elbow"][0]["q"][0] == 1.2);
+
+  // Run codes are counted per movement, and their table is left out of the printed metadata.
+  std::vector<nao::ModelRunCodes> codes(3);
+  for (nao::ModelRunCodes& c : codes) c.d = h.arch.d_model;
+  codes[1].names = {"whole_arm_000", "whole_arm_004"};
+  codes[1].q.assign(2, nao::JointVector::Zero());
+  codes[1].code.assign(2 * static_cast<std::size_t>(h.arch.d_model), 0.5f);
+  codes[1].dtw_m = {0.0, 0.01, 0.01, 0.0};
+  nao::ModelHeader hc = h;
+  hc.metadata_json = nao::withModelRunCodes(h.metadata_json, h.movement_names, codes);
+  const std::string coded = modelPath("with_codes.bin");
+  nao::writeModelFile(coded, hc, randomTensors(1));
+  const Run rc = info(withWeights(coded));
+  REQUIRE(rc.status == 0);
+  const nlohmann::json jc = nlohmann::json::parse(rc.out);
+  CHECK(jc["run_codes"] == nlohmann::json::parse(R"({"elbow":0,"whole_arm":2,"wrist":0})"));
+  CHECK_FALSE(jc["metadata"].contains("run_codes"));
+  CHECK(jc["metadata"]["starts"] == j["metadata"]["starts"]);
 
   h.metadata_json = R"({"starts":{"elbow":[{"name":"x","ticks":5}],"whole_arm":[],"wrist":[]}})";
   const std::string bad = modelPath("bad_starts.bin");

@@ -65,7 +65,13 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source, con
     by_movement[h.movement_names[m]] = std::move(list);
   }
   j["starts"] = std::move(by_movement);
+  // A run latent's codes per movement (chosen at activate): how many, not the table itself.
+  const std::vector<ModelRunCodes> codes = modelRunCodes(h.metadata_json, h.movement_names, static_cast<int>(h.arch.d_model), source);
+  ordered_json code_counts = ordered_json::object();
+  for (std::size_t m = 0; m < h.movement_names.size(); ++m) code_counts[h.movement_names[m]] = m < codes.size() ? codes[m].size() : 0;
+  j["run_codes"] = std::move(code_counts);
   ordered_json metadata = ordered_json::parse(h.metadata_json, nullptr, /*allow_exceptions=*/false);
+  if (!metadata.is_discarded() && metadata.is_object()) metadata.erase("run_codes");
   j["metadata"] = metadata.is_discarded() ? ordered_json(h.metadata_json) : std::move(metadata);
   j["source"] = source;
   // Metadata is whatever the file holds: replace invalid UTF-8 rather than throw.
