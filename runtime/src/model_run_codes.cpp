@@ -140,4 +140,12 @@ int runCodeIndex(const ModelRunCodes& codes, const JointVector& q0) {
   return best;
 }
 
+const float* runCode(const std::vector<ModelRunCodes>& codes, int movement, const JointVector& q0, int* index) {
+  const bool has = movement >= 0 && static_cast<std::size_t>(movement) < codes.size();
+  const ModelRunCodes* c = has ? &codes[static_cast<std::size_t>(movement)] : nullptr;
+  const int i = c != nullptr ? runCodeIndex(*c, q0) : -1;
+  if (index != nullptr) *index = i;
+  return i < 0 ? nullptr : c->code.data() + static_cast<std::size_t>(i) * static_cast<std::size_t>(c->d);
+}
+
 }  // namespace nao

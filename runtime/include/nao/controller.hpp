@@ -303,14 +303,7 @@ void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>
   data.feature_v.setZero();
   data.feature_started = false;
   resetPolicyStream(*data.policy);  // a new rollout: the policy's window starts empty
-  data.run_code = -1;
-  if (movement >= 0 && static_cast<std::size_t>(movement) < model.run_codes.size()) {
-    const ModelRunCodes& codes = model.run_codes[static_cast<std::size_t>(movement)];
-    data.run_code = runCodeIndex(codes, q);
-  }
-  setPolicyRunCode(*data.policy, data.run_code < 0 ? nullptr
-                                                   : model.run_codes[static_cast<std::size_t>(movement)].code.data() +
-                                                         static_cast<std::size_t>(data.run_code) * Dims::kDModel);
+  setPolicyRunCode(*data.policy, runCode(model.run_codes, movement, q, &data.run_code));
   data.fault_counts.fill(0);
   data.record = TickRecord{};
   data.active = true;

@@ -231,6 +231,11 @@ std::string withModelRunCodes(const std::string& metadata_json, const std::vecto
 /// (ties to the nearer). -1 when `codes` is empty. Real-time safe (no allocation).
 int runCodeIndex(const ModelRunCodes& codes, const JointVector& q0);
 
+/// The code (codes[movement].d floats) a run of `movement` from `q0` takes, and its index into
+/// codes[movement] in `*index` (if not null); nullptr and -1 when the movement has none.
+/// Real-time safe.
+const float* runCode(const std::vector<ModelRunCodes>& codes, int movement, const JointVector& q0, int* index = nullptr);
+
 /// `metadata_json` (an object, or empty for {}) with "starts" set to `starts` (one list per
 /// movement of `movement_names`, keys in that order); every other key kept in place. The
 /// serialiser the trainer and nao_toolchain model-starts write with. Throws ModelFileError when

@@ -29,11 +29,7 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
     if (t == 0) {
       resetPolicyStream(*ws);
       // The run's code, as the controller chooses it at activate.
-      const ModelRunCodes* c = codes != nullptr && movement < static_cast<int>(codes->size())
-                                   ? &(*codes)[static_cast<std::size_t>(movement)]
-                                   : nullptr;
-      const int i = c != nullptr ? runCodeIndex(*c, q) : -1;
-      setPolicyRunCode(*ws, i < 0 ? nullptr : c->code.data() + static_cast<std::size_t>(i) * Dims::kDModel);
+      setPolicyRunCode(*ws, codes != nullptr ? runCode(*codes, movement, q) : nullptr);
     }
     PolicyInput in;
     in.q = q.cast<float>();
