@@ -141,6 +141,21 @@ TEST_CASE("nao_codegen writes a config header, a dims header, an .incbin'ing .S 
     CHECK_MESSAGE(s.find(line) != std::string::npos, line);
 }
 
+TEST_CASE("a metadata longer than a constexpr strlen may count (a run latent's codes) is written with its length") {
+  const fs::path dir = freshDir("codegen_long_metadata");
+  const std::string model_path = (dir / "in.bin").string();
+  const nao::PolicyArch arch = nao::smallArch();
+  nao::ModelHeader h = makeHeader(arch);
+  h.metadata_json = R"({"seed":11,"pad":")" + std::string(300000, 'x') + R"(\"q"})";
+  nao::writeModelFile(model_path, h, nao::test::randomManifestTensors(arch, 5));
+  nao::codegen::generate(model_path, (dir / "gen").string());
+  const std::string config = nao::test::readFile((dir / "gen" / "nao_model_config.hpp").string());
+  const std::string head = "inline constexpr std::string_view kMetadataJson{\"{\\\"seed\\\":11,";
+  CHECK(config.find(head) != std::string::npos);
+  // The length given is the metadata's (the escapes make the literal longer than that).
+  CHECK(config.find("\\\"q\\\"}\", " + std::to_string(h.metadata_json.size()) + "};") != std::string::npos);
+}
+
 TEST_CASE("nao_codegen leaves unchanged outputs alone and rewrites what a new model changes") {
   const nao::PolicyArch arch = nao::smallArch();
   const SmallModel m = smallModel("codegen_rerun", 5);

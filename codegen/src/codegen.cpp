@@ -163,7 +163,10 @@ std::string configHeader(const ModelFile& model, const std::string& source, cons
   s << "// Movement names, index order (the movement embedding's rows).\n";
   s << array("std::string_view", "kMovementNames", mnames, 8);
   s << "// The header's metadata JSON as stored (training configuration, split, residual gain ...).\n";
-  s << "inline constexpr std::string_view kMetadataJson = " << cxxString(h.metadata_json) << ";\n";
+  // With its length: a constexpr strlen of a long metadata (a run latent's codes) would exceed
+  // the compiler's constexpr loop limit.
+  s << "inline constexpr std::string_view kMetadataJson{" << cxxString(h.metadata_json) << ", "
+    << h.metadata_json.size() << "};\n";
 
   s << "\nstatic_assert(kDModel % kHeads == 0, \"d_model must be a multiple of heads\");\n";
   s << "static_assert(kTensorOffsets[0] % 64 == 0, \"tensor data is 64-byte aligned\");\n";
