@@ -12,6 +12,7 @@
 #include "nao/tools/reference_source.hpp"
 #include "support/random_policy.hpp"
 #include "support/reference_files.hpp"
+#include "support/rt_run_suite.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -30,88 +31,13 @@
 #include <vector>
 
 using namespace nao;
-using Dims = SmallPolicyDims;
+using namespace nao::test::rt_suite;
 
 namespace {
-
-namespace fs = std::filesystem;
-
-// Per process: suites of several build trees may run at the same time.
-fs::path suiteDir() {
-  return fs::temp_directory_path() / "nao_rt_tests" / ("rt_run_" + std::to_string(::getpid()));
-}
-
-// Removes the suite's files when the suite ends.
-const struct RemoveSuiteDir {
-  ~RemoveSuiteDir() {
-    std::error_code ec;
-    fs::remove_all(suiteDir(), ec);
-  }
-} remove_suite_dir;
-
-fs::path tempDir(const std::string& name) {
-  const fs::path dir = suiteDir() / name;
-  fs::remove_all(dir);
-  fs::create_directories(dir.parent_path());
-  return dir;
-}
-
-/// A random small-config model.bin (movements elbow, whole_arm, wrist like the trainer's); `law_gain`
-/// fills law.gain (the random policy's is 0).
-std::string writeModel(const std::string& name, Conditioning c, const std::string& metadata = "{}",
-                       const PolicyArch& arch = smallArch(), std::uint64_t seed = 7, float law_gain = 0.0f) {
-  const ArmModel arm = loadArmModel(test::kUrdfPath);
-  ModelHeader h;
-  h.arch = arch;
-  h.conditioning = c;
-  h.joints = trainedJoints(arm);
-  h.movement_names = {"elbow", "whole_arm", "wrist"};
-  h.metadata_json = metadata;
-  const fs::path dir = suiteDir();
-  fs::create_directories(dir);
-  const std::string path = (dir / name).string();
-  std::vector<std::vector<float>> tensors = test::makeRandomPolicy(arch, arm, seed).tensors;
-  const std::vector<TensorSpec> manifest = policyManifest(arch);
-  for (std::size_t i = 0; i < manifest.size(); ++i)
-    if (manifest[i].name == "law.gain") std::fill(tensors[i].begin(), tensors[i].end(), law_gain);
-  writeModelFile(path, h, tensors);
-  return path;
-}
 
 const std::string& referenceModel() {
   static const std::string path = writeModel("reference.bin", Conditioning::kReference);
   return path;
-}
-
-struct Outcome {
-  rt::RunReport report;
-  std::string out, err;
-};
-
-Outcome run(const rt::RunOptions& o) {
-  std::ostringstream out, err;
-  Outcome r;
-  r.report = rt::runController<Dims>(o, out, err);
-  r.out = out.str();
-  r.err = err.str();
-  return r;
-}
-
-/// What runMain prints on failure: exactly one line.
-std::string errorLine(const rt::RunOptions& o, int& status) {
-  std::ostringstream out, err;
-  status = rt::runMain<Dims>(o, out, err);
-  return err.str();
-}
-
-bool oneLine(const std::string& s) { return !s.empty() && s.find('\n') == s.size() - 1; }
-
-rt::RunOptions options(const std::string& weights, const std::string& reference, const fs::path& log = {}) {
-  rt::RunOptions o;
-  o.weights_path = weights;
-  o.reference = reference;
-  o.log_dir = log.string();
-  return o;
 }
 
 /// --reference file: of held-out demonstration 0 of run seed 1000000 + seed of `movement`.
@@ -120,13 +46,6 @@ rt::RunOptions recorded(const std::string& weights, const std::string& movement,
   rt::RunOptions o = options(weights, "file:" + test::syntheticReferenceCsv(movement, seed, suiteDir() / "references"), log);
   o.movement = movement;
   return o;
-}
-
-std::string bytes(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
 }
 
 }  // namespace
@@ -563,55 +482,6 @@ TEST_CASE("--reference none rolls an autonomous model out from its I-th start of
   const Outcome rw = run(rollout("whole_arm"));
   REQUIRE_MESSAGE(rw.report.status == 0, rw.report.error);
   CHECK(rw.report.ticks == 30);
-}
-
-TEST_CASE("a model with run codes: each run takes the code of the medoid of the starts nearest its own, named in summary.json") {
-  // Per movement 6 training demonstrations around the test starts, codes of the small d_model.
-  const int d = smallArch().d_model;
-  std::vector<ModelRunCodes> codes(3);
-  for (std::size_t m = 0; m < 3; ++m) {
-    ModelRunCodes& c = codes[m];
-    c.d = d;
-    for (int i = 0; i < 6; ++i) {
-      c.names.push_back("train_" + std::to_string(m) + "_" + std::to_string(i));
-      c.q.push_back(kStartC + JointVector::Constant(0.05 * (i - 2)) + (i % 2 ? kStartA - kStartC : kStartB - kStartC) * 0.5);
-      for (int k = 0; k < d; ++k) c.code.push_back(0.4f * std::sin(0.7f * static_cast<float>(k + 3 * i + 11 * static_cast<int>(m))));
-    }
-    c.dtw_m.assign(36, 0.0);
-    for (std::size_t i = 0; i < 6; ++i)
-      for (std::size_t k = i + 1; k < 6; ++k) c.dtw_m[i * 6 + k] = c.dtw_m[k * 6 + i] = 0.001 * static_cast<double>((i * 7 + k * 3) % 11 + 1);
-  }
-  const std::string path = writeModel("autonomous_codes.bin", Conditioning::kAutonomous,
-                                      withModelRunCodes(startsMetadata(), {"elbow", "whole_arm", "wrist"}, codes));
-  for (int start = 0; start < 2; ++start) {
-    CAPTURE(start);
-    const fs::path with_dir = tempDir("codes_" + std::to_string(start)), without_dir = tempDir("nocodes_" + std::to_string(start));
-    rt::RunOptions with = options(path, "none", with_dir);
-    with.movement = "elbow";
-    with.zero_timing = true;
-    with.start_index = start;
-    rt::RunOptions without = rollout("elbow", without_dir);
-    without.start_index = start;
-    const Outcome rw = run(with), rn = run(without);
-    REQUIRE_MESSAGE(rw.report.status == 0, rw.report.error);
-    REQUIRE_MESSAGE(rn.report.status == 0, rn.report.error);
-    const int expected = runCodeIndex(codes[0], start == 0 ? kStartA : kStartB);
-    REQUIRE(expected >= 0);
-    CHECK(nlohmann::json::parse(rw.report.summary_json)["run_code"] == codes[0].names[static_cast<std::size_t>(expected)]);
-    CHECK(nlohmann::json::parse(rn.report.summary_json)["run_code"].is_null());
-    CHECK(bytes(with_dir / "ticks.csv") != bytes(without_dir / "ticks.csv"));  // the code changes the run
-  }
-  // A malformed table is refused at load, naming the key.
-  rt::RunOptions bad = options(writeModel("autonomous_badcodes.bin", Conditioning::kAutonomous,
-                                          R"({"run_codes":{"elbow":{"names":["a"],"q":[[0,0,0,0,0]],"code":[[1]],"dtw_m":[[0]]}}})"),
-                               "none");
-  bad.movement = "elbow";
-  bad.start_pose = {1.0, -0.2, 1.0, 0.5, 0.0};
-  bad.ticks = 5;
-  int status = 0;
-  const std::string line = errorLine(bad, status);
-  CHECK(line.find("\"run_codes\"") != std::string::npos);
-  CHECK(status == 1);
 }
 
 TEST_CASE("--reference none without a usable start, or --start/--start-pose without it, is refused with one line") {
