@@ -197,6 +197,8 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
     CHECK(spread > 1e-4f);  // the encoder tells the demonstrations apart
   }
   CHECK(n == r.split.train.size());
+  CHECK(modelCard(data, o, r, "cmd", "m.bin").find("| run latent | K 4, KL weight 0.01; " + std::to_string(n) + " run codes") !=
+        std::string::npos);
   CHECK(modelRunCodes(without.header.metadata_json, without.header.movement_names, o.arch.d_model, "none.bin").empty());
 }
 

@@ -203,6 +203,15 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << buf << "; " << r.train_sequences << " training sequences, executed in ";
   std::snprintf(buf, sizeof buf, "%.0f s", r.execution_seconds);
   s << buf << ") |\n";
+  if (o.latent_dims > 0) {
+    std::size_t codes = 0;
+    for (const ModelRunCodes& c : r.run_codes) codes += c.size();
+    s << "| run latent | K " << o.latent_dims << ", KL weight " << o.latent_kl << "; " << codes
+      << " run codes (one per training demonstration) in the metadata: a run takes the medoid of the 5 "
+         "demonstrations whose starts are nearest its own (docs/autonomous.md) |\n";
+  }
+  if (!o.previous_action) s << "| inputs | a(t-1) not read (its weights held at zero) |\n";
+  if (o.ema_decay > 0.0) s << "| weights | moving average, decay " << o.ema_decay << " |\n";
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs << ", patience " << o.patience
     << "), best " << r.best_epoch << " (exported) |\n";
