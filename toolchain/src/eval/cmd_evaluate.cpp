@@ -43,7 +43,7 @@ struct Args {
   std::string recordings;
   std::string out = "out/eval";
   std::string urdf = NAO_DEFAULT_URDF;
-  std::string nao_rt;
+  std::string nao_rt, reference_nao_rt;
   std::string movement = "all";
   std::vector<std::uint64_t> seeds = {1, 2, 3, 4, 5};
   int jobs = 2;
@@ -146,9 +146,14 @@ DemoSet syntheticTestSet(const ArmModel& arm, const std::string& movement, std::
 void evaluate(const Args& a) {
   if (a.seeds.empty()) throw UserError("--seeds needs at least one seed");
   const ArmModel arm = loadArmModel(a.urdf);
-  const fs::path nao_rt = a.nao_rt.empty() ? fs::read_symlink("/proc/self/exe").parent_path() / "nao_rt" : fs::path(a.nao_rt);
-  if (access(nao_rt.c_str(), X_OK) != 0)
-    throw UserError("nao_rt not found at " + nao_rt.string() + ": build it (toolchain/nao build) or pass --nao-rt PATH");
+  // The model's runs and the reference model's may need two nao_rt builds (one per architecture).
+  const fs::path beside = fs::read_symlink("/proc/self/exe").parent_path() / "nao_rt";
+  const fs::path nao_rt = a.nao_rt.empty() ? beside : fs::path(a.nao_rt);
+  const fs::path reference_nao_rt = a.reference_nao_rt.empty() ? beside : fs::path(a.reference_nao_rt);
+  for (const auto& [exe, option] : {std::pair{nao_rt, "--nao-rt"}, std::pair{reference_nao_rt, "--reference-nao-rt"}})
+    if (access(exe.c_str(), X_OK) != 0)
+      throw UserError("nao_rt not found at " + exe.string() + ": build it (toolchain/nao build) or pass " + option +
+                      " PATH");
   const ModelFile model = readModelFile(a.model);
   checkJointsMatch(model, arm, a.model);
   if (model.header.conditioning != Conditioning::kAutonomous)
@@ -260,7 +265,7 @@ void evaluate(const Args& a) {
                          false, 17);
         const auto referenceRun = [&](const std::string& label, const char* sub, std::vector<std::string> extra) {
           const fs::path dir = mdir / sub / ("seed_" + seed);
-          std::vector<std::string> argv = {nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf,
+          std::vector<std::string> argv = {reference_nao_rt.string(), "--weights", a.reference_model, "--urdf", a.urdf,
                                            "--reference", "file:" + skeleton.string(), "--movement", name};
           argv.insert(argv.end(), extra.begin(), extra.end());
           for (const char* x : {"--zero-timing", "--log"}) argv.push_back(x);
@@ -491,8 +496,10 @@ void setup(CLI::App& app) {
   cmd->add_option("--out", args->out, "Output directory")->capture_default_str();
   cmd->add_option("--urdf", args->urdf, "Robot description")->capture_default_str()->check(CLI::ExistingFile);
   cmd->add_option("--nao-rt", args->nao_rt,
-                  "nao_rt executable (default: the one beside nao_toolchain; for another architecture the one\n"
-                  "toolchain/nao build --model FILE printed)");
+                  "nao_rt executable that runs --model (default: the one beside nao_toolchain; for another\n"
+                  "architecture the one toolchain/nao build --model FILE printed)");
+  cmd->add_option("--reference-nao-rt", args->reference_nao_rt,
+                  "nao_rt executable that runs --reference-model (default: the one beside nao_toolchain)");
   cmd->add_option("--movement", args->movement, "A movement of the model, or all")->capture_default_str();
   cmd->add_option("--seeds", args->seeds, "Run seeds of the reference-mode runs")->delimiter(',')->capture_default_str();
   cmd->add_option("--jobs", args->jobs, "nao_rt processes at a time")->check(CLI::Range(1, 64))->capture_default_str();
