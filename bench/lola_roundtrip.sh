@@ -8,6 +8,10 @@
 # with the load average before and after. Usage: bench/lola_roundtrip.sh [BUILD_DIR] > result.txt
 # The autonomous-mode model runs its policy on every tick (a synthetic reference ends after
 # ~13 s, after which the controller bypasses the policy and the ticks get cheap).
+# MODEL (default models/autonomous.bin) and NAO_RT (default BUILD_DIR/bin/nao_rt) choose the model
+# and the nao_rt of its dimensions: models/autonomous.bin is of the small configuration, so
+# NAO_RT=$(toolchain/nao build --model models/autonomous.bin | tail -n 1); the committed results
+# ran the paper configuration's autonomous model of their date.
 # Environment: PRECISION=fp32|int8 (nao_rt --precision, default fp32); MODES="default no-warm
 # answer-first io-thread" (any subset, in that order; default: default and answer-first).
 # no-warm: the default without warming the cache before the tick's packet (--lola-no-warm).
@@ -15,6 +19,8 @@ set -euo pipefail
 build="${1:-build}"
 precision="${PRECISION:-fp32}"
 modes="${MODES:-default answer-first}"
+model="${MODEL:-models/autonomous.bin}"
+nao_rt="${NAO_RT:-$build/bin/nao_rt}"
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
 echo "date: $(date -u '+%Y-%m-%d %H:%M UTC'); host: $(nproc) cores; precision $precision"
@@ -33,7 +39,7 @@ for mode in $modes; do
   "$build/bin/nao_lola_sim" --socket "$tmp/lola.sock" --seconds 200 --summary "$tmp/sim.json" 2>/dev/null &
   sim=$!
   sleep 0.5
-  cmd=("$build/bin/nao_rt" --robot "lola:$tmp/lola.sock" --weights models/autonomous.bin --reference none --movement whole_arm --ticks 1200 --log "$tmp/run" "${flags[@]}")
+  cmd=("$nao_rt" --robot "lola:$tmp/lola.sock" --weights "$model" --reference none --movement whole_arm --ticks 1200 --log "$tmp/run" "${flags[@]}")
   echo "command: ${cmd[*]/$tmp/TMP}"
   "${cmd[@]}" > "$tmp/out.txt"
   kill -TERM "$sim"

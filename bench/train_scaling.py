@@ -64,10 +64,12 @@ def run(tc, data, world, batches, out_dir):
     return wall, cpu
 
 
-# The committed models' recipes (toolchain/nao train), less the epoch count.
+# Recipes of the paper configuration, less the epoch count: models/default.bin's (toolchain/nao
+# train default) and the autonomous one of the paper configuration (models/autonomous.bin is of
+# the small one, trained on one rank: docs/autonomous.md).
 RECIPES = {
-    "autonomous": ["--conditioning", "autonomous", "--lr", "1e-4", "--noisy-rollouts", "0", "--ar-residual",
-                   "--select", "rollout-dtw"],
+    "autonomous": ["--conditioning", "autonomous", "--lr", "1e-4", "--noisy-rollouts", "0", "--chunk", "10",
+                   "--select", "rollouts"],
     "default": ["--conditioning", "reference", "--lr", "3e-4"],
 }
 
@@ -119,7 +121,7 @@ def main():
     ap.add_argument("--tc", default="build/bin/nao_toolchain")
     ap.add_argument("--epoch", action="store_true", help="time one whole epoch of a committed model's recipe")
     ap.add_argument("--recipe", choices=sorted(RECIPES), default="autonomous",
-                    help="with --epoch: the recipe of models/autonomous.bin (default) or models/default.bin")
+                    help="with --epoch: the paper configuration's autonomous recipe (default) or models/default.bin's")
     a = ap.parse_args()
     if a.epoch:
         main_epoch(a)

@@ -1,21 +1,26 @@
-// The committed models beat the two trivial predictors on their own validation split, as their
-// model cards state: the validation demonstrations named in model.bin are regenerated from the
-// synthesiser (training set seed 1, as toolchain/nao train makes it), executed on the simulated
-// arm with the expert's labels as docs/policy.md defines them, and the runtime's streaming
-// inference is scored against the zero action and the repeat-last-action baselines. An autonomous
-// model's rollouts start where their demonstrators did (fromOwnStarts), as in training.
+// The committed models against the baselines on their own validation split, as their model cards
+// state: the validation demonstrations named in model.bin are regenerated from the synthesiser
+// (training set seed 1, as toolchain/nao train makes it), executed on the simulated arm with the
+// expert's labels as docs/policy.md defines them, and the runtime's streaming inference is scored
+// against the zero action and the repeat-last-action baselines. An autonomous model's rollouts
+// start where their demonstrators did (fromOwnStarts), as in training, and it is run closed loop
+// from those starts as nao_rt runs it.
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
+#include "nao/tools/evaluate.hpp"
 #include "nao/tools/kmeans.hpp"
+#include "nao/tools/movement_metrics.hpp"
 #include "nao/tools/policy_dataset.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
+#include "replica.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -27,21 +32,78 @@ namespace {
 
 constexpr std::uint64_t kTrainingSeed = 1;  // toolchain/nao train: synth --seed 1
 
-struct Scores {
-  double model = 0.0, zero = 0.0, repeat = 0.0;
-  std::size_t samples = 0;
+// One movement's closed-loop runs from the validation starts, medians (docs/evaluate.md).
+struct MovementRuns {
+  double dtw_m = 0.0;        ///< hand-path DTW to the nearest validation demonstration
+  double still_dtw_m = 0.0;  ///< the same for the arm held at the start
+  double demo_nn_dtw_m = 0.0;  ///< the validation demonstrations' own, to the nearest other one
+  double speed_ratio = 0.0;  ///< middle-phase RMS hand speed, runs / demonstrations
+  double loops_run = 0.0, loops_demo = 0.0;
 };
 
-Scores score(const std::string& path) {
-  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  const ModelFile model = readModelFile(path);
-  checkJointsMatch(model, arm, path);
-  checkPolicyArch<PaperPolicyDims>(model.header.arch);
+struct Scores {
+  double model = 0.0, zero = 0.0, repeat = 0.0;
+  double run_code = -1.0;  ///< with each run's code (models with run codes; -1: none)
+  std::size_t samples = 0;
+  std::map<std::string, MovementRuns> runs;  ///< autonomous models, by movement
+};
+
+// An autonomous model's runs as nao_rt makes them (the evaluator's in-process replay of
+// nao_rt --start-pose: the runtime's controller, policy and ODE arm) from every validation
+// demonstration's start for its length, scored as nao_toolchain evaluate scores them.
+std::map<std::string, MovementRuns> closedLoop(const ModelFile& model, const ArmModel& arm,
+                                               const tools::PolicyData& data, const std::vector<int>& val) {
+  std::map<std::string, MovementRuns> out;
+  for (std::size_t m = 0; m < model.header.movement_names.size(); ++m) {
+    std::vector<const tools::PolicyDemo*> demos;
+    std::vector<tools::HandPath> hands;
+    for (const int i : val)
+      if (data.demos[static_cast<std::size_t>(i)].movement == static_cast<int>(m)) {
+        demos.push_back(&data.demos[static_cast<std::size_t>(i)]);
+        hands.push_back(tools::handPath(arm, demos.back()->f));
+      }
+    REQUIRE(demos.size() >= 3);
+    const double period_s = demos.front()->t_s[1] - demos.front()->t_s[0];
+    const Eigen::Matrix<double, 3, 2> plane = tools::loopPlane(hands);
+    std::vector<double> dtw, still, demo_nn, speed, demo_speed, loops, demo_loops;
+    for (std::size_t k = 0; k < demos.size(); ++k) {
+      const int ticks = static_cast<int>(demos[k]->f.size());
+      const JointVector start = clampToLimits(arm, demos[k]->start);
+      std::vector<JointVector> q = {start};
+      for (const tools::ReplicaTick& t : tools::replayAutonomousRun(model, arm, SimParams{}, static_cast<int>(m), start, ticks))
+        q.push_back(t.q);
+      const tools::HandPath hand = tools::handPath(arm, q);
+      dtw.push_back(tools::nearestDemo(hand, hands).dtw_m);
+      still.push_back(tools::nearestDemo(tools::handPath(arm, std::vector<JointVector>(q.size(), start)), hands).dtw_m);
+      speed.push_back(tools::middleRmsSpeed(hand, period_s));
+      loops.push_back(tools::loopCount(hand, plane));
+      demo_nn.push_back(tools::nearestDemo(hands[k], hands, static_cast<int>(k)).dtw_m);
+      demo_speed.push_back(tools::middleRmsSpeed(hands[k], period_s));
+      demo_loops.push_back(tools::loopCount(hands[k], plane));
+    }
+    MovementRuns r;
+    r.dtw_m = tools::median(dtw);
+    r.still_dtw_m = tools::median(still);
+    r.demo_nn_dtw_m = tools::median(demo_nn);
+    r.speed_ratio = tools::median(speed) / tools::median(demo_speed);
+    r.loops_run = tools::median(loops);
+    r.loops_demo = tools::median(demo_loops);
+    MESSAGE(model.header.movement_names[m] << ": " << demos.size() << " runs, DTW " << r.dtw_m * 1e3 << " mm (held still "
+                                           << r.still_dtw_m * 1e3 << " mm, demonstrations' NN "
+                                           << r.demo_nn_dtw_m * 1e3 << " mm), speed ratio " << r.speed_ratio << ", loops "
+                                           << r.loops_run << " / " << r.loops_demo);
+    out[model.header.movement_names[m]] = r;
+  }
+  return out;
+}
+
+template <class Dims>
+Scores scoreAs(const std::string& path, const ArmModel& arm, const ModelFile& model) {
   std::vector<const float*> p;
   for (std::size_t i = 0; i < model.tensors.size(); ++i) p.push_back(model.data(i));
-  const PolicyWeights<PaperPolicyDims> w =
-      bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
-  auto ws = makePolicyWorkspace<PaperPolicyDims>();
+  const PolicyWeights<Dims> w =
+      bindPolicyWeights<Dims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
+  auto ws = makePolicyWorkspace<Dims>();
 
   const nlohmann::json meta = nlohmann::json::parse(model.header.metadata_json);
   const std::vector<std::string> val = meta.at("split").at("val").get<std::vector<std::string>>();
@@ -51,7 +113,7 @@ Scores score(const std::string& path) {
   std::map<std::string, std::vector<JointVector>> centroid_map;
   for (std::size_t m = 0; m < model.header.movement_names.size(); ++m)
     for (int k = 0; k < w.clusters; ++k)
-      centroid_map[model.header.movement_names[m]].push_back(centroid(w, static_cast<int>(m), k).cast<double>());
+      centroid_map[model.header.movement_names[m]].push_back(centroid(w, static_cast<int>(m), k).template cast<double>());
   std::vector<tools::PolicyDemo> demos;
   for (const std::string& name : val) {
     const std::size_t cut = name.rfind('_');
@@ -104,33 +166,48 @@ Scores score(const std::string& path) {
   clean.noisy_rollouts = 0;
   const std::vector<tools::PolicySequence> seqs =
       tools::executeDemos(data, all, makeSimModel(arm), clean, meta.at("training").at("seed").get<std::uint64_t>());
-  for (const tools::PolicySequence& seq : seqs) {
-    resetPolicyStream(*ws);
-    for (std::size_t t = 0; t < seq.ticks(); ++t) {
-      PolicyInput in;
-      in.q = seq.q[t].cast<float>();
-      in.a_prev = seq.a_prev[t].cast<float>();
-      in.r = seq.r[t].cast<float>();
-      in.movement = seq.movement;
-      in.step = static_cast<int>(std::min<std::size_t>(t, static_cast<std::size_t>(w.max_steps - 1)));
-      stepPolicy(w, *ws, in);
-      // The trainer's validation MSE is of the executed action's first term: this tick's chunk
-      // entry plus the law (the action itself for a chunk of 1; the ensemble mixes older chunks in).
-      Eigen::Matrix<float, 5, 1> first = ws->chunk.col(0);
-      if (w.conditioning == Conditioning::kReference) first += (w.law_gain.array() * in.r.array()).matrix();
-      const JointVector a = first.cast<double>();
-      sum_model += (a - seq.a[t]).squaredNorm();
-      sum_zero += seq.a[t].squaredNorm();
-      sum_repeat += (seq.a_prev[t] - seq.a[t]).squaredNorm();
-      ++s.samples;
+  // The trainer's validation MSE is of the executed action's first term: this tick's chunk entry
+  // plus the law (the action itself for a chunk of 1; the ensemble mixes older chunks in). It is
+  // taken at the latent's prior mean (the zero code); a model with run codes is also scored as
+  // nao_rt runs it, with the code its controller picks from the demonstration's start.
+  const std::vector<ModelRunCodes> codes =
+      modelRunCodes(model.header.metadata_json, model.header.movement_names, Dims::kDModel, path);
+  double sum_coded = 0.0;
+  for (const tools::PolicySequence& seq : seqs)
+    for (const bool coded : {false, true}) {
+      if (coded && codes.empty()) continue;
+      setPolicyRunCode(*ws, coded ? runCode(codes, seq.movement, seq.q[0]) : nullptr);
+      resetPolicyStream(*ws);
+      for (std::size_t t = 0; t < seq.ticks(); ++t) {
+        PolicyInput in;
+        in.q = seq.q[t].cast<float>();
+        in.a_prev = seq.a_prev[t].cast<float>();
+        in.r = seq.r[t].cast<float>();
+        in.movement = seq.movement;
+        in.step = static_cast<int>(std::min<std::size_t>(t, static_cast<std::size_t>(w.max_steps - 1)));
+        stepPolicy(w, *ws, in);
+        Eigen::Matrix<float, 5, 1> first = ws->chunk.col(0);
+        if (w.conditioning == Conditioning::kReference) first += (w.law_gain.array() * in.r.array()).matrix();
+        const double e = (first.cast<double>() - seq.a[t]).squaredNorm();
+        if (coded) {
+          sum_coded += e;
+          continue;
+        }
+        sum_model += e;
+        sum_zero += seq.a[t].squaredNorm();
+        sum_repeat += (seq.a_prev[t] - seq.a[t]).squaredNorm();
+        ++s.samples;
+      }
     }
-  }
   const double n = static_cast<double>(s.samples * kNumJoints);
   s.model = sum_model / n;
   s.zero = sum_zero / n;
   s.repeat = sum_repeat / n;
+  if (!codes.empty()) s.run_code = sum_coded / n;
+  if (model.header.conditioning == Conditioning::kAutonomous) s.runs = closedLoop(model, arm, data, all);
   MESSAGE(path << ": " << val.size() << " validation demonstrations, " << s.samples << " samples; MSE rad^2: model "
-               << s.model << ", zero action " << s.zero << ", repeat last " << s.repeat);
+               << s.model << " (with the runs' codes " << s.run_code << "), zero action " << s.zero
+               << ", repeat last " << s.repeat);
   // The card's numbers (training pipeline: files, Ceres) are reproduced closely by the
   // in-memory pipeline (no pixel rounding, runtime LM).
   const nlohmann::json& base = meta.at("baselines_rad2").at("val");
@@ -138,6 +215,20 @@ Scores score(const std::string& path) {
   CHECK(s.repeat == doctest::Approx(base.at("repeat_last").get<double>()).epsilon(0.05));
   CHECK(s.model == doctest::Approx(meta.at("result").at("val_mse_rad2").get<double>()).epsilon(0.10));
   return s;
+}
+
+Scores score(const std::string& path) {
+  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
+  const ModelFile model = readModelFile(path);
+  checkJointsMatch(model, arm, path);
+  // The committed models are of the paper's or the small dimensions (checkPolicyArch throws on others).
+  try {
+    checkPolicyArch<SmallPolicyDims>(model.header.arch);
+  } catch (const std::exception&) {
+    checkPolicyArch<PaperPolicyDims>(model.header.arch);
+    return scoreAs<PaperPolicyDims>(path, arm, model);
+  }
+  return scoreAs<SmallPolicyDims>(path, arm, model);
 }
 
 std::string modelPath(const char* name) {
@@ -153,8 +244,23 @@ TEST_CASE("models/default.bin beats both baselines and reaches at most half the 
   CHECK(s.model <= 0.5 * s.repeat);
 }
 
-TEST_CASE("models/autonomous.bin beats both baselines on its validation split") {
+// An autonomous model is judged by its runs, not by one step along a demonstration's trajectory:
+// it acts out its own run (the run code of the training demonstrations' medoid nearest the start),
+// whose phase is not the held-out demonstration's, so its one-step MSE may well exceed the zero
+// action's (models/autonomous.md states both). The card's one-step figures are reproduced
+// (score); on every movement the runs must come within twice the distance between two validation
+// demonstrations (and beat an arm held at its start), and whole_arm's must make its loops at its
+// speed (docs/evaluate.md's bars), as the card states.
+TEST_CASE("models/autonomous.bin's runs from its validation starts make the movement") {
   const Scores s = score(modelPath("autonomous.bin"));
-  CHECK(s.model < s.zero);
-  CHECK(s.model < s.repeat);
+  REQUIRE(s.runs.size() == 3);
+  for (const auto& [name, r] : s.runs) {
+    INFO(name);
+    CHECK(r.dtw_m < r.still_dtw_m);
+    CHECK(r.dtw_m < 2.0 * r.demo_nn_dtw_m);
+  }
+  const MovementRuns& w = s.runs.at("whole_arm");
+  CHECK(w.speed_ratio >= 0.7);
+  CHECK(w.speed_ratio <= 1.3);
+  CHECK(std::abs(w.loops_run - w.loops_demo) <= 1.0);
 }
