@@ -34,10 +34,10 @@ constexpr std::uint64_t kTrainingSeed = 1;  // toolchain/nao train: synth --seed
 
 // One movement's closed-loop runs from the validation starts, medians (docs/evaluate.md).
 struct MovementRuns {
-  double dtw_m = 0.0;        ///< hand-path DTW to the nearest validation demonstration
-  double still_dtw_m = 0.0;  ///< the same for the arm held at the start
+  double dtw_m = 0.0;          ///< hand-path DTW to the nearest validation demonstration
+  double still_dtw_m = 0.0;    ///< the same for the arm held at the start
   double demo_nn_dtw_m = 0.0;  ///< the validation demonstrations' own, to the nearest other one
-  double speed_ratio = 0.0;  ///< middle-phase RMS hand speed, runs / demonstrations
+  double speed_ratio = 0.0;    ///< middle-phase RMS hand speed, runs / demonstrations
   double loops_run = 0.0, loops_demo = 0.0;
 };
 
@@ -206,8 +206,8 @@ Scores scoreAs(const std::string& path, const ArmModel& arm, const ModelFile& mo
   if (!codes.empty()) s.run_code = sum_coded / n;
   if (model.header.conditioning == Conditioning::kAutonomous) s.runs = closedLoop(model, arm, data, all);
   MESSAGE(path << ": " << val.size() << " validation demonstrations, " << s.samples << " samples; MSE rad^2: model "
-               << s.model << " (with the runs' codes " << s.run_code << "), zero action " << s.zero
-               << ", repeat last " << s.repeat);
+               << s.model << (codes.empty() ? "" : " (with the runs' codes " + std::to_string(s.run_code) + ")")
+               << ", zero action " << s.zero << ", repeat last " << s.repeat);
   // The card's numbers (training pipeline: files, Ceres) are reproduced closely by the
   // in-memory pipeline (no pixel rounding, runtime LM).
   const nlohmann::json& base = meta.at("baselines_rad2").at("val");
