@@ -180,3 +180,52 @@ TEST_CASE("a rollout of the zero action holds the simulated arm at s_0, one hand
 // contract for every movement) runs end to end on a model of a user's recordings in the system
 // test open_world (tests/system/open_world.py); its measures are checked on closed-form paths in
 // test_movement_metrics.
+
+TEST_CASE("the neighbour replays are the 5 training demonstrations nearest the start, each tracked from it; the medoid's is the medoid replay") {
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const SimModel sim = makeSimModel(arm);
+  const double period = 0.1, gain = servoStepGain(sim.params);
+  // Seven demonstrations: slow circles of the shoulder and elbow around starts spread along the
+  // joint ranges, each of its own radius and phase.
+  DemoSet train;
+  const JointVector mid = 0.5 * (arm.q_min + arm.q_max), span = arm.q_max - arm.q_min;
+  for (int d = 0; d < 7; ++d) {
+    std::vector<JointVector> f;
+    const JointVector centre = mid + (0.04 * (d - 3)) * span;
+    for (int t = 0; t < 60; ++t) {
+      const double th = 0.2 * t + 0.3 * d, radius = 0.1 + 0.02 * d;
+      JointVector q = centre;
+      q[0] += radius * std::cos(th);
+      q[1] += radius * std::sin(th);
+      q[3] += 0.5 * radius * std::sin(th);
+      f.push_back(q);
+    }
+    train.names.push_back("d" + std::to_string(d));
+    train.start.push_back(f.front());
+    train.hand.push_back(handPath(arm, f));
+    train.f.push_back(std::move(f));
+  }
+  const JointVector start = train.start[2] + JointVector::Constant(0.01);
+  const NeighbourReplays r = neighbourReplays(sim, period, gain, train, start, 60);
+  CHECK(r.demos == nearestStarts(train.start, start, 5));
+  CHECK(r.demos.front() == 2);
+  CHECK(r.medoid == medoid(train.hand, r.demos));
+  REQUIRE(r.q.size() == 5);
+  double worst = 0.0;
+  for (std::size_t k = 0; k < r.q.size(); ++k) {
+    CAPTURE(k);
+    const std::vector<JointVector>& f = train.f[static_cast<std::size_t>(r.demos[k])];
+    // Each is its demonstration tracked from the run's start: the same as trackDemo of it, and
+    // (the arm started 0.01 rad off, the servo a tick behind) near its hand path.
+    CHECK(r.q[k] == trackDemo(sim, period, gain, f, start, 60));
+    REQUIRE(r.q[k].size() == 61);
+    const double dtw = rt::dtwMeanDistance(handPath(arm, r.q[k]), handPath(arm, f));
+    worst = std::max(worst, dtw);
+    CHECK_MESSAGE(dtw < 0.005, "replay of " << train.names[static_cast<std::size_t>(r.demos[k])] << " " << dtw * 1e3 << " mm off");
+    // and farther from the other demonstrations than from its own.
+    for (int other : r.demos)
+      if (other != r.demos[k]) CHECK(dtw < rt::dtwMeanDistance(handPath(arm, r.q[k]), train.hand[static_cast<std::size_t>(other)]));
+  }
+  MESSAGE("neighbour replays: worst hand-path DTW to their own demonstration " << worst * 1e3 << " mm");
+  CHECK(&r.medoidQ() == &r.q[static_cast<std::size_t>(std::find(r.demos.begin(), r.demos.end(), r.medoid) - r.demos.begin())]);
+}

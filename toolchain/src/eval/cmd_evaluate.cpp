@@ -289,7 +289,8 @@ void evaluate(const Args& a) {
     std::fprintf(stderr, "evaluate: the toolchain cannot replay this architecture's runs: no network share or ablation\n");
 
   json summary, detail;
-  std::printf("%-10s %9s %9s %9s %9s %7s %11s %7s %9s %9s\n", "movement", "auto mm", "medoid mm", "demo NN", "lin AR mm",
+  std::printf("%-10s %9s %9s %9s %9s %9s %7s %11s %7s %9s %9s\n", "movement", "auto mm", "medoid mm", "5-near mm", "demo NN",
+              "lin AR mm",
               "speed", "loops r/d", "share", "distinct", "ref mm");
   for (const MovementWork& w : work) {
     const fs::path mdir = out / w.name;
@@ -318,7 +319,7 @@ void evaluate(const Args& a) {
     const LinearArModel ar = fitLinearAr(w.train.f, w.held.f, a.max_order);
     SimData sim_data(sim, w.held.start.front());
 
-    std::vector<double> auto_dtw, medoid_dtw, ar_dtw, speed, loops, share, excess;
+    std::vector<double> auto_dtw, medoid_dtw, neighbour_dtw, ar_dtw, speed, loops, share, excess;
     std::vector<HandPath> run_hands;
     json runs = json::array();
     std::size_t replay_mismatch = 0;
@@ -335,9 +336,12 @@ void evaluate(const Args& a) {
       loops.push_back(loopCount(run.hand, plane));
       excess.push_back(rangeExcess(run.q, lo, hi));
       run_hands.push_back(run.hand);
-      const MedoidReplay med = medoidReplay(sim, period_s, gain, w.train, w.held.start[i], ticks);
-      const NearestDemo med_near = nearestDemo(handPath(arm, med.q), w.held.hand);
+      const NeighbourReplays rep5 = neighbourReplays(sim, period_s, gain, w.train, w.held.start[i], ticks);
+      const NearestDemo med_near = nearestDemo(handPath(arm, rep5.medoidQ()), w.held.hand);
       medoid_dtw.push_back(med_near.dtw_m);
+      std::vector<double> each;
+      for (const std::vector<JointVector>& q : rep5.q) each.push_back(nearestDemo(handPath(arm, q), w.held.hand).dtw_m);
+      neighbour_dtw.push_back(median(each));
       const Rollout ar_run = rolloutOnSim(sim, sim_data, period_s, w.held.start[i], ticks,
                                           [&](const JointVector& q, const std::vector<JointVector>& past) {
                                             return linearArAction(ar, q, past);
@@ -352,8 +356,9 @@ void evaluate(const Args& a) {
                 {"speed_m_s", speed.back()},
                 {"loops", loops.back()},
                 {"joint_range_excess_rad", excess.back()},
-                {"medoid", w.train.names[static_cast<std::size_t>(med.medoid)]},
+                {"medoid", w.train.names[static_cast<std::size_t>(rep5.medoid)]},
                 {"medoid_replay_dtw_m", med_near.dtw_m},
+                {"neighbour_replay_dtw_m", each},
                 {"linear_ar_dtw_m", ar_dtw.back()}};
       if (replay) {
         const std::vector<ReplicaTick> rep = replayAutonomousRun(model, arm, sim_params, w.index, w.held.start[i], ticks);
@@ -399,6 +404,7 @@ void evaluate(const Args& a) {
     m["set"] = w.set_kind;
     m["autonomous_dtw_m"] = numberOrNull(median(auto_dtw));
     m["medoid_replay_dtw_m"] = numberOrNull(median(medoid_dtw));
+    m["neighbour_replay_dtw_m"] = numberOrNull(median(neighbour_dtw));
     m["demo_nn_dtw_m"] = numberOrNull(median(nn_dtw));
     m["linear_ar_dtw_m"] = numberOrNull(median(ar_dtw));
     m["speed_ratio"] = numberOrNull(median(speed) / median(demo_speed));
@@ -420,6 +426,7 @@ void evaluate(const Args& a) {
     }
     m["autonomous_dtw_per_run_m"] = auto_dtw;
     m["medoid_replay_dtw_per_run_m"] = medoid_dtw;
+    m["neighbour_replay_dtw_per_run_m"] = neighbour_dtw;
     m["linear_ar_dtw_per_run_m"] = ar_dtw;
     m["demo_nn_dtw_per_demo_m"] = nn_dtw;
     summary[w.name] = m;
@@ -434,8 +441,9 @@ void evaluate(const Args& a) {
                    w.name.c_str(), replay_mismatch);
     char loops_text[32];
     std::snprintf(loops_text, sizeof loops_text, "%.1f/%.1f", median(loops), median(demo_loops));
-    std::printf("%-10s %9s %9s %9s %9s %7.2f %11s %7.3f %4zu/%-4zu %9s\n", w.name.c_str(),
+    std::printf("%-10s %9s %9s %9s %9s %9s %7.2f %11s %7.3f %4zu/%-4zu %9s\n", w.name.c_str(),
                 millimetres(median(auto_dtw)).c_str(), millimetres(median(medoid_dtw)).c_str(),
+                millimetres(median(neighbour_dtw)).c_str(),
                 millimetres(median(nn_dtw)).c_str(), millimetres(median(ar_dtw)).c_str(), median(speed) / median(demo_speed),
                 loops_text, share.empty() ? std::nan("") : median(share), distinct, auto_dtw.size(),
                 reference ? millimetres(median(ref_rmse)).c_str() : "-");
@@ -453,6 +461,7 @@ void evaluate(const Args& a) {
                               : json{{"kind", "validation"}}},
       {"medoid_replay", "5 training demonstrations nearest the run's start, their medoid by summed hand-path DTW, "
                         "tracked from the run's start by a = g (f(t+1) - q)"},
+      {"neighbour_replay", "each of those 5 tracked the same way; per run the median over the 5"},
       {"gain", gain},
       {"blend_law_pole", kFeatureBlendPole},
       {"detail", "detail.json"}};

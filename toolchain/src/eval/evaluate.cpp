@@ -136,22 +136,27 @@ DemoSet demoSetFromRecordings(const ArmModel& arm, const std::string& dir, const
   return set;
 }
 
-MedoidReplay medoidReplay(const SimModel& sim, double period_s, double gain, const DemoSet& train, const JointVector& start,
-                          int ticks, std::size_t k) {
-  const std::vector<int> near = nearestStarts(train.start, start, k);
-  MedoidReplay out;
-  out.medoid = medoid(train.hand, near);
-  const std::vector<JointVector>& f = train.f[static_cast<std::size_t>(out.medoid)];
+std::vector<JointVector> trackDemo(const SimModel& sim, double period_s, double gain, const std::vector<JointVector>& f,
+                                   const JointVector& start, int ticks) {
   SimData data(sim, start);
   int t = 0;
   const Rollout r = rolloutOnSim(sim, data, period_s, start, ticks, [&](const JointVector& q, const std::vector<JointVector>&) {
-    // The medoid's next sample, held at its last one when the run outlasts it.
+    // The demonstration's next sample, held at its last one when the run outlasts it.
     const JointVector target = clampToLimits(sim.arm, f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, f.size() - 1)]);
     ++t;
     return JointVector(gain * (target - q));
   });
-  out.q.push_back(clampToLimits(sim.arm, start));
-  out.q.insert(out.q.end(), r.q.begin(), r.q.end());
+  std::vector<JointVector> q{clampToLimits(sim.arm, start)};
+  q.insert(q.end(), r.q.begin(), r.q.end());
+  return q;
+}
+
+NeighbourReplays neighbourReplays(const SimModel& sim, double period_s, double gain, const DemoSet& train,
+                                  const JointVector& start, int ticks, std::size_t k) {
+  NeighbourReplays out;
+  out.demos = nearestStarts(train.start, start, k);
+  out.medoid = medoid(train.hand, out.demos);
+  for (int d : out.demos) out.q.push_back(trackDemo(sim, period_s, gain, train.f[static_cast<std::size_t>(d)], start, ticks));
   return out;
 }
 

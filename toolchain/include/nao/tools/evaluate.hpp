@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -70,17 +71,28 @@ DemoSet demoSetFromRecordings(const ArmModel& arm, const std::string& dir, const
                               const RecordingInput& input, const RetargetParams& retarget,
                               const std::vector<JointVector>& key_poses, const std::string& what);
 
-/// Medoid replay (the best fixed trajectory the data give): for a run starting at `start`, the
-/// `k` training demonstrations whose starts are nearest, their medoid by summed hand-path DTW,
-/// tracked from `start` for `ticks` ticks through the same arm by the first-order servo inversion
-/// a = g (clamp(f_medoid(t+1)) - q) (the rollout step nao_rt takes). Returns the joint trajectory
-/// (the start, then the measured q after each tick) and the medoid's index into `train`.
-struct MedoidReplay {
-  std::vector<JointVector> q;
-  int medoid = -1;
+/// A demonstration's feature trajectory `f` tracked from `start` for `ticks` ticks through the
+/// simulated arm by the first-order servo inversion a = g (clamp(f(t+1)) - q) (the rollout step
+/// nao_rt takes), f held at its last sample when the run outlasts it. Returns the start, then the
+/// measured q after each tick.
+std::vector<JointVector> trackDemo(const SimModel& sim, double period_s, double gain, const std::vector<JointVector>& f,
+                                   const JointVector& start, int ticks);
+
+/// The replays of a run's neighbours: the `k` training demonstrations whose starts are nearest
+/// `start` (nearestStarts order), each tracked from `start` for `ticks` ticks by trackDemo, and
+/// which of them is their medoid by summed hand-path DTW (the medoid replay: the best fixed
+/// trajectory the data give). The median over all k is what a policy that faithfully plays one
+/// of its start's demonstrations, picked at random, would score.
+struct NeighbourReplays {
+  std::vector<int> demos;                    ///< indices into `train`, nearest first
+  std::vector<std::vector<JointVector>> q;   ///< per demonstration: the start, then q after each tick
+  int medoid = -1;                           ///< index into `train` (one of `demos`)
+  const std::vector<JointVector>& medoidQ() const {
+    return q[static_cast<std::size_t>(std::find(demos.begin(), demos.end(), medoid) - demos.begin())];
+  }
 };
-MedoidReplay medoidReplay(const SimModel& sim, double period_s, double gain, const DemoSet& train, const JointVector& start,
-                          int ticks, std::size_t k = 5);
+NeighbourReplays neighbourReplays(const SimModel& sim, double period_s, double gain, const DemoSet& train,
+                                  const JointVector& start, int ticks, std::size_t k = 5);
 
 /// Writes a demonstration's f as docs/evaluate.md's demos/<name>.csv: t_s, q_0..q_4 (exact).
 void writeTrajectoryCsv(const std::string& path, const std::vector<JointVector>& q, double period_s);
