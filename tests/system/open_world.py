@@ -114,8 +114,8 @@ class OpenWorld(unittest.TestCase):
             s = json.load(f)
         for m in MOVEMENTS:
             self.assertIn(m, s)
-            for key in ("autonomous_dtw_m", "medoid_replay_dtw_m", "neighbour_replay_dtw_m", "speed_ratio", "loops_run_median",
-                        "loops_demo_median", "network_share", "distinct_runs"):
+            for key in ("autonomous_dtw_m", "medoid_replay_dtw_m", "neighbour_replay_dtw_m", "speed_ratio",
+                        "loops_run_median", "loops_demo_median", "network_share", "distinct_runs"):
                 self.assertIn(key, s[m], "%s: %s" % (m, key))
             self.assertGreater(s[m]["autonomous_dtw_m"], 0.0)
             self.assertLessEqual(s[m]["joint_range_excess_rad"], 0.1)
