@@ -13,6 +13,7 @@
 #include "nao/tools/policy_dataset.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
+#include "nao/tools/toolchain_dims.hpp"
 #include "replica.hpp"
 #include "support/test_util.hpp"
 
@@ -221,14 +222,12 @@ Scores score(const std::string& path) {
   const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
   const ModelFile model = readModelFile(path);
   checkJointsMatch(model, arm, path);
-  // The committed models are of the paper's or the small dimensions (checkPolicyArch throws on others).
-  try {
-    checkPolicyArch<SmallPolicyDims>(model.header.arch);
-  } catch (const std::exception&) {
-    checkPolicyArch<PaperPolicyDims>(model.header.arch);
-    return scoreAs<PaperPolicyDims>(path, arm, model);
-  }
-  return scoreAs<SmallPolicyDims>(path, arm, model);
+  // The committed models are of dimensions the toolchain runs in process (toolchain_dims.hpp).
+  return tools::withToolchainDims(model.header.arch, "test_model_quality", [&](auto dims) {
+    using Dims = typename decltype(dims)::type;
+    checkPolicyArch<Dims>(model.header.arch);
+    return scoreAs<Dims>(path, arm, model);
+  });
 }
 
 std::string modelPath(const char* name) {

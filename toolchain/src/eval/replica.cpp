@@ -3,6 +3,7 @@
 #include "nao/controller.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
+#include "nao/tools/toolchain_dims.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -15,11 +16,6 @@ namespace {
 struct ZeroClock final : ControllerClock {
   std::int64_t nowNs() override { return 0; }
 };
-
-bool sameComputation(const PolicyArch& a, const PolicyArch& b) {
-  return a.d_model == b.d_model && a.heads == b.heads && a.encoder_layers == b.encoder_layers &&
-         a.decoder_layers == b.decoder_layers && a.ffn_hidden == b.ffn_hidden && a.window == b.window;
-}
 
 template <class Dims>
 std::vector<ReplicaTick> replay(const ModelFile& model, const ArmModel& arm, const SimParams& sim_params, int movement,
@@ -60,18 +56,13 @@ std::vector<ReplicaTick> replay(const ModelFile& model, const ArmModel& arm, con
 
 }  // namespace
 
-bool canReplay(const ModelFile& model) {
-  return sameComputation(model.header.arch, PaperPolicyDims::arch()) ||
-         sameComputation(model.header.arch, SmallPolicyDims::arch());
-}
+bool canReplay(const ModelFile& model) { return hasToolchainDims(model.header.arch); }
 
 std::vector<ReplicaTick> replayAutonomousRun(const ModelFile& model, const ArmModel& arm, const SimParams& sim,
                                              int movement, const JointVector& start, int ticks) {
-  if (sameComputation(model.header.arch, PaperPolicyDims::arch()))
-    return replay<PaperPolicyDims>(model, arm, sim, movement, start, ticks);
-  if (sameComputation(model.header.arch, SmallPolicyDims::arch()))
-    return replay<SmallPolicyDims>(model, arm, sim, movement, start, ticks);
-  throw UserError("the replay of a run needs the paper or small dimensions; this model has others");
+  return withToolchainDims(model.header.arch, "the replay of a run", [&](auto dims) {
+    return replay<typename decltype(dims)::type>(model, arm, sim, movement, start, ticks);
+  });
 }
 
 void writeAblationCsv(const std::string& path, const std::vector<ReplicaTick>& ticks) {

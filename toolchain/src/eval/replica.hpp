@@ -22,7 +22,7 @@ struct ReplicaTick {
   std::array<double, 5> delta{};          ///< ||a(body part j left out) - a||, rad
 };
 
-/// True if the toolchain can replay runs of `model` (its computation is the paper or small one).
+/// True if the toolchain can replay runs of `model` (its dimensions are the toolchain's: toolchain_dims.hpp).
 bool canReplay(const ModelFile& model);
 
 /// nao_rt --reference none --start-pose `start` --ticks `ticks` on the ODE arm, replayed: the

@@ -4,6 +4,7 @@
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
+#include "nao/tools/toolchain_dims.hpp"
 #include "policy_train.hpp"
 
 #include <algorithm>
@@ -46,29 +47,20 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
   return rolloutPolicy(data, demos, sim, policy, workspace.empty() ? nullptr : &workspace);
 }
 
-bool sameComputation(const PolicyArch& a, const PolicyArch& b) {
-  return a.d_model == b.d_model && a.heads == b.heads && a.encoder_layers == b.encoder_layers &&
-         a.decoder_layers == b.decoder_layers && a.ffn_hidden == b.ffn_hidden && a.tokens == b.tokens &&
-         a.features == b.features && a.window == b.window;
-}
 
 }  // namespace
 
 bool hasRuntimeStep(const PolicyArch& arch) {
-  return arch.chunk <= kPolicyMaxChunk && arch.bins <= kPolicyMaxBins &&
-         (sameComputation(arch, PaperPolicyDims::arch()) || sameComputation(arch, SmallPolicyDims::arch()));
+  return arch.chunk <= kPolicyMaxChunk && arch.bins <= kPolicyMaxBins && hasToolchainDims(arch);
 }
 
 std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
                                const PolicyNet& net, const std::vector<ModelRunCodes>* codes) {
-  const PolicyArch& arch = net->arch();
-  if (hasRuntimeStep(arch) && sameComputation(arch, PaperPolicyDims::arch()))
-    return runsWith<PaperPolicyDims>(data, demos, sim, net, codes);
-  if (hasRuntimeStep(arch) && sameComputation(arch, SmallPolicyDims::arch()))
-    return runsWith<SmallPolicyDims>(data, demos, sim, net, codes);
-  throw UserError("rollouts through the runtime's step need the paper or small dimensions (d_model, heads, layers, "
-                  "FFN, window); other architectures are rolled out by the nao_rt built for them "
-                  "(toolchain/nao build --model FILE)");
+  if (net->arch().chunk > kPolicyMaxChunk || net->arch().bins > kPolicyMaxBins)
+    throw UserError("rollouts through the runtime's step: the chunk or the bins exceed what the runtime holds");
+  return withToolchainDims(net->arch(), "rollouts through the runtime's step", [&](auto dims) {
+    return runsWith<typename decltype(dims)::type>(data, demos, sim, net, codes);
+  });
 }
 
 SelectionReference selectionReference(const PolicyData& data, const std::vector<int>& val, const ArmModel& arm,

@@ -17,8 +17,8 @@ namespace nao::tools {
 
 struct EpochStats;
 
-/// True if the toolchain holds the runtime's step for `arch`'s computation (the paper and the
-/// small dimensions, PaperPolicyDims / SmallPolicyDims; any table sizes, chunk and bins). Other
+/// True if the toolchain holds the runtime's step for `arch`'s computation (hasToolchainDims;
+/// any table sizes, chunk and bins up to the runtime's bounds). Other
 /// computations are rolled out by the nao_rt built for them (`toolchain/nao build --model`).
 bool hasRuntimeStep(const PolicyArch& arch);
 
