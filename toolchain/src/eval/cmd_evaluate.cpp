@@ -150,10 +150,6 @@ void evaluate(const Args& a) {
   const fs::path beside = fs::read_symlink("/proc/self/exe").parent_path() / "nao_rt";
   const fs::path nao_rt = a.nao_rt.empty() ? beside : fs::path(a.nao_rt);
   const fs::path reference_nao_rt = a.reference_nao_rt.empty() ? beside : fs::path(a.reference_nao_rt);
-  for (const auto& [exe, option] : {std::pair{nao_rt, "--nao-rt"}, std::pair{reference_nao_rt, "--reference-nao-rt"}})
-    if (access(exe.c_str(), X_OK) != 0)
-      throw UserError("nao_rt not found at " + exe.string() + ": build it (toolchain/nao build) or pass " + option +
-                      " PATH");
   const ModelFile model = readModelFile(a.model);
   checkJointsMatch(model, arm, a.model);
   if (model.header.conditioning != Conditioning::kAutonomous)
@@ -165,6 +161,13 @@ void evaluate(const Args& a) {
   const bool test = a.test_seed >= 0;
   if (recordings && test) throw UserError("--test-seed scores a synthetic test set; --recordings scores the model's held-out recordings: take one");
   const bool reference = !recordings && !a.no_reference;
+  // The reference model's nao_rt is needed only where it runs.
+  std::vector<std::pair<fs::path, const char*>> exes{{nao_rt, "--nao-rt"}};
+  if (reference) exes.emplace_back(reference_nao_rt, "--reference-nao-rt");
+  for (const auto& [exe, option] : exes)
+    if (access(exe.c_str(), X_OK) != 0)
+      throw UserError("nao_rt not found at " + exe.string() + ": build it (toolchain/nao build) or pass " + option +
+                      " PATH");
   const int min_demos = a.min_demos > 0 ? a.min_demos : (!recordings && !test ? 16 : 4);
 
   std::unique_ptr<PolicyData> data;

@@ -207,8 +207,8 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     std::size_t codes = 0;
     for (const ModelRunCodes& c : r.run_codes) codes += c.size();
     s << "| run latent | K " << o.latent_dims << ", KL weight " << o.latent_kl << "; " << codes
-      << " run codes (one per training demonstration) in the metadata: a run takes the medoid of the 5 "
-         "demonstrations whose starts are nearest its own (docs/autonomous.md) |\n";
+      << " run codes (one per training demonstration) in the metadata: a run takes the medoid of the "
+      << kRunCodeNearest << " demonstrations whose starts are nearest its own (docs/autonomous.md) |\n";
   }
   if (!o.previous_action) s << "| inputs | a(t-1) not read (its weights held at zero) |\n";
   if (o.ema_decay > 0.0) s << "| weights | moving average, decay " << o.ema_decay << " |\n";

@@ -92,7 +92,7 @@ struct NeighbourReplays {
   }
 };
 NeighbourReplays neighbourReplays(const SimModel& sim, double period_s, double gain, const DemoSet& train,
-                                  const JointVector& start, int ticks, std::size_t k = 5);
+                                  const JointVector& start, int ticks, std::size_t k = kRunCodeNearest);
 
 /// Writes a demonstration's f as docs/evaluate.md's demos/<name>.csv: t_s, q_0..q_4 (exact).
 void writeTrajectoryCsv(const std::string& path, const std::vector<JointVector>& q, double period_s);
