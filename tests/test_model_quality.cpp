@@ -65,30 +65,28 @@ std::map<std::string, MovementRuns> closedLoop(const ModelFile& model, const Arm
       }
     REQUIRE(demos.size() >= 3);
     const double period_s = demos.front()->t_s[1] - demos.front()->t_s[0];
-    const Eigen::Matrix<double, 3, 2> plane = tools::loopPlane(hands);
-    std::vector<double> dtw, still, demo_nn, speed, demo_speed, loops, demo_loops;
+    // Scored as nao_toolchain evaluate scores its runs.
+    const tools::HeldOutScores held = tools::scoreHeldOut(hands, period_s);
+    std::vector<double> dtw, still, speed, loops;
     for (std::size_t k = 0; k < demos.size(); ++k) {
       const int ticks = static_cast<int>(demos[k]->f.size());
       const JointVector start = clampToLimits(arm, demos[k]->start);
       std::vector<JointVector> q = {start};
       for (const tools::ReplicaTick& t : tools::replayAutonomousRun(model, arm, SimParams{}, static_cast<int>(m), start, ticks))
         q.push_back(t.q);
-      const tools::HandPath hand = tools::handPath(arm, q);
-      dtw.push_back(tools::nearestDemo(hand, hands).dtw_m);
+      const tools::RunScore run = tools::scoreRun(tools::handPath(arm, q), held);
+      dtw.push_back(run.nearest.dtw_m);
       still.push_back(tools::nearestDemo(tools::handPath(arm, std::vector<JointVector>(q.size(), start)), hands).dtw_m);
-      speed.push_back(tools::middleRmsSpeed(hand, period_s));
-      loops.push_back(tools::loopCount(hand, plane));
-      demo_nn.push_back(tools::nearestDemo(hands[k], hands, static_cast<int>(k)).dtw_m);
-      demo_speed.push_back(tools::middleRmsSpeed(hands[k], period_s));
-      demo_loops.push_back(tools::loopCount(hands[k], plane));
+      speed.push_back(run.speed_m_s);
+      loops.push_back(run.loops);
     }
     MovementRuns r;
     r.dtw_m = tools::median(dtw);
     r.still_dtw_m = tools::median(still);
-    r.demo_nn_dtw_m = tools::median(demo_nn);
-    r.speed_ratio = tools::median(speed) / tools::median(demo_speed);
+    r.demo_nn_dtw_m = tools::median(held.nn_dtw_m);
+    r.speed_ratio = tools::median(speed) / tools::median(held.speed_m_s);
     r.loops_run = tools::median(loops);
-    r.loops_demo = tools::median(demo_loops);
+    r.loops_demo = tools::median(held.loops);
     MESSAGE(model.header.movement_names[m] << ": " << demos.size() << " runs, DTW " << r.dtw_m * 1e3 << " mm (held still "
                                            << r.still_dtw_m * 1e3 << " mm, demonstrations' NN "
                                            << r.demo_nn_dtw_m * 1e3 << " mm), speed ratio " << r.speed_ratio << ", loops "

@@ -311,13 +311,7 @@ void evaluate(const Args& a) {
         hi = hi.cwiseMax(q);
       }
     }
-    const Eigen::Matrix<double, 3, 2> plane = loopPlane(w.held.hand);
-    std::vector<double> nn_dtw, demo_speed, demo_loops;
-    for (std::size_t i = 0; i < w.held.size(); ++i) {
-      nn_dtw.push_back(nearestDemo(w.held.hand[i], w.held.hand, static_cast<int>(i)).dtw_m);
-      demo_speed.push_back(middleRmsSpeed(w.held.hand[i], period_s));
-      demo_loops.push_back(loopCount(w.held.hand[i], plane));
-    }
+    const HeldOutScores held = scoreHeldOut(w.held.hand, period_s);
     // The linear AR baseline: fitted on the training demonstrations, orders on the held-out ones.
     const LinearArModel ar = fitLinearAr(w.train.f, w.held.f, a.max_order);
     SimData sim_data(sim, w.held.start.front());
@@ -333,10 +327,11 @@ void evaluate(const Args& a) {
       if (!s.contains("ticks") || s["ticks"] != ticks)
         throw UserError((job.dir / "summary.json").string() + ": not the run of " + w.held.names[i]);
       const RunPaths run = readRun(arm, w.held.start[i], job.dir / "ticks.csv");
-      const NearestDemo near = nearestDemo(run.hand, w.held.hand);
+      const RunScore score = scoreRun(run.hand, held);
+      const NearestDemo& near = score.nearest;
       auto_dtw.push_back(near.dtw_m);
-      speed.push_back(middleRmsSpeed(run.hand, period_s));
-      loops.push_back(loopCount(run.hand, plane));
+      speed.push_back(score.speed_m_s);
+      loops.push_back(score.loops);
       excess.push_back(rangeExcess(run.q, lo, hi));
       run_hands.push_back(run.hand);
       const NeighbourReplays rep5 = neighbourReplays(sim, period_s, gain, w.train, w.held.start[i], ticks);
@@ -408,11 +403,11 @@ void evaluate(const Args& a) {
     m["autonomous_dtw_m"] = numberOrNull(median(auto_dtw));
     m["medoid_replay_dtw_m"] = numberOrNull(median(medoid_dtw));
     m["neighbour_replay_dtw_m"] = numberOrNull(median(neighbour_dtw));
-    m["demo_nn_dtw_m"] = numberOrNull(median(nn_dtw));
+    m["demo_nn_dtw_m"] = numberOrNull(median(held.nn_dtw_m));
     m["linear_ar_dtw_m"] = numberOrNull(median(ar_dtw));
-    m["speed_ratio"] = numberOrNull(median(speed) / median(demo_speed));
+    m["speed_ratio"] = numberOrNull(median(speed) / median(held.speed_m_s));
     m["loops_run_median"] = numberOrNull(median(loops));
-    m["loops_demo_median"] = numberOrNull(median(demo_loops));
+    m["loops_demo_median"] = numberOrNull(median(held.loops));
     m["network_share"] = share.empty() ? json(nullptr) : numberOrNull(median(share));
     m["distinct_runs"] = distinct;
     m["joint_range_excess_rad"] = excess.empty() ? 0.0 : *std::max_element(excess.begin(), excess.end());
@@ -431,7 +426,7 @@ void evaluate(const Args& a) {
     m["medoid_replay_dtw_per_run_m"] = medoid_dtw;
     m["neighbour_replay_dtw_per_run_m"] = neighbour_dtw;
     m["linear_ar_dtw_per_run_m"] = ar_dtw;
-    m["demo_nn_dtw_per_demo_m"] = nn_dtw;
+    m["demo_nn_dtw_per_demo_m"] = held.nn_dtw_m;
     summary[w.name] = m;
     detail[w.name] = {{"heldout_demos", w.held.names},
                       {"training_demos", w.train.names},
@@ -443,11 +438,12 @@ void evaluate(const Args& a) {
       std::fprintf(stderr, "evaluate: %s: %zu in-process replay(s) differ from nao_rt's run (detail.json)\n",
                    w.name.c_str(), replay_mismatch);
     char loops_text[32];
-    std::snprintf(loops_text, sizeof loops_text, "%.1f/%.1f", median(loops), median(demo_loops));
+    std::snprintf(loops_text, sizeof loops_text, "%.1f/%.1f", median(loops), median(held.loops));
     std::printf("%-10s %9s %9s %9s %9s %9s %7.2f %11s %7.3f %4zu/%-4zu %9s\n", w.name.c_str(),
                 millimetres(median(auto_dtw)).c_str(), millimetres(median(medoid_dtw)).c_str(),
                 millimetres(median(neighbour_dtw)).c_str(),
-                millimetres(median(nn_dtw)).c_str(), millimetres(median(ar_dtw)).c_str(), median(speed) / median(demo_speed),
+                millimetres(median(held.nn_dtw_m)).c_str(), millimetres(median(ar_dtw)).c_str(),
+                median(speed) / median(held.speed_m_s),
                 loops_text, share.empty() ? std::nan("") : median(share), distinct, auto_dtw.size(),
                 reference ? millimetres(median(ref_rmse)).c_str() : "-");
   }

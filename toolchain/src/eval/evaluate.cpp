@@ -136,6 +136,27 @@ DemoSet demoSetFromRecordings(const ArmModel& arm, const std::string& dir, const
   return set;
 }
 
+HeldOutScores scoreHeldOut(std::vector<HandPath> hand, double period_s) {
+  HeldOutScores s;
+  s.hand = std::move(hand);
+  s.period_s = period_s;
+  s.plane = loopPlane(s.hand);
+  for (std::size_t i = 0; i < s.hand.size(); ++i) {
+    s.nn_dtw_m.push_back(nearestDemo(s.hand[i], s.hand, static_cast<int>(i)).dtw_m);
+    s.speed_m_s.push_back(middleRmsSpeed(s.hand[i], period_s));
+    s.loops.push_back(loopCount(s.hand[i], s.plane));
+  }
+  return s;
+}
+
+RunScore scoreRun(const HandPath& run, const HeldOutScores& held) {
+  RunScore r;
+  r.nearest = nearestDemo(run, held.hand);
+  r.speed_m_s = middleRmsSpeed(run, held.period_s);
+  r.loops = loopCount(run, held.plane);
+  return r;
+}
+
 std::vector<JointVector> trackDemo(const SimModel& sim, double period_s, double gain, const std::vector<JointVector>& f,
                                    const JointVector& start, int ticks) {
   SimData data(sim, start);

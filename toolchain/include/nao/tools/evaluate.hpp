@@ -35,6 +35,26 @@ struct NearestDemo {
 };
 NearestDemo nearestDemo(const HandPath& path, const std::vector<HandPath>& demos, int exclude = -1);
 
+/// A movement's held-out demonstrations as the runs are scored against them (docs/evaluate.md):
+/// their hand paths, the plane loops are counted in (loopPlane of them all) and, per
+/// demonstration, the DTW to its nearest other one, its middle-phase RMS speed and its loops.
+struct HeldOutScores {
+  std::vector<HandPath> hand;
+  double period_s = 0.1;
+  Eigen::Matrix<double, 3, 2> plane = Eigen::Matrix<double, 3, 2>::Zero();
+  std::vector<double> nn_dtw_m, speed_m_s, loops;
+};
+HeldOutScores scoreHeldOut(std::vector<HandPath> hand, double period_s);
+
+/// One run's hand path scored against the held-out demonstrations: the nearest of them by DTW,
+/// the middle-phase RMS speed and the loops in their plane.
+struct RunScore {
+  NearestDemo nearest;
+  double speed_m_s = 0.0;
+  double loops = 0.0;
+};
+RunScore scoreRun(const HandPath& run, const HeldOutScores& held);
+
 /// The demonstrations of one movement an evaluation uses: their names, feature-extracted
 /// trajectories f (the model's key poses), starts and hand paths.
 struct DemoSet {
