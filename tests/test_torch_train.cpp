@@ -786,6 +786,28 @@ TEST_CASE("betterEpoch prefers an epoch that makes the movement, then one that m
   }
   CHECK(st.makes_movement);
   CHECK(st.movements_made == 3);
+  // Runs 1 mrad off their demonstrations keep speed, loops and range; whether the movement is
+  // made then rests on the DTW bar: under twice the demonstrations' nearest-neighbour DTW (one
+  // validation demonstration each here, so NaN: not asked until set).
+  std::vector<PolicyRun> off = runs;
+  for (PolicyRun& r : off)
+    for (JointVector& q : r.q) q[0] += 1e-3;
+  EpochStats near_run;
+  scoreRuns(off, ref, smallSim().arm, period, near_run);
+  CHECK(std::isnan(ref.nn_dtw_m[0]));
+  CHECK(near_run.movements_made == 3);
+  const double d0 = near_run.rollouts[0].dtw_m;
+  REQUIRE(d0 > 0.0);
+  SelectionReference strict = ref;
+  strict.nn_dtw_m[0] = 0.25 * d0;  // the run is at 4x the demonstrations' own: not made
+  EpochStats far_run;
+  scoreRuns(off, strict, smallSim().arm, period, far_run);
+  CHECK(far_run.movements_made == 2);
+  CHECK_FALSE(far_run.makes_movement);
+  CHECK(far_run.rollouts[0].speed_ratio == near_run.rollouts[0].speed_ratio);
+  strict.nn_dtw_m[0] = 0.6 * d0;  // at 1.7x: made
+  scoreRuns(off, strict, smallSim().arm, period, far_run);
+  CHECK(far_run.movements_made == 3);
   runs[1].q[4][2] = std::numeric_limits<double>::quiet_NaN();
   EpochStats nan;
   scoreRuns(runs, ref, smallSim().arm, period, nan);

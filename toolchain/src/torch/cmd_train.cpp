@@ -298,7 +298,8 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "
-                  "Another W needs a nao_rt built for it (toolchain/nao build --model FILE)")
+                  "Another W needs a nao_rt built for it (toolchain/nao build --model FILE); --select rollouts "
+                  "takes the small configuration with W 8 or 24 and the paper's with W 20")
       ->check(CLI::Range(1, 1000));
   cmd->add_option("--urdf", args->urdf, "Robot description (joint names and limits stored in the model)")
       ->check(CLI::ExistingFile)
@@ -339,9 +340,10 @@ void setup(CLI::App& app) {
                   "Which epoch is exported (and what patience counts on): val-loss (the validation loss) or "
                   "rollouts (autonomous: after every epoch the net is rolled out on the simulated arm from each "
                   "validation demonstration's start, as nao_rt's autonomous runs; among the epochs whose runs make "
-                  "the most movements - middle-phase hand speed 0.7-1.3x the demonstrations', loops within ±1 - "
+                  "the most movements - middle-phase hand speed 0.7-1.3x the demonstrations', loops within ±1, "
+                  "joints within their range + 0.1 rad, DTW under twice their own nearest-neighbour DTW - "
                   "the lowest mean over movements of the median hand-path DTW to the nearest validation "
-                  "demonstration wins; paper or small dimensions)")
+                  "demonstration wins; paper or small dimensions, the small ones with a window of 8 or 24)")
       ->check(CLI::IsMember({"val-loss", "rollouts"}))
       ->capture_default_str();
   cmd->callback([args] { run(*args); });

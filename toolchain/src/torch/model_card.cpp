@@ -219,7 +219,7 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     s << "| model selection | after every epoch the net (the runtime's streaming inference) is rolled out on the "
          "simulated arm from each validation demonstration's start; kept: among the epochs whose runs make the "
          "most movements (median middle-phase speed 0.7-1.3x the demonstrations', loops within ±1, joints within "
-         "the demonstrations' range + 0.1 rad), the one with the lowest mean over movements of the median "
+         "the demonstrations' range + 0.1 rad, DTW under twice the demonstrations' own), the one with the lowest mean over movements of the median "
          "hand-path DTW to the nearest validation demonstration. Validation demonstrations' own nearest-neighbour "
          "DTW (median):";
     for (std::size_t m = 0; m < r.val_nn_dtw_m.size(); ++m) {

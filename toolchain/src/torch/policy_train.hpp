@@ -95,8 +95,10 @@ struct EpochStats {
   /// TrainOptions::select_by_rollout: the mean over movements of the median DTW, and per movement
   /// the scores (not kept by checkpoints); NaN / empty when off.
   double rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
-  bool makes_movement = false;  ///< every movement's speed ratio in 0.7-1.3 and loops within ±1 of the demonstrations'
-  int movements_made = 0;       ///< movements whose runs meet those bars and stay in range
+  /// Every movement made: speed ratio in 0.7-1.3, loops within ±1 of the demonstrations', joint
+  /// range exceeded by ≤ 0.1 rad and DTW under twice the demonstrations' nearest-neighbour DTW.
+  bool makes_movement = false;
+  int movements_made = 0;  ///< movements whose runs meet those bars
   std::vector<MovementScore> rollouts;
 };
 

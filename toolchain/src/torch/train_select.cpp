@@ -47,7 +47,6 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
   return rolloutPolicy(data, demos, sim, policy, workspace.empty() ? nullptr : &workspace);
 }
 
-
 }  // namespace
 
 bool hasRuntimeStep(const PolicyArch& arch) {
@@ -133,8 +132,11 @@ void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref
     s.loops_run = broken[m] ? kNaN : median(loops[m]);
     s.loops_demo = ref.demo_loops[m];
     s.range_excess_rad = broken[m] ? kNaN : excess[m];
+    // Speed and loops alone are met by a run that is nowhere near the demonstrations (an early
+    // epoch's wrist at 4x their nearest-neighbour DTW): it must also come within twice that
+    // (unknown with a single validation demonstration: then not asked).
     const bool made = s.speed_ratio >= 0.7 && s.speed_ratio <= 1.3 && std::abs(s.loops_run - s.loops_demo) <= 1.0 &&
-                      s.range_excess_rad <= 0.1;
+                      s.range_excess_rad <= 0.1 && (!std::isfinite(ref.nn_dtw_m[m]) || s.dtw_m < 2.0 * ref.nn_dtw_m[m]);
     st.makes_movement = st.makes_movement && made;
     st.movements_made += made ? 1 : 0;
     sum += s.dtw_m;

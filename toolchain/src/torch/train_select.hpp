@@ -45,7 +45,8 @@ SelectionReference selectionReference(const PolicyData& data, const std::vector<
 
 /// Scores `runs` into `st` (rollout_dtw_m, makes_movement, rollouts): per movement the medians of
 /// the DTW to the nearest validation demonstration, of the speed ratio and of the loops, and the
-/// worst excursion beyond the joint range. A non-finite run scores NaN (never kept).
+/// worst excursion beyond the joint range; a movement is made when its runs meet the bars
+/// (EpochStats::makes_movement). A non-finite run scores NaN (never kept).
 void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref, const ArmModel& arm, double period_s,
                EpochStats& st);
 
