@@ -735,9 +735,6 @@ TEST_CASE("netRuns drives the runtime's step from each start: its actions are li
   CHECK(hasRuntimeStep(smallArch()));
   CHECK(hasRuntimeStep(withHead(paperArch(), kPolicyMaxChunk, kPolicyMaxBins)));
   CHECK_FALSE(hasRuntimeStep(withHead(smallArch(), kPolicyMaxChunk + 1, 0)));
-  PolicyArch long_window = smallArch();
-  long_window.window = 24;
-  CHECK(hasRuntimeStep(long_window));
   PolicyArch window = smallArch();
   window.window = 9;
   CHECK_FALSE(hasRuntimeStep(window));

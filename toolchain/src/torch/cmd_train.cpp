@@ -298,8 +298,8 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "
-                  "Another W needs a nao_rt built for it (toolchain/nao build --model FILE); --select rollouts "
-                  "takes the small configuration with W 8 or 24 and the paper's with W 20")
+                  "Another W needs a nao_rt built for it (toolchain/nao build --model FILE) and, for --select "
+                  "rollouts, the toolchain's step compiled for it (toolchain_dims.hpp)")
       ->check(CLI::Range(1, 1000));
   cmd->add_option("--urdf", args->urdf, "Robot description (joint names and limits stored in the model)")
       ->check(CLI::ExistingFile)
@@ -343,7 +343,7 @@ void setup(CLI::App& app) {
                   "the most movements - middle-phase hand speed 0.7-1.3x the demonstrations', loops within ±1, "
                   "joints within their range + 0.1 rad, DTW under twice their own nearest-neighbour DTW - "
                   "the lowest mean over movements of the median hand-path DTW to the nearest validation "
-                  "demonstration wins; paper or small dimensions, the small ones with a window of 8 or 24)")
+                  "demonstration wins; paper or small dimensions)")
       ->check(CLI::IsMember({"val-loss", "rollouts"}))
       ->capture_default_str();
   cmd->callback([args] { run(*args); });

@@ -64,8 +64,8 @@ void check(const PolicyData& data, const TrainOptions& o) {
     throw UserError("model selection on rollouts is for autonomous mode (a reference-mode run needs a human)");
   if (o.select_by_rollout && !hasRuntimeStep(o.arch))
     throw UserError("model selection on rollouts needs the runtime's step, compiled here for the paper and small "
-                    "dimensions only (the small ones with a window of 8 or 24 ticks; d_model, heads, layers, FFN, "
-                    "window): select by validation loss instead");
+                    "dimensions only (d_model, heads, layers, FFN, window; toolchain_dims.hpp): select by validation "
+                    "loss instead");
 }
 
 // Runs carried between ranks as sequences (q and a; the rest unused).

@@ -1,7 +1,9 @@
 // The policy dimensions the toolchain runs in process: the trainer's selection rollouts and the
 // evaluator's replay drive the runtime's own step, a template over the dimensions, so only the
 // dimensions instantiated here run there. A model of others runs in the nao_rt built for it
-// (toolchain/nao build --model FILE). Offline code.
+// (toolchain/nao build --model FILE). Each entry is one more instantiation of the step in the
+// trainer, the evaluator and test_model_quality (build time): docs/autonomous.md's 24-tick window
+// was trained and evaluated with PolicyDims<32, 4, 2, 2, 64, 64, 64, 24> added. Offline code.
 #pragma once
 
 #include "nao/policy_config.hpp"
@@ -13,10 +15,6 @@
 
 namespace nao::tools {
 
-/// The small configuration with a window of 24 ticks (2.4 s, about one demonstrated circle)
-/// instead of 8: `--config small --window 24`.
-using SmallLongWindowPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 24>;
-
 /// True if `a` and `b` compute the same step (everything the dimensions fix; chunk, bins, the
 /// movements and the clock are bound at run time).
 inline bool sameComputation(const PolicyArch& a, const PolicyArch& b) {
@@ -27,8 +25,7 @@ inline bool sameComputation(const PolicyArch& a, const PolicyArch& b) {
 
 /// True if `arch`'s step is one of the toolchain's dimensions.
 inline bool hasToolchainDims(const PolicyArch& arch) {
-  return sameComputation(arch, PaperPolicyDims::arch()) || sameComputation(arch, SmallPolicyDims::arch()) ||
-         sameComputation(arch, SmallLongWindowPolicyDims::arch());
+  return sameComputation(arch, PaperPolicyDims::arch()) || sameComputation(arch, SmallPolicyDims::arch());
 }
 
 /// A dimensions type passed as a value: DimsTag<D>::type is D.
@@ -43,11 +40,9 @@ template <class F>
 decltype(auto) withToolchainDims(const PolicyArch& arch, const char* what, F&& f) {
   if (sameComputation(arch, PaperPolicyDims::arch())) return std::forward<F>(f)(DimsTag<PaperPolicyDims>{});
   if (sameComputation(arch, SmallPolicyDims::arch())) return std::forward<F>(f)(DimsTag<SmallPolicyDims>{});
-  if (sameComputation(arch, SmallLongWindowPolicyDims::arch()))
-    return std::forward<F>(f)(DimsTag<SmallLongWindowPolicyDims>{});
   throw InputError(std::string(what) +
-                  " needs the runtime's step in process, compiled here for the paper and small dimensions (the small "
-                  "ones with a window of 8 or 24 ticks); a model of other dimensions (d_model, heads, layers, FFN, "
+                  " needs the runtime's step in process, compiled here for the paper and small dimensions "
+                  "(toolchain_dims.hpp); a model of other dimensions (d_model, heads, layers, FFN, "
                   "window) runs in the nao_rt built for it (toolchain/nao build --model FILE)");
 }
 
