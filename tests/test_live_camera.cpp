@@ -21,6 +21,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <set>
 #include <thread>
 
 namespace {
@@ -240,12 +241,21 @@ TEST_CASE("hostile replay: truncated frames and frames with nobody are counted, 
   }
   MESSAGE("truncated " << report.n_truncated << ", no person " << report.n_no_person << "; malformed "
                        << c.files_malformed << ", frames without a person " << c.frames_no_person << ", incomplete "
-                       << c.frames_incomplete << ", complete " << c.frames_complete);
+                       << c.frames_incomplete << ", complete " << c.frames_complete << ", skipped "
+                       << c.frames_skipped);
   REQUIRE(report.n_truncated == 12);
   REQUIRE(report.n_no_person == 16);  // 8 indices x 2 cameras
   CHECK(c.files_malformed == static_cast<std::uint64_t>(report.n_truncated));
-  // Indices with a truncated file (one camera left) or nobody: 12 + 8 - 4 shared.
-  CHECK(c.frames_no_person >= 16);
+  // Indices with a truncated file (one camera left) or nobody: 12 + 8 - 4 shared, each counted
+  // once processed. Index 0 is one of them, and a live source drops a frame older than the one it
+  // processed: on a loaded machine the folders' watches can come up after index 0 was written,
+  // its files are found by a later scan and dropped. So the count is of the processed ones.
+  std::set<long long> processed;
+  for (const LiveSkeleton& r : collected.records) processed.insert(r.frame_index);
+  int hostile_processed = 0;
+  for (long long i = 0; i < 120; ++i) hostile_processed += (i % 10 == 0 || i % 15 == 0) && processed.count(i) ? 1 : 0;
+  CHECK(hostile_processed >= 15);
+  CHECK(c.frames_no_person >= static_cast<std::uint64_t>(hostile_processed));
   CHECK(c.frames_incomplete >= 11);
   CHECK(c.frames_complete >= 90);
   CHECK(n_human > n_takes / 2);
