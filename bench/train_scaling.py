@@ -16,7 +16,7 @@ usage: bench/train_scaling.py DATA [--worlds 1 2] [--batches 10 40] [--tc build/
 --epoch times what the issue's target is about instead: one whole epoch of a committed model's
 recipe (toolchain/nao train autonomous or default, --epochs 1) per world size, from rank 0's
 own lines: the expert's rollouts before training, the epoch (batches, validation loss and the
-validation rollouts of --select rollout-dtw, whose share is printed too) and the whole run.
+validation rollouts of --select rollouts, whose share is printed too) and the whole run.
 """
 import argparse
 import os
@@ -76,7 +76,7 @@ RECIPES = {
 
 def run_epoch(tc, data, world, out_dir, recipe):
     """One epoch of a recipe; returns rank 0's (execution, epoch, rollouts, total) seconds
-    (rollouts: the validation rollouts of --select rollout-dtw, 0 without them)."""
+    (rollouts: the validation rollouts of --select rollouts, 0 without them)."""
     store = os.path.join(out_dir, f"store_epoch_{world}")
     base = [tc, "train", "--config", "paper", "--data", data, "--epochs", "1", "--seed", "1",
             "--out", os.path.join(out_dir, f"e_{world}.bin")] + RECIPES[recipe]
