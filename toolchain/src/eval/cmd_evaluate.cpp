@@ -335,10 +335,9 @@ void evaluate(const Args& a) {
       excess.push_back(rangeExcess(run.q, lo, hi));
       run_hands.push_back(run.hand);
       const NeighbourReplays rep5 = neighbourReplays(sim, period_s, gain, w.train, w.held.start[i], ticks);
-      const NearestDemo med_near = nearestDemo(handPath(arm, rep5.medoidQ()), w.held.hand);
-      medoid_dtw.push_back(med_near.dtw_m);
-      std::vector<double> each;
+      std::vector<double> each;  // in rep5.demos' order, the medoid among them
       for (const std::vector<JointVector>& q : rep5.q) each.push_back(nearestDemo(handPath(arm, q), w.held.hand).dtw_m);
+      medoid_dtw.push_back(each[rep5.medoidSlot()]);
       neighbour_dtw.push_back(median(each));
       const Rollout ar_run = rolloutOnSim(sim, sim_data, period_s, w.held.start[i], ticks,
                                           [&](const JointVector& q, const std::vector<JointVector>& past) {
@@ -355,7 +354,7 @@ void evaluate(const Args& a) {
                 {"loops", loops.back()},
                 {"joint_range_excess_rad", excess.back()},
                 {"medoid", w.train.names[static_cast<std::size_t>(rep5.medoid)]},
-                {"medoid_replay_dtw_m", med_near.dtw_m},
+                {"medoid_replay_dtw_m", medoid_dtw.back()},
                 {"neighbour_replay_dtw_m", each},
                 {"linear_ar_dtw_m", ar_dtw.back()}};
       if (replay) {

@@ -107,9 +107,10 @@ struct NeighbourReplays {
   std::vector<int> demos;                    ///< indices into `train`, nearest first
   std::vector<std::vector<JointVector>> q;   ///< per demonstration: the start, then q after each tick
   int medoid = -1;                           ///< index into `train` (one of `demos`)
-  const std::vector<JointVector>& medoidQ() const {
-    return q[static_cast<std::size_t>(std::find(demos.begin(), demos.end(), medoid) - demos.begin())];
+  std::size_t medoidSlot() const {  ///< the medoid's place in `demos` and `q`
+    return static_cast<std::size_t>(std::find(demos.begin(), demos.end(), medoid) - demos.begin());
   }
+  const std::vector<JointVector>& medoidQ() const { return q[medoidSlot()]; }
 };
 NeighbourReplays neighbourReplays(const SimModel& sim, double period_s, double gain, const DemoSet& train,
                                   const JointVector& start, int ticks, std::size_t k = kRunCodeNearest);
