@@ -2,6 +2,7 @@
 with labels whose spreads are known."""
 
 import io
+import json
 import os
 import shutil
 import tempfile
@@ -82,7 +83,6 @@ class LabelSpread(unittest.TestCase):
         self.assertEqual(rc, 0)
         self.assertIn("| elbow |", buf.getvalue())
         self.assertIn("| wrist |", buf.getvalue())
-        import json
         with open(out_json, encoding="utf-8") as fh:
             got = json.load(fh)
         self.assertEqual(sorted(got["movements"]), ["elbow", "wrist"])

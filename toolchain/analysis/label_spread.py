@@ -83,7 +83,10 @@ def main(argv):
         print("label_spread: %s" % e, file=sys.stderr)
         return 1
     names = a.names.split(",") if a.names else []
-    name = lambda m: names[m] if m < len(names) else str(m)  # noqa: E731
+
+    def name(m):
+        return names[m] if m < len(names) else str(m)
+
     print("Label spread per joint (%s), as a share of each joint's spread over all labels (%s rad per tick):\n"
           % (", ".join(JOINTS), " / ".join("%.4f" % s for s in scale)))
     print("| movement | clean rollouts | noisy rollouts | ticks clean / noisy |")
