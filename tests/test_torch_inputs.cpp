@@ -1,7 +1,7 @@
 // What the net is allowed to read, in training: the previous action, the clock's resolution and
-// a per-run latent; and the moving average of the weights that training may keep instead. Each
-// is a training-time choice: model.bin's tensors and nao_rt stay unchanged (a run latent adds
-// its run codes to the metadata).
+// a per-run latent (and what that latent reads); and the moving average of the weights that
+// training may keep instead. Each is a training-time choice: model.bin's tensors and nao_rt
+// stay unchanged (a run latent adds its run codes to the metadata).
 #include "nao/model_file.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/policy.hpp"
@@ -20,6 +20,7 @@
 #include <algorithm>
 #include <filesystem>
 #include <set>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -200,6 +201,35 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
   CHECK(modelCard(data, o, r, "cmd", "m.bin").find("| run latent | K 4, KL weight 0.01; " + std::to_string(n) + " run codes") !=
         std::string::npos);
   CHECK(modelRunCodes(without.header.metadata_json, without.header.movement_names, o.arch.d_model, "none.bin").empty());
+}
+
+TEST_CASE("a latent that reads each rollout's demonstration: every rollout of a demonstration maps to its clean rollout; training deterministic, another result, recorded") {
+  std::vector<PolicySequence> seqs(6);
+  const int demo[] = {3, 3, 5, 3, 5, 7}, rollout[] = {0, 1, 1, 2, 0, 0};
+  for (std::size_t i = 0; i < seqs.size(); ++i) {
+    seqs[i].demo = demo[i];
+    seqs[i].rollout = rollout[i];
+  }
+  CHECK(cleanRolloutOf(seqs) == std::vector<std::size_t>{0, 0, 4, 0, 4, 5});
+  seqs[4].rollout = 1;  // demonstration 5 left without its clean rollout
+  CHECK_THROWS_AS(cleanRolloutOf(seqs), std::invalid_argument);
+
+  TrainOptions o = smallOptions(85, 2);
+  o.conditioning = Conditioning::kAutonomous;
+  o.latent_dims = 4;
+  REQUIRE(o.execution.noisy_rollouts > 0);  // with clean rollouts alone both readings are one
+  const std::vector<std::uint8_t> own = trainBytes(o);
+  o.latent_reads_demo = true;
+  TrainResult r;
+  const std::vector<std::uint8_t> a = trainBytes(o, &r), b = trainBytes(o);
+  CHECK_MESSAGE(a == b, "two runs with the same seed and reading gave different bytes");
+  CHECK_MESSAGE(a != own, "reading the demonstration's clean rollout changed nothing in training");
+  const nlohmann::json meta = nlohmann::json::parse(decodeModel(a, "demo.bin").header.metadata_json)["training"];
+  CHECK(meta["run_latent"]["reads"] == "demonstration");
+  CHECK(nlohmann::json::parse(decodeModel(own, "own.bin").header.metadata_json)["training"]["run_latent"].count("reads") == 0);
+  CHECK(modelCard(smallData(), o, r, "cmd", "m.bin").find("read from each rollout's demonstration") != std::string::npos);
+  o.latent_dims = 0;
+  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), o, nullptr), doctest::Contains("--run-latent"), UserError);
 }
 
 TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the start plus the rest of the trained weights; training goes on from the trained weights; what is scored is the average; resumable") {

@@ -32,7 +32,7 @@ struct TrainArgs {
   int latent_dims = 0;
   double latent_kl = 1e-2;
   double ema = 0.0;
-  std::string select = "val-loss", noisy_target = "tick", noisy_starts = "own";
+  std::string select = "val-loss", noisy_target = "tick", noisy_starts = "own", latent_reads = "run";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
   std::vector<std::string> val_demos;
 };
@@ -95,6 +95,7 @@ void run(const TrainArgs& a) {
   o.step_ticks = a.step_ticks;
   o.latent_dims = a.latent_dims;
   o.latent_kl = a.latent_kl;
+  o.latent_reads_demo = a.latent_reads == "demo";
   o.ema_decay = a.ema;
   if (a.window > 0) o.arch.window = a.window;
   if (a.chunk > 0) o.arch.chunk = a.chunk;
@@ -289,6 +290,13 @@ void setup(CLI::App& app) {
       ->check(CLI::Range(0, 256));
   cmd->add_option("--latent-kl", args->latent_kl, "Weight of the latent's KL divergence per tick in the loss")
       ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
+  cmd->add_option("--latent-reads", args->latent_reads,
+                  "What the latent's encoder reads: run, each training sequence's own executed run; demo, "
+                  "for every rollout of a demonstration (noisy ones from other starts too) that "
+                  "demonstration's clean rollout, as a run's code at run time is, so the net learns to "
+                  "reach a demonstration's variant from any start")
+      ->check(CLI::IsMember({"run", "demo"}))
       ->capture_default_str();
   cmd->add_option("--ema", args->ema,
                   "Decay D of an exponential moving average of the weights (updated after every optimiser "

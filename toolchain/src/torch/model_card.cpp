@@ -78,7 +78,11 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   if (!o.previous_action) t["previous_action_input"] = false;
   if (o.step_ticks != 1) t["step_ticks"] = o.step_ticks;
   if (o.ema_decay > 0.0) t["ema_decay"] = o.ema_decay;
-  if (o.latent_dims > 0) t["run_latent"] = {{"dims", o.latent_dims}, {"kl_weight", o.latent_kl}};
+  if (o.latent_dims > 0) {
+    t["run_latent"] = {{"dims", o.latent_dims}, {"kl_weight", o.latent_kl}};
+    // Only when set: files of models trained before the option keep their bytes.
+    if (o.latent_reads_demo) t["run_latent"]["reads"] = "demonstration";
+  }
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"
                                                             : "the first key pose";
@@ -206,7 +210,8 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   if (o.latent_dims > 0) {
     std::size_t codes = 0;
     for (const ModelRunCodes& c : r.run_codes) codes += c.size();
-    s << "| run latent | K " << o.latent_dims << ", KL weight " << o.latent_kl << "; " << codes
+    s << "| run latent | K " << o.latent_dims << ", KL weight " << o.latent_kl
+      << (o.latent_reads_demo ? ", read from each rollout's demonstration" : "") << "; " << codes
       << " run codes (one per training demonstration) in the metadata: a run takes the medoid of the "
       << kRunCodeNearest << " demonstrations whose starts are nearest its own (docs/autonomous.md) |\n";
   }

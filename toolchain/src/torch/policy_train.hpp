@@ -69,6 +69,10 @@ struct TrainOptions {
   /// `latent_kl` × its KL divergence per tick in the loss.
   int latent_dims = 0;
   double latent_kl = 1e-2;
+  /// What the latent's encoder reads: false, each sequence's own executed run; true, for every
+  /// rollout of a demonstration (clean or noisy, from whichever start), that demonstration's
+  /// clean rollout: the code a run takes at run time, where it starts elsewhere.
+  bool latent_reads_demo = false;
   /// D > 0: the weights scored, kept and written are an exponential moving average of the
   /// trained ones, updated after every optimiser step with decay min(D, (1 + n) / (10 + n)) at
   /// step n; the optimiser trains the raw weights. 0: no average.

@@ -28,6 +28,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   if (!o.previous_action) k << "; no previous action";
   if (o.step_ticks != 1) k << "; step ticks " << o.step_ticks;
   if (o.latent_dims > 0) k << "; latent " << o.latent_dims << " " << o.latent_kl;
+  if (o.latent_dims > 0 && o.latent_reads_demo) k << " reads demo";
   if (o.ema_decay > 0.0) k << "; ema " << o.ema_decay;
   if (o.select_by_rollout) k << "; select rollout";
   return k.str();

@@ -60,6 +60,8 @@ void check(const PolicyData& data, const TrainOptions& o) {
     throw UserError("the clock's resolution (--step-ticks) is for autonomous mode: reference mode has no clock");
   if (o.conditioning != Conditioning::kAutonomous && o.latent_dims > 0)
     throw UserError("a run latent (--run-latent) is for autonomous mode: in reference mode the human gives the variant");
+  if (o.latent_reads_demo && o.latent_dims == 0)
+    throw UserError("--latent-reads demo needs a run latent (--run-latent K)");
   if (o.select_by_rollout && o.conditioning != Conditioning::kAutonomous)
     throw UserError("model selection on rollouts is for autonomous mode (a reference-mode run needs a human)");
   if (o.select_by_rollout && !hasRuntimeStep(o.arch))
@@ -244,6 +246,10 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   // The codes a run takes at run time (model.bin's "run_codes"), scored with every epoch.
   RunCodeSource codes;
   if (latent) codes = runCodeSource(data, train_seqs, sim.arm, o.arch.d_model);
+  // What the latent reads for each training sequence: itself, or its demonstration's clean rollout.
+  std::vector<std::size_t> latent_source(train_seqs.size());
+  for (std::size_t i = 0; i < train_seqs.size(); ++i) latent_source[i] = i;
+  if (latent && o.latent_reads_demo) latent_source = cleanRolloutOf(train_seqs);
   torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
   // The moving average of the weights (--ema): scored, kept and written in place of the trained
   // weights, which the optimiser goes on training. The input constraints are linear, so the
@@ -335,7 +341,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
                                                           static_cast<std::uint64_t>(k)),
                            torch::kFloat32)
                   .slice(0, lo, hi);
-          const RunLatentImpl::Draw draw = latent->forward(p, eps);
+          std::vector<std::size_t> read;
+          for (const std::size_t i : index) read.push_back(latent_source[i]);
+          const RunLatentImpl::Draw draw = read == index ? latent->forward(p, eps) : latent->forward(pad(train, read), eps);
           p.in.z = draw.z_embedded;
           kl = o.latent_kl * (draw.kl * p.mask.sum(1)).sum();
         }
