@@ -164,7 +164,7 @@ struct LiveCamera::Reader {
     for (const FolderEvent& ev : events) handle(ev, now);
     retryDue(now);
     updateLiveness(now);
-    processComplete();
+    processComplete(now);
   }
 
   void handle(const FolderEvent& ev, std::int64_t now) {
@@ -299,7 +299,7 @@ struct LiveCamera::Reader {
     return live > 0 && all;
   }
 
-  void processComplete() {
+  void processComplete(std::int64_t now) {
     // Frames no live camera completes (every camera waiting or gone) are not kept without bound.
     const auto max_frames = static_cast<std::size_t>(std::ceil(4.0 * cfg.fps)) + 64;
     while (frames.size() > max_frames) {
@@ -310,6 +310,11 @@ struct LiveCamera::Reader {
     auto newest = frames.end();
     for (auto it = frames.begin(); it != frames.end(); ++it)
       if (completeFor(it->second, nullptr)) newest = it;
+    // Every camera quiet for camera_stopped_s and no file left to parse: nothing will complete
+    // the waiting frames (the capture paused or ended on a lost file), so they go with what they have.
+    if (newest == frames.end() && !frames.empty() && pending.empty() &&
+        now - newest_parse_ns >= nanoseconds(cfg.camera_stopped_s))
+      newest = std::prev(frames.end());
     if (newest == frames.end()) return;
     const auto last = std::next(newest);
     auto n_ready = static_cast<int>(std::distance(frames.begin(), last));

@@ -12,7 +12,8 @@
 //    a file that does not parse yet (half written: seen created or modified, not closed) every
 //    retry_s until file_wait_s after it appeared; then it is dropped and counted malformed;
 //  - pairs the cameras by frame index: an index is complete when every live camera's file for
-//    it has parsed, or when a newer index is complete (its missing cameras then see nobody). A
+//    it has parsed, or when a newer index is complete (its missing cameras then see nobody), or
+//    when every camera has been quiet for camera_stopped_s with no file left to parse. A
 //    camera is live from its first parsed file while its folder exists; one whose last parsed
 //    file is more than camera_stopped_s older than any camera's newest is stopped and left out
 //    until it parses a file again;
