@@ -246,9 +246,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   // The codes a run takes at run time (model.bin's "run_codes"), scored with every epoch.
   RunCodeSource codes;
   if (latent) codes = runCodeSource(data, train_seqs, sim.arm, o.arch.d_model);
-  // What the latent reads for each training sequence: itself, or its demonstration's clean rollout.
-  std::vector<std::size_t> latent_source(train_seqs.size());
-  for (std::size_t i = 0; i < train_seqs.size(); ++i) latent_source[i] = i;
+  // --latent-reads demo: the sequence the latent reads for each training sequence (its
+  // demonstration's clean rollout); empty: each reads itself.
+  std::vector<std::size_t> latent_source;
   if (latent && o.latent_reads_demo) latent_source = cleanRolloutOf(train_seqs);
   torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
   // The moving average of the weights (--ema): scored, kept and written in place of the trained
@@ -342,8 +342,9 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
                            torch::kFloat32)
                   .slice(0, lo, hi);
           std::vector<std::size_t> read;
-          for (const std::size_t i : index) read.push_back(latent_source[i]);
-          const RunLatentImpl::Draw draw = read == index ? latent->forward(p, eps) : latent->forward(pad(train, read), eps);
+          if (!latent_source.empty())
+            for (const std::size_t i : index) read.push_back(latent_source[i]);
+          const RunLatentImpl::Draw draw = read.empty() ? latent->forward(p, eps) : latent->forward(pad(train, read), eps);
           p.in.z = draw.z_embedded;
           kl = o.latent_kl * (draw.kl * p.mask.sum(1)).sum();
         }
