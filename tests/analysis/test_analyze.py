@@ -79,8 +79,11 @@ class EndToEnd(unittest.TestCase):
                 self.assertGreater(float(r["mi_bits"]), 1.0, r)
                 for s in stats.STAT_NAMES:
                     self.assertLess(float(r[s + "_p"]), 0.05, "%s %s" % (r["movement"], s))
+                for s in stats.STAT_NAMES[:3]:
                     self.assertLess(float(r[s + "_ci_lo"]), float(r[s]))
                     self.assertGreater(float(r[s + "_ci_hi"]), float(r[s]))
+                self.assertEqual(r["mi_bits_ci_lo"], "nan", "the MI is judged by its null, not an interval")
+                self.assertEqual(r["mi_above_null"], "1")
             else:
                 self.assertLess(abs(float(r["pearson_r"])), 0.5, r)
 
@@ -107,6 +110,7 @@ class EndToEnd(unittest.TestCase):
             mi = o["mi_bits"]
             self.assertAlmostEqual(mi["excess"], mi["estimate"] - mi["null_median"], 12)
             self.assertEqual(mi["above_null_q95"], mi["estimate"] > mi["null_q95"])
+            self.assertEqual(mi["above_null_q95"], mi["p"] < 0.05)
             if o["joint"] == run_fixture.JOINTS[PLANTED]:
                 self.assertTrue(mi["above_null_q95"], "planted %s: MI %.2f, null q95 %.2f"
                                 % (o["movement"], mi["estimate"], mi["null_q95"]))

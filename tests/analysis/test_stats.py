@@ -81,9 +81,11 @@ class MutualInformation(unittest.TestCase):
         self.assertLess(abs(stats.ksg_mi_bits(x, y)), 0.08, "KSG bias for n = 300 is a few hundredths of a bit")
         b = stats.pair_block_length(x, y)
         self.assertLessEqual(b, 3, "white noise needs no long blocks")
-        p, n_shifts = stats.shift_pvalues(x, y, b, seed=1)
-        self.assertGreater(n_shifts, 250)
-        for name, pv in zip(stats.STAT_NAMES, p):
+        mi, null = stats.mi_shift_null(x, y, b, seed=1)
+        self.assertGreater(len(null), 250)
+        point = np.r_[stats.pearson(x, y), stats.spearman(x, y), stats.kendall_tau_b(x, y), mi]
+        res = stats.row_result(point, stats.bootstrap_correlations(x, y, b, 400, 1), null)
+        for name, pv in zip(stats.STAT_NAMES, res["p"]):
             self.assertGreater(pv, 0.05, "%s: p %.3f for independent noise" % (name, pv))
 
     def test_ksg_reads_smoothness_as_information_which_is_why_mi_needs_the_shift_test(self):
@@ -92,20 +94,6 @@ class MutualInformation(unittest.TestCase):
         mi = [stats.ksg_mi_bits(ar1(120, 0.9, rng), ar1(120, 0.9, rng)) for _ in range(80)]
         self.assertGreater(np.mean(mi), 0.1, "mean KSG of independent smooth series: %.3f bit" % np.mean(mi))
         self.assertLess(np.mean(mi), 0.3)
-
-    def test_resampled_copies_of_a_tick_are_not_each_others_neighbours(self):
-        x, y = gaussian_pair(300, 0.0, seed=40)
-        xp, yp = stats.ksg_prepare(x, y, 0)
-        perm = np.random.default_rng(0).permutation(300)
-        # Without repeats, excluding copies changes nothing.
-        self.assertAlmostEqual(stats.ksg_core_bits(xp[perm], yp[perm], origin=perm), stats.ksg_core_bits(xp, yp),
-                               places=12)
-        # Every tick twice: counted as neighbours, copies would fake dependence (> 0.5 bit).
-        idx = np.r_[np.arange(300), np.arange(300)]
-        self.assertLess(stats.ksg_core_bits(xp[idx], yp[idx], origin=idx), 0.3)
-        jitter = 1e-9 * np.random.default_rng(1).standard_normal((2, 600))
-        self.assertGreater(stats.ksg_core_bits(xp[idx] + jitter[0], yp[idx] + jitter[1]), 0.5)
-
 
 class TrendRemoval(unittest.TestCase):
     t = 0.1 * np.arange(120)
@@ -153,42 +141,97 @@ class Resampling(unittest.TestCase):
 
     def test_bootstrap_interval_covers_the_true_correlation_with_the_right_width(self):
         x, y = gaussian_pair(250, 0.5, seed=60)
-        ci = stats.bootstrap_ci(x, y, 1, 400, seed=1)
-        lo, hi = ci[0]
+        reps = stats.bootstrap_correlations(x, y, 1, 400, seed=1)
+        lo, hi = stats.percentile_interval(reps[:, 0])
         self.assertLess(lo, 0.5)
         self.assertGreater(hi, 0.5)
         width = 2 * 1.96 * (1 - 0.25) / math.sqrt(250)  # normal approximation of r's spread
         self.assertLess(abs((hi - lo) / width - 1), 0.3)
-        for s, name in enumerate(stats.STAT_NAMES):
-            est = stats.all_stats_prepared(x, y, *stats.ksg_prepare(x, y, 1))[s]
-            self.assertTrue(ci[s, 0] <= est <= ci[s, 1], "%s estimate outside its interval" % name)
+        for s, est in enumerate((stats.pearson(x, y), stats.spearman(x, y), stats.kendall_tau_b(x, y))):
+            lo, hi = stats.percentile_interval(reps[:, s])
+            self.assertTrue(lo <= est <= hi, "%s estimate outside its interval" % stats.STAT_NAMES[s])
 
-    def test_bootstrap_and_shift_test_are_deterministic(self):
+    def test_bootstrap_and_shift_null_are_deterministic(self):
         x, y = gaussian_pair(120, 0.3, seed=70)
-        np.testing.assert_array_equal(stats.bootstrap_ci(x, y, 5, 200, 9), stats.bootstrap_ci(x, y, 5, 200, 9))
-        np.testing.assert_array_equal(stats.shift_pvalues(x, y, 5, 9)[0], stats.shift_pvalues(x, y, 5, 9)[0])
+        np.testing.assert_array_equal(stats.bootstrap_correlations(x, y, 5, 200, 9),
+                                      stats.bootstrap_correlations(x, y, 5, 200, 9))
+        np.testing.assert_array_equal(stats.mi_shift_null(x, y, 5, 9)[1], stats.mi_shift_null(x, y, 5, 9)[1])
 
-    def test_a_strong_dependence_gets_the_smallest_shift_p_value(self):
+    def test_a_strong_dependence_gets_the_smallest_p_values(self):
         rng = np.random.default_rng(80)
         x = ar1(150, 0.8, rng)
         y = x + 0.2 * rng.standard_normal(150)
         b = stats.pair_block_length(x, y)
-        p, n_shifts = stats.shift_pvalues(x, y, b, seed=1)
-        np.testing.assert_allclose(p, 1.0 / (1 + n_shifts))
-        self.assertAlmostEqual(stats.circular_shift_pvalue(stats.pearson, x, y, b), p[0], places=15)
+        mi, null = stats.mi_shift_null(x, y, b, seed=1)
+        self.assertEqual(stats.mi_null_pvalue(mi, null), 1.0 / (1 + len(null)))
+        reps = stats.bootstrap_correlations(x, y, b, 200, seed=1)
+        self.assertTrue((reps > 0).all())
+        for s in range(3):
+            self.assertEqual(stats.interval_pvalue(reps[:, s]), 1.0 / 201, "the smallest p 200 resamples resolve")
 
-    def test_shift_test_holds_its_level_on_autocorrelated_series_where_the_iid_test_does_not(self):
-        # Independent but smooth series: the textbook (iid) p-value rejects far too often; the
-        # circular-shift test, which keeps each series' autocorrelation, does not.
+    def test_both_tests_hold_their_level_on_autocorrelated_series_where_an_iid_shuffle_does_not(self):
+        # Independent but smooth series. The block bootstrap's p and the MI's circular-shift
+        # null keep each series' autocorrelation; a null that shuffles ticks does not, and KSG
+        # reads the smoothness it destroys as information.
         rng = np.random.default_rng(90)
-        n_pairs, shift_rejects, iid_rejects = 60, 0, 0
-        for _ in range(n_pairs):
+        n_pairs, boot_rejects, shift_rejects, iid_rejects = 60, 0, 0, 0
+        for k in range(n_pairs):
             x, y = ar1(120, 0.9, rng), ar1(120, 0.9, rng)
             b = stats.pair_block_length(x, y)
-            shift_rejects += stats.circular_shift_pvalue(stats.pearson, x, y, b) < 0.05
-            iid_rejects += sps.pearsonr(x, y)[1] < 0.05
-        self.assertLessEqual(shift_rejects / n_pairs, 0.12, "shift test rejected %d of %d" % (shift_rejects, n_pairs))
-        self.assertGreaterEqual(iid_rejects / n_pairs, 0.25, "iid test rejected only %d of %d" % (iid_rejects, n_pairs))
+            boot_rejects += stats.interval_pvalue(stats.bootstrap_correlations(x, y, b, 400, k)[:, 0]) < 0.05
+            mi, null = stats.mi_shift_null(x, y, b, k)
+            shift_rejects += stats.mi_null_pvalue(mi, null) < 0.05
+            xp, yp = stats.ksg_prepare(x, y, k)
+            shuffle = np.random.default_rng(k)
+            iid_rejects += stats.mi_null_pvalue(mi, [stats.ksg_core_bits(xp, shuffle.permutation(yp))
+                                                     for _ in range(100)]) < 0.05
+        self.assertLessEqual(boot_rejects / n_pairs, 0.12, "bootstrap p rejected %d of %d" % (boot_rejects, n_pairs))
+        self.assertLessEqual(shift_rejects / n_pairs, 0.12, "shift null rejected %d of %d" % (shift_rejects, n_pairs))
+        self.assertGreaterEqual(iid_rejects / n_pairs, 0.25, "iid null rejected only %d of %d" % (iid_rejects, n_pairs))
+
+
+class PValuesAgreeWithIntervals(unittest.TestCase):
+    """A p-value read off the resamples of its interval (stats.interval_pvalue) and the MI's
+    null quantile (stats.mi_null_quantiles) on resamples whose answers are known."""
+
+    def test_the_p_value_of_evenly_spread_resamples_is_twice_the_share_below_zero(self):
+        # 401 resamples from -1 to 3 in steps of 0.01: 0 is the 100th of 400 gaps, a quarter.
+        self.assertAlmostEqual(stats.interval_pvalue(np.linspace(-1, 3, 401)), 0.5, places=12)
+        self.assertAlmostEqual(stats.interval_pvalue(-np.linspace(-1, 3, 401)), 0.5, places=12)
+        self.assertAlmostEqual(stats.interval_pvalue(np.linspace(-1, 1, 101)), 1.0, places=12)
+        # Every resample on one side: the smallest p the resamples resolve.
+        self.assertEqual(stats.interval_pvalue(np.linspace(0.1, 1, 100)), 1.0 / 101)
+        self.assertTrue(math.isnan(stats.interval_pvalue(np.full(100, math.nan))))
+
+    def test_p_below_one_minus_the_level_exactly_when_the_interval_excludes_zero(self):
+        rng = np.random.default_rng(7)
+        n_excluded = 0
+        for i in range(2000):
+            n = int(rng.integers(100, 1200))
+            reps = rng.standard_normal(n) * rng.uniform(0.05, 1) + rng.uniform(-2, 2)
+            if i % 4 == 0:
+                reps = np.round(reps, 1)  # ties, also at 0
+            p = stats.interval_pvalue(reps)
+            for level in (0.9, 0.95, 0.99):
+                lo, hi = stats.percentile_interval(reps, level)
+                excluded = lo > 0 or hi < 0
+                n_excluded += excluded
+                self.assertEqual(p < 1 - level, excluded, "n %d, level %g: [%g, %g] but p %g" % (n, level, lo, hi, p))
+        self.assertGreater(n_excluded, 1000, "the cases must include intervals on both sides of 0")
+
+    def test_the_mi_null_quantile_is_the_value_an_mi_must_exceed_for_p_below_0_05(self):
+        null = np.arange(200.0)  # (1 + #{null >= mi}) / 201 < 0.05 needs at most 9 draws at or above mi
+        med, q95 = stats.mi_null_quantiles(null)
+        self.assertEqual((med, q95), (99.5, 190.0))
+        self.assertLess(stats.mi_null_pvalue(190.5, null), 0.05)
+        self.assertGreaterEqual(stats.mi_null_pvalue(190.0, null), 0.05)
+        rng = np.random.default_rng(8)
+        for _ in range(500):
+            null = rng.gamma(2.0, 0.05, int(rng.integers(19, 400)))
+            mi = float(rng.uniform(0, 0.4))
+            q95 = stats.mi_null_quantiles(null)[1]
+            self.assertEqual(stats.mi_null_pvalue(mi, null) < 0.05, math.isfinite(q95) and mi > q95)
+        self.assertTrue(math.isnan(stats.mi_null_quantiles(np.arange(19.0))[1]), "19 draws cannot give p < 0.05")
 
 
 if __name__ == "__main__":

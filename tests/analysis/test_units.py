@@ -11,7 +11,7 @@ import unittest
 import numpy as np
 
 import run_fixture
-from nao_analysis import JOINT_NAMES, protocol, stats, units
+from nao_analysis import JOINT_NAMES, protocol, units
 from nao_analysis.rundir import read_run
 from test_autonomous_ceiling import dtw_mean_reference  # rt::dtwMeanDistance cell by cell
 
@@ -123,20 +123,33 @@ class UnitStatisticsOverSeeds(unittest.TestCase):
         for k, v in counts.items():
             self.assertLessEqual(v, 3, "%s: significant in %d of 10 seeds of independent series" % (k, v))
 
-    def test_one_unit_gets_no_interval_rather_than_a_zero_width_one(self):
+    def test_one_unit_gets_no_interval_and_no_p_value_rather_than_a_zero_width_one(self):
         rng = np.random.default_rng(3)
         x = run_fixture.ar1(120, 0.9, rng)
         res = protocol.unit_statistics([x], [x + rng.standard_normal(120)], 100, 1)
         self.assertTrue(np.isnan(res["ci_lo"]).all() and np.isnan(res["ci_hi"]).all())
-        self.assertLess(res["p"][0], 0.05, "the permutation test still runs on one unit")
+        self.assertTrue(np.isnan(res["p"][:3]).all(), "a correlation's p-value comes from its interval")
+        self.assertLess(res["p"][3], 0.05, "the MI's shift null still runs on one unit")
+        self.assertGreater(res["point"][3], res["mi_null_q95"])
 
-    def test_mi_null_quantiles_are_ordered_and_come_from_the_shift_draws(self):
-        x = np.sin(np.linspace(0, 20, 200))
-        obs, null = stats.shift_null(x, np.roll(x, 3), 10, 1)
-        med, q95 = stats.mi_null_quantiles(null[:, 3])
-        self.assertLessEqual(med, q95)
-        self.assertAlmostEqual(med, float(np.median(null[:, 3])), places=12)
-        self.assertTrue(math.isnan(stats.mi_null_quantiles([math.nan])[0]))
+    def test_every_p_value_agrees_with_its_interval_over_units(self):
+        # Pairs with a weak planted dependence, so that intervals fall on both sides of 0.
+        agree = excluded = 0
+        for seed in range(12):
+            rng = np.random.default_rng(2000 + seed)
+            xs, ys = [], []
+            for n in rng.integers(80, 140, 4):
+                x = run_fixture.ar1(int(n), 0.8, rng)
+                xs.append(x)
+                ys.append(0.25 * x + run_fixture.ar1(int(n), 0.8, rng))
+            res = protocol.unit_statistics(xs, ys, 200, seed, n_perm=50)
+            for s in range(3):
+                out = res["ci_lo"][s] > 0 or res["ci_hi"][s] < 0
+                excluded += out
+                agree += (res["p"][s] < 0.05) == out
+        self.assertEqual(agree, 36)
+        self.assertGreater(excluded, 3)
+        self.assertLess(excluded, 33)
 
 
 if __name__ == "__main__":

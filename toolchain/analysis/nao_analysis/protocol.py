@@ -2,16 +2,19 @@
 (`nao_toolchain evaluate` writes one per held-out demonstration), pooled with the distinct
 rollout as the unit.
 
-Units. Runs that repeat one rollout (units.py: hand paths within 1 mm over their common ticks)
-are one unit, represented by its longest run. Each unit's series (joint velocity, attention
-score) are detrended on their own, then the units of a movement are concatenated; the
-statistic of a movement x joint is that of the pooled series. Its 95 % interval is a bootstrap
-over units in two stages: draw as many units as there are, with replacement, resample each
-drawn unit by circular blocks, pool them, recompute (a copy of a tick is never its own KSG
-neighbour: `origin`); with fewer than MIN_UNITS units there is no interval. Its p-value and the MI's null come from N_PERM permutations that keep each unit's
-autocorrelation: every unit's attention series is circularly shifted by its own random shift
-(between the unit's block length and n - block length) and the pooled statistics recomputed.
-MI is judged by its excess over that null: above the null's 95 % quantile.
+Units. Runs that repeat one rollout (units.py: hand paths within 1 mm of every other run of
+their unit, over their common ticks) are one unit, represented by its longest run. Each unit's
+series (joint velocity, attention score) are detrended on their own, then the units of a
+movement are concatenated; the statistic of a movement x joint is that of the pooled series.
+
+One resampling scheme per statistic. A correlation's 95 % interval is a bootstrap over units in
+two stages (draw as many units as there are, with replacement, resample each drawn unit by
+circular blocks, pool them, recompute), and its p-value is read off the same resamples, so it
+never contradicts the interval; with fewer than MIN_UNITS units there is neither. The MI is
+judged against N_PERM permutations that keep each unit's autocorrelation: every unit's attention
+series circularly shifted by its own random shift (between the unit's block length and n - block
+length) and the pooled MI recomputed; it is evidence of dependence only above the null's 95 %
+quantile (its permutation p below 0.05).
 
 Scores: `att_j` (norm-based, the contract) and, when every run has them, `attm_j` (raw
 cross-attention mass summed over the window), side by side.
@@ -60,72 +63,52 @@ def _run_series(run, j, detrend_spec, prefix):
     return stats.detrend(t, v, detrend_spec), stats.detrend(t, att, detrend_spec)
 
 
-def _prepared(xs, ys, seed):
-    """Per unit, the series standardised over the pooled units with the KSG tie-breaking jitter
-    (stats.ksg_prepare), drawn once: resampled copies of a tick keep the same jitter, so they
-    sit at distance 0 and `origin` can tell them apart from other ticks."""
-    xp, yp = stats.ksg_prepare(np.concatenate(xs), np.concatenate(ys), seed)
-    cut = np.cumsum([len(x) for x in xs])[:-1]
-    return np.split(xp, cut), np.split(yp, cut)
+def _pool(vs, pick, ticks):
+    return np.concatenate([vs[i][t] for i, t in zip(pick, ticks)])
 
 
-def _pooled_stats(xs, ys, xps, yps, pick, ticks=None):
-    """The four statistics of the units `pick` (indices into xs, ys, repeats allowed) pooled;
-    xps, yps: _prepared(xs, ys); ticks: per picked unit the tick indices to take (a block
-    resample), None for all."""
-    ticks = ticks or [np.arange(len(xs[i])) for i in pick]
-
-    def pool(vs):
-        return np.concatenate([vs[i][t] for i, t in zip(pick, ticks)])
-
-    x, y = pool(xs), pool(ys)
-    # Copies of one tick (a unit drawn twice, a block drawn twice) share an origin: never each
-    # other's KSG neighbours.
-    offsets = np.cumsum([0] + [len(v) for v in xs])
-    origin = np.concatenate([offsets[i] + t for i, t in zip(pick, ticks)])
+def _pooled_correlations(xs, ys, pick, ticks):
+    """Pearson r, Spearman rho, Kendall tau-b of the units `pick` (indices into xs, ys, repeats
+    allowed) pooled; ticks: per picked unit the tick indices to take (a block resample)."""
+    x, y = _pool(xs, pick, ticks), _pool(ys, pick, ticks)
     tau = scipy.stats.kendalltau(x, y, variant="b").statistic if len(x) > 1 else math.nan
-    return np.array([stats.pearson(x, y), stats.spearman(x, y), float(tau),
-                     stats.ksg_core_bits(pool(xps), pool(yps), stats.KSG_K, origin)])
+    return np.array([stats.pearson(x, y), stats.spearman(x, y), float(tau)])
 
 
 def unit_statistics(xs, ys, n_boot, seed, n_perm=N_PERM):
     """Table 2's numbers of one movement x joint from its units' detrended series xs, ys (lists
-    of (n_u,) arrays, one per distinct rollout). Returns a dict: point, ci_lo, ci_hi, p (each
-    (4,) in stats.STAT_NAMES order; ci nan below MIN_UNITS units or without resamples),
-    mi_null_median, mi_null_q95, block_len (median over units).
+    of (n_u,) arrays, one per distinct rollout). Returns stats.row_result's dict (point, ci_lo,
+    ci_hi, p, each (4,) in stats.STAT_NAMES order; mi_null_median, mi_null_q95) and block_len
+    (median over units). Below MIN_UNITS units the correlations get no interval and no p.
 
-    The bootstrap is two-stage: draw units with replacement, then resample each drawn unit by
-    circular blocks of its own block length. Units alone would see only the spread between 2-3
-    rollouts, which can be small by chance (three independent pairs of series with the same
-    spurious r give a near-zero-width interval); the blocks add each rollout's own sampling
-    spread."""
+    The correlations' bootstrap is two-stage: draw units with replacement, then resample each
+    drawn unit by circular blocks of its own block length. Units alone would see only the spread
+    between a few rollouts, which can be small by chance (three independent pairs of series with
+    the same spurious r give a near-zero-width interval); the blocks add each rollout's own
+    sampling spread. Each correlation's p-value comes from the same resamples
+    (stats.interval_pvalue)."""
     n_units = len(xs)
     every = list(range(n_units))
-    xps, yps = _prepared(xs, ys, seed)
-    point = _pooled_stats(xs, ys, xps, yps, every)
+    whole = [np.arange(len(x)) for x in xs]
+    # The KSG tie-breaking jitter, drawn once over the pooled units; a shift moves it with its tick.
+    xp, yp = stats.ksg_prepare(np.concatenate(xs), np.concatenate(ys), seed)
+    yps = np.split(yp, np.cumsum([len(x) for x in xs])[:-1])
+    point = np.r_[_pooled_correlations(xs, ys, every, whole), stats.ksg_core_bits(xp, yp)]
     blocks = [stats.pair_block_length(x, y) for x, y in zip(xs, ys)]
     rng = np.random.default_rng(seed)
-    lo = hi = np.full(4, math.nan)
+    reps = None
     if n_units >= MIN_UNITS and n_boot > 0:
-        boot = np.empty((n_boot, 4))
+        reps = np.empty((n_boot, 3))
         for k in range(n_boot):
             pick = [int(i) for i in rng.integers(0, n_units, n_units)]
             ticks = [stats.circular_block_indices(len(xs[i]), blocks[i], rng) for i in pick]
-            boot[k] = _pooled_stats(xs, ys, xps, yps, pick, ticks)
-        # MI: resampled KSG values sit above the estimate (see stats.bootstrap_ci); re-centred.
-        boot[:, 3] += point[3] - np.nanmedian(boot[:, 3])
-        lo = np.nanpercentile(boot, 2.5, axis=0)
-        hi = np.nanpercentile(boot, 97.5, axis=0)
-    null = np.empty((n_perm, 4))
+            reps[k] = _pooled_correlations(xs, ys, pick, ticks)
+    null = np.empty(n_perm)
     for k in range(n_perm):
         shifts = [int(rng.integers(min(b, len(y) - 1), max(min(b, len(y) - 1), len(y) - b) + 1)) if len(y) > 1 else 0
                   for y, b in zip(ys, blocks)]
-        null[k] = _pooled_stats(xs, [np.roll(y, s) for y, s in zip(ys, shifts)], xps,
-                                [np.roll(y, s) for y, s in zip(yps, shifts)], every)
-    med, q95 = stats.mi_null_quantiles(null[:, 3])
-    return {"point": point, "ci_lo": np.asarray(lo, dtype=float), "ci_hi": np.asarray(hi, dtype=float),
-            "p": stats.null_pvalues(point, null), "mi_null_median": med, "mi_null_q95": q95,
-            "block_len": int(np.median(blocks))}
+        null[k] = stats.ksg_core_bits(xp, np.concatenate([np.roll(y, s) for y, s in zip(yps, shifts)]))
+    return dict(stats.row_result(point, reps, null), block_len=int(np.median(blocks)))
 
 
 def pooled_rows(units, movement, detrend_spec, n_boot, base_seed, prefix="att", progress=None):

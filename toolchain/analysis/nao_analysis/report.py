@@ -43,41 +43,46 @@ def method_lines(options):
         "(Kraskov–Stögbauer–Grassberger estimator 1, k = %d, max-norm, series standardised, tie-breaking "
         "jitter 1e-10 from a fixed seed; not clipped at 0)." % stats.KSG_K,
     ] + (_pooled_method(options) if options.get("pooled") else _single_method(options)) + [
-        "MI beside its null: the median and 95 % quantile of the MI over the null draws of the p-value "
-        "(columns mi_null_median, mi_null_q95), the excess over the median (mi_excess); KSG on smooth series "
-        "reads autocorrelation as information, so an MI is evidence of dependence only above the null's 95 % "
-        "quantile (mi_above_null).",
+        "MI beside its null: the median and 95 % quantile of the MI over the null draws (columns "
+        "mi_null_median, mi_null_q95), the excess over the median (mi_excess); KSG on smooth series reads "
+        "autocorrelation as information, so an MI is evidence of dependence only above the null's 95 % quantile "
+        "(mi_above_null). That quantile is the order statistic an MI must exceed for its permutation p-value "
+        "(1 + #{null ≥ MI}) / (1 + draws) to fall below 0.05, so the two never disagree. The MI has no bootstrap "
+        "interval: a resample repeats ticks, which KSG reads as information.",
         "Seeds: each row's bootstrap and jitter seed is CRC-32 of 'movement/joint/%d'; UMAP random_state 0."
         % options["seed"],
     ]
 
 
+_P_FROM_INTERVAL = ("p-values of the correlations: read off the same resamples as the interval, the smallest α at "
+                    "which the (1 − α) percentile interval excludes 0 (at least 1/(1 + resamples)); p < 0.05 "
+                    "exactly when the 95 % interval excludes 0.")
+
+
 def _single_method(options):
     return [
-        "95%% intervals: circular block bootstrap (Politis & Romano 1992), %d resamples, percentile "
-        "interval; block length per row = the larger of the two series' Politis–White (2004/2009) "
-        "automatic block length (column block_len, ticks). For MI the resampled values are first "
-        "re-centred on the estimate (their median moved onto it): repeated ticks bias resampled KSG "
-        "values upward; copies of the same tick are also never each other's KSG neighbours." % options["bootstrap"],
-        "p-values: circular-shift permutation test: every shift s of the attention series with "
-        "block_len ≤ s ≤ n − block_len (column n_shifts), two-sided for the correlations, one-sided "
-        "(larger) for MI; p = (1 + #{null ≥ observed}) / (1 + n_shifts), so p ≥ 1/(1 + n_shifts).",
+        "95%% intervals of the correlations: circular block bootstrap (Politis & Romano 1992), %d resamples, "
+        "percentile interval; block length per row = the larger of the two series' Politis–White (2004/2009) "
+        "automatic block length (column block_len, ticks)." % options["bootstrap"],
+        _P_FROM_INTERVAL,
+        "MI null: every circular shift s of the attention series with block_len ≤ s ≤ n − block_len (column "
+        "n_shifts); one-sided (larger).",
     ]
 
 
 def _pooled_method(options):
     return [
-        "Units: the runs of a movement whose hand paths lie within %g mm of each other (DTW mean distance "
-        "over their common ticks) repeat one rollout and form one distinct rollout (columns n_runs, n_units); "
-        "each unit enters once, as its longest run, its series detrended on their own; the units are "
-        "concatenated." % (1e3 * options["unit_dtw_m"]),
-        "95%% intervals: bootstrap over distinct rollouts (draw as many units as there are, with replacement), "
-        "%d resamples, percentile interval; none with fewer than 2 units. For MI the resampled values are "
-        "re-centred on the estimate, and copies of a unit are never each other's KSG neighbours." % options["bootstrap"],
-        "p-values: %d permutations, each shifting every unit's attention series circularly by its own random "
-        "shift between its block length and its length minus the block length; two-sided for the "
-        "correlations, one-sided (larger) for MI; p = (1 + #{null ≥ observed}) / (1 + %d)."
-        % (options["permutations"], options["permutations"]),
+        "Units: the runs of a movement whose hand paths all lie within %g mm of each other (DTW mean distance "
+        "over their common ticks; complete linkage, so no chain of near neighbours joins runs farther apart) "
+        "repeat one rollout and form one distinct rollout (columns n_runs, n_units); each unit enters once, as "
+        "its longest run, its series detrended on their own; the units are concatenated." % (1e3 * options["unit_dtw_m"]),
+        "95%% intervals of the correlations: two-stage bootstrap over distinct rollouts (draw as many units as "
+        "there are, with replacement, then resample each drawn unit by circular blocks of its own block length), "
+        "%d resamples, percentile interval; none with fewer than 2 units." % options["bootstrap"],
+        _P_FROM_INTERVAL,
+        "MI null: %d permutations, each shifting every unit's attention series circularly by its own random "
+        "shift between its block length and its length minus the block length; one-sided (larger)."
+        % options["permutations"],
     ]
 
 
@@ -127,7 +132,8 @@ def table2_markdown(rows, options):
     lines = ["# Table 2: joint angular velocity vs attention score", "",
              "Trend removal: **%s**." % options["detrend"], ""]
     lines += ["- " + m for m in method_lines(options)]
-    lines += ["", "Each cell: estimate [95% CI] and the permutation p-value.", ""]
+    lines += ["", "Each cell: estimate [95% CI] and its p-value (correlations: from the bootstrap; MI: against "
+                  "its null).", ""]
     head = (["movement", "joint"] + [STAT_LABELS[s] for s in stats.STAT_NAMES]
             + ["MI null median / q95", "MI excess", "runs / units", "n (dropped)", "block"])
     lines.append("| " + " | ".join(head) + " |")

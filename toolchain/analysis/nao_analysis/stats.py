@@ -1,5 +1,6 @@
 """Statistics of Table 2: trend removal, correlations, KSG mutual information, block length,
-circular block bootstrap and circular-shift permutation test (docs/analysis.md says why each).
+the circular block bootstrap with its percentile intervals and the p-values read off them, and
+the MI's circular-shift null (docs/analysis.md says why each).
 
 Every random draw comes from a numpy Generator seeded by the caller, so the same inputs give
 the same numbers bit for bit.
@@ -128,39 +129,22 @@ def ksg_prepare(x, y, seed):
     return x, y
 
 
-def ksg_core_bits(x, y, k=KSG_K, origin=None):
+def ksg_core_bits(x, y, k=KSG_K):
     """KSG estimator 1 in bits on prepared series (ksg_prepare), max-norm, no clipping at 0.
 
     I = psi(k) + psi(N) - < psi(n_x + 1) + psi(n_y + 1) >, where eps_i is the max-norm
     distance from point i to its k-th neighbour in the joint space and n_x(i) counts the points
-    j != i with |x_j - x_i| < eps_i.
-
-    origin: (n,) ints or None. In a bootstrap resample the same tick appears several times; a
-    copy sits at distance 0 and would fake dependence, so copies of the same origin never count
-    as each other's neighbours (and are left out of n_x, n_y). None: all points distinct."""
+    j != i with |x_j - x_i| < eps_i."""
     n = len(x)
     if n <= k or not (np.isfinite(x).all() and np.isfinite(y).all()):
         return math.nan
     z = np.column_stack([x, y])
-    tree = cKDTree(z)
-    if origin is None:
-        d, _ = tree.query(z, k=k + 1, p=np.inf)  # the first neighbour is the point itself
-        eps = d[:, k]
-        self_copies = np.ones(n)
-    else:
-        origin = np.asarray(origin)
-        self_copies = np.bincount(origin)[origin].astype(float)
-        kq = min(n, k + int(self_copies.max()))
-        d, nb = tree.query(z, k=kq, p=np.inf)
-        d = np.where(origin[nb] == origin[:, None], np.inf, d)
-        d.sort(axis=1)
-        eps = d[:, k - 1]
-        if not np.isfinite(eps).all():
-            return math.nan  # fewer than k distinct ticks
+    d, _ = cKDTree(z).query(z, k=k + 1, p=np.inf)  # the first neighbour is the point itself
+    eps = d[:, k]
     # Strictly closer than eps: query the closed ball of the next smaller double.
     r = np.nextafter(eps, 0)
-    nx = cKDTree(x[:, None]).query_ball_point(x[:, None], r, p=np.inf, return_length=True) - self_copies
-    ny = cKDTree(y[:, None]).query_ball_point(y[:, None], r, p=np.inf, return_length=True) - self_copies
+    nx = cKDTree(x[:, None]).query_ball_point(x[:, None], r, p=np.inf, return_length=True) - 1
+    ny = cKDTree(y[:, None]).query_ball_point(y[:, None], r, p=np.inf, return_length=True) - 1
     mi = digamma(k) + digamma(n) - np.mean(digamma(nx + 1) + digamma(ny + 1))
     return float(mi / math.log(2))
 
@@ -169,13 +153,6 @@ def ksg_mi_bits(x, y, k=KSG_K, seed=0):
     """Mutual information of two 1-D series in bits (KSG estimator 1, k neighbours)."""
     xp, yp = ksg_prepare(x, y, seed)
     return ksg_core_bits(xp, yp, k)
-
-
-# --- all four at once, for the resampling loops ----------------------------------------------
-
-def all_stats_prepared(x, y, xp, yp, origin=None):
-    """(pearson_r, spearman_rho, kendall_tau, mi_bits) of x, y; xp, yp: ksg_prepare(x, y)."""
-    return np.array([pearson(x, y), spearman(x, y), kendall_tau_b(x, y), ksg_core_bits(xp, yp, KSG_K, origin)])
 
 
 # --- block length: Politis & White (2004) with Patton, Politis & White (2009) ----------------
@@ -237,96 +214,127 @@ def circular_block_indices(n, b, rng):
     return ((starts[:, None] + np.arange(b)[None, :]) % n).ravel()[:n]
 
 
-# Statistics whose bootstrap distribution is re-centred on the estimate before the percentile
-# interval is read off. A resample repeats ticks, and the KSG estimator reads repeated (and,
-# in smooth series, their adjacent) ticks as a denser neighbourhood: its resampled values sit
-# above the estimate (medians 0.06-0.37 bit higher on the demo runs) while their spread stays usable
-# (conservative in simulations of autocorrelated Gaussian pairs; docs/analysis.md).
-RECENTRED = ("mi_bits",)
+def bootstrap_correlations(x, y, b, n_boot, seed):
+    """(n_boot, 3) Pearson r, Spearman rho and Kendall tau-b of n_boot circular block bootstrap
+    resamples (block length b, the same indices for both series), drawn from seed.
 
-
-def bootstrap_ci(x, y, b, n_boot, seed, level=0.95):
-    """Percentile intervals of the four statistics: (4, 2) array [lo, hi], nan if undefined.
-
-    Correlations: the plain percentile interval. MI (RECENTRED): the percentile interval of the
-    resampled values shifted so that their median is the estimate, [est + q_lo - q_50,
-    est + q_hi - q_50]."""
+    No MI: a resample repeats ticks (and, in smooth series, their near-identical neighbours),
+    which the KSG estimator reads as a denser neighbourhood, so resampled MI values sit above the
+    estimate by an amount of their own; the MI is judged against its circular-shift null instead."""
     rng = np.random.default_rng(seed)
-    xp, yp = ksg_prepare(x, y, seed)
     n = len(x)
-    reps = np.empty((n_boot, len(STAT_NAMES)))
+    reps = np.empty((n_boot, 3))
     for i in range(n_boot):
         idx = circular_block_indices(n, b, rng)
-        reps[i] = all_stats_prepared(x[idx], y[idx], xp[idx], yp[idx], origin=idx)
+        reps[i] = pearson(x[idx], y[idx]), spearman(x[idx], y[idx]), kendall_tau_b(x[idx], y[idx])
+    return reps
+
+
+# --- intervals and p-values from one set of resamples ----------------------------------------
+
+LEVEL = 0.95
+
+
+def percentile_interval(reps, level=LEVEL):
+    """(lo, hi) percentile interval of the finite values of reps (numpy's linear interpolation
+    between order statistics); nan when fewer than 99 % of reps are finite or fewer than 2."""
+    r = np.asarray(reps, dtype=float)
+    f = r[np.isfinite(r)]
+    if f.size < 2 or f.size < 0.99 * r.size:
+        return math.nan, math.nan
     alpha = (1.0 - level) / 2.0
-    out = np.full((len(STAT_NAMES), 2), math.nan)
-    for s in range(len(STAT_NAMES)):
-        r = reps[:, s][np.isfinite(reps[:, s])]
-        # A statistic undefined in more than 1 % of the resamples gets no interval.
-        if r.size >= 0.99 * n_boot:
-            lo, mid, hi = np.quantile(r, [alpha, 0.5, 1.0 - alpha])
-            if STAT_NAMES[s] in RECENTRED:
-                est = ksg_core_bits(xp, yp)  # RECENTRED holds only the MI
-                lo, hi = est + lo - mid, est + hi - mid
-            out[s] = lo, hi
-    return out
+    lo, hi = np.percentile(f, [100.0 * alpha, 100.0 * (1.0 - alpha)])
+    return float(lo), float(hi)
 
 
-def _shift_p(obs, null, two_sided):
-    """p = (1 + #{null >= observed}) / (1 + shifts) per column; |.| first when two-sided."""
-    obs = np.abs(obs) if two_sided else obs
-    null = np.abs(null) if two_sided else null
-    # A hair of tolerance so that a shift giving the same value up to rounding counts as >=.
-    ge = null >= obs - 1e-12 * np.maximum(1.0, np.abs(obs))
-    p = (1.0 + ge.sum(axis=0)) / (1.0 + null.shape[0])
-    return np.where(np.isfinite(obs), p, math.nan)
+def _quantile_level_of(s, value, strict):
+    """For sorted s (n >= 2) and numpy's linear quantile Q(a) (h = a (n - 1)): the largest a with
+    Q(a) <= value (strict False) or the smallest a with Q(a) >= value (strict True), clipped to
+    [0, 1]."""
+    n = len(s)
+    k = int(np.searchsorted(s, value, side="left" if strict else "right"))  # #{s < value} or #{s <= value}
+    if k == 0:
+        return 0.0
+    if k == n:
+        return 1.0
+    lo, hi = s[k - 1], s[k]
+    return ((k - 1) + (value - lo) / (hi - lo)) / (n - 1)
 
+
+def interval_pvalue(reps, null_value=0.0):
+    """Two-sided p-value of "the statistic is null_value" from the same resamples as its
+    percentile interval: the smallest alpha at which the (1 - alpha) percentile interval of reps
+    excludes null_value, at least 1 / (n + 1) (n finite resamples cannot resolve less). By
+    construction p < 1 - level exactly when percentile_interval(reps, level) excludes null_value,
+    so a p-value never contradicts its interval. nan when percentile_interval gives no interval."""
+    r = np.asarray(reps, dtype=float)
+    if not math.isfinite(percentile_interval(r)[0]):
+        return math.nan
+    s = np.sort(r[np.isfinite(r)])
+    # The interval's lower end passes null_value at alpha = 2 a_lo, its upper end at 2 (1 - a_hi).
+    a_lo = _quantile_level_of(s, null_value, strict=False)
+    a_hi = _quantile_level_of(s, null_value, strict=True)
+    p = min(2.0 * a_lo, 2.0 * (1.0 - a_hi), 1.0)
+    return max(p, 1.0 / (len(s) + 1))
+
+
+# --- the MI against its circular-shift null --------------------------------------------------
 
 def circular_shifts(n, min_shift):
     """The shifts of the permutation test: min_shift <= s <= n - min_shift."""
     return np.arange(min_shift, n - min_shift + 1)
 
 
-def circular_shift_pvalue(stat, x, y, min_shift, two_sided=True):
-    """Circular-shift permutation p-value of one statistic stat(x, y) (shift_pvalues explains)."""
-    null = np.array([[stat(x, np.roll(y, s))] for s in circular_shifts(len(x), min_shift)])
-    return float(_shift_p(np.array([stat(x, y)]), null.reshape(-1, 1), two_sided)[0]) if len(null) else math.nan
-
-
-def shift_null(x, y, min_shift, seed):
-    """The four statistics of x, y (4,) and of x against every circular shift s of y with
-    min_shift <= s <= n - min_shift ((n_shifts, 4); empty when there is none)."""
+def mi_shift_null(x, y, min_shift, seed):
+    """(MI of x, y, (n_shifts,) MI of x against every circular shift s of y with min_shift <= s
+    <= n - min_shift; empty when there is none). A shift keeps both series' autocorrelation and
+    breaks only their alignment; all shifts are used (no randomness)."""
     xp, yp = ksg_prepare(x, y, seed)
-    obs = all_stats_prepared(x, y, xp, yp)
-    shifts = circular_shifts(len(x), min_shift)
-    null = np.array([all_stats_prepared(x, np.roll(y, s), xp, np.roll(yp, s)) for s in shifts]).reshape(-1, 4)
-    return obs, null
+    null = np.array([ksg_core_bits(xp, np.roll(yp, s)) for s in circular_shifts(len(x), min_shift)])
+    return ksg_core_bits(xp, yp), null
 
 
-def null_pvalues(obs, null):
-    """p-values of the four statistics against null draws (n, 4): correlations two-sided (|stat|),
-    MI one-sided (larger = more dependence); p = (1 + #{null >= observed}) / (1 + n)."""
-    if len(null) == 0:
-        return np.full(len(STAT_NAMES), math.nan)
-    return np.r_[_shift_p(obs[:3], null[:, :3], True), _shift_p(obs[3:], null[:, 3:], False)]
+# An MI counts as evidence of dependence only above its null's 95 % quantile: one-sided p below
+# MI_ALPHA.
+MI_ALPHA = 0.05
+
+
+def mi_null_pvalue(mi, null_mi):
+    """One-sided permutation p-value of an MI against its null draws (larger = more dependence):
+    p = (1 + #{null >= mi}) / (1 + n) over the n finite draws; nan without any."""
+    v = np.asarray(null_mi, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size == 0 or not math.isfinite(mi):
+        return math.nan
+    return float((1.0 + np.sum(v >= mi)) / (1.0 + v.size))
 
 
 def mi_null_quantiles(null_mi):
-    """(median, 95 % quantile) of the MI under the null; nan when undefined."""
-    v = np.asarray(null_mi, dtype=float)
+    """(median, 95 % quantile) of the MI under the null; nan when undefined. The 95 % quantile is
+    the order statistic an MI must exceed for mi_null_pvalue < MI_ALPHA: the (g + 1)-th largest
+    of the n draws, g = ceil((n + 1) MI_ALPHA) - 2 (the 10th largest of 200), so "above the
+    null's 95 % quantile" and "p < 0.05" are one statement; nan when n is too small for any p
+    below MI_ALPHA."""
+    v = np.sort(np.asarray(null_mi, dtype=float))
     v = v[np.isfinite(v)]
     if v.size == 0:
         return math.nan, math.nan
-    med, q95 = np.quantile(v, [0.5, 0.95])
-    return float(med), float(q95)
+    g = int(math.ceil(round((v.size + 1) * MI_ALPHA, 9))) - 2
+    q95 = float(v[v.size - 1 - g]) if 0 <= g < v.size else math.nan
+    return float(np.median(v)), q95
 
 
-def shift_pvalues(x, y, min_shift, seed):
-    """Circular-shift permutation p-values of the four statistics, and the number of shifts.
-
-    Every circular shift s of y with min_shift <= s <= n - min_shift is one draw of the null:
-    it keeps both series' autocorrelation and breaks only their alignment. All shifts are used
-    (no randomness). Correlations are two-sided (|stat|), MI one-sided (larger = more
-    dependence). p = (1 + #{null >= observed}) / (1 + shifts), so p >= 1 / (1 + shifts)."""
-    obs, null = shift_null(x, y, min_shift, seed)
-    return null_pvalues(obs, null), len(null)
+def row_result(point, reps, null_mi):
+    """One Table 2 row's numbers (table2.fill_row): point (4,) in STAT_NAMES order; reps
+    (n_boot, 3) resampled correlations (None: no interval), from which each correlation's 95 %
+    percentile interval and its p-value (interval_pvalue) come; null_mi the MI's null draws, from
+    which its p-value, median and 95 % quantile come. The MI has no bootstrap interval."""
+    lo, hi, p = (np.full(len(STAT_NAMES), math.nan) for _ in range(3))
+    if reps is not None and len(reps):
+        for s in range(3):
+            lo[s], hi[s] = percentile_interval(reps[:, s])
+            p[s] = interval_pvalue(reps[:, s])
+    p[3] = mi_null_pvalue(point[3], null_mi)
+    med, q95 = mi_null_quantiles(null_mi)
+    return {"point": np.asarray(point, dtype=float), "ci_lo": lo, "ci_hi": hi, "p": p, "mi_null_median": med,
+            "mi_null_q95": q95}

@@ -1,5 +1,6 @@
 """Paper Table 2 for every movement x joint: statistics between joint angular velocity and the
-per-body-part attention score, with block-bootstrap intervals and shift-test p-values.
+per-body-part attention score; the correlations with block-bootstrap intervals and the p-values
+of those intervals, the MI beside its circular-shift null.
 
 The pair for joint j (contract, docs/analysis.md): velocity = numpy.gradient(q_j, t_s) over
 every tick of ticks.csv; attention = att_j. Ticks where the policy was bypassed are dropped
@@ -59,14 +60,13 @@ def table2_rows(run, label, detrend_spec, n_boot=DEFAULT_BOOTSTRAP, base_seed=DE
         t, v, att = joint_series(run, j, detrend_spec)
         seed = row_seed(run.movement, joint, base_seed)
         b = stats.pair_block_length(v, att)
-        ci = stats.bootstrap_ci(v, att, b, n_boot, seed)
-        point, null = stats.shift_null(v, att, b, seed)
-        med, q95 = stats.mi_null_quantiles(null[:, 3])
+        reps = stats.bootstrap_correlations(v, att, b, n_boot, seed)
+        mi, null = stats.mi_shift_null(v, att, b, seed)
+        point = np.r_[stats.pearson(v, att), stats.spearman(v, att), stats.kendall_tau_b(v, att), mi]
         row = {"movement": run.movement, "joint": joint, "n_ticks": n_used, "n_dropped": run.n_ticks - n_used,
                "block_len": b, "n_shifts": len(null), "detrend": detrend_spec, "run": label, "n_runs": 1,
                "n_units": 1}
-        rows.append(fill_row(row, {"point": point, "ci_lo": ci[:, 0], "ci_hi": ci[:, 1],
-                                   "p": stats.null_pvalues(point, null), "mi_null_median": med, "mi_null_q95": q95}))
+        rows.append(fill_row(row, stats.row_result(point, reps, null)))
     return rows
 
 
