@@ -45,6 +45,73 @@ class Dtw(unittest.TestCase):
         self.assertGreater(dist[0, 1], 0.01)
 
 
+def single_linkage_groups(dist, threshold):
+    """The transitive grouping complete linkage replaces (union-find: a pair closer than the
+    threshold joins their groups), written here as the contrast."""
+    parent = list(range(len(dist)))
+
+    def root(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for i in range(len(dist)):
+        for k in range(i + 1, len(dist)):
+            if dist[i, k] < threshold:
+                parent[root(k)] = root(i)
+    found = {}
+    for i in range(len(dist)):
+        found.setdefault(root(i), []).append(i)
+    return sorted(found.values(), key=lambda g: g[0])
+
+
+class CompleteLinkage(unittest.TestCase):
+    def test_a_chain_of_near_neighbours_does_not_join_runs_farther_apart_than_the_threshold(self):
+        # Hand paths 0, 0.8 and 1.6 mm apart along z: neighbours within 1 mm, the ends 1.6 mm apart.
+        t = np.linspace(0, 4, 120)
+        a = 0.05 * np.column_stack([np.cos(t), np.sin(t), 0 * t])
+        paths = [a + [0.0, 0.0, dz] for dz in (0.0, 0.8e-3, 1.6e-3)]
+        groups, dist = units.group_units(paths, 1e-3)
+        np.testing.assert_allclose([dist[0, 1], dist[1, 2], dist[0, 2]], [0.8e-3, 0.8e-3, 1.6e-3], rtol=1e-9)
+        self.assertEqual(single_linkage_groups(dist, 1e-3), [[0, 1, 2]], "the chain joins all three")
+        self.assertEqual(groups, [[0, 1], [2]])
+        self.assertEqual(units.group_units(paths, 2e-3)[0], [[0, 1, 2]])
+        self.assertEqual(units.group_units(paths, 0.5e-3)[0], [[0], [1], [2]])
+
+    def test_two_runs_of_one_unit_are_never_farther_apart_than_the_threshold(self):
+        # A transitive grouping can hold a pair farther apart than the nearest pair of different
+        # units (1.025 against 1.003 mm); complete linkage cannot hold one beyond the threshold.
+        dist = np.array([[0, 0.98, 1.025, 1.4],
+                         [0.98, 0, 0.95, 1.003],
+                         [1.025, 0.95, 0, 1.5],
+                         [1.4, 1.003, 1.5, 0]]) * 1e-3
+        self.assertEqual(single_linkage_groups(dist, 1e-3), [[0, 1, 2], [3]], "0 and 2 joined through 1")
+        self.assertEqual(units.complete_linkage_groups(dist, 1e-3), [[0], [1, 2], [3]])
+        rng = np.random.default_rng(11)
+        for _ in range(200):
+            n = int(rng.integers(2, 14))
+            pts = rng.uniform(0, 3e-3, (n, 2))
+            dist = np.sqrt(((pts[:, None] - pts[None]) ** 2).sum(axis=-1))
+            groups = units.complete_linkage_groups(dist, 1e-3)
+            self.assertEqual(sorted(i for g in groups for i in g), list(range(n)))
+            for g in groups:
+                self.assertLess(dist[np.ix_(g, g)].max(), 1e-3)
+            # Each group lies inside one transitive group: complete linkage only splits.
+            single = single_linkage_groups(dist, 1e-3)
+            for g in groups:
+                self.assertTrue(any(set(g) <= set(h) for h in single))
+
+    def test_near_copies_are_one_unit_at_every_threshold(self):
+        runs = [read_run(p) for p in run_fixture.write_near_copy_runs(tempfile.mkdtemp(prefix="nao-units-th-"),
+                                                                      "elbow", seed=104, n_runs=6)]
+        try:
+            found = units.distinct_units(runs, units.ROBUSTNESS_DTW_M)
+            self.assertEqual(sorted(found), sorted(units.ROBUSTNESS_DTW_M))
+            self.assertEqual({len(found[t][0]) for t in found}, {3}, "copies at 0, others centimetres apart")
+        finally:
+            shutil.rmtree(os.path.dirname(runs[0].path))
+
+
 class NearCopies(unittest.TestCase):
     """3 independent AR(1) rollouts cut into 16 runs, as nao_rt's 16 runs per movement are 2-3
     rollouts. Measured before units: KSG MI 0.61-1.77 bits with the smallest possible p in 25 of

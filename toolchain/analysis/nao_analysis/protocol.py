@@ -27,7 +27,7 @@ import scipy.stats
 
 from . import JOINT_NAMES, N_JOINTS, AnalysisError
 from . import stats
-from .units import distinct_units
+from .units import UNIT_DTW_M, distinct_units
 
 N_PERM = 200
 MIN_RUNS = 2
@@ -157,10 +157,16 @@ def attention_offsets(movement_runs, prefix="att"):
     return wins / max(total, 1), mean / max(total, 1), total
 
 
-def movement_units(runs):
-    """({movement: units}, {movement: separation}) (units.distinct_units) of every movement."""
-    found = {m: distinct_units(v) for m, v in group_runs(runs).items()}
-    return {m: f[0] for m, f in found.items()}, {m: f[1] for m, f in found.items()}
+def movement_units(runs, threshold_m=UNIT_DTW_M):
+    """({movement: units}, {movement: separation}) (units.distinct_units) of every movement at
+    one threshold."""
+    found = movement_groupings(runs, (threshold_m,))
+    return ({m: f[threshold_m][0] for m, f in found.items()}, {m: f[threshold_m][1] for m, f in found.items()})
+
+
+def movement_groupings(runs, thresholds_m):
+    """{movement: {threshold: (units, separation)}} (units.distinct_units) of every movement."""
+    return {m: distinct_units(v, thresholds_m) for m, v in group_runs(runs).items()}
 
 
 def protocol_rows(units_by_movement, detrend_spec, n_boot, base_seed, prefixes, progress=None):

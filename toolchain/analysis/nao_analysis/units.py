@@ -1,17 +1,24 @@
 """Distinct rollouts: the resampling unit of the pooled Table 2 (docs/analysis.md).
 
 An autonomous run starts at its demonstration's first key pose and the policy is
-deterministic, so runs from one start repeat one rollout, each cut at its own length. Such
-near-copies are one piece of evidence, not several: runs whose hand paths are within
+deterministic, so runs from nearby starts can repeat one rollout, each cut at its own length.
+Such near-copies are one piece of evidence, not several: runs whose hand paths are all within
 UNIT_DTW_M of each other (DTW mean distance over their common ticks) form one unit, and the
-statistics, their bootstrap and their permutation test take one series per unit.
+statistics and their resampling take one series per unit.
+
+The grouping is complete linkage: every pair of runs in a unit is closer than the threshold,
+so a chain of near neighbours never joins two runs that are farther apart than two runs of
+different units. The threshold is a choice: docs/reproduction.md gives every verdict at each of
+ROBUSTNESS_DTW_M.
 """
 
 import numpy as np
 
-# A near-copy: hand paths closer than 1 mm per matched pair. Distinct starts of one movement
-# differ by centimetres, the numerical spread of one rollout by far less than a millimetre.
+# A near-copy: hand paths closer than 1 mm per matched pair. The numerical spread of one rollout
+# is far below that, but different rollouts of one movement can come within about a millimetre
+# of each other, so the cut is not clear: the verdicts are also computed at half and twice it.
 UNIT_DTW_M = 1e-3
+ROBUSTNESS_DTW_M = (0.5e-3, 1e-3, 2e-3)
 
 
 def point_distances(a, b):
@@ -94,43 +101,56 @@ def hand_path(run):
     return np.column_stack([run.columns[c] for c in ("ee_x", "ee_y", "ee_z")])
 
 
-def group_units(paths, threshold_m=UNIT_DTW_M):
-    """Indices of the paths grouped into distinct rollouts: a path within threshold_m of any path
-    of a group joins it, transitively. The distance of two paths is their DTW over their common
-    ticks (the shorter one's length): a run that repeats the beginning of a longer one is at 0.
-    Returns (groups, distances): groups a list of index lists in order of their first member,
-    distances the (n, n) matrix of these DTWs."""
+def common_dtw_matrix(paths):
+    """(n, n) DTW mean distances of every pair of paths over their common ticks (the shorter
+    one's length; a run that repeats the beginning of a longer one is at 0), m; 0 on the diagonal."""
     n = len(paths)
     dist = np.zeros((n, n))
-    parent = list(range(n))
-
-    def root(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
     pairs = [(i, k) for i in range(n) for k in range(i + 1, n)]
     if pairs:
         common = [min(len(paths[i]), len(paths[k])) for i, k in pairs]
         d = dtw_mean_distances([(paths[i][:c], paths[k][:c]) for (i, k), c in zip(pairs, common)])
         for (i, k), v in zip(pairs, d):
             dist[i, k] = dist[k, i] = v
-            if v < threshold_m:
-                parent[root(k)] = root(i)
-    groups = {}
-    for i in range(n):
-        groups.setdefault(root(i), []).append(i)
-    return sorted(groups.values(), key=lambda g: g[0]), dist
+    return dist
 
 
-def distinct_units(movement_runs, threshold_m=UNIT_DTW_M):
-    """The runs of one movement grouped into distinct rollouts. Returns (units, separation):
-    units a list of lists of runs whose first member is the unit's representative, its longest
-    run (the others repeat its beginning and add no ticks of their own); separation a dict with
-    the largest common DTW inside a unit and the smallest between units (m; None when there is
-    no such pair), which shows how clear-cut the grouping is."""
-    groups, dist = group_units([hand_path(r) for r in movement_runs], threshold_m)
+def complete_linkage_groups(dist, threshold_m):
+    """Agglomerative complete-linkage groups of a distance matrix (n, n) cut at threshold_m:
+    starting from singletons, repeatedly merge the two groups whose farthest pair is nearest,
+    while that farthest pair is closer than threshold_m (ties: the pair of groups with the
+    smallest first members). Every pair inside a group is then closer than threshold_m. A nan
+    distance never merges. Returns index lists in order of their first member."""
+    d = np.where(np.isfinite(dist), dist, np.inf)
+    groups = [[i] for i in range(len(d))]
+    while len(groups) > 1:
+        best = None
+        for a in range(len(groups)):
+            for b in range(a + 1, len(groups)):
+                far = d[np.ix_(groups[a], groups[b])].max()
+                if far < threshold_m and (best is None or far < best[0]):
+                    best = (far, a, b)
+        if best is None:
+            break
+        _, a, b = best
+        groups[a] = sorted(groups[a] + groups[b])
+        del groups[b]
+    return sorted(groups, key=lambda g: g[0])
+
+
+def group_units(paths, threshold_m=UNIT_DTW_M):
+    """Indices of the paths grouped into distinct rollouts (complete_linkage_groups of their
+    common_dtw_matrix). Returns (groups, distances)."""
+    dist = common_dtw_matrix(paths)
+    return complete_linkage_groups(dist, threshold_m), dist
+
+
+def units_of_groups(movement_runs, groups, dist):
+    """(units, separation) of runs grouped by index lists: units a list of lists of runs whose
+    first member is the unit's representative, its longest run (the others repeat its beginning
+    and add no ticks of their own); separation a dict with the largest common DTW inside a unit
+    and the smallest between units (m; None when there is no such pair), which shows how
+    clear-cut the grouping is."""
     units = []
     for g in groups:
         members = [movement_runs[i] for i in g]
@@ -146,3 +166,10 @@ def distinct_units(movement_runs, threshold_m=UNIT_DTW_M):
     between = [dist[i, k] for i in range(n) for k in range(i + 1, n) if label[i] != label[k]]
     return units, {"max_dtw_within_unit_m": float(max(within)) if within else None,
                    "min_dtw_between_units_m": float(min(between)) if between else None}
+
+
+def distinct_units(movement_runs, thresholds_m=(UNIT_DTW_M,)):
+    """The runs of one movement grouped into distinct rollouts at each threshold (the DTWs
+    computed once): {threshold: (units, separation)} (units_of_groups)."""
+    dist = common_dtw_matrix([hand_path(r) for r in movement_runs])
+    return {t: units_of_groups(movement_runs, complete_linkage_groups(dist, t), dist) for t in thresholds_m}
