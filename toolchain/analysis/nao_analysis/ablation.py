@@ -8,10 +8,19 @@ body parts that get more mass move the action more when masked. Per movement:
 
 - per tick, Spearman rho between the five masses and the five deltas; its median over the
   ticks, with a bootstrap interval over distinct rollouts (units.py);
-- how often the most-attended body part is the one whose masking moves the action most,
-  beside the rate of a random pick (1/5), with the same bootstrap interval.
+- how often the most-attended body part is the one whose masking moves the action most (the
+  match rate), beside its chance level: the rate at which the two would agree if the attention's
+  pick and the ablation's were independent, sum_j P(attention picks j) P(masking j moves the
+  action most), each P the share of the movement's ticks. A uniform 1/5 would understate it
+  wherever both favour one body part.
 
-Attention "predicts the ablation" only when both intervals lie above chance (rho 0, rate 0.2).
+Every interval comes from one bootstrap over distinct rollouts: the match rate and the chance
+level are recomputed on the same resampled rollouts, and the match rate lies "above chance"
+only when the 95 % interval of their difference lies above 0. Attention "predicts the ablation"
+only when, besides, the median rho's interval lies above 0.
+
+Everything is computed from per-run counts (run_record), which the Table 2 JSON keeps, so that
+docs/reproduction.md recomputes it for any grouping of the runs into distinct rollouts.
 """
 
 import csv
@@ -25,7 +34,6 @@ from . import stats
 
 FILE = "ablation.csv"
 COLUMNS = ("tick",) + tuple("mass_%d" % j for j in range(N_JOINTS)) + tuple("delta_%d" % j for j in range(N_JOINTS))
-CHANCE_TOP_MATCH = 1.0 / N_JOINTS
 # ablation.csv's masses are attention.bin's float32 masses written as text.
 MASS_TOLERANCE = 1e-6
 
@@ -87,48 +95,86 @@ def top_match(mass, delta):
     return (np.argmax(mass, axis=1) == np.argmax(delta, axis=1)).astype(float)
 
 
-def unit_series(run):
-    """(rho (n,), match (n,)) over the run's ticks whose attention is the policy's own and whose
-    ablation row is finite; None when the run has no ablation.csv."""
+def run_record(run):
+    """The counts of one run's ablation that every summary needs, over its ticks whose attention
+    is the policy's own, whose ablation row is finite and whose per-tick rho is defined; None
+    when the run has no ablation.csv. A dict (JSON-ready): n_ticks, matches (ticks where the
+    top body parts agree), attention_top and ablation_top (5 each: ticks in which body part j
+    has the most mass / whose masking moves the action most), tick_rho ([[rho, ticks], ...] in
+    increasing rho: per-tick Spearman rho takes few distinct values over five body parts)."""
     read = read_ablation(run)
     if read is None:
         return None
     tick, mass, delta = read
     keep = run.policy_mask()[tick] & np.isfinite(mass).all(axis=1) & np.isfinite(delta).all(axis=1)
-    rho = tick_rho(mass[keep], delta[keep])
-    match = top_match(mass[keep], delta[keep])
+    mass, delta = mass[keep], delta[keep]
+    rho = tick_rho(mass, delta)
     ok = np.isfinite(rho)
-    return rho[ok], match[ok]
+    mass, delta, rho = mass[ok], delta[ok], rho[ok]
+    values, counts = np.unique(rho, return_counts=True)
+    return {"n_ticks": int(len(rho)), "matches": int(top_match(mass, delta).sum()),
+            "attention_top": np.bincount(np.argmax(mass, axis=1), minlength=N_JOINTS).astype(int).tolist(),
+            "ablation_top": np.bincount(np.argmax(delta, axis=1), minlength=N_JOINTS).astype(int).tolist(),
+            "tick_rho": [[float(v), int(c)] for v, c in zip(values, counts)]}
+
+
+class _Counts:
+    """The records of a movement's units as arrays, for resampling whole units."""
+
+    def __init__(self, records):
+        self.values = np.unique(np.array([v for r in records for v, _ in r["tick_rho"]], dtype=float))
+        self.rho = np.zeros((len(records), len(self.values)), dtype=np.int64)
+        for u, r in enumerate(records):
+            for v, c in r["tick_rho"]:
+                self.rho[u, np.searchsorted(self.values, v)] += c
+        self.n = np.array([r["n_ticks"] for r in records], dtype=np.int64)
+        self.matches = np.array([r["matches"] for r in records], dtype=np.int64)
+        self.attention = np.array([r["attention_top"] for r in records], dtype=np.int64)
+        self.ablation = np.array([r["ablation_top"] for r in records], dtype=np.int64)
+
+    def stats(self, pick):
+        """(median rho, match rate, chance level) of the units `pick` (repeats allowed) pooled."""
+        hist = self.rho[pick].sum(axis=0)
+        n = int(hist.sum())
+        cum = np.cumsum(hist)
+        # numpy.median of the pooled ticks: the middle one, or the mean of the middle two.
+        lo = self.values[np.searchsorted(cum, (n - 1) // 2, side="right")]
+        hi = self.values[np.searchsorted(cum, n // 2, side="right")]
+        total = float(self.n[pick].sum())
+        chance = float(np.sum(self.attention[pick].sum(axis=0) / total * (self.ablation[pick].sum(axis=0) / total)))
+        return (lo + hi) / 2, float(self.matches[pick].sum()) / total, chance
+
+
+def summary_from_records(records, n_boot, seed, min_units=2):
+    """The movement's ablation statistics from the run_record of each distinct rollout's
+    representative (None for one without ablation.csv), or None when none has one. Returns a
+    dict: n_units (with ablation.csv), n_units_total, n_ticks, rho_median, rho_ci [lo, hi],
+    top_match_rate, top_match_ci, chance, chance_ci, excess (match rate - chance), excess_ci,
+    above_chance (excess_ci above 0), predicts (above chance and rho_ci above 0); the intervals
+    nan below min_units units. The bootstrap draws units with replacement from a generator
+    seeded by seed."""
+    have = [r for r in records if r is not None and r["n_ticks"]]
+    if not have:
+        return None
+    counts = _Counts(have)
+    n = len(have)
+    rho_med, rate, chance = counts.stats(np.arange(n))
+    rho_ci = rate_ci = chance_ci = excess_ci = (math.nan, math.nan)
+    if n >= min_units:
+        rng = np.random.default_rng(seed)
+        boot = np.array([counts.stats(rng.integers(0, n, n)) for _ in range(n_boot)])
+        rho_ci, rate_ci, chance_ci = (stats.percentile_interval(boot[:, k]) for k in range(3))
+        excess_ci = stats.percentile_interval(boot[:, 1] - boot[:, 2])
+    above = bool(excess_ci[0] > 0)
+    return {"n_units": n, "n_units_total": len(records), "n_ticks": int(counts.n.sum()),
+            "rho_median": float(rho_med), "rho_ci": list(rho_ci), "top_match_rate": rate, "top_match_ci": list(rate_ci),
+            "chance": chance, "chance_ci": list(chance_ci), "excess": rate - chance, "excess_ci": list(excess_ci),
+            "above_chance": above, "predicts": bool(above and rho_ci[0] > 0)}
 
 
 def ablation_summary(units, n_boot, seed, min_units=2):
-    """The movement's ablation statistics from its distinct rollouts (each unit's representative,
-    units[i][0]), or None when no representative has ablation.csv. Returns a dict: n_units,
-    n_units_total, n_ticks, rho_median, rho_ci [lo, hi], top_match_rate, top_match_ci,
-    chance_top_match, predicts (both intervals above chance), the intervals nan below
-    min_units units."""
-    series = [s for s in (unit_series(u[0]) for u in units) if s is not None and len(s[0])]
-    if not series:
-        return None
-    rhos = [s[0] for s in series]
-    matches = [s[1] for s in series]
-
-    def stat(pick):
-        return (float(np.median(np.concatenate([rhos[i] for i in pick]))),
-                float(np.mean(np.concatenate([matches[i] for i in pick]))))
-
-    n = len(series)
-    rho_med, rate = stat(range(n))
-    rho_ci = rate_ci = (math.nan, math.nan)
-    if n >= min_units:
-        rng = np.random.default_rng(seed)
-        boot = np.array([stat(rng.integers(0, n, n)) for _ in range(n_boot)])
-        lo, hi = np.percentile(boot, [2.5, 97.5], axis=0)
-        rho_ci, rate_ci = (float(lo[0]), float(hi[0])), (float(lo[1]), float(hi[1]))
-    predicts = bool(rho_ci[0] > 0 and rate_ci[0] > CHANCE_TOP_MATCH)
-    return {"n_units": n, "n_units_total": len(units), "n_ticks": int(sum(len(r) for r in rhos)),
-            "rho_median": rho_med, "rho_ci": list(rho_ci), "top_match_rate": rate, "top_match_ci": list(rate_ci),
-            "chance_top_match": CHANCE_TOP_MATCH, "predicts": predicts}
+    """summary_from_records of the units' representatives (each unit's first run)."""
+    return summary_from_records([run_record(u[0]) for u in units], n_boot, seed, min_units)
 
 
 def mass_spread(units):

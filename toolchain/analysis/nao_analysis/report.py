@@ -121,10 +121,12 @@ def findings_markdown(rows, training_seed, units, ablations, spreads):
         e = ablations[m]
         L.append("- %s: %s" % (m, "not measured: no run has ablation.csv" if e is None else
                                "median per-tick ρ(mass, delta) %s [%s, %s]; top body part matches %s [%s, %s] "
-                               "(chance %.2f); attention %s the ablation" % (
+                               "against a chance level of %s [%s, %s] (%s chance); attention %s the ablation" % (
                                    fmt(e["rho_median"]), fmt(e["rho_ci"][0]), fmt(e["rho_ci"][1]),
                                    fmt(e["top_match_rate"]), fmt(e["top_match_ci"][0]), fmt(e["top_match_ci"][1]),
-                                   e["chance_top_match"], "predicts" if e["predicts"] else "does not predict")))
+                                   fmt(e["chance"]), fmt(e["chance_ci"][0]), fmt(e["chance_ci"][1]),
+                                   "above" if e["above_chance"] else "not above",
+                                   "predicts" if e["predicts"] else "does not predict")))
     return "\n".join(L) + "\n"
 
 
