@@ -90,12 +90,15 @@ class EndToEnd(unittest.TestCase):
     def test_the_table_json_has_every_row_with_its_mi_null_and_units(self):
         with open(self.json) as f:
             doc = json.load(f)
-        self.assertEqual(doc["schema"], "nao-table2/1")
+        self.assertEqual(doc["schema"], "nao-table2/2")
+        self.assertEqual(doc["method"]["p_values"], "bootstrap interval")
+        self.assertEqual(doc["variants"], [], "single runs: no groupings to vary")
         self.assertEqual(doc["training_seed"], 7)
         self.assertEqual(sorted(doc["movements"]), sorted(MOVEMENTS))
         for m in MOVEMENTS:
             self.assertEqual((doc["movements"][m]["n_runs"], doc["movements"][m]["n_units"]), (1, 1))
             self.assertIsNone(doc["ablation"][m], "no fixture run has ablation.csv")
+            self.assertEqual(list(doc["ablation_runs"][m].values()), [None])
             self.assertEqual(len(doc["attention_mass"][m]["mean"]), 5)
         rows = doc["table2"]["att"]
         self.assertEqual(len(rows), 5 * len(MOVEMENTS))

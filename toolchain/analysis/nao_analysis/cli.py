@@ -9,7 +9,7 @@ from . import JOINT_NAMES, AnalysisError
 from . import stats
 from . import table2 as t2
 from .rundir import read_run
-from .units import UNIT_DTW_M
+from .units import ROBUSTNESS_DTW_M, UNIT_DTW_M
 
 PROG = "nao analyze"
 
@@ -34,6 +34,7 @@ def parse_args(argv):
     p.add_argument("--screenshot")
     p.add_argument("--table-json", metavar="FILE")
     p.add_argument("--training-seed", type=int)
+    p.add_argument("--robustness", action="store_true")
     p.add_argument("--reproduction-from", nargs="+", metavar="JSON")
     p.add_argument("run_dirs", nargs="*", metavar="RUN_DIR")
     args = p.parse_args(argv)
@@ -43,6 +44,8 @@ def parse_args(argv):
         p.error("--reproduction-from takes Table 2 files, not run directories (%s)" % args.run_dirs[0])
     if not args.reproduction_from and not args.run_dirs:
         p.error("no RUN_DIR given")
+    if args.robustness and not args.table_json:
+        p.error("--robustness adds to the --table-json file: give --table-json FILE")
     return args
 
 
@@ -56,6 +59,83 @@ def run_labels(runs):
     if len(set(labels)) != len(labels):
         raise AnalysisError("two run directories give the same name %s: pass each run once" % labels)
     return labels
+
+
+def _name(run):
+    return os.path.basename(run.path)
+
+
+def run_models(runs):
+    """[{path, checksum, conditioning}] of the models the runs' summary.json name."""
+    models = sorted({(str(r.summary.get("model", {}).get("path", "?")),
+                      str(r.summary.get("model", {}).get("checksum", "?")),
+                      str(r.summary.get("model", {}).get("conditioning", "?"))) for r in runs})
+    return [{"path": p, "checksum": c, "conditioning": k} for p, c, k in models]
+
+
+def _grouping_json(units, separation):
+    return dict({"n_units": len(units), "units": [[_name(r) for r in u] for u in units]}, **separation)
+
+
+def movements_json(groups, units, separation, groupings):
+    """The JSON's `movements`: per movement its runs, the distinct rollouts of the analysis and,
+    for pooled runs, the groupings at every threshold."""
+    out = {}
+    for m in sorted(units):
+        reps = [u[0] for u in units[m]]
+        e = dict({"n_runs": len(groups[m]), "n_units": len(units[m]),
+                  "n_ticks": int(sum(int(r.policy_mask().sum()) for r in reps))},
+                 **_grouping_json(units[m], separation[m]))
+        if m in groupings:
+            e["groupings"] = [dict({"unit_dtw_m": t}, **_grouping_json(*groupings[m][t])) for t in sorted(groupings[m])]
+        out[m] = e
+    return out
+
+
+def offsets_json(units):
+    """The JSON's `attention_offsets` of each movement's distinct rollouts."""
+    from . import protocol
+    out = {}
+    for m in sorted(units):
+        share, mean, total = protocol.attention_offsets([u[0] for u in units[m]])
+        out[m] = {"n_ticks": total, "top_share": dict(zip(JOINT_NAMES, map(float, share))),
+                  "mean_score": dict(zip(JOINT_NAMES, map(float, mean)))}
+    return out
+
+
+def ablation_records(groups):
+    """{movement: {run directory name: ablation.run_record or None}} (the JSON's `ablation_runs`)."""
+    from . import ablation
+    for m, runs in groups.items():
+        names = [_name(r) for r in runs]
+        if len(set(names)) != len(names):
+            raise AnalysisError("two %s run directories share a name (%s): the Table 2 file names runs by their "
+                                "directory" % (m, ", ".join(sorted({n for n in names if names.count(n) > 1}))))
+    return {m: {_name(r): ablation.run_record(r) for r in groups[m]} for m in sorted(groups)}
+
+
+def robustness_variants(args, groupings, rows, progress=None):
+    """Table 2 (`att`) at the other distinct-rollout thresholds (this analysis' trend removal) and
+    with the other trend removals (this threshold): [{unit_dtw_m, detrend, table2: {"att": rows}}].
+    A movement whose units do not change with the threshold keeps its rows."""
+    from . import protocol
+    if not groupings:
+        return []
+    name = stats.parse_detrend(args.detrend)[0]
+    cases = [(t, args.detrend) for t in sorted(next(iter(groupings.values()))) if t != UNIT_DTW_M]
+    cases += [(UNIT_DTW_M, d) for d in ("linear", "highpass", "none") if d != name]
+    variants = []
+    for t, detrend in cases:
+        if progress:
+            progress("robustness: Table 2 at %g mm, --detrend %s" % (1e3 * t, detrend))
+        out = []
+        for m in sorted(groupings):
+            units, main = groupings[m][t][0], groupings[m][UNIT_DTW_M][0]
+            same = detrend == args.detrend and [[r.path for r in u] for u in units] == [[r.path for r in u] for u in main]
+            out += ([r for r in rows if r["movement"] == m] if same else
+                    protocol.pooled_rows(units, m, detrend, args.bootstrap, args.seed, "att", progress))
+        variants.append({"unit_dtw_m": t, "detrend": detrend, "table2": {"att": out}})
+    return variants
 
 
 def analyze(args, command):
@@ -76,11 +156,15 @@ def analyze(args, command):
     from . import ablation, protocol
     pooled = protocol.is_protocol(runs)
     groups = protocol.group_runs(runs)
+    thresholds = sorted(set(ROBUSTNESS_DTW_M) | {UNIT_DTW_M})
+    groupings = {}
     if pooled:
         # The paper's protocol: several runs per movement, pooled with the distinct rollout as the unit.
         progress("protocol: %s; grouping near-copies into distinct rollouts (hand-path DTW)"
                  % ", ".join("%s %d run(s)" % (m, len(v)) for m, v in sorted(groups.items())))
-        units, separation = protocol.movement_units(runs)
+        groupings = protocol.movement_groupings(runs, thresholds)
+        units = {m: g[UNIT_DTW_M][0] for m, g in groupings.items()}
+        separation = {m: g[UNIT_DTW_M][1] for m, g in groupings.items()}
         progress("distinct rollouts: %s" % ", ".join("%s %d of %d" % (m, len(units[m]), len(groups[m]))
                                                       for m in sorted(units)))
         prefixes = protocol.score_prefixes(runs)
@@ -103,7 +187,9 @@ def analyze(args, command):
                     "resampling_unit": "distinct rollout" if pooled else "circular block of ticks",
                     "unit_dtw_m": UNIT_DTW_M})
     progress("ablation and attention spread")
-    ablations = {m: ablation.ablation_summary(units[m], args.bootstrap, args.seed) for m in sorted(units)}
+    records = ablation_records(groups)
+    ablations = {m: ablation.summary_from_records([records[m][_name(u[0])] for u in units[m]], args.bootstrap,
+                                                  args.seed) for m in sorted(units)}
     spreads = {m: ablation.mass_spread(units[m]) for m in sorted(units)}
     with open(os.path.join(out_dir, "table2.csv"), "w") as f:
         f.write(t2.table2_csv(rows))
@@ -115,21 +201,10 @@ def analyze(args, command):
         f.write(findings)
     if args.table_json:
         from .table_json import table_document, write_table_json
-        reps = {m: [u[0] for u in units[m]] for m in units}
-        movements = {m: dict({"n_runs": len(groups[m]), "n_units": len(units[m]),
-                              "n_ticks": int(sum(int(r.policy_mask().sum()) for r in reps[m])),
-                              "units": [[os.path.basename(r.path) for r in u] for u in units[m]]}, **separation[m])
-                     for m in sorted(units)}
-        offsets = {}
-        for m in sorted(units):
-            share, mean, total = protocol.attention_offsets(reps[m])
-            offsets[m] = {"n_ticks": total, "top_share": dict(zip(JOINT_NAMES, map(float, share))),
-                          "mean_score": dict(zip(JOINT_NAMES, map(float, mean)))}
-        models = sorted({(str(r.summary.get("model", {}).get("path", "?")),
-                          str(r.summary.get("model", {}).get("checksum", "?")),
-                          str(r.summary.get("model", {}).get("conditioning", "?"))) for r in runs})
-        doc = table_document(args.training_seed, [{"path": p, "checksum": c, "conditioning": k} for p, c, k in models],
-                             options, command, movements, rows_by_prefix, offsets, spreads, ablations)
+        variants = robustness_variants(args, groupings, rows_by_prefix["att"], progress) if args.robustness else ()
+        doc = table_document(args.training_seed, run_models(runs), options, command,
+                             movements_json(groups, units, separation, groupings), rows_by_prefix,
+                             offsets_json(units), spreads, ablations, records, variants)
         write_table_json(args.table_json, doc)
         progress("wrote %s" % args.table_json)
 
@@ -172,8 +247,9 @@ def main(argv=None):
     try:
         if args.reproduction_from:
             from .reproduction import DOC, write_reproduction
-            doc, found = write_reproduction(args.reproduction_from, command, args.out or DOC)
-            print("%s: wrote %s: %s" % (PROG, doc, ", ".join("(%s) %s" % (f["id"], f["verdict"]) for f in found)))
+            doc, found, found_mi = write_reproduction(args.reproduction_from, command, args.out or DOC)
+            print("%s: wrote %s: %s" % (PROG, doc, ", ".join("(%s) %s, MI %s" % (f["id"], f["verdict"], g["verdict"])
+                                                            for f, g in zip(found, found_mi))))
             return 0
         out_dir = analyze(args, command)
     except AnalysisError as e:

@@ -106,6 +106,13 @@ def findings_markdown(rows, training_seed, units, ablations, spreads):
             L.append("  - %s %s: ρ %s: %s" % (movement, joint, "%s [%s, %s]" % (
                 fmt(row["spearman_rho"]), fmt(row["spearman_rho_ci_lo"]), fmt(row["spearman_rho_ci_hi"]))
                 if row else "–", "holds" if holds else "does not hold (%s)" % why))
+    L += ["", "# The paper's MI statements on this analysis", "", "Criterion: " + verdict.MI_CRITERION, ""]
+    for f in verdict.judge_mi({seed: {(r["movement"], r["joint"]): r for r in rows}}):
+        L.append("- (%s) %s" % (f["id"], f["statement"]))
+        for movement, joint, kind, _, holds, why, row in f["checks"]:
+            L.append("  - %s %s (%s): MI %s, null q95 %s: %s" % (
+                movement, joint, kind, fmt(row["mi_bits"]) if row else "–", fmt(row["mi_null_q95"]) if row else "–",
+                "holds" if holds else "does not hold (%s)" % why))
     L += ["", "# Distinct rollouts", ""]
     for m in sorted(units):
         L.append("- %s: %d run(s), %d distinct rollout(s)" % (m, sum(len(u) for u in units[m]), len(units[m])))

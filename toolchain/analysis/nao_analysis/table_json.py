@@ -1,6 +1,13 @@
 """Table 2 of one analysis as JSON (`toolchain/nao analyze --table-json FILE`): the input of
 `--reproduction-from`, so docs/reproduction.md is made from committed numbers, one file per
 training seed. Keys: docs/analysis.md "Table 2 as JSON".
+
+Schema 2 adds what docs/reproduction.md needs beyond one Table 2: the runs' groupings into
+distinct rollouts at every threshold (`movements.*.groupings`), each run's ablation counts
+(`ablation_runs`), and Table 2 at other thresholds and trend removals (`variants`). Files of
+schema 1 are still read; their correlation p-values come from a permutation test that holds
+the set of rollouts fixed (`method.p_values`), which can contradict the intervals, and they
+lack the keys above: the page says so where it needs them.
 """
 
 import json
@@ -9,7 +16,10 @@ import math
 from . import AnalysisError
 from . import stats
 
-SCHEMA = "nao-table2/1"
+SCHEMA = "nao-table2/2"
+READABLE = ("nao-table2/1", SCHEMA)
+# method.p_values of this schema: how the correlations' p-values were made.
+P_FROM_INTERVAL = "bootstrap interval"
 STAT_KEYS = ("estimate", "ci_lo", "ci_hi", "p")
 
 
@@ -52,8 +62,11 @@ def row_from_json(o):
     return r
 
 
-def table_document(training_seed, models, options, command, movements, rows_by_prefix, offsets, mass, ablation):
-    """The whole JSON document as a dict (write_table_json writes it)."""
+def table_document(training_seed, models, options, command, movements, rows_by_prefix, offsets, mass, ablation,
+                   ablation_runs=None, variants=()):
+    """The whole JSON document as a dict (write_table_json writes it). ablation_runs: {movement:
+    {run directory name: ablation.run_record or None}}; variants: dicts {unit_dtw_m, detrend,
+    table2: {prefix: rows}}."""
     return {
         "schema": SCHEMA,
         "training_seed": training_seed,
@@ -61,30 +74,39 @@ def table_document(training_seed, models, options, command, movements, rows_by_p
         "command": command,
         "method": {"detrend": options["detrend"], "bootstrap": options["bootstrap"], "analysis_seed": options["seed"],
                    "ksg_k": stats.KSG_K, "permutations": options.get("permutations"),
-                   "unit_dtw_m": options.get("unit_dtw_m"), "resampling_unit": options.get("resampling_unit")},
+                   "unit_dtw_m": options.get("unit_dtw_m"), "unit_grouping": "complete linkage",
+                   "resampling_unit": options.get("resampling_unit"), "p_values": P_FROM_INTERVAL},
         "movements": movements,
         "table2": {p: [row_json(r) for r in rows] for p, rows in rows_by_prefix.items()},
         "attention_offsets": offsets,
         "attention_mass": mass,
         "ablation": ablation,
+        "ablation_runs": ablation_runs or {},
+        "variants": [{"unit_dtw_m": v["unit_dtw_m"], "detrend": v["detrend"],
+                      "table2": {p: [row_json(r) for r in rows] for p, rows in v["table2"].items()}} for v in variants],
     }
 
 
-def _clean(x):
+def p_values_agree_with_intervals(doc):
+    """True when the document's correlation p-values are read off their intervals' resamples."""
+    return doc["method"].get("p_values") == P_FROM_INTERVAL
+
+
+def json_ready(x):
     """NaN -> null all the way down (json.dumps would write the non-JSON NaN)."""
     if isinstance(x, float):
         return x if math.isfinite(x) else None
     if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
+        return {k: json_ready(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
+        return [json_ready(v) for v in x]
     return x
 
 
 def write_table_json(path, doc):
     try:
         with open(path, "w") as f:
-            json.dump(_clean(doc), f, indent=1, ensure_ascii=False, allow_nan=False)
+            json.dump(json_ready(doc), f, indent=1, ensure_ascii=False, allow_nan=False)
             f.write("\n")
     except OSError as e:
         raise AnalysisError("%s: cannot write: %s" % (path, e.strerror)) from None
@@ -99,13 +121,16 @@ def read_table_json(path):
         raise AnalysisError("%s: cannot read: %s" % (path, e.strerror)) from None
     except (ValueError, UnicodeDecodeError) as e:
         raise AnalysisError("%s: not valid JSON: %s" % (path, e)) from None
-    if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
-        raise AnalysisError("%s: not a Table 2 file of schema %s (toolchain/nao analyze --table-json)" % (path, SCHEMA))
+    if not isinstance(doc, dict) or doc.get("schema") not in READABLE:
+        raise AnalysisError("%s: not a Table 2 file of schema %s (toolchain/nao analyze --table-json)"
+                            % (path, " or ".join(READABLE)))
     try:
-        for rows in doc["table2"].values():
-            for o in rows:
-                row_from_json(o)
+        for table in [doc["table2"]] + [v["table2"] for v in doc.get("variants", [])]:
+            for rows in table.values():
+                for o in rows:
+                    row_from_json(o)
         doc["movements"].items()
+        doc["method"].get("unit_dtw_m")
     except (KeyError, TypeError, AttributeError, ValueError) as e:
         raise AnalysisError("%s: malformed Table 2 file (%s: %s)" % (path, type(e).__name__, e)) from None
     return doc
