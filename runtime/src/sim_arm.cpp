@@ -68,20 +68,25 @@ JointVector brakingLimits(const ArmModel& arm, double g) {
   return a;
 }
 
-// The servo law of the header, plus a slew limit: the target velocity changes by at most
-// a_brake * dt per step, so no joint is asked for more acceleration than its motor can give
-// and the reaction torques on the proximal joints stay within their efforts.
-double servoVelocity(double error, double v_prev, double gain, double v_max, double a_brake, double dt) {
+}  // namespace
+
+// The servo law of the header. The square-root term brakes along a curve planned at a_brake / 2:
+// the slew limit (a_brake) can then always follow it, so the joint stops on the target instead of
+// a step late.
+double servoTargetVelocity(double error, double gain, double v_max, double a_brake) {
   const double e = std::abs(error);
-  // Brake along a curve planned at a_brake / 2: the slew limit (a_brake) can then always
-  // follow it, so the joint stops on the target instead of a step late.
   const double speed = std::min({gain * e, v_max, std::sqrt(a_brake * e)});
-  const double v = error < 0.0 ? -speed : speed;
+  return error < 0.0 ? -speed : speed;
+}
+
+// The slew limit: the target velocity changes by at most a_brake * dt per step, so no joint is
+// asked for more acceleration than its motor can give and the reaction torques on the proximal
+// joints stay within their efforts.
+double servoVelocity(double error, double v_prev, double gain, double v_max, double a_brake, double dt) {
+  const double v = servoTargetVelocity(error, gain, v_max, a_brake);
   const double dv = a_brake * dt;
   return std::min(std::max(v, v_prev - dv), v_prev + dv);
 }
-
-}  // namespace
 
 SimModel makeSimModel(const ArmModel& arm, const SimParams& params) {
   if (!(params.dt_s > 0.0 && params.dt_s <= 0.01))

@@ -126,12 +126,10 @@ JointVector linearArAction(const LinearArModel& m, const JointVector& q, const s
   return a;
 }
 
-Rollout rolloutOnSim(const SimModel& sim, SimData& data, double period_s, const JointVector& q0, int ticks,
-                     const ActionLaw& law) {
-  const ArmModel& arm = sim.arm;
+Rollout rolloutOn(const ArmModel& arm, RobotBackend& robot, double period_s, const JointVector& q0, int ticks,
+                  const ActionLaw& law) {
   Rollout r;
   ArmData kin;
-  OdeArmBackend robot(sim, data);
   const JointVector start = clampToLimits(arm, q0);
   robot.activate(start);
   r.hand.push_back(forwardKinematics(arm, kin, start));
@@ -146,6 +144,12 @@ Rollout rolloutOnSim(const SimModel& sim, SimData& data, double period_s, const 
     r.hand.push_back(forwardKinematics(arm, kin, r.q.back()));
   }
   return r;
+}
+
+Rollout rolloutOnSim(const SimModel& sim, SimData& data, double period_s, const JointVector& q0, int ticks,
+                     const ActionLaw& law) {
+  OdeArmBackend robot(sim, data);
+  return rolloutOn(sim.arm, robot, period_s, q0, ticks, law);
 }
 
 }  // namespace nao::tools

@@ -216,12 +216,7 @@ std::vector<JointEnvelope> workspaceEnvelopes(const PolicyWeights<Dims>& policy,
                                               const std::vector<ModelWorkspace>& demonstrated = {}) {
   std::vector<JointEnvelope> out;
   if (static_cast<int>(demonstrated.size()) == policy.movements) {
-    for (const ModelWorkspace& w : demonstrated) {
-      JointEnvelope e;
-      e.lo = w.lo.array() - margin_rad;
-      e.hi = w.hi.array() + margin_rad;
-      out.push_back(e);
-    }
+    for (const ModelWorkspace& w : demonstrated) out.push_back(widenedEnvelope(w.lo, w.hi, margin_rad));
     return out;
   }
   const int K = policy.clusters;

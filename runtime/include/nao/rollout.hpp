@@ -34,6 +34,15 @@ struct JointEnvelope {
   JointVector hi = JointVector::Constant(std::numeric_limits<double>::infinity());
 };
 
+/// The box lo..hi widened by margin_rad on every side (an autonomous model's demonstrated joint
+/// range, the controller's workspace envelope). Real-time safe.
+inline JointEnvelope widenedEnvelope(const JointVector& lo, const JointVector& hi, double margin_rad) {
+  JointEnvelope e;
+  e.lo = lo.array() - margin_rad;
+  e.hi = hi.array() + margin_rad;
+  return e;
+}
+
 /// The command interval of joint j at q: [lo_j, hi_j] = [q_min_j, q_max_j] ∩ [q_j − v_max_j T,
 /// q_j + v_max_j T] (T = period_s; the ends swapped when the arm is outside its limits by more
 /// than a period's reach, so the interval pulls it back). Rad.

@@ -50,6 +50,15 @@ inline double servoStepGain(const SimParams& p) {
   return 1.0 / (1.0 - std::exp(-p.servo_gain_per_s * (p.dt_s * p.substeps_per_tick)));
 }
 
+/// The servo's velocity target for the error e = q_cmd − q before the slew limit, rad/s:
+/// sign(e) · min(K |e|, v_max, √(a_brake |e|)). Real-time safe.
+double servoTargetVelocity(double error, double gain, double v_max, double a_brake);
+
+/// The servo law of one physics substep (the header's): servoTargetVelocity, changed by at most
+/// a_brake · dt from the previous substep's v_prev, rad/s. stepSim sends it to the hinge motor;
+/// the trainer's copy of the arm (toolchain arm_copy.hpp) integrates it. Real-time safe.
+double servoVelocity(double error, double v_prev, double gain, double v_max, double a_brake, double dt);
+
 /// Immutable description of the simulation: the arm, the parameters, and per-joint servo
 /// braking limits derived from them.
 struct SimModel {

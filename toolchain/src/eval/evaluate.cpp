@@ -157,19 +157,25 @@ RunScore scoreRun(const HandPath& run, const HeldOutScores& held) {
   return r;
 }
 
-std::vector<JointVector> trackDemo(const SimModel& sim, double period_s, double gain, const std::vector<JointVector>& f,
-                                   const JointVector& start, int ticks) {
-  SimData data(sim, start);
+std::vector<JointVector> trackDemo(const ArmModel& arm, RobotBackend& robot, double period_s, double gain,
+                                   const std::vector<JointVector>& f, const JointVector& start, int ticks) {
   int t = 0;
-  const Rollout r = rolloutOnSim(sim, data, period_s, start, ticks, [&](const JointVector& q, const std::vector<JointVector>&) {
+  const Rollout r = rolloutOn(arm, robot, period_s, start, ticks, [&](const JointVector& q, const std::vector<JointVector>&) {
     // The demonstration's next sample, held at its last one when the run outlasts it.
-    const JointVector target = clampToLimits(sim.arm, f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, f.size() - 1)]);
+    const JointVector target = clampToLimits(arm, f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, f.size() - 1)]);
     ++t;
     return JointVector(gain * (target - q));
   });
-  std::vector<JointVector> q{clampToLimits(sim.arm, start)};
+  std::vector<JointVector> q{clampToLimits(arm, start)};
   q.insert(q.end(), r.q.begin(), r.q.end());
   return q;
+}
+
+std::vector<JointVector> trackDemo(const SimModel& sim, double period_s, double gain, const std::vector<JointVector>& f,
+                                   const JointVector& start, int ticks) {
+  SimData data(sim, start);
+  OdeArmBackend robot(sim, data);
+  return trackDemo(sim.arm, robot, period_s, gain, f, start, ticks);
 }
 
 NeighbourReplays neighbourReplays(const SimModel& sim, double period_s, double gain, const DemoSet& train,

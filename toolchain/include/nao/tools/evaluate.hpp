@@ -8,6 +8,7 @@
 #include "nao/arm_model.hpp"
 #include "nao/model_file.hpp"
 #include "nao/retarget.hpp"
+#include "nao/robot_backend.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/tools/movement_metrics.hpp"
 #include "nao/tools/policy_dataset.hpp"
@@ -97,6 +98,9 @@ DemoSet demoSetFromRecordings(const ArmModel& arm, const std::string& dir, const
 /// measured q after each tick.
 std::vector<JointVector> trackDemo(const SimModel& sim, double period_s, double gain, const std::vector<JointVector>& f,
                                    const JointVector& start, int ticks);
+/// The same through `robot`, a backend of `arm` (the trainer's copy of the arm: arm_copy.hpp).
+std::vector<JointVector> trackDemo(const ArmModel& arm, RobotBackend& robot, double period_s, double gain,
+                                   const std::vector<JointVector>& f, const JointVector& start, int ticks);
 
 /// The replays of a run's neighbours: the `k` training demonstrations whose starts are nearest
 /// `start` (nearestStarts order), each tracked from `start` for `ticks` ticks by trackDemo, and

@@ -79,4 +79,9 @@ using ActionLaw = std::function<JointVector(const JointVector&, const std::vecto
 Rollout rolloutOnSim(const SimModel& sim, SimData& data, double period_s, const JointVector& q0, int ticks,
                      const ActionLaw& law);
 
+/// The same on any robot backend of `arm` (the ODE arm, or the trainer's copy of it,
+/// nao/tools/arm_copy.hpp), activated at q0 clamped to the limits.
+Rollout rolloutOn(const ArmModel& arm, RobotBackend& robot, double period_s, const JointVector& q0, int ticks,
+                  const ActionLaw& law);
+
 }  // namespace nao::tools
