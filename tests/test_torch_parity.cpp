@@ -14,6 +14,7 @@
 #include "policy_torch.hpp"
 #include "policy_train.hpp"
 #include "support/test_util.hpp"
+#include "support/torch_policy.hpp"
 
 #include <doctest/doctest.h>
 #include <torch/torch.h>
@@ -231,43 +232,12 @@ std::vector<std::vector<JointVector>> syntheticKeyPoses(const ArmModel& arm) {
   return centroids;
 }
 
-// A fresh net of `arch` moved away from its initialisation (LN gains 1, biases 0, zero step rows)
-// so every term counts: normalisation statistics, key poses, a law of 1.0894 (reference mode),
-// an ensemble decay of 0.3 (chunks), bin centers spread over the normalised range and logits of a
-// few units (bins: the argmax is clear of rounding).
-tools::PolicyNet perturbedNet(const PolicyArch& arch, Conditioning c, const std::vector<std::vector<JointVector>>& centroids,
-                              std::uint64_t seed) {
-  torch::manual_seed(seed);
-  tools::PolicyNet net(arch, c);
-  torch::NoGradGuard no_grad;
-  for (torch::Tensor& p : net->trainableParameters()) p.add_(torch::randn_like(p) * 0.05);
-  if (arch.bins > 0) {
-    net->head_logit_weight.mul_(5.0);
-    net->setBinCenters(torch::randn({arch.bins, arch.tokens, arch.chunk}) * 0.8);
-  }
-  tools::NormStats stats;
-  for (int j = 0; j < kNumJoints; ++j) {
-    stats.q_mean[j] = 0.1 * j;
-    stats.q_std[j] = 0.5 + 0.1 * j;
-    stats.a_mean[j] = 0.001 * j;
-    stats.a_std[j] = 0.02 + 0.01 * j;
-    stats.r_mean[j] = -0.1 * j;
-    stats.r_std[j] = 0.7;
-  }
-  net->setNormalisation(stats);
-  net->setCentroids(centroids);
-  net->setLawGain(1.0894);
-  net->setEnsembleDecay(0.3);
-  net->eval();
-  return net;
-}
-
 template <class Dims>
 void checkHead(const PolicyArch& arch, const std::vector<std::vector<JointVector>>& centroids,
                const std::vector<Sequence>& random, const std::vector<Sequence>& recorded, const std::string& name,
                std::uint64_t seed) {
   for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
-    const tools::PolicyNet net = perturbedNet(arch, c, centroids, seed);
+    const tools::PolicyNet net = test::perturbedNet(arch, c, centroids, seed);
     const std::vector<std::vector<float>> floats = tools::manifestFloats(net);
     const std::vector<const float*> p = pointers(floats);
     const PolicyWeights<Dims> weights = bindPolicyWeights<Dims>(p.data(), p.size(), arch, c);
@@ -332,7 +302,7 @@ TEST_CASE("small configuration, autonomous with a run code: the runtime's run_co
   const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
   const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
   const PolicyArch arch = withHead(smallArch(), 5, 0);
-  const tools::PolicyNet net = perturbedNet(arch, Conditioning::kAutonomous, centroids, 31);
+  const tools::PolicyNet net = test::perturbedNet(arch, Conditioning::kAutonomous, centroids, 31);
   const std::vector<std::vector<float>> floats = tools::manifestFloats(net);
   const std::vector<const float*> p = pointers(floats);
   const PolicyWeights<SmallPolicyDims> weights = bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), arch, Conditioning::kAutonomous);

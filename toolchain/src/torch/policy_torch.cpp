@@ -112,22 +112,35 @@ torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor
   return attend(x, z, bias, alpha, values);
 }
 
-torch::Tensor AttentionImpl::attend(const torch::Tensor& x, const torch::Tensor& z, const torch::Tensor& bias,
-                                    torch::Tensor* alpha, torch::Tensor* values) const {
-  const std::int64_t n_batch = x.size(0), n_query = x.size(1), n_key = z.size(1), d = wq.size(0);
+torch::Tensor AttentionImpl::keys(const torch::Tensor& z) const {
+  const std::int64_t d_h = wq.size(0) / heads;
+  return z.matmul(wk).add(bk).view({z.size(0), z.size(1), heads, d_h}).transpose(1, 2);
+}
+
+torch::Tensor AttentionImpl::values(const torch::Tensor& z) const {
+  const std::int64_t d_h = wq.size(0) / heads;
+  return z.matmul(wv).add(bv).view({z.size(0), z.size(1), heads, d_h}).transpose(1, 2);
+}
+
+torch::Tensor AttentionImpl::attendKV(const torch::Tensor& x, const torch::Tensor& k, const torch::Tensor& v,
+                                      const torch::Tensor& bias, torch::Tensor* alpha) const {
+  const std::int64_t n_batch = x.size(0), n_query = x.size(1), d = wq.size(0);
   const std::int64_t d_h = d / heads;
   // [B,J,d] -> [B,H,J,d_h]: head h owns columns h*d_h .. (h+1)*d_h - 1.
-  const auto split = [&](const torch::Tensor& t, std::int64_t n) { return t.view({n_batch, n, heads, d_h}).transpose(1, 2); };
-  const torch::Tensor q = split(x.matmul(wq).add(bq), n_query);
-  const torch::Tensor k = split(z.matmul(wk).add(bk), n_key);
-  const torch::Tensor v = split(z.matmul(wv).add(bv), n_key);
+  const torch::Tensor q = x.matmul(wq).add(bq).view({n_batch, n_query, heads, d_h}).transpose(1, 2);
   torch::Tensor scores = q.matmul(k.transpose(-2, -1)).div(std::sqrt(static_cast<double>(d_h)));
   if (bias.defined()) scores = scores + bias;
   const torch::Tensor a = torch::softmax(scores, -1);
   if (alpha) *alpha = a;
-  if (values) *values = v;
   const torch::Tensor o = a.matmul(v).transpose(1, 2).reshape({n_batch, n_query, d});
   return o.matmul(wo).add(bo);
+}
+
+torch::Tensor AttentionImpl::attend(const torch::Tensor& x, const torch::Tensor& z, const torch::Tensor& bias,
+                                    torch::Tensor* alpha, torch::Tensor* values_out) const {
+  const torch::Tensor v = values(z);
+  if (values_out) *values_out = v;
+  return attendKV(x, keys(z), v, bias, alpha);
 }
 
 torch::Tensor AttentionImpl::attendBlocked(const torch::Tensor& x, const torch::Tensor& z, const WindowMask& mask,

@@ -106,6 +106,14 @@ class AttentionImpl : public torch::nn::Module {
   /// and the blocked pairs of `mask` are excluded.
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& z, const WindowMask& mask,
                         torch::Tensor* alpha = nullptr, torch::Tensor* values = nullptr) const;
+  /// The keys and the values of tokens z [B,N,d] in the heads' layout [B,H,N,d_h].
+  torch::Tensor keys(const torch::Tensor& z) const;
+  torch::Tensor values(const torch::Tensor& z) const;
+  /// Queries x [B,Jq,d] against keys and values k, v [B,H,Nk,d_h] (keys(), values()), the scores
+  /// plus `bias` (broadcast to [B,H,Jq,Nk]; undefined: none): the output after wo, bo [B,Jq,d];
+  /// alpha (if given) receives α [B,H,Jq,Nk]. What every form of the attention computes.
+  torch::Tensor attendKV(const torch::Tensor& x, const torch::Tensor& k, const torch::Tensor& v, const torch::Tensor& bias,
+                         torch::Tensor* alpha = nullptr) const;
   int heads;
   torch::Tensor wq, bq, wk, bk, wv, bv, wo, bo, age_bias;
 
