@@ -32,6 +32,7 @@ struct TrainArgs {
   int latent_dims = 0;
   double latent_kl = 1e-2;
   double ema = 0.0;
+  ClosedLoopOptions closed_loop;
   std::string select = "val-loss", noisy_target = "tick", noisy_starts = "own", latent_reads = "run";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
   std::vector<std::string> val_demos;
@@ -97,6 +98,7 @@ void run(const TrainArgs& a) {
   o.latent_kl = a.latent_kl;
   o.latent_reads_demo = a.latent_reads == "demo";
   o.ema_decay = a.ema;
+  o.closed_loop = a.closed_loop;
   if (a.window > 0) o.arch.window = a.window;
   if (a.chunk > 0) o.arch.chunk = a.chunk;
   if (a.bins >= 0) o.arch.bins = a.bins;
@@ -303,6 +305,33 @@ void setup(CLI::App& app) {
                   "step): the average is what is scored each epoch, kept and written; it smooths the "
                   "epoch-to-epoch swings of the rollouts. 0: the trained weights themselves")
       ->check(CLI::Range(0.0, 0.99999))
+      ->capture_default_str();
+  cmd->add_option("--closed-loop-epochs", args->closed_loop.epochs,
+                  "Autonomous: after the --epochs teacher-forced epochs, this many epochs in closed loop: the "
+                  "net rolled out tick by tick through the command limiter and an exact differentiable copy of "
+                  "the arm's servo, from the training starts, perturbed starts and starts between two "
+                  "demonstrations, each with the run code nao_rt would give it there, and trained on the "
+                  "trajectory it makes against the medoid replay from that start (docs/autonomous.md). "
+                  "--patience then counts in this phase. 0: none")
+      ->check(CLI::Range(0, 100000))
+      ->capture_default_str();
+  cmd->add_option("--closed-loop-lr", args->closed_loop.lr, "Adam learning rate of the closed-loop phase")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  cmd->add_option("--closed-loop-batch", args->closed_loop.batch, "Closed-loop rollouts per optimiser step")
+      ->check(CLI::Range(1, 1 << 20))
+      ->capture_default_str();
+  cmd->add_option("--closed-loop-horizon", args->closed_loop.horizon,
+                  "Ticks each rollout runs in the first closed-loop epoch (a run shorter than that runs whole)")
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
+  cmd->add_option("--closed-loop-horizon-growth", args->closed_loop.horizon_growth,
+                  "Ticks added to the closed-loop horizon every epoch (a curriculum up to the whole run)")
+      ->check(CLI::Range(0, 100000))
+      ->capture_default_str();
+  cmd->add_option("--closed-loop-perturb", args->closed_loop.perturb_rad,
+                  "Standard deviation of a perturbed start, rad per joint")
+      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "

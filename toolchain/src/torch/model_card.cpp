@@ -5,6 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 
@@ -82,6 +83,18 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
     t["run_latent"] = {{"dims", o.latent_dims}, {"kl_weight", o.latent_kl}};
     // Only when set: files of models trained before the option keep their bytes.
     if (o.latent_reads_demo) t["run_latent"]["reads"] = "demonstration";
+  }
+  if (o.closed_loop.enabled()) {
+    const ClosedLoopOptions& c = o.closed_loop;
+    t["closed_loop"] = {{"epochs", c.epochs},
+                        {"lr", c.lr},
+                        {"batch", c.batch},
+                        {"horizon", c.horizon},
+                        {"horizon_growth", c.horizon_growth},
+                        {"perturb_rad", c.perturb_rad},
+                        {"grad_clip", c.grad_clip},
+                        {"hand_weight", c.hand_weight},
+                        {"limit_weight", c.limit_weight}};
   }
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"
@@ -217,9 +230,18 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   }
   if (!o.previous_action) s << "| inputs | a(t-1) not read (its weights held at zero) |\n";
   if (o.ema_decay > 0.0) s << "| weights | moving average, decay " << o.ema_decay << " |\n";
+  if (o.closed_loop.enabled()) {
+    const ClosedLoopOptions& c = o.closed_loop;
+    s << "| closed loop | after the " << o.max_epochs << " teacher-forced epochs, " << c.epochs
+      << " epochs rolled out through the arm copy (Adam lr " << c.lr << ", " << c.batch
+      << " rollouts per step, gradient norm clipped at " << c.grad_clip << "): every training demonstration from its "
+      << "own start, from it perturbed by " << c.perturb_rad << " rad and from a point between it and another "
+      << "demonstration's, each with the run code nao_rt gives it there, against the medoid replay from that start, "
+      << "over " << c.horizon << " ticks growing by " << c.horizon_growth << " per epoch (docs/autonomous.md) |\n";
+  }
   s << "| seed | " << o.seed << " |\n";
-  s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs << ", patience " << o.patience
-    << "), best " << r.best_epoch << " (exported) |\n";
+  s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs + o.closed_loop.epochs << ", patience "
+    << o.patience << "), best " << r.best_epoch << " (exported) |\n";
   if (o.select_by_rollout) {
     s << "| model selection | after every epoch the net (the runtime's streaming inference) is rolled out on the "
          "simulated arm from each validation demonstration's start; kept: among the epochs whose runs make the "
@@ -293,6 +315,13 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e |", e.epoch, e.epoch == r.best_epoch ? " *" : "",
                   e.train_loss, e.val_loss, e.val_mse_rad2);
     s << buf;
+    if (std::isfinite(e.closed_loop_hand_rms_m)) {
+      // A closed-loop epoch: its loss is the rollouts', with their hand error against the targets.
+      std::snprintf(buf, sizeof buf, " closed loop, hand %.1f mm (own %.1f, perturbed %.1f, between %.1f);",
+                    1e3 * e.closed_loop_hand_rms_m, 1e3 * e.closed_loop_kind_rms_m[0], 1e3 * e.closed_loop_kind_rms_m[1],
+                    1e3 * e.closed_loop_kind_rms_m[2]);
+      s << buf;
+    }
     if (rollouts) {
       std::snprintf(buf, sizeof buf, " %.1f (makes %d of %zu)", 1e3 * e.rollout_dtw_m, e.movements_made,
                     data.movement_names.size());  // resumed epochs keep the count, not the rollouts

@@ -7,10 +7,12 @@
 #include "nao/model_file.hpp"
 #include "nao/policy_config.hpp"
 #include "nao/tools/policy_dataset.hpp"
+#include "closed_loop.hpp"
 #include "data_parallel.hpp"
 #include "policy_torch.hpp"
 #include "train_data.hpp"
 
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <ostream>
@@ -77,6 +79,9 @@ struct TrainOptions {
   /// trained ones, updated after every optimiser step with decay min(D, (1 + n) / (10 + n)) at
   /// step n; the optimiser trains the raw weights. 0: no average.
   double ema_decay = 0.0;
+  /// Autonomous: after the max_epochs teacher-forced epochs (all of them: patience then counts
+  /// in this phase only), closed-loop epochs from the kept weights (closed_loop.hpp).
+  ClosedLoopOptions closed_loop;
 };
 
 /// How the rollouts of one movement went (train_select.hpp): medians over its validation
@@ -91,7 +96,14 @@ struct MovementScore {
 
 struct EpochStats {
   int epoch = 0;             ///< 1-based
-  double train_loss = 0.0;   ///< mean training loss per tick over the epoch's batches
+  double train_loss = 0.0;   ///< mean training loss per tick over the epoch's batches (closed loop: its own loss)
+  /// A closed-loop epoch: the RMS hand-point error of its rollouts against their targets, m
+  /// (NaN for a teacher-forced epoch; not kept by checkpoints).
+  double closed_loop_hand_rms_m = std::numeric_limits<double>::quiet_NaN();
+  /// The same per kind of start: own, perturbed, between two demonstrations' (ClosedLoopRun::kind).
+  std::array<double, 3> closed_loop_kind_rms_m = {std::numeric_limits<double>::quiet_NaN(),
+                                                  std::numeric_limits<double>::quiet_NaN(),
+                                                  std::numeric_limits<double>::quiet_NaN()};
   double val_loss = 0.0;     ///< the same on the validation split after the epoch
   double val_mse_rad2 = 0.0; ///< the executed action's one-step MSE on the validation split
   double seconds = 0.0;      ///< wall time of the epoch (never written to model.bin)

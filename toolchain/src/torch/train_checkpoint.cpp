@@ -2,6 +2,7 @@
 
 #include "nao/tools/command.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <sstream>
 
@@ -14,7 +15,7 @@ void writeExecutionKey(std::ostream& k, const ExecutionOptions& e) {
   if (e.other_starts) k << " other starts";
 }
 
-std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
+std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint, bool teacher_forced_only) {
   std::ostringstream k;
   k.precision(17);
   k << "nao-rt checkpoint 3; data " << hex64(fingerprint) << "; config " << o.config_name << " "
@@ -31,6 +32,11 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint) {
   if (o.latent_dims > 0 && o.latent_reads_demo) k << " reads demo";
   if (o.ema_decay > 0.0) k << "; ema " << o.ema_decay;
   if (o.select_by_rollout) k << "; select rollout";
+  const ClosedLoopOptions& c = o.closed_loop;
+  if (c.enabled() && !teacher_forced_only)
+    k << "; closed loop after " << o.max_epochs << ": lr " << c.lr << " batch " << c.batch
+      << " horizon " << c.horizon << " + " << c.horizon_growth << " perturb " << c.perturb_rad << " clip "
+      << c.grad_clip << " hand " << c.hand_weight << " limit " << c.limit_weight;
   return k.str();
 }
 
@@ -82,17 +88,18 @@ void writeCheckpoint(const std::string& path, const std::string& key, const std:
   if (std::rename(tmp.c_str(), path.c_str()) != 0) throw UserError("cannot rename " + tmp + " to " + path);
 }
 
-Checkpoint readCheckpoint(const std::string& path, const std::string& key, std::vector<torch::Tensor>& params,
-                          torch::optim::Adam& optimiser) {
+Checkpoint readCheckpoint(const std::string& path, const std::vector<std::string>& keys,
+                          std::vector<torch::Tensor>& params, torch::optim::Adam& optimiser) {
   Checkpoint ck;
   try {
     torch::serialize::InputArchive archive;
     archive.load_from(path);
     c10::IValue v;
     archive.read("key", v);
-    if (v.toStringRef() != key)
+    if (std::find(keys.begin(), keys.end(), v.toStringRef()) == keys.end())
       throw UserError("checkpoint " + path + " belongs to another run: it has '" + v.toStringRef() + "', this run '" +
-                      key + "'");
+                      keys.front() + "'");
+    ck.key = v.toStringRef();
     torch::serialize::InputArchive p, b, adam;
     archive.read("params", p);
     archive.read("best", b);

@@ -12,8 +12,11 @@
 
 namespace nao::tools {
 
-/// The key a checkpoint must match to be resumed by a run of `o` on data `fingerprint`.
-std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint);
+/// The key a checkpoint must match to be resumed by a run of `o` on data `fingerprint`. With a
+/// closed-loop phase, where it starts and its options (not its epoch count) are part of the key;
+/// a checkpoint of the teacher-forced epochs alone (the key without them, `teacher_forced_only`)
+/// may be resumed into it.
+std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint, bool teacher_forced_only = false);
 
 /// The execution options' part of the checkpoint and execution-cache keys, written to `k`
 /// (whose precision the caller sets). Options at their defaults add nothing, so older keys stay.
@@ -25,6 +28,7 @@ struct Checkpoint {
   std::vector<EpochStats> history;
   std::vector<torch::Tensor> ema;  ///< the moving average of the weights, empty without one
   std::int64_t ema_steps = 0;
+  std::string key;  ///< the key it was written with
 };
 
 /// Writes the state aside and renames it over `path` (a run killed while saving leaves the
@@ -35,9 +39,10 @@ void writeCheckpoint(const std::string& path, const std::string& key, const std:
                      const std::vector<EpochStats>& history, const std::vector<torch::Tensor>& ema = {},
                      std::int64_t ema_steps = 0);
 
-/// Reads `path` into `params` and `optimiser`; returns the best weights and the history. Throws
-/// UserError for another run's checkpoint, an unreadable file or one without a finished epoch.
-Checkpoint readCheckpoint(const std::string& path, const std::string& key, std::vector<torch::Tensor>& params,
-                          torch::optim::Adam& optimiser);
+/// Reads `path` into `params` and `optimiser`; returns the best weights and the history. The
+/// checkpoint's key must be one of `keys` (Checkpoint::key says which). Throws UserError for
+/// another run's checkpoint, an unreadable file or one without a finished epoch.
+Checkpoint readCheckpoint(const std::string& path, const std::vector<std::string>& keys,
+                          std::vector<torch::Tensor>& params, torch::optim::Adam& optimiser);
 
 }  // namespace nao::tools

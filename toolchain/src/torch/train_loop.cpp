@@ -36,6 +36,18 @@ std::string duration(double s) {
   return buf;
 }
 
+std::string millimetresText(double m) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.1f mm", 1e3 * m);
+  return buf;
+}
+
+// A closed-loop epoch's hand error against its targets: all runs, then own / perturbed / between starts.
+std::string closedLoopText(const EpochStats& st) {
+  return " hand " + millimetresText(st.closed_loop_hand_rms_m) + " (" + millimetresText(st.closed_loop_kind_rms_m[0]) +
+         " / " + millimetresText(st.closed_loop_kind_rms_m[1]) + " / " + millimetresText(st.closed_loop_kind_rms_m[2]) + ")";
+}
+
 void check(const PolicyData& data, const TrainOptions& o) {
   const std::string problem = archProblem(o.arch);
   if (!problem.empty()) throw UserError("architecture: " + problem);
@@ -64,6 +76,19 @@ void check(const PolicyData& data, const TrainOptions& o) {
     throw UserError("--latent-reads demo needs a run latent (--run-latent K)");
   if (o.select_by_rollout && o.conditioning != Conditioning::kAutonomous)
     throw UserError("model selection on rollouts is for autonomous mode (a reference-mode run needs a human)");
+  const ClosedLoopOptions& c = o.closed_loop;
+  if (c.epochs < 0) throw UserError("closed-loop epochs must not be negative (0: none)");
+  if (c.enabled()) {
+    if (o.conditioning != Conditioning::kAutonomous)
+      throw UserError("closed-loop training is for autonomous mode (a reference-mode run follows a human)");
+    if (o.arch.bins > 0) throw UserError("closed-loop training needs a regression head (--bins 0)");
+    if (!(c.lr > 0.0)) throw UserError("the closed-loop learning rate must be positive");
+    if (c.batch < 1) throw UserError("the closed-loop batch must be at least 1 rollout");
+    if (c.horizon < 1 || c.horizon_growth < 0)
+      throw UserError("the closed-loop horizon must be at least 1 tick and its growth not negative");
+    if (!(c.perturb_rad >= 0.0) || !(c.grad_clip >= 0.0) || !(c.hand_weight >= 0.0) || !(c.limit_weight >= 0.0))
+      throw UserError("closed-loop perturbation, clip and loss weights must not be negative");
+  }
   if (o.select_by_rollout && !hasRuntimeStep(o.arch))
     throw UserError("model selection on rollouts needs the runtime's step, compiled here for the paper and small "
                     "dimensions only (d_model, heads, layers, FFN, window; toolchain_dims.hpp): select by validation "
@@ -243,14 +268,19 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     latent = RunLatent(o.latent_dims, o.arch.d_model);
     for (const torch::Tensor& t : latent->parameters()) params.push_back(t);
   }
-  // The codes a run takes at run time (model.bin's "run_codes"), scored with every epoch.
+  const double period_s = ControllerParams{}.period_s;
+  // The codes a run takes at run time (model.bin's "run_codes"), scored with every epoch; the
+  // closed-loop phase picks its rollouts' codes and targets from their starts and DTW tables.
   RunCodeSource codes;
-  if (latent) codes = runCodeSource(data, train_seqs, sim.arm, o.arch.d_model);
+  if (latent || o.closed_loop.enabled()) codes = runCodeSource(data, train_seqs, sim.arm, o.arch.d_model);
+  ClosedLoopData cl;
+  if (o.closed_loop.enabled())
+    cl = closedLoopData(data, codes, sim, period_s, ControllerParams{}.workspace_margin_rad);
   // --latent-reads demo: the sequence the latent reads for each training sequence (its
   // demonstration's clean rollout); empty: each reads itself.
   std::vector<std::size_t> latent_source;
   if (latent && o.latent_reads_demo) latent_source = cleanRolloutOf(train_seqs);
-  torch::optim::Adam optimiser(params, torch::optim::AdamOptions(o.lr));
+  auto optimiser = std::make_unique<torch::optim::Adam>(params, torch::optim::AdamOptions(o.lr));
   // The moving average of the weights (--ema): scored, kept and written in place of the trained
   // weights, which the optimiser goes on training. The input constraints are linear, so the
   // average of constrained weights meets them too.
@@ -272,8 +302,13 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   best_stats.val_loss = std::numeric_limits<double>::infinity();
   double epoch_seconds_sum = 0.0;
   int first_epoch = 1;
+  // Epochs max_epochs + 1 .. last_epoch are closed-loop ones.
+  const int last_epoch = o.max_epochs + o.closed_loop.epochs;
   if (!o.resume.empty()) {
-    Checkpoint ck = readCheckpoint(o.resume, key, params, optimiser);
+    const std::vector<std::string> keys = {key, checkpointKey(o, res.fingerprint, true)};
+    Checkpoint ck = readCheckpoint(o.resume, keys, params, *optimiser);
+    if (ck.key != key && static_cast<int>(ck.history.size()) > o.max_epochs)
+      throw UserError("checkpoint " + o.resume + " is past the teacher-forced epochs of another closed-loop run");
     best = std::move(ck.best);
     if (!ema.empty()) {
       if (ck.ema.size() != ema.size()) throw UserError("checkpoint " + o.resume + " holds no moving average");
@@ -288,6 +323,8 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     }
     first_epoch = static_cast<int>(res.history.size()) + 1;
     res.resumed_after = first_epoch - 1;
+    if (first_epoch > o.max_epochs + 1)  // the checkpoint's optimiser is the closed-loop one
+      static_cast<torch::optim::AdamOptions&>(optimiser->param_groups()[0].options()).lr(o.closed_loop.lr);
   }
   if (group) {
     // Ranks that disagree would call different collectives: refuse before the first batch.
@@ -295,89 +332,157 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     group->checkInSync(params);
   }
   const bool live = progress && o.live_progress;
-  const double period_s = ControllerParams{}.period_s;
   SelectionReference ref;
   if (o.select_by_rollout) {
     ref = selectionReference(data, res.split.val, sim.arm, period_s);
     res.val_nn_dtw_m = ref.nn_dtw_m;
   }
+  // Patience counts within the closed-loop phase when there is one (the teacher-forced epochs all run).
+  const auto stopsAfter = [&](int epoch) {
+    if (epoch >= last_epoch) return true;
+    if (!o.closed_loop.enabled()) return epoch - res.best_epoch >= o.patience;
+    return epoch > o.max_epochs && epoch - std::max(res.best_epoch, o.max_epochs) >= o.patience;
+  };
+  // One optimiser step on the gradient of the global batch's summed loss / global_ticks (each rank
+  // adds its share's), then the constraints and the moving average.
+  const auto optimiserStep = [&](double clip) {
+    if (group) group->sumGradients(params);
+    if (clip > 0.0) torch::nn::utils::clip_grad_norm_(params, clip);
+    optimiser->step();
+    holdInputConstraints();
+    if (!ema.empty()) {
+      torch::NoGradGuard no_grad;
+      const double d = std::min(o.ema_decay, static_cast<double>(1 + ema_steps) / static_cast<double>(10 + ema_steps));
+      for (std::size_t i = 0; i < ema.size(); ++i) ema[i].mul_(d).add_(params[i].detach(), 1.0 - d);
+      ++ema_steps;
+    }
+  };
 
-  const bool done_before = !res.history.empty() && (res.history.back().epoch - res.best_epoch >= o.patience ||
-                                                     res.history.back().epoch >= o.max_epochs);
-  for (int epoch = first_epoch; epoch <= o.max_epochs && !done_before; ++epoch) {
+  const bool done_before = !res.history.empty() && stopsAfter(res.history.back().epoch);
+  for (int epoch = first_epoch; epoch <= last_epoch && !done_before; ++epoch) {
     const Clock::time_point t_epoch = Clock::now();
+    const bool closed_loop = epoch > o.max_epochs;
+    if (closed_loop && epoch == o.max_epochs + 1) {
+      // The closed-loop phase starts from the kept teacher-forced weights with a fresh optimiser
+      // and a fresh moving average.
+      torch::NoGradGuard no_grad;
+      for (std::size_t i = 0; i < params.size() && i < best.size(); ++i) params[i].copy_(best[i]);
+      optimiser = std::make_unique<torch::optim::Adam>(params, torch::optim::AdamOptions(o.closed_loop.lr));
+      for (std::size_t i = 0; i < ema.size(); ++i) ema[i] = params[i].detach().clone();
+      ema_steps = 0;
+    }
     net->train();
-    // Batch order: one stream per (seed, epoch), independent of torch's generator and of the
-    // world size (a global batch is the same sequences for every world size).
-    const std::vector<std::size_t> order =
-        shuffledIndices(train.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
-    const auto n_seq = static_cast<std::int64_t>(train.size());
-    const std::int64_t n_batches = (n_seq + o.batch - 1) / o.batch;
-    const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
-    double loss_sum = 0.0;
+    double loss_sum = 0.0, hand_sse = 0.0;
+    std::array<double, 3> kind_sse{}, kind_ticks{};
     std::int64_t seen = 0;
     Clock::time_point t_live = Clock::now();
-    for (std::int64_t k = 0; k < n_run; ++k) {
-      const std::int64_t b = k * o.batch, e = std::min<std::int64_t>(b + o.batch, n_seq);
-      // The global batch's real ticks: every rank knows them, so each can scale its share.
-      std::int64_t global_ticks = 0;
-      for (std::int64_t i = b; i < e; ++i) global_ticks += train.qn[order[static_cast<std::size_t>(i)]].size(0);
-      const auto [lo, hi] = group ? shardRange(e - b, o.dist.world_size, o.dist.rank) : std::pair<std::int64_t, std::int64_t>{0, e - b};
-      optimiser.zero_grad();
-      if (hi > lo) {
-        std::vector<std::size_t> index;
-        for (std::int64_t i = b + lo; i < b + hi; ++i) index.push_back(order[static_cast<std::size_t>(i)]);
-        // This rank's share of the global batch's mean over real ticks: the all-reduced sum of
-        // the gradients is the gradient of that mean.
-        Padded p = pad(train, index);
-        torch::Tensor kl;
-        if (latent) {
-          // ε of the global batch from (seed, epoch, batch), this rank's rows: the same draws on a
-          // resumed run and for every world size.
-          const torch::Tensor eps =
-              torch::randn({e - b, o.latent_dims},
-                           at::detail::createCPUGenerator(o.seed * 0x9e3779b97f4a7c15ull +
-                                                          static_cast<std::uint64_t>(epoch) * 1000003ull +
-                                                          static_cast<std::uint64_t>(k)),
-                           torch::kFloat32)
-                  .slice(0, lo, hi);
-          std::vector<std::size_t> read;
-          if (!latent_source.empty())
-            for (const std::size_t i : index) read.push_back(latent_source[i]);
-          const RunLatentImpl::Draw draw = read.empty() ? latent->forward(p, eps) : latent->forward(pad(train, read), eps);
-          p.in.z = draw.z_embedded;
-          kl = o.latent_kl * (draw.kl * p.mask.sum(1)).sum();
+    const auto liveLine = [&](std::int64_t k, std::int64_t n_run) {
+      if (!live || secondsSince(t_live) < 0.5) return;
+      t_live = Clock::now();
+      const double sec = secondsSince(t_epoch);
+      char line[160];
+      std::snprintf(line, sizeof line, "\r\033[Kepoch %d/%d  batch %lld/%lld  %.0f ticks/s  epoch ~%s left", epoch,
+                    last_epoch, static_cast<long long>(k + 1), static_cast<long long>(n_run),
+                    static_cast<double>(seen) / sec,
+                    duration(sec / static_cast<double>(k + 1) * static_cast<double>(n_run - k - 1)).c_str());
+      *progress << line << std::flush;
+    };
+    if (closed_loop) {
+      // The epoch's rollouts in a seeded order, batch by batch through the arm copy.
+      const int k_cl = epoch - o.max_epochs;
+      const std::vector<ClosedLoopRun> runs = closedLoopEpochRuns(data, cl, sim, period_s, o.closed_loop, o.seed, k_cl);
+      const int horizon = closedLoopHorizon(o.closed_loop, k_cl);
+      const std::vector<std::size_t> order =
+          shuffledIndices(runs.size(), o.seed * 0x9e3779b97f4a7c15ull + 0x5bd1e995ull * static_cast<std::uint64_t>(epoch));
+      const auto n_runs = static_cast<std::int64_t>(runs.size());
+      const std::int64_t B = o.closed_loop.batch;
+      const std::int64_t n_batches = (n_runs + B - 1) / B;
+      const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
+      for (std::int64_t k = 0; k < n_run; ++k) {
+        const std::int64_t b = k * B, e = std::min<std::int64_t>(b + B, n_runs);
+        std::int64_t global_ticks = 0;
+        for (std::int64_t i = b; i < e; ++i)
+          global_ticks += std::min(horizon, runs[order[static_cast<std::size_t>(i)]].ticks);
+        const auto [lo, hi] = group ? shardRange(e - b, o.dist.world_size, o.dist.rank) : std::pair<std::int64_t, std::int64_t>{0, e - b};
+        optimiser->zero_grad();
+        if (hi > lo) {
+          std::vector<const ClosedLoopRun*> mine;
+          for (std::int64_t i = b + lo; i < b + hi; ++i) mine.push_back(&runs[order[static_cast<std::size_t>(i)]]);
+          const ClosedLoopLoss l = closedLoopLoss(*net, latent ? latent.get() : nullptr, train, cl, sim, period_s, mine,
+                                                  horizon, o.closed_loop);
+          (l.loss / static_cast<double>(global_ticks)).backward();
+          loss_sum += l.loss.item<double>();
+          hand_sse += l.hand_sse_m2;
+          for (std::size_t r = 0; r < mine.size(); ++r) {
+            const auto kind = static_cast<std::size_t>(mine[r]->kind);
+            kind_sse[kind] += l.run_hand_sse_m2[r];
+            kind_ticks[kind] += std::min(horizon, mine[r]->ticks);
+          }
         }
-        LossSums s = lossSums(net, p, o.offset_weight);
-        if (kl.defined()) s.loss = s.loss + kl;
-        (s.loss / static_cast<double>(global_ticks)).backward();
-        loss_sum += s.loss.item<double>();
+        optimiserStep(o.closed_loop.grad_clip);
+        seen += global_ticks;
+        liveLine(k, n_run);
       }
-      if (group) group->sumGradients(params);
-      optimiser.step();
-      holdInputConstraints();
-      if (!ema.empty()) {
-        torch::NoGradGuard no_grad;
-        const double d = std::min(o.ema_decay, static_cast<double>(1 + ema_steps) / static_cast<double>(10 + ema_steps));
-        for (std::size_t i = 0; i < ema.size(); ++i) ema[i].mul_(d).add_(params[i].detach(), 1.0 - d);
-        ++ema_steps;
-      }
-      seen += global_ticks;
-      if (live && secondsSince(t_live) >= 0.5) {
-        t_live = Clock::now();
-        const double sec = secondsSince(t_epoch);
-        char line[160];
-        std::snprintf(line, sizeof line, "\r\033[Kepoch %d/%d  batch %lld/%lld  %.0f ticks/s  epoch ~%s left", epoch,
-                      o.max_epochs, static_cast<long long>(k + 1), static_cast<long long>(n_run),
-                      static_cast<double>(seen) / sec,
-                      duration(sec / static_cast<double>(k + 1) * static_cast<double>(n_run - k - 1)).c_str());
-        *progress << line << std::flush;
+    } else {
+      // Batch order: one stream per (seed, epoch), independent of torch's generator and of the
+      // world size (a global batch is the same sequences for every world size).
+      const std::vector<std::size_t> order =
+          shuffledIndices(train.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
+      const auto n_seq = static_cast<std::int64_t>(train.size());
+      const std::int64_t n_batches = (n_seq + o.batch - 1) / o.batch;
+      const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
+      for (std::int64_t k = 0; k < n_run; ++k) {
+        const std::int64_t b = k * o.batch, e = std::min<std::int64_t>(b + o.batch, n_seq);
+        // The global batch's real ticks: every rank knows them, so each can scale its share.
+        std::int64_t global_ticks = 0;
+        for (std::int64_t i = b; i < e; ++i) global_ticks += train.qn[order[static_cast<std::size_t>(i)]].size(0);
+        const auto [lo, hi] = group ? shardRange(e - b, o.dist.world_size, o.dist.rank) : std::pair<std::int64_t, std::int64_t>{0, e - b};
+        optimiser->zero_grad();
+        if (hi > lo) {
+          std::vector<std::size_t> index;
+          for (std::int64_t i = b + lo; i < b + hi; ++i) index.push_back(order[static_cast<std::size_t>(i)]);
+          // This rank's share of the global batch's mean over real ticks: the all-reduced sum of
+          // the gradients is the gradient of that mean.
+          Padded p = pad(train, index);
+          torch::Tensor kl;
+          if (latent) {
+            // ε of the global batch from (seed, epoch, batch), this rank's rows: the same draws on a
+            // resumed run and for every world size.
+            const torch::Tensor eps =
+                torch::randn({e - b, o.latent_dims},
+                             at::detail::createCPUGenerator(o.seed * 0x9e3779b97f4a7c15ull +
+                                                            static_cast<std::uint64_t>(epoch) * 1000003ull +
+                                                            static_cast<std::uint64_t>(k)),
+                             torch::kFloat32)
+                    .slice(0, lo, hi);
+            std::vector<std::size_t> read;
+            if (!latent_source.empty())
+              for (const std::size_t i : index) read.push_back(latent_source[i]);
+            const RunLatentImpl::Draw draw = read.empty() ? latent->forward(p, eps) : latent->forward(pad(train, read), eps);
+            p.in.z = draw.z_embedded;
+            kl = o.latent_kl * (draw.kl * p.mask.sum(1)).sum();
+          }
+          LossSums s = lossSums(net, p, o.offset_weight);
+          if (kl.defined()) s.loss = s.loss + kl;
+          (s.loss / static_cast<double>(global_ticks)).backward();
+          loss_sum += s.loss.item<double>();
+        }
+        optimiserStep(0.0);
+        seen += global_ticks;
+        liveLine(k, n_run);
       }
     }
     if (group) {
-      torch::Tensor total = torch::tensor({loss_sum}, torch::kFloat64);
+      torch::Tensor total = torch::tensor({loss_sum, hand_sse, kind_sse[0], kind_sse[1], kind_sse[2], kind_ticks[0],
+                                           kind_ticks[1], kind_ticks[2]},
+                                          torch::kFloat64);
       group->sum(total, "training loss");
-      loss_sum = total.item<double>();
+      loss_sum = total[0].item<double>();
+      hand_sse = total[1].item<double>();
+      for (std::size_t i = 0; i < 3; ++i) {
+        kind_sse[i] = total[static_cast<std::int64_t>(2 + i)].item<double>();
+        kind_ticks[i] = total[static_cast<std::int64_t>(5 + i)].item<double>();
+      }
     }
     net->eval();
     swapAverage();  // score the average; the trained weights come back before the next epoch
@@ -385,6 +490,11 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     st.epoch = epoch;
     st.samples = static_cast<std::size_t>(seen);
     st.train_loss = loss_sum / static_cast<double>(seen);
+    if (closed_loop) {
+      st.closed_loop_hand_rms_m = std::sqrt(hand_sse / static_cast<double>(seen));
+      for (std::size_t i = 0; i < 3; ++i)
+        if (kind_ticks[i] > 0) st.closed_loop_kind_rms_m[i] = std::sqrt(kind_sse[i] / kind_ticks[i]);
+    }
     const SplitLoss v = evaluateLoss(net, val, o.offset_weight, group.get());
     st.val_loss = v.loss;
     st.val_mse_rad2 = v.mse_rad2;
@@ -409,12 +519,14 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     st.seconds = secondsSince(t_epoch);
     epoch_seconds_sum += st.seconds;
     res.history.push_back(st);
-    const bool stop = epoch - res.best_epoch >= o.patience || epoch == o.max_epochs;
+    const bool stop = stopsAfter(epoch);
     if (!o.checkpoint.empty() && o.dist.rank == 0)
-      writeCheckpoint(o.checkpoint, key, params, optimiser, best, res.best_epoch, res.history, ema, ema_steps);
+      writeCheckpoint(o.checkpoint, closed_loop ? key : checkpointKey(o, res.fingerprint, true), params, *optimiser, best,
+                      res.best_epoch, res.history, ema, ema_steps);
     if (progress) {
       char line[320];
       std::string text;  // the per-movement scores have no length bound: kept out of the buffer
+      const std::string phase = closed_loop ? "closed loop " : "";
       if (o.select_by_rollout) {
         std::string moves;
         for (std::size_t m = 0; m < st.rollouts.size(); ++m) {
@@ -424,22 +536,24 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
                         st.rollouts[m].loops_run, st.rollouts[m].loops_demo);
           moves += part;
         }
-        std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g  rollouts %.1f mm%s (",
-                      live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, 1e3 * st.rollout_dtw_m,
-                      st.makes_movement ? " moves" : "");
+        std::snprintf(line, sizeof line, "%sepoch %d/%d  %strain %.4g%s  val %.4g  rollouts %.1f mm%s (",
+                      live ? "\r\033[K" : "", epoch, last_epoch, phase.c_str(), st.train_loss,
+                      closed_loop ? closedLoopText(st).c_str() : "", st.val_loss,
+                      1e3 * st.rollout_dtw_m, st.makes_movement ? " moves" : "");
         text = line + moves;
         std::snprintf(line, sizeof line, ")  best @ %d  %.1f s (rollouts %.1f s)  ", res.best_epoch, st.seconds,
                       score_seconds);
         text += line;
       } else {
-        std::snprintf(line, sizeof line, "%sepoch %d/%d  train %.4g  val %.4g (best %.4g @ %d)  %.1f s  %.0f samples/s  ",
-                      live ? "\r\033[K" : "", epoch, o.max_epochs, st.train_loss, st.val_loss, best_stats.val_loss,
-                      res.best_epoch, st.seconds, static_cast<double>(st.samples) / st.seconds);
+        std::snprintf(line, sizeof line, "%sepoch %d/%d  %strain %.4g%s  val %.4g (best %.4g @ %d)  %.1f s  %.0f samples/s  ",
+                      live ? "\r\033[K" : "", epoch, last_epoch, phase.c_str(), st.train_loss,
+                      closed_loop ? closedLoopText(st).c_str() : "", st.val_loss, best_stats.val_loss, res.best_epoch,
+                      st.seconds, static_cast<double>(st.samples) / st.seconds);
         text = line;
       }
       *progress << text
-                << (stop ? std::string(epoch == o.max_epochs ? "epoch cap reached" : "early stop")
-                         : "~" + duration(epoch_seconds_sum / (epoch - first_epoch + 1) * (o.max_epochs - epoch)) + " left")
+                << (stop ? std::string(epoch == last_epoch ? "epoch cap reached" : "early stop")
+                         : "~" + duration(epoch_seconds_sum / (epoch - first_epoch + 1) * (last_epoch - epoch)) + " left")
                 << std::endl;
     }
     if (stop) break;

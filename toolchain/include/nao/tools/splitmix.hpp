@@ -2,6 +2,7 @@
 // same on every platform and standard library (std distributions are implementation-defined).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 
 namespace nao::tools {
@@ -34,6 +35,11 @@ class SplitMix64 {
   }
   /// Uniform in (0, 1), 53 random bits.
   double uniform() { return (static_cast<double>(next() >> 11) + 0.5) * 0x1.0p-53; }
+  /// Standard normal (Box-Muller, one variate per call).
+  double normal() {
+    const double u1 = uniform(), u2 = uniform();
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * 3.14159265358979323846 * u2);
+  }
 
  private:
   std::uint64_t state_;

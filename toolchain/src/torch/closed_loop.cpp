@@ -1,0 +1,159 @@
+#include "closed_loop.hpp"
+
+#include "arm_copy_torch.hpp"
+#include "nao/kinematics.hpp"
+#include "nao/tools/arm_copy.hpp"
+#include "nao/tools/evaluate.hpp"
+#include "nao/tools/splitmix.hpp"
+#include "policy_stream.hpp"
+
+#include <algorithm>
+#include <limits>
+#include <stdexcept>
+
+namespace nao::tools {
+
+ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes, const SimModel& sim, double period_s,
+                              double workspace_margin_rad) {
+  ClosedLoopData cl;
+  cl.codes = codes.codes;
+  cl.code_seq = codes.sequence;
+  cl.code_demo.resize(cl.codes.size());
+  for (std::size_t m = 0; m < cl.codes.size(); ++m)
+    for (const std::string& name : cl.codes[m].names) {
+      const auto it = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& d) { return d.name == name; });
+      if (it == data.demos.end()) throw std::invalid_argument("closed loop: no demonstration '" + name + "' in the data");
+      cl.code_demo[m].push_back(static_cast<int>(it - data.demos.begin()));
+    }
+  for (const ModelWorkspace& w : demonstratedWorkspace(data))
+    cl.envelope.push_back(workspace_margin_rad >= 0.0 ? widenedEnvelope(w.lo, w.hi, workspace_margin_rad) : JointEnvelope{});
+  for (std::size_t m = 0; m < cl.codes.size(); ++m)
+    for (const int d : cl.code_demo[m]) {
+      const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
+      ClosedLoopRun run = closedLoopTarget(data, cl, sim, period_s, static_cast<int>(m), demo.start,
+                                           static_cast<int>(demo.f.size()));
+      run.source = d;
+      cl.own.push_back(std::move(run));
+    }
+  return cl;
+}
+
+ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim, double period_s,
+                               int movement, const JointVector& start, int ticks) {
+  const auto m = static_cast<std::size_t>(movement);
+  ClosedLoopRun run;
+  run.movement = movement;
+  run.start = clampToLimits(sim.arm, start);
+  run.ticks = ticks;
+  run.code = runCodeIndex(cl.codes.at(m), run.start);
+  if (run.code < 0) throw std::invalid_argument("closed loop: a movement without training demonstrations");
+  const PolicyDemo& demo = data.demos[static_cast<std::size_t>(cl.code_demo[m][static_cast<std::size_t>(run.code)])];
+  ArmCopyBackend copy(sim);
+  run.q = trackDemo(sim.arm, copy, period_s, servoStepGain(sim.params), demo.f, run.start, ticks);
+  run.hand = handPath(sim.arm, run.q);
+  return run;
+}
+
+std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
+                                               double period_s, const ClosedLoopOptions& o, std::uint64_t seed,
+                                               int epoch) {
+  std::vector<ClosedLoopRun> runs = cl.own;
+  for (const ClosedLoopRun& own : cl.own) {
+    const auto m = static_cast<std::size_t>(own.movement);
+    SplitMix64 rng(splitMix64(seed ^ splitMix64(static_cast<std::uint64_t>(epoch) * 0x100000001b3ull +
+                                                static_cast<std::uint64_t>(own.source))));
+    JointVector perturbed = own.start;
+    for (int j = 0; j < kNumJoints; ++j) perturbed[j] += o.perturb_rad * rng.normal();
+    ClosedLoopRun p = closedLoopTarget(data, cl, sim, period_s, own.movement, perturbed, own.ticks);
+    p.source = own.source;
+    p.kind = 1;
+    runs.push_back(std::move(p));
+    const std::size_t n = cl.codes[m].size();
+    if (n < 2) continue;
+    const JointVector& other = cl.codes[m].q[static_cast<std::size_t>(rng.below(n))];
+    const double u = rng.uniform();
+    ClosedLoopRun b = closedLoopTarget(data, cl, sim, period_s, own.movement, own.start + u * (other - own.start), own.ticks);
+    b.source = own.source;
+    b.kind = 2;
+    runs.push_back(std::move(b));
+  }
+  return runs;
+}
+
+int closedLoopHorizon(const ClosedLoopOptions& o, int k) { return o.horizon + (k - 1) * o.horizon_growth; }
+
+ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, const SequenceTensors& train,
+                              const ClosedLoopData& cl, const SimModel& sim, double period_s,
+                              const std::vector<const ClosedLoopRun*>& runs, int horizon, const ClosedLoopOptions& o) {
+  const auto n_runs = static_cast<std::int64_t>(runs.size());
+  const std::int64_t J = kNumJoints;
+  std::int64_t T = 0;
+  for (const ClosedLoopRun* r : runs) T = std::max<std::int64_t>(T, std::min(horizon, r->ticks));
+  // Targets after each tick [B,T,·] (held at the run's last entry past its end) and the mask of
+  // the ticks each run has.
+  torch::Tensor q_target = torch::empty({n_runs, T, J}, torch::kFloat64);
+  torch::Tensor hand_target = torch::empty({n_runs, T, 3}, torch::kFloat64);
+  torch::Tensor mask = torch::zeros({n_runs, T}, torch::kFloat64);
+  torch::Tensor q = torch::empty({n_runs, J}, torch::kFloat64);
+  torch::Tensor env_lo = torch::empty({n_runs, J}, torch::kFloat64), env_hi = torch::empty_like(env_lo);
+  torch::Tensor movement = torch::empty({n_runs}, torch::kInt64);
+  {
+    auto qt = q_target.accessor<double, 3>(), ht = hand_target.accessor<double, 3>();
+    auto ma = mask.accessor<double, 2>(), qa = q.accessor<double, 2>();
+    auto lo = env_lo.accessor<double, 2>(), hi = env_hi.accessor<double, 2>();
+    for (std::int64_t b = 0; b < n_runs; ++b) {
+      const ClosedLoopRun& r = *runs[static_cast<std::size_t>(b)];
+      const JointEnvelope& e = cl.envelope[static_cast<std::size_t>(r.movement)];
+      movement[b] = r.movement;
+      for (std::int64_t j = 0; j < J; ++j) {
+        qa[b][j] = r.start[j];
+        lo[b][j] = e.lo[j];
+        hi[b][j] = e.hi[j];
+      }
+      for (std::int64_t t = 0; t < T; ++t) {
+        const std::size_t at = static_cast<std::size_t>(std::min<std::int64_t>(t + 1, r.ticks));
+        ma[b][t] = t < r.ticks ? 1.0 : 0.0;
+        for (std::int64_t j = 0; j < J; ++j) qt[b][t][j] = r.q[at][j];
+        for (std::int64_t k = 0; k < 3; ++k) ht[b][t][k] = r.hand[at][k];
+      }
+    }
+  }
+  StreamInput in;
+  in.movement = movement;
+  if (latent != nullptr) {
+    std::vector<std::size_t> seqs;
+    for (const ClosedLoopRun* r : runs)
+      seqs.push_back(cl.code_seq[static_cast<std::size_t>(r->movement)][static_cast<std::size_t>(r->code)]);
+    in.z = latent->forward(pad(train, seqs), torch::zeros({n_runs, latent->dims})).z_embedded;
+  }
+  const torch::Tensor q_std = net.q_std.to(torch::kFloat64), a_std = net.a_std.to(torch::kFloat64);
+  torch::Tensor v = torch::zeros({n_runs, J}, torch::kFloat64);
+  torch::Tensor a_prev = torch::zeros({n_runs, J});
+  PolicyStream stream;
+  ClosedLoopLoss out;
+  out.loss = torch::zeros({}, torch::kFloat64);
+  torch::Tensor run_hand_sse = torch::zeros({n_runs}, torch::kFloat64);
+  for (std::int64_t t = 0; t < T; ++t) {
+    in.q = q.to(torch::kFloat32);
+    in.a_prev = a_prev;
+    in.step = torch::full({n_runs}, t, torch::kInt64);
+    const torch::Tensor a = streamStep(net, stream, in);
+    const ArmTick tick = armCopyTick(sim, period_s, q, v, a, env_lo, env_hi);
+    const torch::Tensor m = mask.select(1, t);
+    // 1 per cm² of hand error and per σ² of joint error; the action the limiter cut, per a-σ².
+    const torch::Tensor hand_se = (tick.hand - hand_target.select(1, t)).square().sum(1);
+    const torch::Tensor q_se = ((tick.q - q_target.select(1, t)) / q_std).square().sum(1);
+    const torch::Tensor cut = ((a.to(torch::kFloat64) - tick.a_applied.detach()) / a_std).square().sum(1);
+    out.loss = out.loss + (m * (o.hand_weight * 1e4 * hand_se + q_se + o.limit_weight * cut)).sum();
+    run_hand_sse += m * hand_se.detach();
+    q = tick.q;
+    v = tick.v;
+    a_prev = tick.a_applied.to(torch::kFloat32);
+  }
+  out.ticks = static_cast<std::int64_t>(mask.sum().item<double>());
+  out.hand_sse_m2 = run_hand_sse.sum().item<double>();
+  for (std::int64_t b = 0; b < n_runs; ++b) out.run_hand_sse_m2.push_back(run_hand_sse[b].item<double>());
+  return out;
+}
+
+}  // namespace nao::tools

@@ -1,0 +1,96 @@
+// Closed-loop training (docs/autonomous.md "Training in closed loop"): the net rolled out in
+// libtorch the way nao_rt runs it - streamed tick by tick (policy_stream.hpp) through the
+// command limiter and the trainer's copy of the arm (arm_copy_torch.hpp) - from training starts,
+// perturbed starts and starts between two demonstrations, each with the run code the runtime
+// would give it there, and scored tick by tick against the medoid replay from that start: the
+// code's demonstration tracked by the gain law through the same arm, which is what evaluation
+// compares a run with. The loss is backpropagated through the whole rollout. Offline only.
+#pragma once
+
+#include "nao/model_file.hpp"
+#include "nao/rollout.hpp"
+#include "nao/sim_arm.hpp"
+#include "nao/tools/policy_dataset.hpp"
+#include "policy_torch.hpp"
+#include "run_latent.hpp"
+#include "train_data.hpp"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <vector>
+
+namespace nao::tools {
+
+/// The closed-loop phase of training (TrainOptions::closed_loop).
+struct ClosedLoopOptions {
+  int epochs = 0;               ///< closed-loop epochs after the teacher-forced ones (0: none)
+  double lr = 1e-4;             ///< Adam, a fresh optimiser from the kept teacher-forced weights
+  int batch = 16;               ///< rollouts per optimiser step
+  int horizon = 30;             ///< ticks rolled out in the first closed-loop epoch
+  int horizon_growth = 10;      ///< ticks more in every later epoch, up to the whole run
+  double perturb_rad = 0.05;    ///< σ of a perturbed start, per joint
+  double grad_clip = 1.0;       ///< the gradient's norm is clipped to this (0: no clip)
+  double hand_weight = 1.0;     ///< loss per cm² of hand-point error (beside 1 per joint σ² of angle error)
+  double limit_weight = 1.0;    ///< loss per a-σ² of action the command limiter cut
+  bool enabled() const { return epochs > 0; }
+};
+
+/// One closed-loop rollout and its target.
+struct ClosedLoopRun {
+  int movement = 0;
+  int code = -1;        ///< the run code's demonstration: index into the movement's run codes (runCodeIndex)
+  int source = -1;      ///< the training demonstration the start was drawn from (data.demos index)
+  int kind = 0;         ///< 0: its own start, 1: perturbed, 2: between two demonstrations' starts
+  JointVector start = JointVector::Zero();
+  int ticks = 0;        ///< length of the run
+  std::vector<JointVector> q;          ///< target: the code's demonstration tracked from the start, ticks + 1 entries
+  std::vector<Eigen::Vector3d> hand;   ///< its hand points
+};
+
+/// What the closed-loop rollouts are made of, built once per training run.
+struct ClosedLoopData {
+  std::vector<ModelRunCodes> codes;                ///< per movement: the training demonstrations' starts and DTW table
+  std::vector<std::vector<int>> code_demo;         ///< [movement][code]: its data.demos index
+  std::vector<std::vector<std::size_t>> code_seq;  ///< [movement][code]: its clean rollout in the training tensors
+  std::vector<JointEnvelope> envelope;             ///< per movement: the workspace the runtime keeps commands in
+  std::vector<ClosedLoopRun> own;                  ///< one per training demonstration: from its own start
+};
+
+/// The data for `train_seqs` (the training split's executed sequences, whose clean rollouts give
+/// the codes) of `data` (the demonstrations as recorded: their f is what a replay tracks).
+/// `codes`: the run codes' names, starts and DTW tables (RunCodeSource), in the order of `code_seq`.
+ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes, const SimModel& sim, double period_s,
+                              double workspace_margin_rad);
+
+/// The target of a run of `movement` from `start` for `ticks` ticks: the run code the runtime
+/// picks there (runCodeIndex) and its demonstration tracked from `start` by the gain law through
+/// the arm copy (trackDemo on ArmCopyBackend).
+ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim, double period_s,
+                               int movement, const JointVector& start, int ticks);
+
+/// The epoch's rollouts: every training demonstration from its own start, from its start
+/// perturbed by N(0, σ²) per joint, and from a point between its start and another training
+/// demonstration's of the same movement (uniform on the segment). Seeded by (seed, epoch, demo).
+std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
+                                               double period_s, const ClosedLoopOptions& o, std::uint64_t seed,
+                                               int epoch);
+
+/// The horizon of closed-loop epoch k (1-based): horizon + (k − 1) · horizon_growth ticks.
+int closedLoopHorizon(const ClosedLoopOptions& o, int k);
+
+/// The loss of rolling `net` out for `runs` over their first min(horizon, ticks) ticks.
+struct ClosedLoopLoss {
+  torch::Tensor loss;         ///< summed over the rolled ticks of every run; differentiable
+  std::int64_t ticks = 0;     ///< the rolled ticks of every run
+  double hand_sse_m2 = 0.0;   ///< Σ over those ticks of the squared hand-point error, m²
+  std::vector<double> run_hand_sse_m2;  ///< the same per run
+};
+/// `latent` (nullptr: zero codes) gives each run its code P μ of its code's clean rollout in
+/// `train`. The rollouts start at rest at each start, stream through streamStep with step rows
+/// 0, 1, ... and go through armCopyTick with the movement's envelope.
+ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, const SequenceTensors& train,
+                              const ClosedLoopData& cl, const SimModel& sim, double period_s,
+                              const std::vector<const ClosedLoopRun*>& runs, int horizon, const ClosedLoopOptions& o);
+
+}  // namespace nao::tools
