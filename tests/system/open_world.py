@@ -115,8 +115,17 @@ class OpenWorld(unittest.TestCase):
         for m in MOVEMENTS:
             self.assertIn(m, s)
             for key in ("autonomous_dtw_m", "medoid_replay_dtw_m", "neighbour_replay_dtw_m", "speed_ratio",
-                        "loops_run_median", "loops_demo_median", "network_share", "distinct_runs"):
+                        "loops_run_median", "loops_demo_median", "network_share", "distinct_runs",
+                        "replay_distinct_runs", "code_fidelity_m", "replay_fidelity_m"):
                 self.assertIn(key, s[m], "%s: %s" % (m, key))
+            # Every run names the demonstration it plays: the medoid of the 5 training
+            # recordings nearest its start, one the model trained on, and its run code's.
+            with open(os.path.join(out, "detail.json")) as f:
+                detail = json.load(f)[m]
+            for r in detail["runs"]:
+                self.assertIn(r["named_demo"], detail["training_demos"])
+                with open(os.path.join(out, r["run_dir"], "summary.json")) as f:
+                    self.assertEqual(json.load(f)["run_code"], r["named_demo"], "%s: the run's code" % r["start"])
             self.assertGreater(s[m]["autonomous_dtw_m"], 0.0)
             self.assertLessEqual(s[m]["joint_range_excess_rad"], 0.1)
             self.assertEqual(s[m]["network_share"], 1.0, "nothing analytic is added to an autonomous model's action")

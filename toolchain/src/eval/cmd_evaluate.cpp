@@ -18,6 +18,7 @@
 #include "nao/tools/linear_ar.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "nao/tools/synth.hpp"
+#include "rt_metrics.hpp"
 
 #include <nlohmann/json.hpp>
 #include <unistd.h>
@@ -317,7 +318,8 @@ void evaluate(const Args& a) {
     SimData sim_data(sim, w.held.start.front());
 
     std::vector<double> auto_dtw, medoid_dtw, neighbour_dtw, ar_dtw, speed, loops, share, excess;
-    std::vector<HandPath> run_hands;
+    std::vector<double> code_fidelity, replay_fidelity;
+    std::vector<HandPath> run_hands, replay_hands;
     json runs = json::array();
     std::size_t replay_mismatch = 0;
     for (std::size_t i = 0; i < w.held.size(); ++i) {
@@ -339,6 +341,12 @@ void evaluate(const Args& a) {
       for (const std::vector<JointVector>& q : rep5.q) each.push_back(nearestDemo(handPath(arm, q), w.held.hand).dtw_m);
       medoid_dtw.push_back(each[rep5.medoidSlot()]);
       neighbour_dtw.push_back(median(each));
+      // What the run plays: the named demonstration (the medoid, whose code a run-code model's
+      // run takes), and how far the run and the medoid replay are from it.
+      const HandPath& named = w.train.hand[static_cast<std::size_t>(rep5.medoid)];
+      replay_hands.push_back(handPath(arm, rep5.medoidQ()));
+      code_fidelity.push_back(rt::dtwMeanDistance(run.hand, named));
+      replay_fidelity.push_back(rt::dtwMeanDistance(replay_hands.back(), named));
       const Rollout ar_run = rolloutOnSim(sim, sim_data, period_s, w.held.start[i], ticks,
                                           [&](const JointVector& q, const std::vector<JointVector>& past) {
                                             return linearArAction(ar, q, past);
@@ -354,6 +362,9 @@ void evaluate(const Args& a) {
                 {"loops", loops.back()},
                 {"joint_range_excess_rad", excess.back()},
                 {"medoid", w.train.names[static_cast<std::size_t>(rep5.medoid)]},
+                {"named_demo", w.train.names[static_cast<std::size_t>(rep5.medoid)]},
+                {"code_fidelity_m", code_fidelity.back()},
+                {"replay_fidelity_m", replay_fidelity.back()},
                 {"medoid_replay_dtw_m", medoid_dtw.back()},
                 {"neighbour_replay_dtw_m", each},
                 {"linear_ar_dtw_m", ar_dtw.back()}};
@@ -373,7 +384,7 @@ void evaluate(const Args& a) {
       }
       runs.push_back(r);
     }
-    const std::size_t distinct = distinctRuns(run_hands);
+    const std::size_t distinct = distinctRuns(run_hands), replay_distinct = distinctRuns(replay_hands);
     std::vector<double> ref_rmse, law_rmse, gain_rmse, ref_share;
     json ref_runs = json::array();
     for (std::size_t k = 0; k < w.ref_jobs.size(); ++k)
@@ -409,6 +420,9 @@ void evaluate(const Args& a) {
     m["loops_demo_median"] = numberOrNull(median(held.loops));
     m["network_share"] = share.empty() ? json(nullptr) : numberOrNull(median(share));
     m["distinct_runs"] = distinct;
+    m["replay_distinct_runs"] = replay_distinct;
+    m["code_fidelity_m"] = numberOrNull(median(code_fidelity));
+    m["replay_fidelity_m"] = numberOrNull(median(replay_fidelity));
     m["joint_range_excess_rad"] = excess.empty() ? 0.0 : *std::max_element(excess.begin(), excess.end());
     m["autonomous_runs"] = auto_dtw.size();
     m["heldout_demos"] = w.held.size();
@@ -425,6 +439,8 @@ void evaluate(const Args& a) {
     m["medoid_replay_dtw_per_run_m"] = medoid_dtw;
     m["neighbour_replay_dtw_per_run_m"] = neighbour_dtw;
     m["linear_ar_dtw_per_run_m"] = ar_dtw;
+    m["code_fidelity_per_run_m"] = code_fidelity;
+    m["replay_fidelity_per_run_m"] = replay_fidelity;
     m["demo_nn_dtw_per_demo_m"] = held.nn_dtw_m;
     summary[w.name] = m;
     detail[w.name] = {{"heldout_demos", w.held.names},
