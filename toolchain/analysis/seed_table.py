@@ -3,13 +3,14 @@
 rollouts (`nao_toolchain evaluate`), then `toolchain/nao analyze` with the robustness variants.
 
 usage: toolchain/analysis/seed_table.py --model FILE --training-seed N [--out JSON]
-           [--eval DIR] [--analysis DIR] [--nao-toolchain PATH [--nao-rt PATH] [--data DIR]]
+           [--eval DIR] [--analysis DIR] [--jobs N] [--nao-toolchain PATH [--nao-rt PATH] [--data DIR]]
 
   --model FILE         the seed's model.bin
   --training-seed N    the seed it was trained with (recorded in the file)
   --out JSON           the Table 2 file (default docs/reproduction/seed_N.json)
   --eval DIR           where the rollouts go (default out/eval_seedN; emptied first)
   --analysis DIR       analyze's tables and figures (default out/analysis/seed_N)
+  --jobs N             nao_rt processes at a time in evaluate (default: evaluate's)
   --nao-toolchain PATH run this nao_toolchain's evaluate directly instead of
                        `toolchain/nao evaluate` (which builds build/ and makes the data set); then
                        --nao-rt PATH names the nao_rt for the model (default: the last line of
@@ -49,6 +50,7 @@ def main(argv=None):
     p.add_argument("--out")
     p.add_argument("--eval")
     p.add_argument("--analysis")
+    p.add_argument("--jobs", type=int)
     p.add_argument("--nao-toolchain")
     p.add_argument("--nao-rt")
     p.add_argument("--data", default="out/train/data")
@@ -62,6 +64,8 @@ def main(argv=None):
     # Old rollouts would be analysed with the new ones.
     shutil.rmtree(os.path.join(REPO, eval_dir), ignore_errors=True)
     evaluate = ["evaluate", "--model", model, "--no-reference", "--out", eval_dir]
+    if args.jobs:
+        evaluate += ["--jobs", str(args.jobs)]
     if args.nao_toolchain:
         nao_rt = args.nao_rt or run([NAO, "build", "--model", model], capture=True).strip().splitlines()[-1]
         run([args.nao_toolchain] + evaluate + ["--nao-rt", nao_rt, "--data", args.data])

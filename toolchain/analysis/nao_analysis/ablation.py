@@ -11,8 +11,9 @@ body parts that get more mass move the action more when masked. Per movement:
 - how often the most-attended body part is the one whose masking moves the action most (the
   match rate), beside its chance level: the rate at which the two would agree if the attention's
   pick and the ablation's were independent, sum_j P(attention picks j) P(masking j moves the
-  action most), each P the share of the movement's ticks. A uniform 1/5 would understate it
-  wherever both favour one body part.
+  action most), each P the share of the movement's ticks. A uniform 1/5 would be wrong
+  wherever one body part is favoured: too low where both favour the same one, too high where
+  they favour different ones.
 
 Every interval comes from one bootstrap over distinct rollouts: the match rate and the chance
 level are recomputed on the same resampled rollouts, and the match rate lies "above chance"
