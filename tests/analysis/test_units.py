@@ -113,9 +113,9 @@ class CompleteLinkage(unittest.TestCase):
 
 
 class NearCopies(unittest.TestCase):
-    """3 independent AR(1) rollouts cut into 16 runs, as nao_rt's 16 runs per movement are 2-3
-    rollouts. Measured before units: KSG MI 0.61-1.77 bits with the smallest possible p in 25 of
-    25 rows, and |r| called significant in 9 of 25 (5 generator seeds)."""
+    """3 independent AR(1) rollouts cut into 16 runs, as nao_rt's runs from nearby starts can
+    repeat one rollout. Taken as 16 independent runs: KSG MI 0.61-1.77 bits with the smallest
+    possible p in 25 of 25 rows, and |r| called significant in 9 of 25 (5 generator seeds)."""
 
     @classmethod
     def setUpClass(cls):
