@@ -348,8 +348,12 @@ TEST_CASE("the closed-loop loss of a run is its hand and joint error against the
   RunLatent latent(4, arch.d_model);
   ClosedLoopOptions o;
   const std::vector<const ClosedLoopRun*> runs = {&cl.own[0], &cl.own[5]};
-  const ClosedLoopLoss l = closedLoopLoss(*net, latent.get(), train, cl, sim(), kPeriod, runs, 12, o);
+  const ClosedLoopLoss l = closedLoopLoss(*net, latent.get(), train, cl, sim(), kPeriod, runs, 0, 12, o);
   CHECK(l.ticks == 24);
+  // A segment from tick 20 after the target's own 20 ticks: 12 ticks each again.
+  const ClosedLoopLoss later = closedLoopLoss(*net, latent.get(), train, cl, sim(), kPeriod, runs, 20, 12, o);
+  CHECK(later.ticks == 24);
+  CHECK(later.loss.item<double>() != l.loss.item<double>());
   CHECK(std::isfinite(l.loss.item<double>()));
   CHECK(l.loss.item<double>() >= 1e4 * l.hand_sse_m2 * o.hand_weight);  // the hand term is part of it
   l.loss.backward();
@@ -387,7 +391,7 @@ TEST_CASE("closed-loop training: deterministic, another result than teacher forc
     const EpochStats& st = r.history[static_cast<std::size_t>(e)];
     CHECK(std::isfinite(st.closed_loop_hand_rms_m));
     for (const double k : st.closed_loop_kind_rms_m) CHECK(std::isfinite(k));
-    // Every run, own start, perturbed and between, for 10 then 15 ticks (the runs are longer).
+    // Every run, own start, perturbed and between, segments of 10 then 15 ticks (the runs are longer).
     const std::size_t runs = 3 * r.split.train.size();
     CHECK(st.samples == runs * static_cast<std::size_t>(e == 2 ? 10 : 15));
   }

@@ -139,6 +139,7 @@ Rollout rolloutOn(const ArmModel& arm, RobotBackend& robot, double period_s, con
     const JointVector a = law(robot.measured(), a_past);
     r.q.push_back(rolloutStep(arm, period_s, robot, a, step));
     if (step.limit & kCommandClamped) ++r.limited_ticks;
+    r.a_applied.push_back(step.a_applied);
     a_past.insert(a_past.begin(), step.a_applied);
     if (a_past.size() > static_cast<std::size_t>(kMaxLinearArOrder)) a_past.pop_back();
     r.hand.push_back(forwardKinematics(arm, kin, r.q.back()));

@@ -157,15 +157,20 @@ RunScore scoreRun(const HandPath& run, const HeldOutScores& held) {
   return r;
 }
 
-std::vector<JointVector> trackDemo(const ArmModel& arm, RobotBackend& robot, double period_s, double gain,
-                                   const std::vector<JointVector>& f, const JointVector& start, int ticks) {
+Rollout trackDemoRollout(const ArmModel& arm, RobotBackend& robot, double period_s, double gain,
+                         const std::vector<JointVector>& f, const JointVector& start, int ticks) {
   int t = 0;
-  const Rollout r = rolloutOn(arm, robot, period_s, start, ticks, [&](const JointVector& q, const std::vector<JointVector>&) {
+  return rolloutOn(arm, robot, period_s, start, ticks, [&](const JointVector& q, const std::vector<JointVector>&) {
     // The demonstration's next sample, held at its last one when the run outlasts it.
     const JointVector target = clampToLimits(arm, f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, f.size() - 1)]);
     ++t;
     return JointVector(gain * (target - q));
   });
+}
+
+std::vector<JointVector> trackDemo(const ArmModel& arm, RobotBackend& robot, double period_s, double gain,
+                                   const std::vector<JointVector>& f, const JointVector& start, int ticks) {
+  const Rollout r = trackDemoRollout(arm, robot, period_s, gain, f, start, ticks);
   std::vector<JointVector> q{clampToLimits(arm, start)};
   q.insert(q.end(), r.q.begin(), r.q.end());
   return q;

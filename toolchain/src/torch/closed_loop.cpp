@@ -48,9 +48,15 @@ ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl,
   run.code = runCodeIndex(cl.codes.at(m), run.start);
   if (run.code < 0) throw std::invalid_argument("closed loop: a movement without training demonstrations");
   const PolicyDemo& demo = data.demos[static_cast<std::size_t>(cl.code_demo[m][static_cast<std::size_t>(run.code)])];
-  ArmCopyBackend copy(sim);
-  run.q = trackDemo(sim.arm, copy, period_s, servoStepGain(sim.params), demo.f, run.start, ticks);
-  run.hand = handPath(sim.arm, run.q);
+  std::vector<ArmCopyState> states;
+  ArmCopyBackend copy(sim, &states);
+  const Rollout r = trackDemoRollout(sim.arm, copy, period_s, servoStepGain(sim.params), demo.f, run.start, ticks);
+  for (const ArmCopyState& st : states) {
+    run.q.push_back(st.q);
+    run.v.push_back(st.v);
+  }
+  run.a_applied = r.a_applied;
+  run.hand = r.hand;
   return run;
 }
 
@@ -62,57 +68,78 @@ std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const Clo
     const auto m = static_cast<std::size_t>(own.movement);
     SplitMix64 rng(splitMix64(seed ^ splitMix64(static_cast<std::uint64_t>(epoch) * 0x100000001b3ull +
                                                 static_cast<std::uint64_t>(own.source))));
-    JointVector perturbed = own.start;
-    for (int j = 0; j < kNumJoints; ++j) perturbed[j] += o.perturb_rad * rng.normal();
-    ClosedLoopRun p = closedLoopTarget(data, cl, sim, period_s, own.movement, perturbed, own.ticks);
-    p.source = own.source;
-    p.kind = 1;
-    runs.push_back(std::move(p));
     const std::size_t n = cl.codes[m].size();
-    if (n < 2) continue;
-    const JointVector& other = cl.codes[m].q[static_cast<std::size_t>(rng.below(n))];
-    const double u = rng.uniform();
-    ClosedLoopRun b = closedLoopTarget(data, cl, sim, period_s, own.movement, own.start + u * (other - own.start), own.ticks);
-    b.source = own.source;
-    b.kind = 2;
-    runs.push_back(std::move(b));
+    for (int k = 1; k < o.starts; ++k) {
+      JointVector start = own.start;
+      int kind = 1;
+      if (k % 2 == 0 && n >= 2) {
+        const JointVector& other = cl.codes[m].q[static_cast<std::size_t>(rng.below(n))];
+        start += rng.uniform() * (other - own.start);
+        kind = 2;
+      } else {
+        for (int j = 0; j < kNumJoints; ++j) start[j] += o.perturb_rad * rng.normal();
+      }
+      ClosedLoopRun run = closedLoopTarget(data, cl, sim, period_s, own.movement, start, own.ticks);
+      run.source = own.source;
+      run.kind = kind;
+      runs.push_back(std::move(run));
+    }
   }
   return runs;
 }
 
 int closedLoopHorizon(const ClosedLoopOptions& o, int k) { return o.horizon + (k - 1) * o.horizon_growth; }
 
+int closedLoopSegmentStart(const std::vector<const ClosedLoopRun*>& runs, int horizon, std::uint64_t key) {
+  int shortest = std::numeric_limits<int>::max();
+  for (const ClosedLoopRun* r : runs) shortest = std::min(shortest, r->ticks);
+  if (runs.empty() || shortest <= horizon) return 0;
+  return static_cast<int>(SplitMix64(key).below(static_cast<std::uint64_t>(shortest - horizon + 1)));
+}
+
 ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, const SequenceTensors& train,
                               const ClosedLoopData& cl, const SimModel& sim, double period_s,
-                              const std::vector<const ClosedLoopRun*>& runs, int horizon, const ClosedLoopOptions& o) {
+                              const std::vector<const ClosedLoopRun*>& runs, int start_tick, int horizon,
+                              const ClosedLoopOptions& o) {
   const auto n_runs = static_cast<std::int64_t>(runs.size());
-  const std::int64_t J = kNumJoints;
+  const std::int64_t J = kNumJoints, t0 = start_tick;
+  // Ticks t0 .. t0 + T − 1 are rolled out (as far as the longest run goes).
   std::int64_t T = 0;
-  for (const ClosedLoopRun* r : runs) T = std::max<std::int64_t>(T, std::min(horizon, r->ticks));
+  for (const ClosedLoopRun* r : runs) T = std::max<std::int64_t>(T, std::min<std::int64_t>(horizon, r->ticks - t0));
   // Targets after each tick [B,T,·] (held at the run's last entry past its end) and the mask of
   // the ticks each run has.
   torch::Tensor q_target = torch::empty({n_runs, T, J}, torch::kFloat64);
   torch::Tensor hand_target = torch::empty({n_runs, T, 3}, torch::kFloat64);
   torch::Tensor mask = torch::zeros({n_runs, T}, torch::kFloat64);
-  torch::Tensor q = torch::empty({n_runs, J}, torch::kFloat64);
+  // The target's states and applied actions before t0 (the warm-up), its arm state at t0.
+  torch::Tensor q_before = torch::empty({n_runs, t0, J}, torch::kFloat64), a_before = torch::empty_like(q_before);
+  torch::Tensor q = torch::empty({n_runs, J}, torch::kFloat64), v = torch::empty_like(q);
   torch::Tensor env_lo = torch::empty({n_runs, J}, torch::kFloat64), env_hi = torch::empty_like(env_lo);
   torch::Tensor movement = torch::empty({n_runs}, torch::kInt64);
   {
     auto qt = q_target.accessor<double, 3>(), ht = hand_target.accessor<double, 3>();
-    auto ma = mask.accessor<double, 2>(), qa = q.accessor<double, 2>();
+    auto ma = mask.accessor<double, 2>(), qa = q.accessor<double, 2>(), va = v.accessor<double, 2>();
+    auto qb = q_before.accessor<double, 3>(), ab = a_before.accessor<double, 3>();
     auto lo = env_lo.accessor<double, 2>(), hi = env_hi.accessor<double, 2>();
     for (std::int64_t b = 0; b < n_runs; ++b) {
       const ClosedLoopRun& r = *runs[static_cast<std::size_t>(b)];
+      if (t0 >= r.ticks) throw std::invalid_argument("closed loop: a segment starts after a run's end");
       const JointEnvelope& e = cl.envelope[static_cast<std::size_t>(r.movement)];
       movement[b] = r.movement;
       for (std::int64_t j = 0; j < J; ++j) {
-        qa[b][j] = r.start[j];
+        qa[b][j] = r.q[static_cast<std::size_t>(t0)][j];
+        va[b][j] = r.v[static_cast<std::size_t>(t0)][j];
         lo[b][j] = e.lo[j];
         hi[b][j] = e.hi[j];
       }
+      for (std::int64_t t = 0; t < t0; ++t)
+        for (std::int64_t j = 0; j < J; ++j) {
+          qb[b][t][j] = r.q[static_cast<std::size_t>(t)][j];
+          ab[b][t][j] = t > 0 ? r.a_applied[static_cast<std::size_t>(t - 1)][j] : 0.0;
+        }
       for (std::int64_t t = 0; t < T; ++t) {
-        const std::size_t at = static_cast<std::size_t>(std::min<std::int64_t>(t + 1, r.ticks));
-        ma[b][t] = t < r.ticks ? 1.0 : 0.0;
+        const std::size_t at = static_cast<std::size_t>(std::min<std::int64_t>(t0 + t + 1, r.ticks));
+        ma[b][t] = t0 + t < r.ticks ? 1.0 : 0.0;
         for (std::int64_t j = 0; j < J; ++j) qt[b][t][j] = r.q[at][j];
         for (std::int64_t k = 0; k < 3; ++k) ht[b][t][k] = r.hand[at][k];
       }
@@ -127,16 +154,34 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
     in.z = latent->forward(pad(train, seqs), torch::zeros({n_runs, latent->dims})).z_embedded;
   }
   const torch::Tensor q_std = net.q_std.to(torch::kFloat64), a_std = net.a_std.to(torch::kFloat64);
-  torch::Tensor v = torch::zeros({n_runs, J}, torch::kFloat64);
-  torch::Tensor a_prev = torch::zeros({n_runs, J});
   PolicyStream stream;
+  {
+    // The warm-up: the target's own ticks fill the caches as a run along it would.
+    torch::NoGradGuard no_grad;
+    const torch::Tensor z = in.z;
+    if (z.defined()) in.z = z.detach();
+    for (std::int64_t t = 0; t < t0; ++t) {
+      in.q = q_before.select(1, t).to(torch::kFloat32);
+      in.a_prev = a_before.select(1, t).to(torch::kFloat32);
+      in.step = torch::full({n_runs}, t, torch::kInt64);
+      streamStep(net, stream, in);
+    }
+    in.z = z;
+  }
+  torch::Tensor a_prev = t0 > 0 ? torch::empty({n_runs, J}) : torch::zeros({n_runs, J});
+  if (t0 > 0) {
+    auto ap = a_prev.accessor<float, 2>();
+    for (std::int64_t b = 0; b < n_runs; ++b)
+      for (std::int64_t j = 0; j < J; ++j)
+        ap[b][j] = static_cast<float>(runs[static_cast<std::size_t>(b)]->a_applied[static_cast<std::size_t>(t0 - 1)][j]);
+  }
   ClosedLoopLoss out;
   out.loss = torch::zeros({}, torch::kFloat64);
   torch::Tensor run_hand_sse = torch::zeros({n_runs}, torch::kFloat64);
   for (std::int64_t t = 0; t < T; ++t) {
     in.q = q.to(torch::kFloat32);
     in.a_prev = a_prev;
-    in.step = torch::full({n_runs}, t, torch::kInt64);
+    in.step = torch::full({n_runs}, t0 + t, torch::kInt64);
     const torch::Tensor a = streamStep(net, stream, in);
     const ArmTick tick = armCopyTick(sim, period_s, q, v, a, env_lo, env_hi);
     const torch::Tensor m = mask.select(1, t);

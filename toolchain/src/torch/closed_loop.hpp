@@ -33,6 +33,9 @@ struct ClosedLoopOptions {
   double grad_clip = 1.0;       ///< the gradient's norm is clipped to this (0: no clip)
   double hand_weight = 1.0;     ///< loss per cm² of hand-point error (beside 1 per joint σ² of angle error)
   double limit_weight = 1.0;    ///< loss per a-σ² of action the command limiter cut
+  /// Rollouts per training demonstration and epoch: its own start, then perturbed starts and
+  /// starts between it and another demonstration's, in turn.
+  int starts = 3;
   bool enabled() const { return epochs > 0; }
 };
 
@@ -45,6 +48,8 @@ struct ClosedLoopRun {
   JointVector start = JointVector::Zero();
   int ticks = 0;        ///< length of the run
   std::vector<JointVector> q;          ///< target: the code's demonstration tracked from the start, ticks + 1 entries
+  std::vector<JointVector> v;          ///< the arm copy's servo velocity along it, ticks + 1 entries
+  std::vector<JointVector> a_applied;  ///< its applied actions, ticks entries
   std::vector<Eigen::Vector3d> hand;   ///< its hand points
 };
 
@@ -69,9 +74,10 @@ ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes
 ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim, double period_s,
                                int movement, const JointVector& start, int ticks);
 
-/// The epoch's rollouts: every training demonstration from its own start, from its start
-/// perturbed by N(0, σ²) per joint, and from a point between its start and another training
-/// demonstration's of the same movement (uniform on the segment). Seeded by (seed, epoch, demo).
+/// The epoch's rollouts: every training demonstration from its own start, then (starts − 1
+/// more) in turn from its start perturbed by N(0, σ²) per joint and from a point between its
+/// start and another training demonstration's of the same movement (uniform on the segment;
+/// perturbed instead when the movement has one demonstration). Seeded by (seed, epoch, demo).
 std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
                                                double period_s, const ClosedLoopOptions& o, std::uint64_t seed,
                                                int epoch);
@@ -79,7 +85,13 @@ std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const Clo
 /// The horizon of closed-loop epoch k (1-based): horizon + (k − 1) · horizon_growth ticks.
 int closedLoopHorizon(const ClosedLoopOptions& o, int k);
 
-/// The loss of rolling `net` out for `runs` over their first min(horizon, ticks) ticks.
+/// Where a batch's segments start: a tick drawn uniformly (seeded by `key`) from 0 .. the shortest
+/// run's length − horizon (0 when a run is no longer than the horizon: the runs are rolled out
+/// from their starts).
+int closedLoopSegmentStart(const std::vector<const ClosedLoopRun*>& runs, int horizon, std::uint64_t key);
+
+/// The loss of rolling `net` out for `runs` over ticks start_tick .. start_tick + horizon − 1
+/// (each run's own ticks).
 struct ClosedLoopLoss {
   torch::Tensor loss;         ///< summed over the rolled ticks of every run; differentiable
   std::int64_t ticks = 0;     ///< the rolled ticks of every run
@@ -87,10 +99,13 @@ struct ClosedLoopLoss {
   std::vector<double> run_hand_sse_m2;  ///< the same per run
 };
 /// `latent` (nullptr: zero codes) gives each run its code P μ of its code's clean rollout in
-/// `train`. The rollouts start at rest at each start, stream through streamStep with step rows
-/// 0, 1, ... and go through armCopyTick with the movement's envelope.
+/// `train`. The net streams from tick 0 with step rows 0, 1, ...; before start_tick it is fed the
+/// target's own states and actions (its caches filled as along the target, no gradient), from
+/// start_tick on its actions drive the arm copy (armCopyTick, the movement's envelope) from the
+/// target's state at that tick.
 ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, const SequenceTensors& train,
                               const ClosedLoopData& cl, const SimModel& sim, double period_s,
-                              const std::vector<const ClosedLoopRun*>& runs, int horizon, const ClosedLoopOptions& o);
+                              const std::vector<const ClosedLoopRun*>& runs, int start_tick, int horizon,
+                              const ClosedLoopOptions& o);
 
 }  // namespace nao::tools

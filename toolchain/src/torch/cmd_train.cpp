@@ -329,6 +329,11 @@ void setup(CLI::App& app) {
                   "Ticks added to the closed-loop horizon every epoch (a curriculum up to the whole run)")
       ->check(CLI::Range(0, 100000))
       ->capture_default_str();
+  cmd->add_option("--closed-loop-starts", args->closed_loop.starts,
+                  "Closed-loop rollouts per training demonstration and epoch: its own start, then perturbed "
+                  "starts and starts between it and another demonstration's, in turn")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   cmd->add_option("--closed-loop-perturb", args->closed_loop.perturb_rad,
                   "Standard deviation of a perturbed start, rad per joint")
       ->check(CLI::Range(0.0, 1.0))

@@ -91,6 +91,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
                         {"batch", c.batch},
                         {"horizon", c.horizon},
                         {"horizon_growth", c.horizon_growth},
+                        {"starts", c.starts},
                         {"perturb_rad", c.perturb_rad},
                         {"grad_clip", c.grad_clip},
                         {"hand_weight", c.hand_weight},
@@ -234,10 +235,12 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     const ClosedLoopOptions& c = o.closed_loop;
     s << "| closed loop | after the " << o.max_epochs << " teacher-forced epochs, " << c.epochs
       << " epochs rolled out through the arm copy (Adam lr " << c.lr << ", " << c.batch
-      << " rollouts per step, gradient norm clipped at " << c.grad_clip << "): every training demonstration from its "
-      << "own start, from it perturbed by " << c.perturb_rad << " rad and from a point between it and another "
-      << "demonstration's, each with the run code nao_rt gives it there, against the medoid replay from that start, "
-      << "over " << c.horizon << " ticks growing by " << c.horizon_growth << " per epoch (docs/autonomous.md) |\n";
+      << " rollouts per step, gradient norm clipped at " << c.grad_clip << "): " << c.starts
+      << " rollouts per training demonstration and epoch, from its own start, from it perturbed by " << c.perturb_rad
+      << " rad and from points between it and another demonstration's, each with the run code nao_rt gives it "
+      << "there, against the medoid replay from that start; segments of " << c.horizon << " ticks growing by "
+      << c.horizon_growth << " per epoch, each batch's from a seeded tick after the target's own history "
+      << "(docs/autonomous.md) |\n";
   }
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs + o.closed_loop.epochs << ", patience "

@@ -20,7 +20,7 @@ namespace nao::tools {
 struct PolicyStream {
   std::vector<torch::Tensor> enc_k, enc_v;      ///< per encoder layer [B,H,n·J,d_h], oldest tick first
   std::vector<torch::Tensor> cross_k, cross_v;  ///< per decoder layer, the memory's cross keys/values, the same
-  std::vector<torch::Tensor> chunks;            ///< the last ≤ C chunks [B,J,C], rad, newest last
+  torch::Tensor pending;  ///< [B,J,C] rad: entry k, the ensemble's weighted sum of every chunk's entry for tick t + k
   std::int64_t ticks = 0;                       ///< ticks streamed since the start
 };
 

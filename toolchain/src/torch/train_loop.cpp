@@ -400,23 +400,27 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
       for (std::int64_t k = 0; k < n_run; ++k) {
         const std::int64_t b = k * B, e = std::min<std::int64_t>(b + B, n_runs);
+        // The global batch's runs and where their segments start: every rank knows them.
+        std::vector<const ClosedLoopRun*> batch;
+        for (std::int64_t i = b; i < e; ++i) batch.push_back(&runs[order[static_cast<std::size_t>(i)]]);
+        const int t0 = closedLoopSegmentStart(
+            batch, horizon, o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch) * 1000003ull + static_cast<std::uint64_t>(k));
+        const auto segment = [&](const ClosedLoopRun* r) { return std::min(horizon, r->ticks - t0); };
         std::int64_t global_ticks = 0;
-        for (std::int64_t i = b; i < e; ++i)
-          global_ticks += std::min(horizon, runs[order[static_cast<std::size_t>(i)]].ticks);
+        for (const ClosedLoopRun* r : batch) global_ticks += segment(r);
         const auto [lo, hi] = group ? shardRange(e - b, o.dist.world_size, o.dist.rank) : std::pair<std::int64_t, std::int64_t>{0, e - b};
         optimiser->zero_grad();
         if (hi > lo) {
-          std::vector<const ClosedLoopRun*> mine;
-          for (std::int64_t i = b + lo; i < b + hi; ++i) mine.push_back(&runs[order[static_cast<std::size_t>(i)]]);
+          const std::vector<const ClosedLoopRun*> mine(batch.begin() + lo, batch.begin() + hi);
           const ClosedLoopLoss l = closedLoopLoss(*net, latent ? latent.get() : nullptr, train, cl, sim, period_s, mine,
-                                                  horizon, o.closed_loop);
+                                                  t0, horizon, o.closed_loop);
           (l.loss / static_cast<double>(global_ticks)).backward();
           loss_sum += l.loss.item<double>();
           hand_sse += l.hand_sse_m2;
           for (std::size_t r = 0; r < mine.size(); ++r) {
             const auto kind = static_cast<std::size_t>(mine[r]->kind);
             kind_sse[kind] += l.run_hand_sse_m2[r];
-            kind_ticks[kind] += std::min(horizon, mine[r]->ticks);
+            kind_ticks[kind] += segment(mine[r]);
           }
         }
         optimiserStep(o.closed_loop.grad_clip);

@@ -21,6 +21,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <vector>
 
 namespace nao::tools {
 
@@ -58,16 +59,19 @@ CommandDerivative commandDerivative(const ArmModel& arm, double period_s, const 
 /// same loop as one through ODE.
 class ArmCopyBackend final : public RobotBackend {
  public:
-  /// `sim` must outlive the backend.
-  explicit ArmCopyBackend(const SimModel& sim) : sim_(sim) {}
+  /// `sim` (and `log`, if given) must outlive the backend. With a log, every state the arm is in
+  /// (after activate and after each command) is appended to it.
+  explicit ArmCopyBackend(const SimModel& sim, std::vector<ArmCopyState>* log = nullptr) : sim_(sim), log_(log) {}
   const JointVector& activate(const JointVector& q0) override {
     state_.q = clampToLimits(sim_.arm, q0);
     state_.v.setZero();
+    if (log_ != nullptr) log_->push_back(state_);
     return state_.q;
   }
   const JointVector& measured() const override { return state_.q; }
   const JointVector& command(const JointVector& q_cmd) override {
     stepArmCopy(sim_, state_, q_cmd);
+    if (log_ != nullptr) log_->push_back(state_);
     return state_.q;
   }
   std::uint32_t faults() const override { return 0; }
@@ -78,6 +82,7 @@ class ArmCopyBackend final : public RobotBackend {
 
  private:
   const SimModel& sim_;
+  std::vector<ArmCopyState>* log_;
   ArmCopyState state_;
 };
 

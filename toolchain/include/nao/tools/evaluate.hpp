@@ -10,6 +10,7 @@
 #include "nao/retarget.hpp"
 #include "nao/robot_backend.hpp"
 #include "nao/sim_arm.hpp"
+#include "nao/tools/linear_ar.hpp"
 #include "nao/tools/movement_metrics.hpp"
 #include "nao/tools/policy_dataset.hpp"
 
@@ -101,6 +102,9 @@ std::vector<JointVector> trackDemo(const SimModel& sim, double period_s, double 
 /// The same through `robot`, a backend of `arm` (the trainer's copy of the arm: arm_copy.hpp).
 std::vector<JointVector> trackDemo(const ArmModel& arm, RobotBackend& robot, double period_s, double gain,
                                    const std::vector<JointVector>& f, const JointVector& start, int ticks);
+/// That rollout itself (q after each tick, the applied actions, the hand path).
+Rollout trackDemoRollout(const ArmModel& arm, RobotBackend& robot, double period_s, double gain,
+                         const std::vector<JointVector>& f, const JointVector& start, int ticks);
 
 /// The replays of a run's neighbours: the `k` training demonstrations whose starts are nearest
 /// `start` (nearestStarts order), each tracked from `start` for `ticks` ticks by trackDemo, and

@@ -66,6 +66,7 @@ JointVector linearArAction(const LinearArModel& m, const JointVector& q, const s
 struct Rollout {
   std::vector<Eigen::Vector3d> hand;  ///< torso frame, m; ticks + 1 points
   std::vector<JointVector> q;         ///< ticks entries
+  std::vector<JointVector> a_applied; ///< ticks entries: the action as the limiter let it through (q_cmd − q)
   int limited_ticks = 0;
 };
 
