@@ -156,9 +156,22 @@ TEST_CASE("a run's code is the medoid replay's demonstration: the runtime's choi
     const int expected = medoid(paths, near);
     CHECK(runCodeIndex(codes, q0) == expected);
     differs_from_nearest += expected != near.front() ? 1 : 0;
+    // With one demonstration left out: the choice among the others (its start's index removed).
+    const int out = trial % 30;
+    std::vector<JointVector> others = codes.q;
+    others.erase(others.begin() + out);
+    std::vector<int> near_others = nearestStarts(others, q0, kRunCodeNearest);
+    for (int& i : near_others) i += i >= out ? 1 : 0;
+    CHECK(runCodeIndex(codes, q0, out) == medoid(paths, near_others));
   }
   CHECK(differs_from_nearest > 50);  // the medoid is not merely the nearest start
   CHECK(runCodeIndex(ModelRunCodes{}, JointVector::Zero()) == -1);
+  ModelRunCodes one = codes;  // its only demonstration left out: nothing to choose
+  one.names.resize(1);
+  one.q.resize(1);
+  one.dtw_m = {0.0};
+  CHECK(runCodeIndex(one, JointVector::Zero(), 0) == -1);
+  CHECK(runCodeIndex(one, JointVector::Zero()) == 0);
   ModelRunCodes three = codes;  // fewer demonstrations than kRunCodeNearest: the medoid of all
   three.names.resize(3);
   three.q.resize(3);

@@ -105,14 +105,15 @@ std::string withModelRunCodes(const std::string& metadata_json, const std::vecto
   return j.dump();
 }
 
-int runCodeIndex(const ModelRunCodes& codes, const JointVector& q0) {
+int runCodeIndex(const ModelRunCodes& codes, const JointVector& q0, int exclude) {
   const int n = static_cast<int>(codes.size());
-  if (n == 0) return -1;
+  if (n == 0 || (n == 1 && exclude == 0)) return -1;
   // The nearest starts in order of distance, a stable insertion: equal distances keep index order.
   std::array<int, kRunCodeNearest> near{};
   std::array<double, kRunCodeNearest> dist{};
   int k = 0;
   for (int i = 0; i < n; ++i) {
+    if (i == exclude) continue;
     const double di = (codes.q[static_cast<std::size_t>(i)] - q0).squaredNorm();
     if (k == kRunCodeNearest && !(di < dist[kRunCodeNearest - 1])) continue;
     int at = std::min(k, kRunCodeNearest - 1);

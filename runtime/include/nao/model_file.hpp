@@ -228,8 +228,10 @@ std::string withModelRunCodes(const std::string& metadata_json, const std::vecto
 
 /// The demonstration whose code a run from `q0` takes: of the kRunCodeNearest starts nearest q0
 /// (Euclidean, rad; ties to the lower index), the one with the smallest summed DTW to the others
-/// (ties to the nearer). -1 when `codes` is empty. Real-time safe (no allocation).
-int runCodeIndex(const ModelRunCodes& codes, const JointVector& q0);
+/// (ties to the nearer). `exclude` (>= 0) leaves that demonstration out, as if the run started
+/// where no training demonstration did (the trainer's closed-loop runs from training starts).
+/// -1 when no demonstration is left. Real-time safe (no allocation).
+int runCodeIndex(const ModelRunCodes& codes, const JointVector& q0, int exclude = -1);
 
 /// The code (codes[movement].d floats) a run of `movement` from `q0` takes, and its index into
 /// codes[movement] in `*index` (if not null); nullptr and -1 when the movement has none.

@@ -28,10 +28,11 @@ ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes
   for (const ModelWorkspace& w : demonstratedWorkspace(data))
     cl.envelope.push_back(workspace_margin_rad >= 0.0 ? widenedEnvelope(w.lo, w.hi, workspace_margin_rad) : JointEnvelope{});
   for (std::size_t m = 0; m < cl.codes.size(); ++m)
-    for (const int d : cl.code_demo[m]) {
+    for (std::size_t i = 0; i < cl.code_demo[m].size(); ++i) {
+      const int d = cl.code_demo[m][i];
       const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
       ClosedLoopRun run = closedLoopTarget(data, cl, sim, period_s, static_cast<int>(m), demo.start,
-                                           static_cast<int>(demo.f.size()));
+                                           static_cast<int>(demo.f.size()), static_cast<int>(i));
       run.source = d;
       cl.own.push_back(std::move(run));
     }
@@ -39,13 +40,15 @@ ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes
 }
 
 ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim, double period_s,
-                               int movement, const JointVector& start, int ticks) {
+                               int movement, const JointVector& start, int ticks, int source) {
   const auto m = static_cast<std::size_t>(movement);
   ClosedLoopRun run;
   run.movement = movement;
   run.start = clampToLimits(sim.arm, start);
   run.ticks = ticks;
-  run.code = runCodeIndex(cl.codes.at(m), run.start);
+  run.source_code = source;
+  // A movement of one training demonstration has nothing else to play: its own.
+  run.code = cl.codes.at(m).size() > 1 ? runCodeIndex(cl.codes[m], run.start, source) : runCodeIndex(cl.codes[m], run.start);
   if (run.code < 0) throw std::invalid_argument("closed loop: a movement without training demonstrations");
   const PolicyDemo& demo = data.demos[static_cast<std::size_t>(cl.code_demo[m][static_cast<std::size_t>(run.code)])];
   std::vector<ArmCopyState> states;
@@ -57,6 +60,8 @@ ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl,
   }
   run.a_applied = r.a_applied;
   run.hand = r.hand;
+  for (int t = 0; t < ticks; ++t)
+    run.f_next.push_back(clampToLimits(sim.arm, demo.f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, demo.f.size() - 1)]));
   return run;
 }
 
@@ -79,7 +84,7 @@ std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const Clo
       } else {
         for (int j = 0; j < kNumJoints; ++j) start[j] += o.perturb_rad * rng.normal();
       }
-      ClosedLoopRun run = closedLoopTarget(data, cl, sim, period_s, own.movement, start, own.ticks);
+      ClosedLoopRun run = closedLoopTarget(data, cl, sim, period_s, own.movement, start, own.ticks, own.source_code);
       run.source = own.source;
       run.kind = kind;
       runs.push_back(std::move(run));
@@ -110,6 +115,7 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
   // the ticks each run has.
   torch::Tensor q_target = torch::empty({n_runs, T, J}, torch::kFloat64);
   torch::Tensor hand_target = torch::empty({n_runs, T, 3}, torch::kFloat64);
+  torch::Tensor f_next = torch::empty({n_runs, T, J}, torch::kFloat64);
   torch::Tensor mask = torch::zeros({n_runs, T}, torch::kFloat64);
   // The target's states and applied actions before t0 (the warm-up), its arm state at t0.
   torch::Tensor q_before = torch::empty({n_runs, t0, J}, torch::kFloat64), a_before = torch::empty_like(q_before);
@@ -117,7 +123,7 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
   torch::Tensor env_lo = torch::empty({n_runs, J}, torch::kFloat64), env_hi = torch::empty_like(env_lo);
   torch::Tensor movement = torch::empty({n_runs}, torch::kInt64);
   {
-    auto qt = q_target.accessor<double, 3>(), ht = hand_target.accessor<double, 3>();
+    auto qt = q_target.accessor<double, 3>(), ht = hand_target.accessor<double, 3>(), fn = f_next.accessor<double, 3>();
     auto ma = mask.accessor<double, 2>(), qa = q.accessor<double, 2>(), va = v.accessor<double, 2>();
     auto qb = q_before.accessor<double, 3>(), ab = a_before.accessor<double, 3>();
     auto lo = env_lo.accessor<double, 2>(), hi = env_hi.accessor<double, 2>();
@@ -140,7 +146,11 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
       for (std::int64_t t = 0; t < T; ++t) {
         const std::size_t at = static_cast<std::size_t>(std::min<std::int64_t>(t0 + t + 1, r.ticks));
         ma[b][t] = t0 + t < r.ticks ? 1.0 : 0.0;
-        for (std::int64_t j = 0; j < J; ++j) qt[b][t][j] = r.q[at][j];
+        const std::size_t tick = static_cast<std::size_t>(std::min<std::int64_t>(t0 + t, r.ticks - 1));
+        for (std::int64_t j = 0; j < J; ++j) {
+          qt[b][t][j] = r.q[at][j];
+          fn[b][t][j] = r.f_next[tick][j];
+        }
         for (std::int64_t k = 0; k < 3; ++k) ht[b][t][k] = r.hand[at][k];
       }
     }
@@ -154,6 +164,7 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
     in.z = latent->forward(pad(train, seqs), torch::zeros({n_runs, latent->dims})).z_embedded;
   }
   const torch::Tensor q_std = net.q_std.to(torch::kFloat64), a_std = net.a_std.to(torch::kFloat64);
+  const double gain = servoStepGain(sim.params);
   PolicyStream stream;
   {
     // The warm-up: the target's own ticks fill the caches as a run along it would.
@@ -188,8 +199,11 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
     // 1 per cm² of hand error and per σ² of joint error; the action the limiter cut, per a-σ².
     const torch::Tensor hand_se = (tick.hand - hand_target.select(1, t)).square().sum(1);
     const torch::Tensor q_se = ((tick.q - q_target.select(1, t)) / q_std).square().sum(1);
-    const torch::Tensor cut = ((a.to(torch::kFloat64) - tick.a_applied.detach()) / a_std).square().sum(1);
-    out.loss = out.loss + (m * (o.hand_weight * 1e4 * hand_se + q_se + o.limit_weight * cut)).sum();
+    const torch::Tensor a64 = a.to(torch::kFloat64);
+    const torch::Tensor cut = ((a64 - tick.a_applied.detach()) / a_std).square().sum(1);
+    const torch::Tensor expert = gain * (f_next.select(1, t) - q.detach());
+    const torch::Tensor off = ((a64 - expert) / a_std).square().sum(1);
+    out.loss = out.loss + (m * (o.hand_weight * 1e4 * hand_se + q_se + o.limit_weight * cut + o.action_weight * off)).sum();
     run_hand_sse += m * hand_se.detach();
     q = tick.q;
     v = tick.v;

@@ -33,6 +33,9 @@ struct ClosedLoopOptions {
   double grad_clip = 1.0;       ///< the gradient's norm is clipped to this (0: no clip)
   double hand_weight = 1.0;     ///< loss per cm² of hand-point error (beside 1 per joint σ² of angle error)
   double limit_weight = 1.0;    ///< loss per a-σ² of action the command limiter cut
+  /// Loss per a-σ² of the action's difference from the gain law's toward the code's demonstration
+  /// from the state the run is in (the expert of the target, asked where the net went).
+  double action_weight = 1.0;
   /// Rollouts per training demonstration and epoch: its own start, then perturbed starts and
   /// starts between it and another demonstration's, in turn.
   int starts = 3;
@@ -43,13 +46,15 @@ struct ClosedLoopOptions {
 struct ClosedLoopRun {
   int movement = 0;
   int code = -1;        ///< the run code's demonstration: index into the movement's run codes (runCodeIndex)
-  int source = -1;      ///< the training demonstration the start was drawn from (data.demos index)
+  int source = -1;      ///< the training demonstration the start was drawn around (data.demos index)
+  int source_code = -1; ///< the same as an index into the movement's run codes
   int kind = 0;         ///< 0: its own start, 1: perturbed, 2: between two demonstrations' starts
   JointVector start = JointVector::Zero();
   int ticks = 0;        ///< length of the run
   std::vector<JointVector> q;          ///< target: the code's demonstration tracked from the start, ticks + 1 entries
   std::vector<JointVector> v;          ///< the arm copy's servo velocity along it, ticks + 1 entries
   std::vector<JointVector> a_applied;  ///< its applied actions, ticks entries
+  std::vector<JointVector> f_next;     ///< per tick, the code's demonstration's next pose the gain law aims at (clamped)
   std::vector<Eigen::Vector3d> hand;   ///< its hand points
 };
 
@@ -68,11 +73,13 @@ struct ClosedLoopData {
 ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes, const SimModel& sim, double period_s,
                               double workspace_margin_rad);
 
-/// The target of a run of `movement` from `start` for `ticks` ticks: the run code the runtime
-/// picks there (runCodeIndex) and its demonstration tracked from `start` by the gain law through
-/// the arm copy (trackDemo on ArmCopyBackend).
+/// The target of a run of `movement` from `start` for `ticks` ticks, drawn around training
+/// demonstration `source` (its index among the movement's run codes): the run code the runtime
+/// picks there with `source` left out (runCodeIndex: the runs are to play what a run from a start
+/// no training demonstration began at plays) and its demonstration tracked from `start` by the
+/// gain law through the arm copy (trackDemo on ArmCopyBackend).
 ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim, double period_s,
-                               int movement, const JointVector& start, int ticks);
+                               int movement, const JointVector& start, int ticks, int source);
 
 /// The epoch's rollouts: every training demonstration from its own start, then (starts − 1
 /// more) in turn from its start perturbed by N(0, σ²) per joint and from a point between its
@@ -98,8 +105,11 @@ struct ClosedLoopLoss {
   double hand_sse_m2 = 0.0;   ///< Σ over those ticks of the squared hand-point error, m²
   std::vector<double> run_hand_sse_m2;  ///< the same per run
 };
-/// `latent` (nullptr: zero codes) gives each run its code P μ of its code's clean rollout in
-/// `train`. The net streams from tick 0 with step rows 0, 1, ...; before start_tick it is fed the
+/// The loss per rolled tick: the hand point's squared error in cm² times hand_weight, plus each
+/// joint's squared error in q-σ, plus limit_weight times the squared action (a-σ) the limiter cut,
+/// plus action_weight times the squared difference (a-σ) from the gain law's action from the
+/// state reached, g (f_next − q) (the label, no gradient through it). `latent` (nullptr: zero
+/// codes) gives each run its code P μ of its code's clean rollout in `train`. The net streams from tick 0 with step rows 0, 1, ...; before start_tick it is fed the
 /// target's own states and actions (its caches filled as along the target, no gradient), from
 /// start_tick on its actions drive the arm copy (armCopyTick, the movement's envelope) from the
 /// target's state at that tick.

@@ -334,6 +334,12 @@ void setup(CLI::App& app) {
                   "starts and starts between it and another demonstration's, in turn")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
+  cmd->add_option("--closed-loop-action-weight", args->closed_loop.action_weight,
+                  "Weight of the on-policy action term of the closed-loop loss: the net's action against the "
+                  "gain law's toward the code's demonstration from the state the rollout reached (0: the "
+                  "trajectory terms alone)")
+      ->check(CLI::Range(0.0, 1e6))
+      ->capture_default_str();
   cmd->add_option("--closed-loop-perturb", args->closed_loop.perturb_rad,
                   "Standard deviation of a perturbed start, rad per joint")
       ->check(CLI::Range(0.0, 1.0))

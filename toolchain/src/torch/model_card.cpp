@@ -95,7 +95,8 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
                         {"perturb_rad", c.perturb_rad},
                         {"grad_clip", c.grad_clip},
                         {"hand_weight", c.hand_weight},
-                        {"limit_weight", c.limit_weight}};
+                        {"limit_weight", c.limit_weight},
+                        {"action_weight", c.action_weight}};
   }
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"

@@ -36,7 +36,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint, bool
   if (c.enabled() && !teacher_forced_only)
     k << "; closed loop after " << o.max_epochs << ": lr " << c.lr << " batch " << c.batch
       << " horizon " << c.horizon << " + " << c.horizon_growth << " starts " << c.starts << " perturb " << c.perturb_rad << " clip "
-      << c.grad_clip << " hand " << c.hand_weight << " limit " << c.limit_weight;
+      << c.grad_clip << " hand " << c.hand_weight << " limit " << c.limit_weight << " action " << c.action_weight;
   return k.str();
 }
 

@@ -86,7 +86,8 @@ void check(const PolicyData& data, const TrainOptions& o) {
     if (c.batch < 1) throw UserError("the closed-loop batch must be at least 1 rollout");
     if (c.horizon < 1 || c.horizon_growth < 0)
       throw UserError("the closed-loop horizon must be at least 1 tick and its growth not negative");
-    if (!(c.perturb_rad >= 0.0) || !(c.grad_clip >= 0.0) || !(c.hand_weight >= 0.0) || !(c.limit_weight >= 0.0))
+    if (!(c.perturb_rad >= 0.0) || !(c.grad_clip >= 0.0) || !(c.hand_weight >= 0.0) || !(c.limit_weight >= 0.0) ||
+        !(c.action_weight >= 0.0))
       throw UserError("closed-loop perturbation, clip and loss weights must not be negative");
   }
   if (o.select_by_rollout && !hasRuntimeStep(o.arch))
