@@ -11,6 +11,7 @@
 #include "nao/tools/command.hpp"
 #include "policy_stream.hpp"
 #include "policy_train.hpp"
+#include "train_select.hpp"
 #include "support/random_policy.hpp"
 #include "support/small_policy_data.hpp"
 #include "support/test_util.hpp"
@@ -434,4 +435,52 @@ TEST_CASE("closed-loop training: deterministic, another result than teacher forc
   bins.arch.bins = 4;
   CHECK_THROWS_WITH_AS(trainPolicy(test::smallData(), test::smallSim(), bins, nullptr), doctest::Contains("regression"),
                        UserError);
+}
+
+TEST_CASE("selection by code fidelity: a run that is its code's demonstration plays it at 0 mm; the epoch in range that plays closest wins") {
+  const PolicyData& data = test::smallData();
+  const std::vector<int> val = {1, 5, 9};
+  std::vector<int> train;
+  for (std::size_t i = 0; i < data.demos.size(); ++i)
+    if (std::find(val.begin(), val.end(), static_cast<int>(i)) == val.end()) train.push_back(static_cast<int>(i));
+  ExecutionOptions e;
+  e.noisy_rollouts = 0;
+  const std::vector<PolicySequence> seqs = executeDemos(data, train, sim(), e, 1);
+  const RunCodeSource source = runCodeSource(data, seqs, arm(), 8);
+  const SelectionReference ref = selectionReference(data, val, arm(), kPeriod, &source.codes);
+  REQUIRE(ref.code_paths.size() == 3);
+  // Each validation start's run is the demonstration its code names, started where that one did.
+  std::vector<PolicyRun> runs;
+  for (const int d : val) {
+    const int m = data.demos[static_cast<std::size_t>(d)].movement;
+    const int code = runCodeIndex(source.codes[static_cast<std::size_t>(m)], data.demos[static_cast<std::size_t>(d)].f.front());
+    REQUIRE(code >= 0);
+    const std::string& name = source.codes[static_cast<std::size_t>(m)].names[static_cast<std::size_t>(code)];
+    const auto played = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& x) { return x.name == name; });
+    std::vector<JointVector> q = played->f;
+    q.front() = data.demos[static_cast<std::size_t>(d)].f.front();  // the code is chosen from the run's start
+    runs.push_back({d, m, q, {}});
+  }
+  EpochStats faithful;
+  scoreRuns(runs, ref, arm(), kPeriod, faithful, &source.codes);
+  for (const MovementScore& s : faithful.rollouts) CHECK(s.code_fidelity_m < 0.01);
+  CHECK(std::isfinite(faithful.code_fidelity_m));
+  EpochStats no_codes;
+  scoreRuns(runs, ref, arm(), kPeriod, no_codes);
+  CHECK(std::isnan(no_codes.code_fidelity_m));
+  // The ranking: finite over NaN, in range over out of range, then the lower fidelity; the
+  // nearest-demonstration DTW does not decide.
+  EpochStats close = faithful, far = faithful, wild = faithful;
+  close.code_fidelity_m = 0.004;
+  close.rollout_dtw_m = 0.03;
+  far.code_fidelity_m = 0.009;
+  far.rollout_dtw_m = 0.01;
+  wild.code_fidelity_m = 0.001;
+  wild.rollouts[0].range_excess_rad = 0.2;
+  CHECK(betterEpoch(close, far, true));
+  CHECK_FALSE(betterEpoch(far, close, true));
+  CHECK(betterEpoch(far, close, false));  // by DTW to the nearest held-out demonstration, the other way
+  CHECK(betterEpoch(close, wild, true));
+  CHECK(betterEpoch(far, no_codes, true));
+  CHECK_FALSE(betterEpoch(no_codes, far, true));
 }

@@ -318,7 +318,7 @@ void evaluate(const Args& a) {
     SimData sim_data(sim, w.held.start.front());
 
     std::vector<double> auto_dtw, medoid_dtw, neighbour_dtw, ar_dtw, speed, loops, share, excess;
-    std::vector<double> code_fidelity, replay_fidelity;
+    std::vector<double> code_fidelity, replay_fidelity, replay_speed, replay_loops;
     std::vector<HandPath> run_hands, replay_hands;
     json runs = json::array();
     std::size_t replay_mismatch = 0;
@@ -347,6 +347,9 @@ void evaluate(const Args& a) {
       replay_hands.push_back(handPath(arm, rep5.medoidQ()));
       code_fidelity.push_back(rt::dtwMeanDistance(run.hand, named));
       replay_fidelity.push_back(rt::dtwMeanDistance(replay_hands.back(), named));
+      const RunScore replay_score = scoreRun(replay_hands.back(), held);
+      replay_speed.push_back(replay_score.speed_m_s);
+      replay_loops.push_back(replay_score.loops);
       const Rollout ar_run = rolloutOnSim(sim, sim_data, period_s, w.held.start[i], ticks,
                                           [&](const JointVector& q, const std::vector<JointVector>& past) {
                                             return linearArAction(ar, q, past);
@@ -421,6 +424,8 @@ void evaluate(const Args& a) {
     m["network_share"] = share.empty() ? json(nullptr) : numberOrNull(median(share));
     m["distinct_runs"] = distinct;
     m["replay_distinct_runs"] = replay_distinct;
+    m["medoid_replay_speed_ratio"] = numberOrNull(median(replay_speed) / median(held.speed_m_s));
+    m["medoid_replay_loops_median"] = numberOrNull(median(replay_loops));
     m["code_fidelity_m"] = numberOrNull(median(code_fidelity));
     m["replay_fidelity_m"] = numberOrNull(median(replay_fidelity));
     m["joint_range_excess_rad"] = excess.empty() ? 0.0 : *std::max_element(excess.begin(), excess.end());

@@ -246,7 +246,13 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs + o.closed_loop.epochs << ", patience "
     << o.patience << "), best " << r.best_epoch << " (exported) |\n";
-  if (o.select_by_rollout) {
+  if (o.select_by_rollout && o.closed_loop.enabled() && o.latent_dims > 0) {
+    s << "| model selection | after every epoch the net (the runtime's streaming inference) is rolled out on the "
+         "simulated arm from each validation demonstration's start with the run code nao_rt gives it; kept: among "
+         "the epochs whose runs stay within the demonstrations' joint range + 0.1 rad, the one whose runs play "
+         "their codes most faithfully (the lowest mean over movements of the median hand-path DTW from a run to "
+         "the demonstration its code names) |\n";
+  } else if (o.select_by_rollout) {
     s << "| model selection | after every epoch the net (the runtime's streaming inference) is rolled out on the "
          "simulated arm from each validation demonstration's start; kept: among the epochs whose runs make the "
          "most movements (median middle-phase speed 0.7-1.3x the demonstrations', loops within ±1, joints within "
@@ -335,6 +341,10 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
                       1e3 * e.rollouts[m].dtw_m, e.rollouts[m].speed_ratio, e.rollouts[m].loops_run,
                       e.rollouts[m].loops_demo);
         s << buf;
+        if (std::isfinite(e.rollouts[m].code_fidelity_m)) {
+          std::snprintf(buf, sizeof buf, ", plays %.1f", 1e3 * e.rollouts[m].code_fidelity_m);
+          s << buf;
+        }
       }
       s << " |";
     }

@@ -92,6 +92,8 @@ struct MovementScore {
   double loops_run = std::numeric_limits<double>::quiet_NaN();    ///< loops drawn in the middle stretch
   double loops_demo = std::numeric_limits<double>::quiet_NaN();
   double range_excess_rad = std::numeric_limits<double>::quiet_NaN();  ///< worst excursion beyond the demonstrations' joint range
+  /// With run codes: hand-path DTW to the demonstration whose code the run takes
+  double code_fidelity_m = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct EpochStats {
@@ -113,6 +115,8 @@ struct EpochStats {
   double rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
   /// Every movement made: speed ratio in 0.7-1.3, loops within ±1 of the demonstrations', joint
   /// range exceeded by ≤ 0.1 rad and DTW under twice the demonstrations' nearest-neighbour DTW.
+  /// With run codes: the mean over movements of the median code fidelity (NaN: none; not kept by checkpoints).
+  double code_fidelity_m = std::numeric_limits<double>::quiet_NaN();
   bool makes_movement = false;
   int movements_made = 0;  ///< movements whose runs meet those bars
   std::vector<MovementScore> rollouts;

@@ -335,7 +335,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   const bool live = progress && o.live_progress;
   SelectionReference ref;
   if (o.select_by_rollout) {
-    ref = selectionReference(data, res.split.val, sim.arm, period_s);
+    ref = selectionReference(data, res.split.val, sim.arm, period_s, latent ? &codes.codes : nullptr);
     res.val_nn_dtw_m = ref.nn_dtw_m;
   }
   // Patience counts within the closed-loop phase when there is one (the teacher-forced epochs all run).
@@ -508,10 +508,13 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     if (o.select_by_rollout) {
       if (latent) updateRunCodes(codes, train, *latent);
       scoreRuns(sharedRuns(group.get(), res.split.val, executed, sim, net, latent ? &codes.codes : nullptr), ref, sim.arm,
-                period_s, st);
+                period_s, st, latent ? &codes.codes : nullptr);
     }
     const double score_seconds = secondsSince(t_score);
-    const bool better = o.select_by_rollout ? (best.empty() || betterEpoch(st, best_stats)) : st.val_loss < best_stats.val_loss;
+    // A closed-loop model with run codes is trained to play its codes: kept by how faithfully it does.
+    const bool by_fidelity = o.closed_loop.enabled() && latent;
+    const bool better =
+        o.select_by_rollout ? (best.empty() || betterEpoch(st, best_stats, by_fidelity)) : st.val_loss < best_stats.val_loss;
     if (better) {
       best_stats = st;
       res.best_epoch = epoch;
@@ -540,6 +543,10 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
                         data.movement_names[m].c_str(), 1e3 * st.rollouts[m].dtw_m, st.rollouts[m].speed_ratio,
                         st.rollouts[m].loops_run, st.rollouts[m].loops_demo);
           moves += part;
+          if (std::isfinite(st.rollouts[m].code_fidelity_m)) {
+            std::snprintf(part, sizeof part, " plays %.1f mm", 1e3 * st.rollouts[m].code_fidelity_m);
+            moves += part;
+          }
         }
         std::snprintf(line, sizeof line, "%sepoch %d/%d  %strain %.4g%s  val %.4g  rollouts %.1f mm%s (",
                       live ? "\r\033[K" : "", epoch, last_epoch, phase.c_str(), st.train_loss,

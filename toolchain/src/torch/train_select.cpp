@@ -6,6 +6,7 @@
 #include "nao/tools/evaluate.hpp"
 #include "nao/tools/toolchain_dims.hpp"
 #include "policy_train.hpp"
+#include "rt_metrics.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -63,7 +64,7 @@ std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& d
 }
 
 SelectionReference selectionReference(const PolicyData& data, const std::vector<int>& val, const ArmModel& arm,
-                                      double period_s) {
+                                      double period_s, const std::vector<ModelRunCodes>* codes) {
   const auto nm = static_cast<std::size_t>(data.movements());
   SelectionReference ref;
   ref.demos.resize(nm);
@@ -95,13 +96,23 @@ SelectionReference selectionReference(const PolicyData& data, const std::vector<
     ref.demo_loops.push_back(median(loops));
     ref.nn_dtw_m.push_back(median(nn));
   }
+  if (codes != nullptr)
+    for (const ModelRunCodes& c : *codes) {
+      ref.code_paths.emplace_back();
+      for (const std::string& name : c.names) {
+        const auto it = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& d) { return d.name == name; });
+        if (it == data.demos.end()) throw std::logic_error("selection: no demonstration '" + name + "' for its run code");
+        ref.code_paths.back().push_back(handPath(arm, it->f));
+      }
+    }
   return ref;
 }
 
 void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref, const ArmModel& arm, double period_s,
-               EpochStats& st) {
+               EpochStats& st, const std::vector<ModelRunCodes>* codes) {
   const std::size_t nm = ref.demos.size();
-  std::vector<std::vector<double>> dtw(nm), speed(nm), loops(nm);
+  const bool fidelity = codes != nullptr && ref.code_paths.size() == nm;
+  std::vector<std::vector<double>> dtw(nm), speed(nm), loops(nm), played(nm);
   std::vector<double> excess(nm, 0.0);
   std::vector<bool> broken(nm, false);
   for (const PolicyRun& run : runs) {
@@ -118,9 +129,11 @@ void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref
     loops[m].push_back(loopCount(path, ref.plane[m]));
     for (const JointVector& q : run.q)
       excess[m] = std::max({excess[m], (q - ref.q_max[m]).maxCoeff(), (ref.q_min[m] - q).maxCoeff()});
+    const int code = fidelity ? runCodeIndex((*codes)[m], run.q.front()) : -1;
+    if (code >= 0) played[m].push_back(rt::dtwMeanDistance(path, ref.code_paths[m][static_cast<std::size_t>(code)]));
   }
   st.rollouts.assign(nm, MovementScore{});
-  double sum = 0.0;
+  double sum = 0.0, sum_played = 0.0;
   int n = 0;
   st.makes_movement = true;
   st.movements_made = 0;
@@ -132,6 +145,7 @@ void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref
     s.loops_run = broken[m] ? kNaN : median(loops[m]);
     s.loops_demo = ref.demo_loops[m];
     s.range_excess_rad = broken[m] ? kNaN : excess[m];
+    s.code_fidelity_m = broken[m] || played[m].empty() ? kNaN : median(played[m]);
     // Speed and loops alone are met by a run that is nowhere near the demonstrations (an early
     // epoch's wrist at 4x their nearest-neighbour DTW): it must also come within twice that
     // (unknown with a single validation demonstration: then not asked).
@@ -140,12 +154,25 @@ void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref
     st.makes_movement = st.makes_movement && made;
     st.movements_made += made ? 1 : 0;
     sum += s.dtw_m;
+    sum_played += s.code_fidelity_m;
     ++n;
   }
   st.rollout_dtw_m = n > 0 ? sum / n : kNaN;
+  st.code_fidelity_m = n > 0 && fidelity ? sum_played / n : kNaN;
 }
 
-bool betterEpoch(const EpochStats& a, const EpochStats& b) {
+bool betterEpoch(const EpochStats& a, const EpochStats& b, bool by_fidelity) {
+  if (by_fidelity) {
+    const auto inRange = [](const EpochStats& e) {
+      bool ok = true;
+      for (const MovementScore& s : e.rollouts) ok = ok && s.range_excess_rad <= 0.1;
+      return ok;
+    };
+    if (!std::isfinite(a.code_fidelity_m)) return false;
+    if (!std::isfinite(b.code_fidelity_m)) return true;
+    if (inRange(a) != inRange(b)) return inRange(a);
+    return a.code_fidelity_m < b.code_fidelity_m;
+  }
   if (!std::isfinite(a.rollout_dtw_m)) return false;
   if (!std::isfinite(b.rollout_dtw_m)) return true;
   if (a.makes_movement != b.makes_movement) return a.makes_movement;

@@ -39,19 +39,28 @@ struct SelectionReference {
   std::vector<double> demo_speed, demo_loops;  ///< medians per movement
   std::vector<JointVector> q_min, q_max;       ///< per movement
   std::vector<double> nn_dtw_m;                ///< per movement: the demonstrations' own nearest-neighbour DTW
+  /// With run codes: per movement, the hand path of each code's demonstration (the run codes' order).
+  std::vector<std::vector<HandPath>> code_paths;
 };
+/// `codes` (nullptr: none): the run codes the runs take, whose demonstrations' paths a run's
+/// code fidelity is measured against.
 SelectionReference selectionReference(const PolicyData& data, const std::vector<int>& val, const ArmModel& arm,
-                                      double period_s);
+                                      double period_s, const std::vector<ModelRunCodes>* codes = nullptr);
 
 /// Scores `runs` into `st` (rollout_dtw_m, makes_movement, rollouts): per movement the medians of
 /// the DTW to the nearest validation demonstration, of the speed ratio and of the loops, and the
 /// worst excursion beyond the joint range; a movement is made when its runs meet the bars
-/// (EpochStats::makes_movement). A non-finite run scores NaN (never kept).
+/// (EpochStats::makes_movement). With `codes` (and ref.code_paths) also each run's code
+/// fidelity: the DTW to the demonstration whose code it takes (runCodeIndex of its start),
+/// their median per movement and its mean over movements. A non-finite run scores NaN (never kept).
 void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref, const ArmModel& arm, double period_s,
-               EpochStats& st);
+               EpochStats& st, const std::vector<ModelRunCodes>* codes = nullptr);
 
 /// True if epoch `a` is better than `b` for selection: one that makes the movement over one that
-/// does not, then the lower rollout DTW (a NaN never wins).
-bool betterEpoch(const EpochStats& a, const EpochStats& b);
+/// does not, then the lower rollout DTW (a NaN never wins). `by_fidelity`: among the epochs whose
+/// runs keep within the demonstrations' joint range + 0.1 rad, the lower mean code fidelity (a
+/// run-code model trained to play its codes: the speed and loops of the demonstrations its codes
+/// name are what it should have, whatever the held-out ones' are).
+bool betterEpoch(const EpochStats& a, const EpochStats& b, bool by_fidelity = false);
 
 }  // namespace nao::tools
