@@ -5,6 +5,8 @@
 #include "nao/tools/policy_dataset.hpp"
 #include "policy_train.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <malloc.h>
 #include <unistd.h>
 
@@ -181,6 +183,60 @@ void run(const TrainArgs& a) {
     card << modelCard(data, o, r, command, a.out);
     if (!card) throw UserError("cannot write " + a.card);
     std::printf("train: model card -> %s\n", a.card.c_str());
+  }
+}
+
+// The options of a recipe file (models/recipes/<name>.json: {"train": {"<option>": value, ...}})
+// into `cmd`, each as if given on the command line, except those the command line gives itself
+// (it wins). Through CLI11's own results, so every value meets its option's checks.
+void applyRecipe(CLI::App& cmd, const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw UserError("cannot read the recipe " + path);
+  nlohmann::json recipe;
+  try {
+    recipe = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception& e) {
+    throw UserError(path + ": not JSON (" + e.what() + ")");
+  }
+  if (!recipe.is_object() || !recipe.contains("train") || !recipe["train"].is_object())
+    throw UserError(path + ": a recipe is an object with an object \"train\" of training options");
+  const auto text = [&](const std::string& key, const nlohmann::json& v) -> std::string {
+    if (v.is_string()) return v.get<std::string>();
+    if (v.is_boolean()) return v.get<bool>() ? "true" : "false";
+    if (v.is_number_integer()) return std::to_string(v.get<long long>());
+    if (v.is_number()) {
+      char buf[32];
+      std::snprintf(buf, sizeof buf, "%.17g", v.get<double>());
+      return buf;
+    }
+    throw UserError(path + ": option '" + key + "' is not a string, number or boolean");
+  };
+  for (const auto& [key, value] : recipe["train"].items()) {
+    if (key == "recipe" || key == "out" || key == "data" || key == "card")
+      throw UserError(path + ": '" + key + "' is given on the command line, not in a recipe");
+    CLI::Option* opt = nullptr;
+    try {
+      opt = cmd.get_option("--" + key);
+    } catch (const CLI::OptionNotFound&) {
+      throw UserError(path + ": no training option --" + key + " (nao_toolchain train --help)");
+    }
+    if (opt->count() > 0) continue;  // the command line's own value
+    std::vector<std::string> values;
+    if (value.is_array())
+      for (const nlohmann::json& v : value) values.push_back(text(key, v));
+    else
+      values.push_back(text(key, value));
+    if (opt->get_type_size() == 0) {  // a flag: true sets it, false leaves it
+      if (values.size() != 1 || (values[0] != "true" && values[0] != "false"))
+        throw UserError(path + ": --" + key + " is a flag: true or false");
+      if (values[0] == "false") continue;
+    }
+    try {
+      opt->add_result(values);
+      opt->run_callback();
+    } catch (const CLI::Error& e) {
+      throw UserError(path + ": --" + key + ": " + e.what());
+    }
   }
 }
 
@@ -394,7 +450,16 @@ void setup(CLI::App& app) {
                   "demonstration wins; paper or small dimensions)")
       ->check(CLI::IsMember({"val-loss", "rollouts"}))
       ->capture_default_str();
-  cmd->callback([args] { run(*args); });
+  auto recipe = std::make_shared<std::string>();
+  cmd->add_option("--recipe", *recipe,
+                  "A recipe file (models/recipes/<name>.json): every training option of a committed model, as "
+                  "{\"train\": {\"<option>\": value, ...}}; an option also given here on the command line takes "
+                  "the command line's value")
+      ->check(CLI::ExistingFile);
+  cmd->callback([cmd, args, recipe] {
+    if (!recipe->empty()) applyRecipe(*cmd, *recipe);
+    run(*args);
+  });
 }
 
 }  // namespace
