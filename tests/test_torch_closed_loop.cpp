@@ -431,10 +431,6 @@ TEST_CASE("closed-loop training: deterministic, another result than teacher forc
   reference.latent_dims = 0;
   CHECK_THROWS_WITH_AS(trainPolicy(test::smallData(), test::smallSim(), reference, nullptr), doctest::Contains("autonomous"),
                        UserError);
-  TrainOptions bins = o;
-  bins.arch.bins = 4;
-  CHECK_THROWS_WITH_AS(trainPolicy(test::smallData(), test::smallSim(), bins, nullptr), doctest::Contains("regression"),
-                       UserError);
 }
 
 TEST_CASE("selection by code fidelity: a run that is its code's demonstration plays it at 0 mm; the epoch in range that plays closest wins") {

@@ -1,6 +1,5 @@
-// What the net is allowed to read, in training: the previous action, the clock's resolution and
-// a per-run latent (and what that latent reads); and the moving average of the weights that
-// training may keep instead. Each is a training-time choice: model.bin's tensors and nao_rt
+// What the net is allowed to read, in training: the previous action and a per-run latent; and
+// the moving average of the weights that training may keep instead. Each is a training-time choice: model.bin's tensors and nao_rt
 // stay unchanged (a run latent adds its run codes to the metadata).
 #include "nao/model_file.hpp"
 #include "nao/tools/command.hpp"
@@ -20,7 +19,6 @@
 #include <algorithm>
 #include <filesystem>
 #include <set>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -86,36 +84,6 @@ TEST_CASE("without the previous action the net's a(t-1) weights stay zero throug
     }
     CHECK(all_equal == !previous_action);
     CHECK(largest > 1e-3);
-  }
-}
-
-TEST_CASE("the clock's resolution: step rows equal within blocks of G ticks, all zero without a clock") {
-  for (const int g : {0, 1, 4}) {
-    CAPTURE(g);
-    TrainOptions o = smallOptions(83, 2);
-    o.conditioning = Conditioning::kAutonomous;
-    o.step_ticks = g;
-    const ModelFile file = decodeModel(trainBytes(o), "trained.bin");
-    const int d = file.header.arch.d_model, rows = file.header.arch.max_steps;
-    // embed.step [rows, d] row-major: column t of the column-major view is tick t's row.
-    const Eigen::Map<const Eigen::MatrixXf> step(file.data(file.find("embed.step")), d, rows);
-    int equal_within = 0, differ_across = 0, blocks = 0;
-    for (int t = 1; t < rows; ++t) {
-      const bool same = step.col(t) == step.col(t - 1);
-      if (g > 1 && t % g != 0) equal_within += same ? 1 : 0;
-      if (g > 1 && t % g == 0) {
-        ++blocks;
-        differ_across += same ? 0 : 1;
-      }
-      if (g == 1) differ_across += same ? 0 : 1;
-    }
-    if (g == 0) CHECK(step.cwiseAbs().maxCoeff() == 0.0f);
-    if (g == 1) CHECK(differ_across == rows - 1);
-    if (g > 1) {
-      CHECK(equal_within == rows - 1 - blocks);
-      CHECK(differ_across == blocks);
-    }
-    CHECK(nlohmann::json::parse(file.header.metadata_json)["training"].value("step_ticks", 1) == g);
   }
 }
 
@@ -203,35 +171,6 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
   CHECK(modelRunCodes(without.header.metadata_json, without.header.movement_names, o.arch.d_model, "none.bin").empty());
 }
 
-TEST_CASE("a latent that reads each rollout's demonstration: every rollout of a demonstration maps to its clean rollout; training deterministic, another result, recorded") {
-  std::vector<PolicySequence> seqs(6);
-  const int demo[] = {3, 3, 5, 3, 5, 7}, rollout[] = {0, 1, 1, 2, 0, 0};
-  for (std::size_t i = 0; i < seqs.size(); ++i) {
-    seqs[i].demo = demo[i];
-    seqs[i].rollout = rollout[i];
-  }
-  CHECK(cleanRolloutOf(seqs) == std::vector<std::size_t>{0, 0, 4, 0, 4, 5});
-  seqs[4].rollout = 1;  // demonstration 5 left without its clean rollout
-  CHECK_THROWS_AS(cleanRolloutOf(seqs), std::invalid_argument);
-
-  TrainOptions o = smallOptions(85, 2);
-  o.conditioning = Conditioning::kAutonomous;
-  o.latent_dims = 4;
-  REQUIRE(o.execution.noisy_rollouts > 0);  // with clean rollouts alone both readings are one
-  const std::vector<std::uint8_t> own = trainBytes(o);
-  o.latent_reads_demo = true;
-  TrainResult r;
-  const std::vector<std::uint8_t> a = trainBytes(o, &r), b = trainBytes(o);
-  CHECK_MESSAGE(a == b, "two runs with the same seed and reading gave different bytes");
-  CHECK_MESSAGE(a != own, "reading the demonstration's clean rollout changed nothing in training");
-  const nlohmann::json meta = nlohmann::json::parse(decodeModel(a, "demo.bin").header.metadata_json)["training"];
-  CHECK(meta["run_latent"]["reads"] == "demonstration");
-  CHECK(nlohmann::json::parse(decodeModel(own, "own.bin").header.metadata_json)["training"]["run_latent"].count("reads") == 0);
-  CHECK(modelCard(smallData(), o, r, "cmd", "m.bin").find("read from each rollout's demonstration") != std::string::npos);
-  o.latent_dims = 0;
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), o, nullptr), doctest::Contains("--run-latent"), UserError);
-}
-
 TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the start plus the rest of the trained weights; training goes on from the trained weights; what is scored is the average; resumable") {
   // One optimiser step per epoch. The start's weights are those after a step of lr 1e-12 (Adam
   // moves no weight by more than about the learning rate).
@@ -298,17 +237,11 @@ TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the 
 TEST_CASE("the inputs' options are refused where they mean nothing: reference mode, negative sizes, a decay of 1") {
   TrainOptions o = smallOptions(89, 1);
   o.conditioning = Conditioning::kReference;
-  TrainOptions clock = o;
-  clock.step_ticks = 30;
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), clock, nullptr), doctest::Contains("no clock"), UserError);
   TrainOptions latent = o;
   latent.latent_dims = 8;
   CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), latent, nullptr), doctest::Contains("autonomous"), UserError);
   o.conditioning = Conditioning::kAutonomous;
   TrainOptions negative = o;
-  negative.step_ticks = -1;
-  CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), negative, nullptr), doctest::Contains("negative"), UserError);
-  negative = o;
   negative.latent_dims = -1;
   CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), negative, nullptr), doctest::Contains("negative"), UserError);
   TrainOptions decay = o;

@@ -2,12 +2,11 @@
 // key/value rings of W ticks, the chunk ring of C ticks) and libtorch's whole-sequence forward of
 // the training module (toolchain/src/torch/: all T·J tokens at once under the sliding-window mask;
 // PolicyNet::act) agree within 1e-5 absolute on the executed actions and the network's share of
-// them, on each tick's decoded chunk and bin, on every decoder layer's cross-attention per body
-// part, on the raw mass and the temporal profile, and (relative) on the norm-based score, at every
-// tick of sequences several windows long (the rings wrap), random and recorded, in both
-// conditionings (reference mode with a law), for the regression head (a chunk of 1 and of 5 with
-// the temporal ensemble) and the bins head, in the small configuration and the paper one (fresh
-// weights, perturbed away from their initialisation).
+// them, on each tick's chunk, on every decoder layer's cross-attention per body part, on the raw
+// mass and the temporal profile, and (relative) on the norm-based score, at every tick of
+// sequences several windows long (the rings wrap), random and recorded, in both conditionings
+// (reference mode with a law), for a chunk of 1 and of 5 with the temporal ensemble, in the small
+// configuration and the paper one (fresh weights, perturbed away from their initialisation).
 #include "nao/policy.hpp"
 #include "nao/tools/kmeans.hpp"
 #include "nao/tools/reference_source.hpp"
@@ -24,7 +23,6 @@
 #include <filesystem>
 #include <random>
 #include <string>
-#include <tuple>
 #include <vector>
 
 using namespace nao;
@@ -120,14 +118,12 @@ void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights
                  const std::string& what) {
   torch::NoGradGuard no_grad;
   auto ws = makePolicyWorkspace<Dims>();
-  const int C = weights.chunk, B = weights.bins;
+  const int C = weights.chunk;
   REQUIRE(net->arch().chunk == C);
-  REQUIRE(net->arch().bins == B);
+  REQUIRE(weights.bins == 0);
   double worst_action = 0.0, worst_net = 0.0, worst_chunk = 0.0, worst_alpha = 0.0, worst_mass = 0.0;
   double worst_profile = 0.0, worst_score_rel = 0.0, largest_action = 0.0, oldest_mass = 0.0, largest_law = 0.0;
-  double smallest_margin = INFINITY;
-  long ticks = 0, bins_differ = 0;
-  std::vector<long> bins_seen;
+  long ticks = 0;
   for (const Sequence& seq : seqs) {
     tools::PolicyAttention att;
     torch::Tensor net_action;
@@ -135,12 +131,10 @@ void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights
                                            torch::tensor({static_cast<long>(seq.front().movement)}), &att, &net_action)
                                       .contiguous();
     net_action = net_action.contiguous();
-    // Each tick's decoded chunk in rad, and the logits it was picked by.
+    // Each tick's chunk in rad.
     const tools::PolicyHeadOutput out = net->forward(normalised(net, seq));
     const torch::Tensor chunk =
-        (net->decodeChunk(out) * net->a_std.view({1, 1, -1, 1}) + net->a_mean.view({1, 1, -1, 1})).contiguous();
-    torch::Tensor top, best;
-    if (B > 0) std::tie(top, best) = out.logits.topk(2, -1);
+        (out.chunk * net->a_std.view({1, 1, -1, 1}) + net->a_mean.view({1, 1, -1, 1})).contiguous();
     auto ta = actions.accessor<float, 3>();
     auto tn = net_action.accessor<float, 3>();
     auto tc = chunk.accessor<float, 4>();
@@ -165,12 +159,6 @@ void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights
         const double s_torch = ts[0][t][j];
         worst_score_rel = std::max(worst_score_rel, std::abs(ws->score[j] - s_torch) / std::max(1.0, std::abs(s_torch)));
       }
-      if (B > 0) {
-        const long torch_bin = best[0][t][0].item<long>();
-        smallest_margin = std::min(smallest_margin, static_cast<double>((top[0][t][0] - top[0][t][1]).item<float>()));
-        bins_differ += ws->bin != torch_bin;
-        if (std::find(bins_seen.begin(), bins_seen.end(), torch_bin) == bins_seen.end()) bins_seen.push_back(torch_bin);
-      }
       for (int age = 0; age < Dims::kWindow; ++age)
         worst_profile = std::max(worst_profile, std::abs(static_cast<double>(ws->age_profile[age]) - tp[0][t][age]));
       if (static_cast<int>(n) >= Dims::kWindow - 1) oldest_mass = std::max(oldest_mass, static_cast<double>(ws->age_profile[Dims::kWindow - 1]));
@@ -188,8 +176,7 @@ void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights
                << " rad (largest action " << largest_action << " rad, law up to " << largest_law << " rad), net action "
                << worst_net << ", chunk " << worst_chunk << ", worst |alpha difference| " << worst_alpha
                << ", |mass difference| " << worst_mass << ", |profile difference| " << worst_profile
-               << ", relative score difference " << worst_score_rel
-               << (B > 0 ? ", smallest logit margin " + std::to_string(smallest_margin) : std::string()));
+               << ", relative score difference " << worst_score_rel);
   CHECK(worst_action <= kTolerance);
   CHECK(worst_net <= kTolerance);
   CHECK(worst_chunk <= kTolerance);
@@ -203,13 +190,6 @@ void checkParity(const tools::PolicyNet& net, const PolicyWeights<Dims>& weights
   CHECK(oldest_mass > 1e-6);
   if (net->conditioning() == Conditioning::kReference) CHECK(largest_law > 1e-3);
   if (net->conditioning() == Conditioning::kAutonomous) CHECK(largest_law == 0.0);
-  if (B > 0) {
-    // The argmax is clear of rounding at every tick (the weights are chosen so), the runtime
-    // picked libtorch's bin every time, and several bins were picked.
-    CHECK(smallest_margin > 4 * kTolerance);
-    CHECK(bins_differ == 0);
-    CHECK(bins_seen.size() >= 3);
-  }
 }
 
 std::vector<const float*> pointers(const std::vector<std::vector<float>>& floats) {
@@ -249,9 +229,8 @@ void checkHead(const PolicyArch& arch, const std::vector<std::vector<JointVector
   }
 }
 
-PolicyArch withHead(PolicyArch a, int chunk, int bins) {
+PolicyArch withChunk(PolicyArch a, int chunk) {
   a.chunk = chunk;
-  a.bins = bins;
   return a;
 }
 
@@ -273,19 +252,10 @@ TEST_CASE("small configuration, a regressed chunk of 5 with the temporal ensembl
   const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
   const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 3, 120);
   const std::vector<Sequence> random = randomSequences(arm, 3, 6, 3 * smallArch().window + 5, 13);
-  checkHead<SmallPolicyDims>(withHead(smallArch(), 5, 0), centroids, random, recorded, "small C5", 22);
+  checkHead<SmallPolicyDims>(withChunk(smallArch(), 5), centroids, random, recorded, "small C5", 22);
 }
 
-TEST_CASE("small configuration, 8 action bins of chunk 3: the runtime picks libtorch's bin and equals its act within 1e-5") {
-  torch::set_num_threads(1);
-  const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
-  const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
-  const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 3, 120);
-  const std::vector<Sequence> random = randomSequences(arm, 3, 6, 3 * smallArch().window + 5, 14);
-  checkHead<SmallPolicyDims>(withHead(smallArch(), 3, 8), centroids, random, recorded, "small B8 C3", 23);
-}
-
-TEST_CASE("paper configuration: the runtime equals libtorch's act within 1e-5, a chunk of 1 and a bins head of chunk 2") {
+TEST_CASE("paper configuration: the runtime equals libtorch's act within 1e-5, a chunk of 1") {
   torch::set_num_threads(1);
   const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
   const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
@@ -293,7 +263,6 @@ TEST_CASE("paper configuration: the runtime equals libtorch's act within 1e-5, a
   const std::vector<Sequence> random = randomSequences(arm, 3, 3, 60, 15);
   const std::vector<Sequence> recorded = recordedSequences(arm, centroids, 3, 60);
   checkHead<PaperPolicyDims>(paperArch(), centroids, random, recorded, "paper C1", 24);
-  checkHead<PaperPolicyDims>(withHead(paperArch(), 2, 16), centroids, random, {}, "paper B16 C2", 25);
 }
 
 TEST_CASE("small configuration, autonomous with a run code: the runtime's run_code is libtorch's z, within 1e-5") {
@@ -301,7 +270,7 @@ TEST_CASE("small configuration, autonomous with a run code: the runtime's run_co
   torch::NoGradGuard no_grad;
   const ArmModel arm = loadArmModel(nao::test::kUrdfPath);
   const std::vector<std::vector<JointVector>> centroids = syntheticKeyPoses(arm);
-  const PolicyArch arch = withHead(smallArch(), 5, 0);
+  const PolicyArch arch = withChunk(smallArch(), 5);
   const tools::PolicyNet net = test::perturbedNet(arch, Conditioning::kAutonomous, centroids, 31);
   const std::vector<std::vector<float>> floats = tools::manifestFloats(net);
   const std::vector<const float*> p = pointers(floats);
@@ -314,7 +283,7 @@ TEST_CASE("small configuration, autonomous with a run code: the runtime's run_co
     const torch::Tensor z = torch::randn({1, arch.d_model}) * 0.5;
     tools::PolicyBatch b = normalised(net, seq);
     const auto chunkOf = [&](const tools::PolicyBatch& batch) {
-      return (net->decodeChunk(net->forward(batch)) * net->a_std.view({1, 1, -1, 1}) + net->a_mean.view({1, 1, -1, 1}))
+      return (net->forward(batch).chunk * net->a_std.view({1, 1, -1, 1}) + net->a_mean.view({1, 1, -1, 1}))
           .contiguous();
     };
     const torch::Tensor plain = chunkOf(b);

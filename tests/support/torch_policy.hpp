@@ -15,18 +15,13 @@ namespace nao::test {
 
 // A fresh net of `arch` moved away from its initialisation (LN gains 1, biases 0, zero step rows)
 // so every term counts: normalisation statistics, key poses, a law of 1.0894 (reference mode),
-// an ensemble decay of 0.3 (chunks), bin centers spread over the normalised range and logits of a
-// few units (bins: the argmax is clear of rounding).
+// an ensemble decay of 0.3 (chunks).
 inline tools::PolicyNet perturbedNet(const PolicyArch& arch, Conditioning c,
                                      const std::vector<std::vector<JointVector>>& centroids, std::uint64_t seed) {
   torch::manual_seed(seed);
   tools::PolicyNet net(arch, c);
   torch::NoGradGuard no_grad;
   for (torch::Tensor& p : net->trainableParameters()) p.add_(torch::randn_like(p) * 0.05);
-  if (arch.bins > 0) {
-    net->head_logit_weight.mul_(5.0);
-    net->setBinCenters(torch::randn({arch.bins, arch.tokens, arch.chunk}) * 0.8);
-  }
   tools::NormStats stats;
   for (int j = 0; j < kNumJoints; ++j) {
     stats.q_mean[j] = 0.1 * j;

@@ -375,24 +375,6 @@ PolicySplit splitByDemonstration(const PolicyData& data, double val_fraction, st
   return split;
 }
 
-PolicySplit splitByNames(const PolicyData& data, const std::vector<std::string>& val_names) {
-  std::vector<bool> is_val(data.demos.size(), false);
-  for (const std::string& name : val_names) {
-    const auto it = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& d) { return d.name == name; });
-    if (it == data.demos.end()) throw UserError("validation demonstration '" + name + "' is not in the data set");
-    const std::size_t i = static_cast<std::size_t>(it - data.demos.begin());
-    if (is_val[i]) throw UserError("validation demonstration '" + name + "' is named twice");
-    is_val[i] = true;
-  }
-  PolicySplit split;
-  for (std::size_t i = 0; i < data.demos.size(); ++i) (is_val[i] ? split.val : split.train).push_back(static_cast<int>(i));
-  for (int m = 0; m < data.movements(); ++m)
-    if (std::none_of(split.train.begin(), split.train.end(), [&](int i) { return data.demos[static_cast<std::size_t>(i)].movement == m; }))
-      throw UserError("movement '" + data.movement_names[static_cast<std::size_t>(m)] +
-                      "' has no training demonstration left after the named validation ones");
-  return split;
-}
-
 std::vector<std::size_t> shuffledIndices(std::size_t n, std::uint64_t seed) {
   std::vector<std::size_t> order(n);
   for (std::size_t i = 0; i < n; ++i) order[i] = i;

@@ -10,18 +10,12 @@
 #include <atomic>
 #include <cmath>
 #include <exception>
-#include <limits>
 #include <mutex>
 #include <ostream>
 #include <thread>
 
 namespace nao::tools {
 namespace {
-
-// kPath's cost of one tick off the nominal progress (one pose per tick), rad²: as much as 0.01 rad
-// of distance, so where f hardly moves (a dwell) the arm's pose keeps the demonstration's
-// timing, and where it moves the distance decides.
-constexpr double kPathTickCost = 1e-4;
 
 // The controller's per-tick command bounds at q: the position limits and one period's reach.
 void commandBounds(const SimModel& sim_model, const JointVector& q, JointVector& lo, JointVector& hi) {
@@ -91,7 +85,7 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
   s.demo = d;
   s.movement = demo.movement;
   s.rollout = k;
-  const double sd = k == 0 ? 0.0 : o.noise_std_rad[static_cast<std::size_t>(k - 1) % o.noise_std_rad.size()];
+  const double sd = k == 0 ? 0.0 : kNoiseStdRad[static_cast<std::size_t>(k - 1) % kNoiseStdRad.size()];
   SplitMix64 rng(seed ^ (0x9e3779b97f4a7c15ull * static_cast<std::uint64_t>(d + 1)) ^
                  (0xc2b2ae3d27d4eb4full * static_cast<std::uint64_t>(k + 1)));
   const auto normal = [&] {
@@ -114,28 +108,10 @@ PolicySequence executeRollout(const PolicyData& data, int d, int k, const SimMod
   resetSim(sim_model, sim, start);
   JointVector q = sim.q, a_prev = JointVector::Zero(), noise = JointVector::Zero();
   const double innovation = sd * std::sqrt(1.0 - o.noise_corr * o.noise_corr);
-  const bool by_path = k > 0 && o.noisy_target == ExecutionOptions::Target::kPath;
-  const std::size_t last = demo.f.size() - 1;
-  std::size_t p = 0;  // kPath: the pose of f the arm is at
   for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
     JointVector lo, hi;
     double miss = 0.0;
-    std::size_t next = t + 1;
-    if (by_path) {
-      const std::size_t nominal = t == 0 ? 0 : p + 1;
-      const std::size_t end = std::min(last, p + static_cast<std::size_t>(o.path_search));
-      double best = std::numeric_limits<double>::infinity();
-      for (std::size_t i = p; i <= end; ++i) {
-        const double lag = static_cast<double>(i) - static_cast<double>(nominal);
-        const double cost = (demo.f[i] - q).squaredNorm() + kPathTickCost * lag * lag;
-        if (cost < best) {
-          best = cost;
-          p = i;
-        }
-      }
-      next = std::min(last, p + 1);
-    }
-    const JointVector target = clampToLimits(sim_model.arm, demo.f[next]);
+    const JointVector target = clampToLimits(sim_model.arm, demo.f[t + 1]);
     commandBounds(sim_model, q, lo, hi);
     captureSim(sim, snap);
     const JointVector c = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
@@ -164,12 +140,8 @@ void checkDemos(const PolicyData& data, const std::vector<int>& demos) {
 
 void checkExecution(const PolicyData& data, const std::vector<int>& demos, const ExecutionOptions& o) {
   if (o.noisy_rollouts < 0) throw UserError("execution: noisy_rollouts must not be negative");
-  if (o.noisy_rollouts > 0 && o.noise_std_rad.empty()) throw UserError("execution: no noise standard deviation given");
-  for (double sd : o.noise_std_rad)
-    if (!(sd >= 0.0)) throw UserError("execution: noise standard deviation " + std::to_string(sd) + " is negative");
   if (!(o.noise_corr >= 0.0 && o.noise_corr < 1.0)) throw UserError("execution: noise_corr must be in [0, 1)");
   if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
-  if (o.path_search < 1) throw UserError("execution: path_search must be at least 1");
   if (o.threads < 1) throw UserError("execution: threads must be at least 1");
   checkDemos(data, demos);
 }

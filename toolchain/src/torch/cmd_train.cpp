@@ -24,20 +24,16 @@ struct TrainArgs {
   std::string config = "paper", out, data, conditioning = "reference", urdf = NAO_DEFAULT_URDF, card;
   std::string rendezvous, interface, checkpoint, resume, execution_cache;
   std::uint64_t seed = 1;
-  int epochs = 200, patience = 10, batch = 2, world_size = 1, rank = 0, max_batches = 0, window = 0;
-  int chunk = 0, bins = -1;
+  int epochs = 200, patience = 10, world_size = 1, rank = 0, max_batches = 0, window = 0;
+  int chunk = 0;
   int noisy_rollouts = ExecutionOptions{}.noisy_rollouts;
-  std::vector<double> noise_std = ExecutionOptions{}.noise_std_rad;
-  double law_gain = -1.0, offset_weight = TrainOptions{}.offset_weight, ensemble_decay = TrainOptions{}.ensemble_decay;
   bool no_previous_action = false;
-  int step_ticks = 1;
   int latent_dims = 0;
   double latent_kl = 1e-2;
   double ema = 0.0;
   ClosedLoopOptions closed_loop;
-  std::string select = "val-loss", noisy_target = "tick", noisy_starts = "own", latent_reads = "run";
+  std::string select = "val-loss", noisy_starts = "own";
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
-  std::vector<std::string> val_demos;
 };
 
 // The process's own argv (Linux), shell-quoted where needed; empty if unavailable.
@@ -84,26 +80,16 @@ void run(const TrainArgs& a) {
   o.max_epochs = a.epochs;
   o.patience = a.patience;
   o.val_fraction = a.val_fraction;
-  o.val_demos = a.val_demos;
-  o.batch = a.batch;
   o.lr = a.lr;
   o.execution.noisy_rollouts = a.noisy_rollouts;
-  o.execution.noise_std_rad = a.noise_std;
-  o.execution.noisy_target = a.noisy_target == "path" ? ExecutionOptions::Target::kPath : ExecutionOptions::Target::kTick;
   o.execution.other_starts = a.noisy_starts == "others";
-  o.law_gain = a.law_gain;
-  o.offset_weight = a.offset_weight;
-  o.ensemble_decay = a.ensemble_decay;
   o.previous_action = !a.no_previous_action;
-  o.step_ticks = a.step_ticks;
   o.latent_dims = a.latent_dims;
   o.latent_kl = a.latent_kl;
-  o.latent_reads_demo = a.latent_reads == "demo";
   o.ema_decay = a.ema;
   o.closed_loop = a.closed_loop;
   if (a.window > 0) o.arch.window = a.window;
   if (a.chunk > 0) o.arch.chunk = a.chunk;
-  if (a.bins >= 0) o.arch.bins = a.bins;
   o.dist.world_size = a.world_size;
   o.dist.rank = a.rank;
   o.dist.rendezvous = a.rendezvous;
@@ -251,7 +237,7 @@ void setup(CLI::App& app) {
       "One thread per process and seeded: two equal runs write byte-identical model.bin files.\n"
       "Data-parallel over libtorch's c10d Gloo process group (docs/training.md): start the same command\n"
       "once per rank with --world-size N --rank R --rendezvous URL (toolchain/nao train --procs N does it\n"
-      "on one machine); each rank takes a slice of every global batch of --batch samples, the gradients\n"
+      "on one machine); each rank takes a slice of every global batch of 2 sequences, the gradients\n"
       "are summed by all-reduce, rank 0 writes the model, the card and the checkpoints. Bit-identical for\n"
       "a fixed world size and seed; world size 1 (the default) is the single-process trainer.");
   cmd->add_option("--config", args->config, "Architecture: paper (4+4 layers, d_model 128) or small (tests)")
@@ -270,17 +256,8 @@ void setup(CLI::App& app) {
   cmd->add_option("--patience", args->patience, "Epochs without a new best validation loss before stopping")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
-  auto* val_fraction = cmd->add_option("--val-fraction", args->val_fraction, "Validation share of each movement's demonstrations")
-                           ->check(CLI::Range(0.01, 0.99))
-                           ->capture_default_str();
-  cmd->add_option("--val-demos", args->val_demos,
-                  "Validation demonstrations by name (NAME,NAME,... of the data set's folders), instead of\n"
-                  "a seeded --val-fraction: e.g. a recording session held out. Every movement keeps at\n"
-                  "least one training demonstration")
-      ->delimiter(',')
-      ->excludes(val_fraction);
-  cmd->add_option("--batch", args->batch, "Sequences (executed rollouts of whole demonstrations) per optimiser step")
-      ->check(CLI::Range(1, 1 << 20))
+  cmd->add_option("--val-fraction", args->val_fraction, "Validation share of each movement's demonstrations")
+      ->check(CLI::Range(0.01, 0.99))
       ->capture_default_str();
   cmd->add_option("--lr", args->lr, "Adam learning rate")->check(CLI::PositiveNumber)->capture_default_str();
   cmd->add_option("--noisy-rollouts", args->noisy_rollouts,
@@ -288,58 +265,19 @@ void setup(CLI::App& app) {
                   "labelled by the expert from the states they reach (DART; 0: on-trajectory states only)")
       ->check(CLI::Range(0, 16))
       ->capture_default_str();
-  cmd->add_option("--noise-std", args->noise_std,
-                  "Standard deviations (rad) of the noisy rollouts' stationary AR(1) command noise, comma-separated: "
-                  "rollout k uses entry (k-1) modulo the count. Larger values put training states further off "
-                  "the demonstration (where an autonomous rollout drifts to), labelled back by the expert")
-      ->delimiter(',')
-      ->check(CLI::Range(0.0, 1.0))
-      ->capture_default_str();
-  cmd->add_option("--noisy-target", args->noisy_target,
-                  "What the expert labelling the noisy rollouts aims at: tick (f(t+1), the demonstration's pose of "
-                  "the same tick, reached in one tick if the bounds allow) or path (the pose after the one nearest "
-                  "the arm, searched forward from the last: the demonstrated path ahead of the arm, whatever the "
-                  "clock; for autonomous runs that start off the demonstrations' timing)")
-      ->check(CLI::IsMember({"tick", "path"}))
-      ->capture_default_str();
   cmd->add_option("--noisy-starts", args->noisy_starts,
                   "Where the noisy rollouts start: own (the demonstration's start) or others (from rest at another "
                   "training demonstration's start of the same movement, a seeded choice: the way onto the "
                   "demonstration from starts it does not begin at)")
       ->check(CLI::IsMember({"own", "others"}))
       ->capture_default_str();
-  cmd->add_option("--law-gain", args->law_gain,
-                  "Reference mode: nao_rt adds G r to the network's action (r = f(t+1) - q: the first-order servo "
-                  "inversion, model.bin's law.gain) and the network learns the rest. Negative: G = 1/(1 - exp(-K T)) "
-                  "of the simulated servo (1.089); 0: the network predicts the whole action. Autonomous models "
-                  "have no law")
-      ->check(CLI::Range(-1.0, 100.0))
-      ->capture_default_str();
   cmd->add_option("--chunk", args->chunk,
                   "Actions each action token predicts per tick, a(t) .. a(t+C-1) (an action chunk); the executed "
                   "action averages the last C chunks' entries for the tick (default: 1)")
       ->check(CLI::Range(1, 32));
-  cmd->add_option("--bins", args->bins,
-                  "0: the head regresses the chunk; B > 0: it picks one of B action bins (k-means++ of the training "
-                  "chunks) by its logits and adds that bin's offset, so it commits to one mode of the "
-                  "demonstrations where a regression would average them (default: 0)")
-      ->check(CLI::Range(0, 1024));
-  cmd->add_option("--offset-weight", args->offset_weight, "Bins: weight of the offset's squared error beside the cross-entropy")
-      ->check(CLI::Range(0.0, 1e6))
-      ->capture_default_str();
-  cmd->add_option("--ensemble-decay", args->ensemble_decay,
-                  "Chunks: a chunk made k ticks ago weighs exp(-decay k) in the executed action (0: equal weights)")
-      ->check(CLI::Range(0.0, 20.0))
-      ->capture_default_str();
   cmd->add_flag("--no-previous-action", args->no_previous_action,
                "The net does not see its previous action a(t-1), only the joint angles over the window (their "
                "input weights are held at zero, so nao_rt runs the model unchanged)");
-  cmd->add_option("--step-ticks", args->step_ticks,
-                  "Autonomous: resolution of the clock the net sees. 1: every tick has its own step embedding; "
-                  "G > 1: blocks of G ticks share one, so the clock says how far the movement is but not the "
-                  "phase of a cycle shorter than G; 0: no clock, the phase is read off the joint angles alone")
-      ->check(CLI::Range(0, 100000))
-      ->capture_default_str();
   cmd->add_option("--run-latent", args->latent_dims,
                   "Autonomous: K > 0 trains with a per-run latent of K dimensions (a conditional VAE's encoder "
                   "reads the whole run and tells the net which demonstrated variant it follows); model.bin "
@@ -348,13 +286,6 @@ void setup(CLI::App& app) {
       ->check(CLI::Range(0, 256));
   cmd->add_option("--latent-kl", args->latent_kl, "Weight of the latent's KL divergence per tick in the loss")
       ->check(CLI::Range(0.0, 1e6))
-      ->capture_default_str();
-  cmd->add_option("--latent-reads", args->latent_reads,
-                  "What the latent's encoder reads: run, each training sequence's own executed run; demo, "
-                  "for every rollout of a demonstration (noisy ones from other starts too) that "
-                  "demonstration's clean rollout, as a run's code at run time is, so the net learns to "
-                  "reach a demonstration's variant from any start")
-      ->check(CLI::IsMember({"run", "demo"}))
       ->capture_default_str();
   cmd->add_option("--ema", args->ema,
                   "Decay D of an exponential moving average of the weights (updated after every optimiser "
@@ -374,9 +305,6 @@ void setup(CLI::App& app) {
   cmd->add_option("--closed-loop-lr", args->closed_loop.lr, "Adam learning rate of the closed-loop phase")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  cmd->add_option("--closed-loop-batch", args->closed_loop.batch, "Closed-loop rollouts per optimiser step")
-      ->check(CLI::Range(1, 1 << 20))
-      ->capture_default_str();
   cmd->add_option("--closed-loop-horizon", args->closed_loop.horizon,
                   "Ticks each rollout runs in the first closed-loop epoch (a run shorter than that runs whole)")
       ->check(CLI::Range(1, 100000))
@@ -395,10 +323,6 @@ void setup(CLI::App& app) {
                   "gain law's toward the code's demonstration from the state the rollout reached (0: the "
                   "trajectory terms alone)")
       ->check(CLI::Range(0.0, 1e6))
-      ->capture_default_str();
-  cmd->add_option("--closed-loop-perturb", args->closed_loop.perturb_rad,
-                  "Standard deviation of a perturbed start, rad per joint")
-      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "

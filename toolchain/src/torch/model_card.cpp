@@ -14,19 +14,11 @@ namespace {
 
 using ordered_json = nlohmann::ordered_json;
 
-const char* headName(const PolicyArch& a) { return a.bins == 0 ? "regression" : "bins"; }
-
 std::string headText(const TrainOptions& o) {
   std::ostringstream s;
-  if (o.arch.bins == 0)
-    s << "regression of " << (o.arch.chunk == 1 ? "the next action" : "a chunk of " + std::to_string(o.arch.chunk) + " actions")
-      << " (MSE)";
-  else
-    s << o.arch.bins << " action bins (k-means++ of the training chunks) + offsets, " << o.arch.chunk
-      << (o.arch.chunk == 1 ? " action" : " actions") << " per bin: cross-entropy + " << o.offset_weight
-      << " x the chosen bin's offset MSE; the runtime takes the bin with the largest logit";
-  if (o.arch.chunk > 1)
-    s << "; temporal ensemble of the last " << o.arch.chunk << " chunks, weight exp(-" << o.ensemble_decay << " x age)";
+  s << "regression of " << (o.arch.chunk == 1 ? "the next action" : "a chunk of " + std::to_string(o.arch.chunk) + " actions")
+    << " (MSE)";
+  if (o.arch.chunk > 1) s << "; temporal ensemble of the last " << o.arch.chunk << " chunks, equal weights";
   return s.str();
 }
 
@@ -60,8 +52,8 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   c["max_steps"] = o.arch.max_steps;
   c["window"] = o.arch.window;
   c["chunk"] = o.arch.chunk;
-  c["bins"] = o.arch.bins;
-  c["head"] = headName(o.arch);
+  c["bins"] = 0;
+  c["head"] = "regression";
   c["layer_norm"] = "pre";
   c["conditioning"] = conditioningName(o.conditioning);
   auto& t = j["training"];
@@ -69,21 +61,14 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   t["max_epochs"] = o.max_epochs;
   t["patience"] = o.patience;
   t["val_fraction"] = o.val_fraction;
-  if (!o.val_demos.empty()) t["val_demos"] = o.val_demos;
-  t["batch"] = o.batch;
+  t["batch"] = kTrainBatch;
   t["optimizer"] = "adam";
   t["lr"] = o.lr;
-  t["loss"] = o.arch.bins == 0 ? "mse of the normalised chunk" : "cross-entropy of the bin + offset_weight x offset mse";
-  if (o.arch.bins > 0) t["offset_weight"] = o.offset_weight;
-  if (o.arch.chunk > 1) t["ensemble_decay"] = o.ensemble_decay;
+  t["loss"] = "mse of the normalised chunk";
+  if (o.arch.chunk > 1) t["ensemble_decay"] = 0.0;  // head.ensemble_decay: equal weights
   if (!o.previous_action) t["previous_action_input"] = false;
-  if (o.step_ticks != 1) t["step_ticks"] = o.step_ticks;
   if (o.ema_decay > 0.0) t["ema_decay"] = o.ema_decay;
-  if (o.latent_dims > 0) {
-    t["run_latent"] = {{"dims", o.latent_dims}, {"kl_weight", o.latent_kl}};
-    // Only when set: files of models trained before the option keep their bytes.
-    if (o.latent_reads_demo) t["run_latent"]["reads"] = "demonstration";
-  }
+  if (o.latent_dims > 0) t["run_latent"] = {{"dims", o.latent_dims}, {"kl_weight", o.latent_kl}};
   if (o.closed_loop.enabled()) {
     const ClosedLoopOptions& c = o.closed_loop;
     t["closed_loop"] = {{"epochs", c.epochs},
@@ -111,12 +96,14 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   ex["expert"] = "command ending the tick at f(t+1)";
   ex["reference_input"] = "f(t+1) - q(t), f: online blend of the snapped key poses, pole " + std::to_string(kFeatureBlendPole);
   ex["noisy_rollouts"] = o.execution.noisy_rollouts;
-  ex["noise_std_rad"] = o.execution.noise_std_rad;
+  ex["noise_std_rad"] = kNoiseStdRad;
   ex["noise_corr"] = o.execution.noise_corr;
   ex["expert_iterations"] = o.execution.expert_iterations;
   ex["expert_tol_rad"] = o.execution.expert_tol_rad;
-  ex["noisy_target"] = o.execution.noisy_target == ExecutionOptions::Target::kPath ? "path" : "tick";
-  ex["path_search"] = o.execution.path_search;
+  // Every rollout's expert aims at the tick's f(t+1) ("tick"); "path_search" stays in the
+  // metadata with its value of 10, so the files' bytes are those of earlier models.
+  ex["noisy_target"] = "tick";
+  ex["path_search"] = 10;
   ex["noisy_starts"] = o.execution.other_starts ? "others" : "own";
   auto& d = j["data"];
   d["fingerprint"] = hex64(r.fingerprint);
@@ -197,27 +184,19 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     << o.arch.clusters << " / " << o.arch.max_steps << " |\n";
   s << "| window | " << o.arch.window << " ticks (" << o.arch.window * 0.1 << " s): tokens (tick, joint), encoder causal in time, age bias |\n";
   s << "| head | " << headText(o) << " |\n";
-  if (o.arch.bins > 0) {
-    std::snprintf(buf, sizeof buf, "%.0f %%", 100.0 * r.bin_coverage);
-    s << "| bin coverage | " << buf << " of the training ticks lie within their bin's RMS radius |\n";
-  }
   s << "| law added at run time | "
     << (r.law_gain != 0.0 ? "law.gain " + std::to_string(r.law_gain) + " x r (r = f(t+1) - q: the first-order servo inversion)"
                           : std::string("none: the executed action is the network's"))
     << " |\n";
   s << "| parameters (manifest floats) | " << parameterCount(o.arch) << " |\n";
-  s << "| optimiser | Adam, lr " << o.lr << ", batch " << o.batch << " sequences |\n";
+  s << "| optimiser | Adam, lr " << o.lr << ", batch " << kTrainBatch << " sequences |\n";
   s << "| training rollouts | per demonstration 1 clean + " << o.execution.noisy_rollouts
     << " with AR(1) command noise (ρ " << o.execution.noise_corr << ", σ in {";
-  for (std::size_t i = 0; i < o.execution.noise_std_rad.size(); ++i) s << (i ? ", " : "") << o.execution.noise_std_rad[i];
+  for (std::size_t i = 0; i < kNoiseStdRad.size(); ++i) s << (i ? ", " : "") << kNoiseStdRad[i];
   s << "} rad) on the servo-lagged ODE arm"
     << (o.conditioning == Conditioning::kAutonomous ? ", each from its demonstration's own start" : "")
     << (o.execution.other_starts ? "; the noisy ones from other training demonstrations' starts" : "")
-    << "; labels: the expert's command ending each tick at f(t+1)"
-    << (o.execution.noisy_target == ExecutionOptions::Target::kPath
-            ? " (noisy rollouts: at the pose after the nearest one on f ahead of the arm)"
-            : "")
-    << " (worst miss ";
+    << "; labels: the expert's command ending each tick at f(t+1) (worst miss ";
   std::snprintf(buf, sizeof buf, "%.2g rad", r.expert_worst_miss_rad);
   s << buf << "; " << r.train_sequences << " training sequences, executed in ";
   std::snprintf(buf, sizeof buf, "%.0f s", r.execution_seconds);
@@ -225,8 +204,7 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   if (o.latent_dims > 0) {
     std::size_t codes = 0;
     for (const ModelRunCodes& c : r.run_codes) codes += c.size();
-    s << "| run latent | K " << o.latent_dims << ", KL weight " << o.latent_kl
-      << (o.latent_reads_demo ? ", read from each rollout's demonstration" : "") << "; " << codes
+    s << "| run latent | K " << o.latent_dims << ", KL weight " << o.latent_kl << "; " << codes
       << " run codes (one per training demonstration) in the metadata: a run takes the medoid of the "
       << kRunCodeNearest << " demonstrations whose starts are nearest its own (docs/autonomous.md) |\n";
   }
@@ -291,12 +269,8 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "- fingerprint " << hex64(r.fingerprint) << ", movements";
   for (std::size_t m = 0; m < data.movement_names.size(); ++m) s << (m ? ", " : " ") << m << " = " << data.movement_names[m];
   s << "\n- " << data.demos.size() << " demonstrations: " << r.split.train.size() << " training (" << r.train_samples
-    << " samples), " << r.split.val.size() << " validation (" << r.val_samples << " samples, ";
-  if (o.val_demos.empty())
-    s << "val fraction " << o.val_fraction;
-  else
-    s << "named by --val-demos";
-  s << "); the validation demonstrations' starts are the model's autonomous starts\n";
+    << " samples), " << r.split.val.size() << " validation (" << r.val_samples << " samples, val fraction "
+    << o.val_fraction << "); the validation demonstrations' starts are the model's autonomous starts\n";
   s << "- validation demonstrations:";
   for (const std::string& n : demoNames(data, r.split.val)) s << ' ' << n;
   s << "\n\n";

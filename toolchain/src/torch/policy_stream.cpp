@@ -41,7 +41,6 @@ torch::Tensor streamStep(const PolicyNetImpl& net, PolicyStream& s, const Stream
   const PolicyArch& arch = net.arch();
   if (net.conditioning() != Conditioning::kAutonomous)
     throw std::invalid_argument("streamStep: an autonomous-mode net (a reference-mode one also adds its law)");
-  if (arch.bins > 0) throw std::invalid_argument("streamStep: a regression head (bins heads are not streamed)");
   const std::int64_t n_batch = in.q.size(0), J = arch.tokens, d = arch.d_model, W = arch.window, C = arch.chunk;
   if (s.enc_k.empty()) {
     s.enc_k.resize(net.enc.size());

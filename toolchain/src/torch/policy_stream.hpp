@@ -33,11 +33,10 @@ struct StreamInput {
   torch::Tensor z;         ///< [B,d] float: the run code added to every encoder token (undefined: 0)
 };
 
-/// One tick of an autonomous-mode regression net (chunk C ≥ 1, no bins) for the B runs of `s`
-/// (a fresh PolicyStream starts them): the network's action a(t) [B,J] in rad, the decoded
-/// chunks de-normalised and ensembled over the last min(t + 1, C) ticks with head.ensemble_decay
-/// (the runtime's net_action; autonomous mode adds no law). Throws std::invalid_argument for a
-/// reference-mode or bins net.
+/// One tick of an autonomous-mode net (chunk C ≥ 1) for the B runs of `s` (a fresh PolicyStream
+/// starts them): the network's action a(t) [B,J] in rad, the chunks de-normalised and ensembled
+/// over the last min(t + 1, C) ticks with head.ensemble_decay (the runtime's net_action;
+/// autonomous mode adds no law). Throws std::invalid_argument for a reference-mode net.
 torch::Tensor streamStep(const PolicyNetImpl& net, PolicyStream& s, const StreamInput& in);
 
 }  // namespace nao::tools

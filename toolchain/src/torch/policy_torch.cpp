@@ -236,6 +236,7 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
     : arch_(arch), conditioning_(conditioning) {
   const std::string problem = archProblem(arch);
   if (!problem.empty()) throw std::invalid_argument("policy architecture: " + problem);
+  if (arch.bins != 0) throw std::invalid_argument("policy architecture: the head regresses the chunk (bins 0)");
   const int d = arch.d_model, n_joints = arch.tokens;
 
   embed = register_module("embed", std::make_shared<torch::nn::Module>());
@@ -255,19 +256,9 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
   for (int l = 0; l < arch.decoder_layers; ++l)
     dec.push_back(dec_holder->register_module(std::to_string(l), DecoderLayer(arch)));
   dec_norm = dec_holder->register_module("norm", LayerNorm(d));
-  const int C = arch.chunk, nb = arch.bins;
-  if (nb == 0) {
-    head_chunk = register_module("head", Affine(d, C));
-    head = head_chunk.ptr();
-  } else {
-    head = register_module("head", std::make_shared<torch::nn::Module>());
-    auto logit = head->register_module("logit", std::make_shared<torch::nn::Module>());
-    head_logit_weight = logit->register_parameter("weight", torch::empty({n_joints, d, nb}));
-    head_logit_bias = logit->register_parameter("bias", torch::empty({nb}));
-    head_offset = head->register_module("offset", Affine(d, nb * C));
-    head_centers = head->register_buffer("centers", torch::zeros({nb, n_joints, C}));
-  }
-  if (C > 1) ensemble_decay = head->register_buffer("ensemble_decay", torch::zeros({1}));
+  const int C = arch.chunk;
+  head_chunk = register_module("head", Affine(d, C));
+  if (C > 1) ensemble_decay = head_chunk->register_buffer("ensemble_decay", torch::zeros({1}));
   auto law = register_module("law", std::make_shared<torch::nn::Module>());
   law_gain = law->register_buffer("gain", torch::zeros({n_joints}));
 
@@ -285,8 +276,7 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
   torch::NoGradGuard no_grad;
   for (auto& [name, t] : inManifestOrder(*this, arch_)) {
     const std::string last = lastComponent(name);
-    if (name.rfind("norm.", 0) == 0 || name == "centroids" || name == "head.centers" || name == "head.ensemble_decay" ||
-        name == "law.gain")
+    if (name.rfind("norm.", 0) == 0 || name == "centroids" || name == "head.ensemble_decay" || name == "law.gain")
       continue;  // buffers, set above
     if (name == "embed.step" && conditioning == Conditioning::kReference)
       t.zero_();
@@ -298,8 +288,6 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
       t.fill_(1.0);
     else if (last == "bias" || last == "bq" || last == "bk" || last == "bv" || last == "bo")
       t.zero_();
-    else if (name == "head.logit.weight")
-      t.normal_(0.0, 0.02);  // near-uniform over the bins at the start
     else if (last == "weight" || last == "wq" || last == "wk" || last == "wv" || last == "wo")
       torch::nn::init::xavier_uniform_(t);
     else
@@ -352,22 +340,8 @@ PolicyHeadOutput PolicyNetImpl::forward(const PolicyBatch& batch, PolicyAttentio
   }
   const torch::Tensor h = dec_norm->forward(y);  // [B,T,J,d]
   PolicyHeadOutput out;
-  if (arch_.bins == 0) {
-    out.chunk = head_chunk->forward(h);  // [B,T,J,C]
-  } else {
-    out.logits = torch::einsum("btjd,jdk->btk", {h, head_logit_weight}) + head_logit_bias;
-    out.offsets = head_offset->forward(h).view({n_batch, n_ticks, n_joints, arch_.bins, arch_.chunk});
-  }
+  out.chunk = head_chunk->forward(h);  // [B,T,J,C]
   return out;
-}
-
-torch::Tensor PolicyNetImpl::decodeChunk(const PolicyHeadOutput& out) const {
-  if (arch_.bins == 0) return out.chunk;
-  const std::int64_t n_batch = out.logits.size(0), n_ticks = out.logits.size(1), J = arch_.tokens, C = arch_.chunk;
-  const torch::Tensor best = out.logits.argmax(-1);  // [B,T]; the first of equal maxima
-  const torch::Tensor center = head_centers.index_select(0, best.reshape({-1})).view({n_batch, n_ticks, J, C});
-  const torch::Tensor index = best.view({n_batch, n_ticks, 1, 1, 1}).expand({n_batch, n_ticks, J, 1, C});
-  return center + out.offsets.gather(3, index).squeeze(3);
 }
 
 torch::Tensor PolicyNetImpl::act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
@@ -379,7 +353,7 @@ torch::Tensor PolicyNetImpl::act(const torch::Tensor& q, const torch::Tensor& a_
   batch.rn = (r - r_mean) / r_std;
   batch.movement = movement;
   // [B,T,J,C] in rad.
-  const torch::Tensor chunk = decodeChunk(forward(batch, attention)) * a_std.view({1, 1, -1, 1}) + a_mean.view({1, 1, -1, 1});
+  const torch::Tensor chunk = forward(batch, attention).chunk * a_std.view({1, 1, -1, 1}) + a_mean.view({1, 1, -1, 1});
   const std::int64_t n_ticks = chunk.size(1), C = arch_.chunk;
   // The temporal ensemble (the runtime's ensembledAction): tick t takes entry k of the chunk
   // made at t − k, for every k < min(t + 1, C), weighted exp(−decay k) / Σ over those k.
@@ -426,15 +400,6 @@ void PolicyNetImpl::setCentroids(const std::vector<std::vector<JointVector>>& c)
       for (int j = 0; j < kNumJoints; ++j)
         acc[static_cast<std::int64_t>(m)][static_cast<std::int64_t>(k)][j] = static_cast<float>(c[m][k][j]);
   }
-}
-
-void PolicyNetImpl::setBinCenters(const torch::Tensor& centers) {
-  if (arch_.bins == 0) throw std::invalid_argument("a regression head has no bin centers");
-  if (centers.sizes() != head_centers.sizes())
-    throw std::invalid_argument("bin centers of shape " + c10::str(centers.sizes()) + ", the head's are " +
-                                c10::str(head_centers.sizes()));
-  torch::NoGradGuard no_grad;
-  head_centers.copy_(centers);
 }
 
 void PolicyNetImpl::setEnsembleDecay(double decay) {

@@ -37,9 +37,7 @@ struct PolicyBatch {
 
 /// The head's output for every tick of a batch (docs/policy.md "Head"), normalised units.
 struct PolicyHeadOutput {
-  torch::Tensor chunk;    ///< regression: [B,T,J,C], token j's a_j(t) .. a_j(t+C-1)
-  torch::Tensor logits;   ///< bins: [B,T,nb]
-  torch::Tensor offsets;  ///< bins: [B,T,J,nb,C], every bin's offset
+  torch::Tensor chunk;  ///< [B,T,J,C], token j's a_j(t) .. a_j(t+C-1)
 };
 
 /// The attention record of docs/policy.md, per batch element and tick.
@@ -164,20 +162,17 @@ class PolicyNetImpl : public torch::nn::Module {
   /// Parameters initialised per docs/policy.md from torch's global generator (seed it first with
   /// torch::manual_seed): matrices Xavier-uniform, biases 0, LN gain 1 / bias 0, embeddings
   /// N(0, 0.02²); embed.step zero and frozen (requires_grad false) in reference mode. Buffers:
-  /// norm means 0, stds 1, centroids 0.
+  /// norm means 0, stds 1, centroids 0. The head regresses the chunk: throws
+  /// std::invalid_argument for an architecture with action bins.
   PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning);
 
   /// The head's output for a normalised batch of sequences; fills `attention` if given (memory
   /// grows as (T·J)² · d: for short sequences, tests and analysis).
   PolicyHeadOutput forward(const PolicyBatch& batch, PolicyAttention* attention = nullptr) const;
 
-  /// Each tick's chunk as the runtime decodes it, normalised [B,T,J,C]: regression, the chunk;
-  /// bins, the center of the bin with the largest logit (the first of equals) plus its offset.
-  torch::Tensor decodeChunk(const PolicyHeadOutput& out) const;
-
   /// The actions a(t) in rad [B,T,J] the runtime executes, from raw sequences in rad (q, a(t-1),
   /// r: [B,T,J] float; movement [B] int64), normalised with the norm.* buffers (rn = 0 in
-  /// autonomous mode): the decoded chunks de-normalised, temporally ensembled over the last C
+  /// autonomous mode): the chunks de-normalised, temporally ensembled over the last C
   /// ticks (head.ensemble_decay), plus law.gain ⊙ r in reference mode. `net_action` (if given)
   /// receives the ensembled chunks alone, the network's share.
   torch::Tensor act(const torch::Tensor& q, const torch::Tensor& a_prev, const torch::Tensor& r,
@@ -188,8 +183,6 @@ class PolicyNetImpl : public torch::nn::Module {
   void setNormalisation(const NormStats& stats);
   /// Stores the centroids [M][K] in the "centroids" buffer [M,K,J].
   void setCentroids(const std::vector<std::vector<JointVector>>& centroids);
-  /// Stores the action bins [nb, J, C] (normalised) in head.centers (bins models only).
-  void setBinCenters(const torch::Tensor& centers);
   /// Stores the temporal ensemble's decay per tick of age in head.ensemble_decay (C > 1 only).
   void setEnsembleDecay(double decay);
   /// Stores the law the runtime adds in reference mode, gain_j r_j, in law.gain (0 autonomous).
@@ -218,12 +211,10 @@ class PolicyNetImpl : public torch::nn::Module {
   std::vector<EncoderLayer> enc;
   std::vector<DecoderLayer> dec;
   LayerNorm enc_norm{nullptr}, dec_norm{nullptr};
-  // head.*: regression (bins 0) head.weight [d,C], head.bias [C]; bins head.logit.weight
-  // [J,d,nb], head.logit.bias [nb], head.offset (Affine d -> nb·C), head.centers [nb,J,C]
-  // (buffer); C > 1: head.ensemble_decay [1] (buffer). law.gain [J] (buffer).
-  std::shared_ptr<torch::nn::Module> head;
-  Affine head_chunk{nullptr}, head_offset{nullptr};
-  torch::Tensor head_logit_weight, head_logit_bias, head_centers, ensemble_decay, law_gain;
+  // head.*: head.weight [d,C], head.bias [C]; C > 1: head.ensemble_decay [1] (buffer).
+  // law.gain [J] (buffer).
+  Affine head_chunk{nullptr};
+  torch::Tensor ensemble_decay, law_gain;
   // norm.* and centroids (buffers)
   torch::Tensor q_mean, q_std, a_mean, a_std, r_mean, r_std, centroids;
 };

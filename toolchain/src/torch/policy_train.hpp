@@ -21,16 +21,17 @@
 
 namespace nao::tools {
 
+/// Sequences (whole executed rollouts) per optimiser step: a global batch, sliced among the ranks.
+inline constexpr int kTrainBatch = 2;
+
 struct TrainOptions {
   std::string config_name = "paper";  ///< recorded in the metadata ("paper" | "small" | ...)
   PolicyArch arch = paperArch();      ///< movements and clusters must match the data
   Conditioning conditioning = Conditioning::kReference;
-  std::uint64_t seed = 1;             ///< weights, split, bins and batch order
+  std::uint64_t seed = 1;             ///< weights, split and batch order
   int max_epochs = 200;               ///< iteration cap; early stopping usually ends sooner
   int patience = 10;                  ///< epochs without a new best before stopping
   double val_fraction = 0.2;          ///< of each movement's demonstrations
-  std::vector<std::string> val_demos; ///< if not empty: the validation demonstrations by name (val_fraction unused)
-  int batch = 2;                      ///< sequences (whole executed rollouts) per optimiser step
   double lr = 6e-5;                   ///< Adam
   ExecutionOptions execution;         ///< how the demonstrations are executed and labelled
   DistOptions dist;                   ///< world size 1: this process alone, the single-process loop
@@ -42,14 +43,6 @@ struct TrainOptions {
   std::string resume;                 ///< if set, continue from this checkpoint (any world size)
   int max_batches = 0;                ///< > 0: each epoch stops after this many global batches (timing)
   bool live_progress = false;         ///< rank 0 also redraws a '\r' line during the epoch (terminals)
-  /// Reference mode: the law the runtime adds, gain·r with r = f(t+1) − q (law.gain), the net
-  /// learning the rest. < 0: the first-order inversion of the simulated servo over one tick,
-  /// 1 / (1 − exp(−K T)); 0: none. Autonomous mode has no law.
-  double law_gain = -1.0;
-  /// Bins head: the weight of the offset's squared error beside the bin's cross-entropy.
-  double offset_weight = 1.0;
-  /// Chunk > 1: the temporal ensemble's decay per tick of a chunk's age (head.ensemble_decay).
-  double ensemble_decay = 0.0;
   /// Model selection on rollouts (autonomous mode, paper §4.1): after every epoch the net is
   /// rolled out on the simulated arm from each validation demonstration's start (the runtime's
   /// streaming inference, no human input) and scored (RolloutScore); the exported epoch is the
@@ -60,21 +53,10 @@ struct TrainOptions {
   /// A policy fed its own last action can learn to copy it, and in closed loop its errors then
   /// persist instead of being corrected (behaviour cloning's copycat problem).
   bool previous_action = true;
-  /// Resolution of the clock the net sees (autonomous): 1, every tick has its own step row;
-  /// G > 1, blocks of G ticks share one row (the rows are averaged after every optimiser step),
-  /// so the clock tells how far the movement is but not the phase of a cycle shorter than G;
-  /// 0, the step rows are held at zero. A per-tick clock lets a regression fall back on the
-  /// demonstrations' mean pose at that tick, which damps cycles whose phase varies between
-  /// demonstrations; without one, the phase must be read off the joint angles over the window.
-  int step_ticks = 1;
   /// K > 0: a per-run latent of K dimensions (RunLatent, training only; z = 0 at run time) with
   /// `latent_kl` × its KL divergence per tick in the loss.
   int latent_dims = 0;
   double latent_kl = 1e-2;
-  /// What the latent's encoder reads: false, each sequence's own executed run; true, for every
-  /// rollout of a demonstration (clean or noisy, from whichever start), that demonstration's
-  /// clean rollout: the code a run takes at run time, where it starts elsewhere.
-  bool latent_reads_demo = false;
   /// D > 0: the weights scored, kept and written are an exponential moving average of the
   /// trained ones, updated after every optimiser step with decay min(D, (1 + n) / (10 + n)) at
   /// step n; the optimiser trains the raw weights. 0: no average.
@@ -123,7 +105,7 @@ struct EpochStats {
 };
 
 struct TrainResult {
-  PolicyNet net{nullptr};       ///< the kept weights, norm.*, centroids, bins and law set
+  PolicyNet net{nullptr};       ///< the kept weights, norm.*, centroids and law set
   PolicySplit split;
   NormStats stats;
   std::uint64_t fingerprint = 0;
@@ -132,7 +114,6 @@ struct TrainResult {
   double expert_worst_miss_rad = 0.0;  ///< largest end-of-tick miss of the expert (clean rollouts)
   double execution_seconds = 0.0;      ///< wall time of executing the rollouts
   double law_gain = 0.0;               ///< law.gain of the exported model
-  double bin_coverage = 0.0;           ///< bins: share of training ticks whose target is within its bin's mean radius
   std::vector<EpochStats> history;
   int best_epoch = 0;           ///< 1-based epoch whose weights were kept
   SplitLoss train, val;         ///< of the kept weights
@@ -153,7 +134,7 @@ struct TrainResult {
 /// Trains a policy on `data`: executes the training split's demonstrations on the simulated arm
 /// `sim` (clean and noisy rollouts, expert labels: ExecutionOptions; validation: the clean
 /// rollouts of the validation split) - in autonomous mode each from its own start
-/// (fromOwnStarts) - fits the bins of a bins head, then fits the whole sequences. Sets torch to
+/// (fromOwnStarts) - then fits the whole sequences. Sets torch to
 /// one thread and deterministic algorithms, seeds torch's generator with options.seed before
 /// initialisation, shuffles batches with a local generator. Prints one line per epoch to
 /// `progress` (if not null, flushed). With options.dist.world_size > 1 this is one rank of a
@@ -164,7 +145,9 @@ struct TrainResult {
 /// a failed rendezvous or collective.
 TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const TrainOptions& options, std::ostream* progress);
 
-/// The law gain training uses for `o` on `sim` (TrainOptions::law_gain).
+/// The law gain training uses for `o` on `sim` (model.bin's law.gain): in reference mode the
+/// first-order inversion of the simulated servo over one tick, 1 / (1 − exp(−K T)), the net
+/// learning the rest of the action; autonomous mode has no law (0).
 double lawGain(const TrainOptions& o, const SimModel& sim);
 
 /// The metadata JSON stored in model.bin: config, seed, data fingerprint, split, the autonomous

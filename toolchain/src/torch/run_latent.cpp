@@ -3,7 +3,6 @@
 #include "nao/tools/evaluate.hpp"
 #include "rt_metrics.hpp"
 
-#include <map>
 #include <stdexcept>
 #include <string>
 
@@ -55,20 +54,6 @@ RunCodeSource runCodeSource(const PolicyData& data, const std::vector<PolicySequ
       for (std::size_t k = i + 1; k < n; ++k) c.dtw_m[i * n + k] = c.dtw_m[k * n + i] = rt::dtwMeanDistance(paths[m][i], paths[m][k]);
   }
   return s;
-}
-
-std::vector<std::size_t> cleanRolloutOf(const std::vector<PolicySequence>& seqs) {
-  std::map<int, std::size_t> clean;
-  for (std::size_t i = 0; i < seqs.size(); ++i)
-    if (seqs[i].rollout == 0) clean[seqs[i].demo] = i;
-  std::vector<std::size_t> of(seqs.size());
-  for (std::size_t i = 0; i < seqs.size(); ++i) {
-    const auto it = clean.find(seqs[i].demo);
-    if (it == clean.end())
-      throw std::invalid_argument("run latent: demonstration " + std::to_string(seqs[i].demo) + " has no clean rollout");
-    of[i] = it->second;
-  }
-  return of;
 }
 
 void updateRunCodes(RunCodeSource& source, const SequenceTensors& t, RunLatentImpl& latent) {

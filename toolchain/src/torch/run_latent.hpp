@@ -45,10 +45,6 @@ struct RunCodeSource {
 RunCodeSource runCodeSource(const PolicyData& data, const std::vector<PolicySequence>& train, const ArmModel& arm,
                             int d_model);
 
-/// For each sequence of `seqs`, the index of its demonstration's clean rollout (rollout 0) in
-/// `seqs`; std::invalid_argument if a demonstration has none.
-std::vector<std::size_t> cleanRolloutOf(const std::vector<PolicySequence>& seqs);
-
 /// Each code of `source` as `latent`'s P μ of its clean rollout in `t` (no draw: ε = 0).
 void updateRunCodes(RunCodeSource& source, const SequenceTensors& t, RunLatentImpl& latent);
 

@@ -10,8 +10,7 @@ namespace nao::tools {
 
 void writeExecutionKey(std::ostream& k, const ExecutionOptions& e) {
   k << e.noisy_rollouts << " " << e.noise_corr << " " << e.expert_iterations << " " << e.expert_tol_rad;
-  for (double q : e.noise_std_rad) k << " " << q;
-  if (e.noisy_target == ExecutionOptions::Target::kPath) k << " path " << e.path_search;
+  for (double q : kNoiseStdRad) k << " " << q;
   if (e.other_starts) k << " other starts";
 }
 
@@ -21,15 +20,14 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint, bool
   k << "nao-rt checkpoint 3; data " << hex64(fingerprint) << "; config " << o.config_name << " "
     << parameterCount(o.arch) << "; " << conditioningName(o.conditioning) << "; seed " << o.seed << "; val "
     << o.val_fraction;
-  for (const std::string& n : o.val_demos) k << " " << n;
-  k << "; batch " << o.batch << "; lr " << o.lr << "; window " << o.arch.window << "; head "
-    << o.arch.chunk << " " << o.arch.bins << " " << o.offset_weight << " " << o.ensemble_decay << "; execution ";
+  // The head's fields after the chunk (no bins, offset weight 1, ensemble decay 0) and the law's
+  // (-1: the servo's) are the text checkpoints have always carried: they stay resumable.
+  k << "; batch " << kTrainBatch << "; lr " << o.lr << "; window " << o.arch.window << "; head " << o.arch.chunk
+    << " 0 1 0; execution ";
   writeExecutionKey(k, o.execution);
-  k << "; batches " << o.max_batches << "; law " << o.law_gain;
+  k << "; batches " << o.max_batches << "; law -1";
   if (!o.previous_action) k << "; no previous action";
-  if (o.step_ticks != 1) k << "; step ticks " << o.step_ticks;
   if (o.latent_dims > 0) k << "; latent " << o.latent_dims << " " << o.latent_kl;
-  if (o.latent_dims > 0 && o.latent_reads_demo) k << " reads demo";
   if (o.ema_decay > 0.0) k << "; ema " << o.ema_decay;
   if (o.select_by_rollout) k << "; select rollout";
   const ClosedLoopOptions& c = o.closed_loop;

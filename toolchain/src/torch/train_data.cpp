@@ -1,7 +1,6 @@
 #include "train_data.hpp"
 
 #include "nao/tools/command.hpp"
-#include "nao/tools/splitmix.hpp"
 
 #include <algorithm>
 #include <cstdio>
@@ -58,13 +57,6 @@ const double* unpack(const double* in, const double* end, PolicySequence& s) {
   return x;
 }
 
-// Nearest row of `centers` [nb, n] for each row of `x` [m, n], ties to the lower row: squared
-// distances written out (no matmul shortcut), so every build picks the same bins.
-torch::Tensor nearestRows(const torch::Tensor& x, const torch::Tensor& centers) {
-  const torch::Tensor d = (x.unsqueeze(1) - centers.unsqueeze(0)).square().sum(-1);  // [m, nb]
-  return d.argmin(1);
-}
-
 }  // namespace
 
 SequenceTensors toTensors(const PolicyNet& net, const std::vector<PolicySequence>& seqs) {
@@ -91,54 +83,6 @@ SequenceTensors toTensors(const PolicyNet& net, const std::vector<PolicySequence
   return t;
 }
 
-void labelBins(const PolicyNet& net, SequenceTensors& t) {
-  if (net->arch().bins == 0) throw std::logic_error("labelBins: a regression head has no bins");
-  const torch::Tensor centers = net->head_centers.reshape({net->arch().bins, -1});
-  t.label.clear();
-  for (const torch::Tensor& y : t.target) t.label.push_back(nearestRows(y.reshape({y.size(0), -1}), centers));
-}
-
-torch::Tensor fitActionBins(const SequenceTensors& train, int bins, std::uint64_t seed, int iterations) {
-  std::vector<torch::Tensor> rows;
-  for (const torch::Tensor& y : train.target) rows.push_back(y.reshape({y.size(0), -1}));
-  const torch::Tensor x = torch::cat(rows, 0).to(torch::kFloat64);  // [N, J·C]
-  const std::int64_t n = x.size(0);
-  if (n < bins)
-    throw UserError("action bins: " + std::to_string(n) + " training ticks for " + std::to_string(bins) + " bins");
-  SplitMix64 rng(seed ^ 0x6a09e667f3bcc909ull);
-  const auto uniform = [&rng] { return rng.uniform(); };
-  // k-means++: the first center uniformly, each next one with probability ∝ D(x)².
-  std::vector<std::int64_t> chosen{static_cast<std::int64_t>(uniform() * static_cast<double>(n)) % n};
-  torch::Tensor d2 = (x - x[chosen[0]]).square().sum(1);
-  for (int k = 1; k < bins; ++k) {
-    const torch::Tensor cum = d2.cumsum(0);
-    const double total = cum[n - 1].item<double>();
-    std::int64_t pick = 0;
-    if (total > 0.0) {
-      const double u = uniform() * total;
-      pick = std::min<std::int64_t>(n - 1, torch::searchsorted(cum, torch::tensor({u}, torch::kFloat64)).item<std::int64_t>());
-    } else {
-      pick = static_cast<std::int64_t>(uniform() * static_cast<double>(n)) % n;  // all points coincide
-    }
-    chosen.push_back(pick);
-    d2 = torch::minimum(d2, (x - x[pick]).square().sum(1));
-  }
-  torch::Tensor centers = x.index_select(0, torch::tensor(chosen, torch::kInt64)).clone();
-  // Lloyd by mean; a center left without points keeps its place.
-  torch::Tensor labels = nearestRows(x, centers);
-  for (int it = 0; it < iterations; ++it) {
-    torch::Tensor sum = torch::zeros_like(centers).index_add_(0, labels, x);
-    torch::Tensor count = torch::zeros({bins}, torch::kFloat64).index_add_(0, labels, torch::ones({n}, torch::kFloat64));
-    const torch::Tensor filled = count > 0;
-    centers = torch::where(filled.unsqueeze(1), sum / count.clamp_min(1.0).unsqueeze(1), centers);
-    const torch::Tensor next = nearestRows(x, centers);
-    if (torch::equal(next, labels)) break;
-    labels = next;
-  }
-  const std::int64_t C = train.target.front().size(2);
-  return centers.to(torch::kFloat32).view({bins, kNumJoints, C});
-}
-
 Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index) {
   std::int64_t longest = 0;
   for (std::size_t i : index) longest = std::max(longest, t.qn[i].size(0));
@@ -152,8 +96,6 @@ Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index) {
   p.action = torch::zeros({n, longest, kNumJoints});
   p.r = torch::zeros({n, longest, kNumJoints});
   p.mask = torch::zeros({n, longest});
-  const bool bins = !t.label.empty();
-  if (bins) p.label = torch::zeros({n, longest}, torch::kInt64);
   std::vector<std::int64_t> movement;
   for (std::int64_t b = 0; b < n; ++b) {
     const std::size_t i = index[static_cast<std::size_t>(b)];
@@ -164,7 +106,6 @@ Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index) {
     p.target[b].slice(0, 0, len).copy_(t.target[i]);
     p.action[b].slice(0, 0, len).copy_(t.action[i]);
     p.r[b].slice(0, 0, len).copy_(t.r[i]);
-    if (bins) p.label[b].slice(0, 0, len).copy_(t.label[i]);
     p.mask[b].slice(0, 0, len).fill_(1.0);
     movement.push_back(t.movement[i]);
     p.ticks += len;
@@ -173,35 +114,21 @@ Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index) {
   return p;
 }
 
-LossSums lossSums(const PolicyNet& net, const Padded& p, double offset_weight) {
+LossSums lossSums(const PolicyNet& net, const Padded& p) {
   const PolicyHeadOutput out = net->forward(p.in);
   LossSums s;
-  torch::Tensor per_tick;  // [B,T]
-  if (net->arch().bins == 0) {
-    per_tick = (out.chunk - p.target).square().mean({2, 3});
-  } else {
-    const std::int64_t nb = net->arch().bins, B = p.mask.size(0), T = p.mask.size(1);
-    const torch::Tensor ce =
-        torch::nn::functional::cross_entropy(out.logits.reshape({B * T, nb}), p.label.reshape({B * T}),
-                                             torch::nn::functional::CrossEntropyFuncOptions().reduction(torch::kNone))
-            .view({B, T});
-    const std::int64_t J = net->arch().tokens, C = net->arch().chunk;
-    const torch::Tensor index = p.label.view({B, T, 1, 1, 1}).expand({B, T, J, 1, C});
-    const torch::Tensor offset = out.offsets.gather(3, index).squeeze(3);  // [B,T,J,C]
-    const torch::Tensor center = net->head_centers.index_select(0, p.label.reshape({-1})).view({B, T, J, C});
-    per_tick = ce + offset_weight * (offset - (p.target - center)).square().mean({2, 3});
-  }
+  const torch::Tensor per_tick = (out.chunk - p.target).square().mean({2, 3});  // [B,T]
   s.loss = (per_tick * p.mask).sum();
   {
     torch::NoGradGuard no_grad;
-    // The executed action's first term: the decoded chunk's a(t) in rad plus the law.
-    const torch::Tensor first = net->decodeChunk(out).select(3, 0) * net->a_std + net->a_mean + net->law_gain * p.r;
+    // The executed action's first term: the chunk's a(t) in rad plus the law.
+    const torch::Tensor first = out.chunk.select(3, 0) * net->a_std + net->a_mean + net->law_gain * p.r;
     s.action_sse_rad2 = ((first - p.action).square().sum(2) * p.mask).sum().item<double>();
   }
   return s;
 }
 
-SplitLoss evaluateLoss(const PolicyNet& net, const SequenceTensors& t, double offset_weight, ProcessGroup* group) {
+SplitLoss evaluateLoss(const PolicyNet& net, const SequenceTensors& t, ProcessGroup* group) {
   SplitLoss out;
   if (t.size() == 0) return out;
   torch::NoGradGuard no_grad;
@@ -209,7 +136,7 @@ SplitLoss evaluateLoss(const PolicyNet& net, const SequenceTensors& t, double of
   if (group) std::tie(begin, end) = shardRange(end, group->worldSize(), group->rank());
   double loss = 0.0, sse = 0.0;
   for (std::int64_t i = begin; i < end; ++i) {
-    const LossSums s = lossSums(net, pad(t, {static_cast<std::size_t>(i)}), offset_weight);
+    const LossSums s = lossSums(net, pad(t, {static_cast<std::size_t>(i)}));
     loss += s.loss.item<double>();
     sse += s.action_sse_rad2;
   }

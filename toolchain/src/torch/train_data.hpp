@@ -1,6 +1,6 @@
-// The training's tensors (docs/policy.md "Head"): executed sequences as normalised inputs,
-// chunk targets and bin labels; the action bins; the loss of a batch; sharing the simulated
-// rollouts between ranks. Offline only (libtorch).
+// The training's tensors (docs/policy.md "Head"): executed sequences as normalised inputs and
+// chunk targets; the loss of a batch; sharing the simulated rollouts between ranks. Offline only
+// (libtorch).
 #pragma once
 
 #include "data_parallel.hpp"
@@ -19,7 +19,6 @@ struct SequenceTensors {
   /// Each [T_i, J, C]: the chunk a(t) .. a(t+C−1) of the labels less the model's law (reference
   /// mode: gain·r), normalised; past the sequence's end the arm holds (a = 0, r = 0).
   std::vector<torch::Tensor> target;
-  std::vector<torch::Tensor> label;  ///< bins models: each [T_i] int64, the bin nearest the target
   std::vector<torch::Tensor> action;  ///< each [T_i, J]: the label a(t) itself, rad (for MSE in rad²)
   std::vector<torch::Tensor> r;       ///< each [T_i, J]: r(t), rad (the law's input)
   std::vector<std::int64_t> movement;
@@ -27,38 +26,26 @@ struct SequenceTensors {
   std::size_t size() const { return qn.size(); }
 };
 
-/// `seqs` normalised with the net's norm.* buffers, with targets for its head (chunk C, law.gain);
-/// the bin labels only once the net has its bin centers (labelBins).
+/// `seqs` normalised with the net's norm.* buffers, with targets for its head (chunk C, law.gain).
 SequenceTensors toTensors(const PolicyNet& net, const std::vector<PolicySequence>& seqs);
 
-/// Each target's nearest bin center of the net (Euclidean over the J·C entries; ties to the
-/// lower bin) into t.label. Bins models only.
-void labelBins(const PolicyNet& net, SequenceTensors& t);
-
-/// The action bins of a bins head: k-means++ (seeded with a local splitmix64 generator, Lloyd
-/// by mean, at most `iterations` rounds) over the training targets' J·C entries, `bins` centers
-/// as [bins, J, C]. Deterministic; throws UserError when there are fewer targets than bins.
-torch::Tensor fitActionBins(const SequenceTensors& train, int bins, std::uint64_t seed, int iterations = 50);
-
-/// Sequences `index` padded to the longest: the batch, targets [B,T,J,C], labels [B,T], the
-/// labels in rad [B,T,J], r [B,T,J] and the mask of real ticks [B,T].
+/// Sequences `index` padded to the longest: the batch, targets [B,T,J,C], the labels in rad
+/// [B,T,J], r [B,T,J] and the mask of real ticks [B,T].
 struct Padded {
   PolicyBatch in;
-  torch::Tensor target, label, action, r, mask;
+  torch::Tensor target, action, r, mask;
   std::int64_t ticks = 0;  ///< real ticks
 };
 Padded pad(const SequenceTensors& t, const std::vector<std::size_t>& index);
 
-/// Per real tick of `p`, summed: the training loss (regression: the mean squared error over the
-/// chunk's J·C normalised entries; bins: the cross-entropy of the target's bin plus
-/// offset_weight × the mean squared error of that bin's offset), and the squared error in rad²
-/// summed over J of the executed action's first term (the decoded chunk's a(t), plus the law) -
-/// comparable with the one-step baselines.
+/// Per real tick of `p`, summed: the training loss (the mean squared error over the chunk's J·C
+/// normalised entries), and the squared error in rad² summed over J of the executed action's
+/// first term (the chunk's a(t), plus the law) - comparable with the one-step baselines.
 struct LossSums {
   torch::Tensor loss;  ///< scalar, differentiable
   double action_sse_rad2 = 0.0;
 };
-LossSums lossSums(const PolicyNet& net, const Padded& p, double offset_weight);
+LossSums lossSums(const PolicyNet& net, const Padded& p);
 
 /// Loss per tick and the executed action's MSE (rad², per joint) of `net` on `t`, one sequence at a
 /// time; with a group each rank evaluates its shard and the sums are all-reduced.
@@ -66,7 +53,7 @@ struct SplitLoss {
   double loss = 0.0;      ///< the training loss per tick
   double mse_rad2 = 0.0;  ///< the first action's squared error per tick and joint
 };
-SplitLoss evaluateLoss(const PolicyNet& net, const SequenceTensors& t, double offset_weight, ProcessGroup* group = nullptr);
+SplitLoss evaluateLoss(const PolicyNet& net, const SequenceTensors& t, ProcessGroup* group = nullptr);
 
 /// Executed sequences kept in a file, so that training runs on the same data, execution options
 /// and split share them (TrainOptions::execution_cache): exact doubles, little-endian. readSequences

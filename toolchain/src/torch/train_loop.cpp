@@ -59,21 +59,14 @@ void check(const PolicyData& data, const TrainOptions& o) {
                     std::to_string(data.clusters()));
   if (o.max_epochs < 1) throw UserError("epochs must be at least 1");
   if (o.patience < 1) throw UserError("patience must be at least 1");
-  if (o.batch < 1) throw UserError("batch must be at least 1 sequence");
   if (!(o.lr > 0.0)) throw UserError("learning rate must be positive");
-  if (!(o.offset_weight >= 0.0)) throw UserError("the offset weight must not be negative");
-  if (!(o.ensemble_decay >= 0.0 && o.ensemble_decay <= 20.0)) throw UserError("the ensemble decay must be in [0, 20]");
-  if (o.step_ticks < 0) throw UserError("the clock's resolution must not be negative (0: no clock)");
+  if (o.arch.bins != 0) throw UserError("the trainer's head is a regression of the chunk (bins 0)");
   if (o.latent_dims < 0) throw UserError("the run latent's dimensions must not be negative (0: none)");
   if (!(o.ema_decay >= 0.0 && o.ema_decay < 1.0)) throw UserError("the moving average's decay must be in [0, 1)");
-  // Reference mode has no clock (its step rows are zero) and its action follows the human, so a
-  // coarser clock or a run latent would change nothing but the model's key: refused.
-  if (o.conditioning != Conditioning::kAutonomous && o.step_ticks != 1)
-    throw UserError("the clock's resolution (--step-ticks) is for autonomous mode: reference mode has no clock");
+  // Reference mode's action follows the human, so a run latent would change nothing but the
+  // model's key: refused.
   if (o.conditioning != Conditioning::kAutonomous && o.latent_dims > 0)
     throw UserError("a run latent (--run-latent) is for autonomous mode: in reference mode the human gives the variant");
-  if (o.latent_reads_demo && o.latent_dims == 0)
-    throw UserError("--latent-reads demo needs a run latent (--run-latent K)");
   if (o.select_by_rollout && o.conditioning != Conditioning::kAutonomous)
     throw UserError("model selection on rollouts is for autonomous mode (a reference-mode run needs a human)");
   const ClosedLoopOptions& c = o.closed_loop;
@@ -81,7 +74,6 @@ void check(const PolicyData& data, const TrainOptions& o) {
   if (c.enabled()) {
     if (o.conditioning != Conditioning::kAutonomous)
       throw UserError("closed-loop training is for autonomous mode (a reference-mode run follows a human)");
-    if (o.arch.bins > 0) throw UserError("closed-loop training needs a regression head (--bins 0)");
     if (!(c.lr > 0.0)) throw UserError("the closed-loop learning rate must be positive");
     if (c.batch < 1) throw UserError("the closed-loop batch must be at least 1 rollout");
     if (c.horizon < 1 || c.horizon_growth < 0)
@@ -142,7 +134,6 @@ std::string executionCacheFile(const TrainOptions& o, std::uint64_t fingerprint,
 
 double lawGain(const TrainOptions& o, const SimModel& sim) {
   if (o.conditioning != Conditioning::kReference) return 0.0;
-  if (o.law_gain >= 0.0) return o.law_gain;
   return servoStepGain(sim.params);
 }
 
@@ -160,7 +151,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   res.world_size = o.dist.world_size;
   res.threads_per_rank = torch::get_num_threads();
   res.fingerprint = dataFingerprint(data);
-  res.split = o.val_demos.empty() ? splitByDemonstration(data, o.val_fraction, o.seed) : splitByNames(data, o.val_demos);
+  res.split = splitByDemonstration(data, o.val_fraction, o.seed);
   if (res.split.val.empty())
     throw UserError("no validation demonstration: model selection needs a movement with at least 2 demonstrations "
                     "and a positive validation fraction");
@@ -221,47 +212,18 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   net->setCentroids(data.centroids);
   res.law_gain = lawGain(o, sim);
   net->setLawGain(res.law_gain);
-  net->setEnsembleDecay(o.ensemble_decay);
-  // Constraints on the input weights, restored after every optimiser step: a dropped input's
-  // weights stay zero, a coarse clock's blocks of step rows stay equal. The runtime multiplies
-  // a(t-1) by those weights and adds the tick's step row, so model.bin needs no other mark and
-  // nao_rt runs it unchanged.
+  // A dropped input's weights stay zero, restored after every optimiser step. The runtime
+  // multiplies a(t-1) by those weights, so model.bin needs no other mark and nao_rt runs it
+  // unchanged.
   const auto holdInputConstraints = [&] {
+    if (o.previous_action) return;
     torch::NoGradGuard no_grad;
-    if (!o.previous_action) {
-      net->embed_in->weight[1].zero_();
-      net->embed_act->weight.zero_();
-    }
-    if (o.step_ticks == 0) net->step_emb.zero_();
-    if (o.step_ticks > 1) {
-      const std::int64_t rows = net->step_emb.size(0), g = o.step_ticks;
-      for (std::int64_t b = 0; b < rows; b += g) {
-        torch::Tensor block = net->step_emb.slice(0, b, std::min(b + g, rows));
-        block.copy_(block.mean(0, true).expand_as(block));
-      }
-    }
+    net->embed_in->weight[1].zero_();
+    net->embed_act->weight.zero_();
   };
   holdInputConstraints();
   SequenceTensors train = toTensors(net, train_seqs);
   SequenceTensors val = toTensors(net, val_seqs);
-  if (o.arch.bins > 0) {
-    net->setBinCenters(fitActionBins(train, o.arch.bins, o.seed));
-    labelBins(net, train);
-    labelBins(net, val);
-    // How well the bins cover the targets: the share of ticks within their bin's RMS radius.
-    torch::NoGradGuard no_grad;
-    const torch::Tensor centers = net->head_centers.reshape({o.arch.bins, -1});
-    std::vector<torch::Tensor> dist, label;
-    for (std::size_t i = 0; i < train.size(); ++i) {
-      const torch::Tensor y = train.target[i].reshape({train.target[i].size(0), -1});
-      dist.push_back((y - centers.index_select(0, train.label[i])).square().sum(1));
-      label.push_back(train.label[i]);
-    }
-    const torch::Tensor d = torch::cat(dist), l = torch::cat(label);
-    const torch::Tensor count = torch::zeros({o.arch.bins}).index_add_(0, l, torch::ones_like(d));
-    const torch::Tensor radius2 = torch::zeros({o.arch.bins}).index_add_(0, l, d) / count.clamp_min(1.0);
-    res.bin_coverage = (d <= radius2.index_select(0, l)).to(torch::kFloat64).mean().item<double>();
-  }
 
   std::vector<torch::Tensor> params = net->trainableParameters();
   RunLatent latent{nullptr};
@@ -277,10 +239,6 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   ClosedLoopData cl;
   if (o.closed_loop.enabled())
     cl = closedLoopData(data, codes, sim, period_s, ControllerParams{}.workspace_margin_rad);
-  // --latent-reads demo: the sequence the latent reads for each training sequence (its
-  // demonstration's clean rollout); empty: each reads itself.
-  std::vector<std::size_t> latent_source;
-  if (latent && o.latent_reads_demo) latent_source = cleanRolloutOf(train_seqs);
   auto optimiser = std::make_unique<torch::optim::Adam>(params, torch::optim::AdamOptions(o.lr));
   // The moving average of the weights (--ema): scored, kept and written in place of the trained
   // weights, which the optimiser goes on training. The input constraints are linear, so the
@@ -434,10 +392,10 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       const std::vector<std::size_t> order =
           shuffledIndices(train.size(), o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch));
       const auto n_seq = static_cast<std::int64_t>(train.size());
-      const std::int64_t n_batches = (n_seq + o.batch - 1) / o.batch;
+      const std::int64_t n_batches = (n_seq + kTrainBatch - 1) / kTrainBatch;
       const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
       for (std::int64_t k = 0; k < n_run; ++k) {
-        const std::int64_t b = k * o.batch, e = std::min<std::int64_t>(b + o.batch, n_seq);
+        const std::int64_t b = k * kTrainBatch, e = std::min<std::int64_t>(b + kTrainBatch, n_seq);
         // The global batch's real ticks: every rank knows them, so each can scale its share.
         std::int64_t global_ticks = 0;
         for (std::int64_t i = b; i < e; ++i) global_ticks += train.qn[order[static_cast<std::size_t>(i)]].size(0);
@@ -460,14 +418,11 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
                                                             static_cast<std::uint64_t>(k)),
                              torch::kFloat32)
                     .slice(0, lo, hi);
-            std::vector<std::size_t> read;
-            if (!latent_source.empty())
-              for (const std::size_t i : index) read.push_back(latent_source[i]);
-            const RunLatentImpl::Draw draw = read.empty() ? latent->forward(p, eps) : latent->forward(pad(train, read), eps);
+            const RunLatentImpl::Draw draw = latent->forward(p, eps);
             p.in.z = draw.z_embedded;
             kl = o.latent_kl * (draw.kl * p.mask.sum(1)).sum();
           }
-          LossSums s = lossSums(net, p, o.offset_weight);
+          LossSums s = lossSums(net, p);
           if (kl.defined()) s.loss = s.loss + kl;
           (s.loss / static_cast<double>(global_ticks)).backward();
           loss_sum += s.loss.item<double>();
@@ -500,7 +455,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
       for (std::size_t i = 0; i < 3; ++i)
         if (kind_ticks[i] > 0) st.closed_loop_kind_rms_m[i] = std::sqrt(kind_sse[i] / kind_ticks[i]);
     }
-    const SplitLoss v = evaluateLoss(net, val, o.offset_weight, group.get());
+    const SplitLoss v = evaluateLoss(net, val, group.get());
     st.val_loss = v.loss;
     st.val_mse_rad2 = v.mse_rad2;
     const Clock::time_point t_score = Clock::now();
@@ -581,8 +536,8 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     updateRunCodes(codes, train, *latent);
     res.run_codes = std::move(codes.codes);
   }
-  res.train = evaluateLoss(net, train, o.offset_weight, group.get());
-  res.val = evaluateLoss(net, val, o.offset_weight, group.get());
+  res.train = evaluateLoss(net, train, group.get());
+  res.val = evaluateLoss(net, val, group.get());
   res.seconds = secondsSince(t_start);
   double samples = 0.0, seconds = 0.0;
   for (const EpochStats& e : res.history) {

@@ -13,6 +13,7 @@
 #include "nao/sim_arm.hpp"
 #include "nao/tools/kmeans.hpp"
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -116,23 +117,14 @@ PolicyData makePolicyData(const std::map<std::string, std::vector<JointVector>>&
 /// more execute c(t) + n(t) with AR(1) command noise n (DART: the states off the trajectory the
 /// policy's own errors reach, labelled by the expert from there); the inputs are what the
 /// controller sees (measured q, the applied a(t−1), and as r the offset f(t+1) − q(t) of the
-/// feature-extracted target the controller computes online from the snapped key poses).
+/// feature-extracted target the controller computes online from the snapped key poses). Every
+/// rollout's expert aims at f(t+1), the demonstration's pose of the same tick: a noisy state
+/// that fell behind or aside is asked to catch up in one tick.
 struct ExecutionOptions {
   int noisy_rollouts = 1;                          ///< per demonstration, besides the clean one
-  std::vector<double> noise_std_rad = {0.03, 0.06};  ///< σ of noisy rollout k: entry (k − 1) % size
   double noise_corr = 0.8;                         ///< ρ of the AR(1) noise, per tick
   int expert_iterations = 8;                       ///< secant steps per tick (iteration cap)
   double expert_tol_rad = 1e-7;                    ///< stop when every joint ends this close to f(t+1)
-  /// What the noisy rollouts' expert aims at (the clean rollout always follows f(t+1)).
-  /// kTick: f(t+1), the demonstration's pose of the same tick: a state that fell behind or
-  /// aside is asked to catch up in one tick. kPath: f(p+1), p the pose of f nearest q(t)
-  /// (joint-space L2, plus 1e-4 rad² per tick squared off p(t−1) + 1, so dwells keep their
-  /// timing) among the previous tick's p and the path_search poses after it: the
-  /// demonstrated path ahead of where the arm is, whatever the clock - what a run that lost the
-  /// demonstration's timing (an autonomous run from a start it has not seen) needs to be shown.
-  enum class Target { kTick, kPath };
-  Target noisy_target = Target::kTick;
-  int path_search = 10;                            ///< kPath: poses after the previous p searched per tick
   /// Noisy rollouts start from rest at another training demonstration's start of the same
   /// movement (a seeded choice among the listed ones) instead of their own: the states on the
   /// way from a start onto the demonstration. The result then depends on the listed demos.
@@ -141,6 +133,10 @@ struct ExecutionOptions {
   /// in libode) with two worlds stepped on two threads here; more only with an ODE built for it.
   int threads = 1;
 };
+
+/// σ of the noisy rollouts' stationary AR(1) command noise, rad: noisy rollout k takes entry
+/// (k − 1) % 2.
+inline constexpr std::array<double, 2> kNoiseStdRad = {0.03, 0.06};
 
 /// One executed rollout of a demonstration: T − 1 ticks (every sample with a successor), rad.
 struct PolicySequence {
@@ -205,11 +201,6 @@ std::size_t tickCount(const std::vector<PolicySequence>& sequences);
 /// `seed`), and the last round(val_fraction * n) become validation, at least 1 when n >= 2 and
 /// val_fraction > 0, and at most n - 1. Throws UserError unless 0 <= val_fraction < 1.
 PolicySplit splitByDemonstration(const PolicyData& data, double val_fraction, std::uint64_t seed);
-
-/// Split by name: the demonstrations named in `val_names` validate, the others train (a user's
-/// held-out session, or demonstrations an experiment must keep out). Throws UserError for a name
-/// not in the data, a name given twice, or a movement left without a training demonstration.
-PolicySplit splitByNames(const PolicyData& data, const std::vector<std::string>& val_names);
 
 /// 0..n-1 in a seeded random order (Fisher-Yates with a local splitmix64 generator): the same
 /// on every platform and standard library.
