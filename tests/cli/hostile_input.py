@@ -222,5 +222,44 @@ class Hostile(unittest.TestCase):
         self.assertFalse(os.path.exists(os.path.join(data, "centroids.json")))
 
 
+    # ---- train: recipe files ------------------------------------------------------------------
+
+    def recipe_refused(self, text, names):
+        recipe = self.write("recipe.json", text)
+        out = self.path("model.bin")
+        self.expect_refused([NAO_TOOLCHAIN, "train", "--recipe", recipe, "--data", os.path.join(self.tmp, "synth"),
+                             "--out", out], [recipe] + names, timeout=60)
+        self.assertFalse(os.path.exists(out))
+
+    def test_train_recipe_unknown_option(self):
+        self.recipe_refused('{"train": {"lr": 0.001, "learning-rate": 0.1}}', ["--learning-rate"])
+
+    def test_train_recipe_value_out_of_range(self):
+        self.recipe_refused('{"train": {"lr": -1}}', ["--lr"])
+
+    def test_train_recipe_flag_not_boolean(self):
+        self.recipe_refused('{"train": {"no-previous-action": 1}}', ["--no-previous-action", "true or false"])
+
+    def test_train_recipe_not_an_object(self):
+        self.recipe_refused('[{"train": {}}]', ["\"train\""])
+        self.recipe_refused('{"train": {"lr": 0.001}', ["not JSON"])
+
+    def test_train_recipe_output_in_recipe(self):
+        self.recipe_refused('{"train": {"out": "elsewhere.bin"}}', ["'out'", "command line"])
+
+    def test_train_committed_recipes_are_read(self):
+        # Every option of a committed model's recipe is one train takes: the run gets past the
+        # recipe and stops at the (empty) data set.
+        recipes = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "models", "recipes")
+        empty = os.path.join(self.tmp, "no_demonstrations")
+        os.makedirs(empty, exist_ok=True)
+        names = sorted(n for n in os.listdir(recipes) if n.endswith(".json"))
+        self.assertIn("autonomous.json", names)
+        for n in names:
+            line = self.expect_refused([NAO_TOOLCHAIN, "train", "--recipe", os.path.join(recipes, n), "--data", empty,
+                                        "--out", self.path(n + ".bin")], [empty], timeout=60)
+            self.assertNotIn("recipe", line)
+
+
 if __name__ == "__main__":
     unittest.main(argv=[sys.argv[0], "-v"] + sys.argv[4:])

@@ -212,7 +212,7 @@ void applyRecipe(CLI::App& cmd, const std::string& path) {
       for (const nlohmann::json& v : value) values.push_back(text(key, v));
     else
       values.push_back(text(key, value));
-    if (opt->get_type_size() == 0) {  // a flag: true sets it, false leaves it
+    if (opt->get_expected_max() == 0) {  // a flag: true sets it, false leaves it
       if (values.size() != 1 || (values[0] != "true" && values[0] != "false"))
         throw UserError(path + ": --" + key + " is a flag: true or false");
       if (values[0] == "false") continue;
