@@ -2,7 +2,8 @@
 // streamed with its key/value caches (streamStep) through the command limiter and the arm copy
 // (armCopyTick), forward and backward, for a batch of runs; beside the same rollout without a
 // cache, where each tick reruns the sequence forward over every tick so far (what a rollout
-// would cost through PolicyNetImpl::act). Small configuration, random weights, one thread.
+// would cost through PolicyNetImpl::act). Small and paper configurations, random weights, one
+// thread.
 #include "arm_copy_torch.hpp"
 #include "nao/arm_model.hpp"
 #include "policy_stream.hpp"
@@ -21,9 +22,9 @@ const SimModel& benchSim() {
   return sim;
 }
 
-PolicyNet benchNet() {
+PolicyNet benchNet(bool paper) {
   torch::manual_seed(1);
-  PolicyArch arch = smallArch();
+  PolicyArch arch = paper ? paperArch() : smallArch();
   arch.chunk = 10;
   PolicyNet net(arch, Conditioning::kAutonomous);
   torch::NoGradGuard no_grad;
@@ -68,9 +69,9 @@ void rollout(const PolicyNet& net, std::int64_t B, std::int64_t T, bool cached) 
   loss.backward();
 }
 
-void BM_ClosedLoop(benchmark::State& state, bool cached) {
+void BM_ClosedLoop(benchmark::State& state, bool cached, bool paper = false) {
   torch::set_num_threads(1);
-  const PolicyNet net = benchNet();
+  const PolicyNet net = benchNet(paper);
   const std::int64_t B = state.range(0), T = state.range(1);
   for (auto _ : state) {
     for (auto& p : net->parameters()) p.mutable_grad() = torch::Tensor();
@@ -82,8 +83,10 @@ void BM_ClosedLoop(benchmark::State& state, bool cached) {
 
 void BM_ClosedLoop_Streamed(benchmark::State& state) { BM_ClosedLoop(state, true); }
 void BM_ClosedLoop_Recomputed(benchmark::State& state) { BM_ClosedLoop(state, false); }
+void BM_ClosedLoop_Streamed_Paper(benchmark::State& state) { BM_ClosedLoop(state, true, true); }
 
 }  // namespace
 
 BENCHMARK(BM_ClosedLoop_Streamed)->Args({16, 30})->Args({64, 30})->Args({16, 150})->Args({64, 150})->Unit(benchmark::kMillisecond)->MinTime(2.0);
+BENCHMARK(BM_ClosedLoop_Streamed_Paper)->Args({16, 30})->Args({16, 150})->Unit(benchmark::kMillisecond)->MinTime(2.0);
 BENCHMARK(BM_ClosedLoop_Recomputed)->Args({16, 30})->Args({16, 150})->Unit(benchmark::kMillisecond)->MinTime(2.0);
