@@ -226,10 +226,11 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     << o.patience << "), best " << r.best_epoch << " (exported) |\n";
   if (o.select_by_rollout && o.closed_loop.enabled() && o.latent_dims > 0) {
     s << "| model selection | after every epoch the net (the runtime's streaming inference) is rolled out on the "
-         "simulated arm from each validation demonstration's start with the run code nao_rt gives it; kept: among "
-         "the epochs whose runs stay within the demonstrations' joint range + 0.1 rad, the one whose runs play "
-         "their codes most faithfully (the lowest mean over movements of the median hand-path DTW from a run to "
-         "the demonstration its code names) |\n";
+         "simulated arm from each validation demonstration's start with the run code nao_rt gives it; the closed "
+         "loop starts from the teacher-forced epoch whose runs make the most movements, then the lowest DTW to the "
+         "nearest validation demonstration; kept: among the closed-loop epochs whose runs stay within the "
+         "demonstrations' joint range + 0.1 rad, the one whose runs play their codes most faithfully (the lowest "
+         "mean over movements of the median hand-path DTW from a run to the demonstration its code names) |\n";
   } else if (o.select_by_rollout) {
     s << "| model selection | after every epoch the net (the runtime's streaming inference) is rolled out on the "
          "simulated arm from each validation demonstration's start; kept: among the epochs whose runs make the "

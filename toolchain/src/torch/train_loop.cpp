@@ -466,10 +466,14 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
                 period_s, st, latent ? &codes.codes : nullptr);
     }
     const double score_seconds = secondsSince(t_score);
-    // A closed-loop model with run codes is trained to play its codes: kept by how faithfully it does.
-    const bool by_fidelity = o.closed_loop.enabled() && latent;
-    const bool better =
-        o.select_by_rollout ? (best.empty() || betterEpoch(st, best_stats, by_fidelity)) : st.val_loss < best_stats.val_loss;
+    // A closed-loop run keeps a closed-loop epoch: its teacher-forced phase only picks the weights
+    // the closed loop starts from (by the teacher-forced rule), whatever a checkpoint's history
+    // recorded. A closed-loop model with run codes is trained to play its codes: kept by how
+    // faithfully it does.
+    const bool first_closed_loop = epoch == o.max_epochs + 1 && o.closed_loop.enabled();
+    const bool by_fidelity = epoch > o.max_epochs && latent;
+    const bool better = best.empty() || first_closed_loop ||
+                        (o.select_by_rollout ? betterEpoch(st, best_stats, by_fidelity) : st.val_loss < best_stats.val_loss);
     if (better) {
       best_stats = st;
       res.best_epoch = epoch;
