@@ -13,8 +13,10 @@
 #include "nao/tools/policy_dataset.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
+#include "nao/tools/synth.hpp"
 #include "nao/tools/toolchain_dims.hpp"
 #include "replica.hpp"
+#include "rt_metrics.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
@@ -40,6 +42,9 @@ struct MovementRuns {
   double demo_nn_dtw_m = 0.0;  ///< the validation demonstrations' own, to the nearest other one
   double speed_ratio = 0.0;    ///< middle-phase RMS hand speed, runs / demonstrations
   double loops_run = 0.0, loops_demo = 0.0;
+  /// Run-code models: the medoid replay's DTW to the nearest validation demonstration, and how
+  /// far the runs and the replays are from the demonstration their code names.
+  double replay_dtw_m = -1.0, code_fidelity_m = -1.0, replay_fidelity_m = -1.0;
 };
 
 struct Scores {
@@ -52,9 +57,15 @@ struct Scores {
 // An autonomous model's runs as nao_rt makes them (the evaluator's in-process replay of
 // nao_rt --start-pose: the runtime's controller, policy and ODE arm) from every validation
 // demonstration's start for its length, scored as nao_toolchain evaluate scores them.
+// With run codes, each run's named demonstration (the training demonstration whose code the
+// controller picks from its start) is regenerated from the synthesiser with the model's key poses
+// and tracked from the run's start by the gain law (the medoid replay, as evaluate makes it).
 std::map<std::string, MovementRuns> closedLoop(const ModelFile& model, const ArmModel& arm,
-                                               const tools::PolicyData& data, const std::vector<int>& val) {
+                                               const tools::PolicyData& data, const std::vector<int>& val,
+                                               const std::vector<ModelRunCodes>& codes,
+                                               const std::map<std::string, std::vector<JointVector>>& centroids) {
   std::map<std::string, MovementRuns> out;
+  const SimModel sim = makeSimModel(arm);
   for (std::size_t m = 0; m < model.header.movement_names.size(); ++m) {
     std::vector<const tools::PolicyDemo*> demos;
     std::vector<tools::HandPath> hands;
@@ -67,7 +78,7 @@ std::map<std::string, MovementRuns> closedLoop(const ModelFile& model, const Arm
     const double period_s = demos.front()->t_s[1] - demos.front()->t_s[0];
     // Scored as nao_toolchain evaluate scores its runs.
     const tools::HeldOutScores held = tools::scoreHeldOut(hands, period_s);
-    std::vector<double> dtw, still, speed, loops;
+    std::vector<double> dtw, still, speed, loops, replay, code_fid, replay_fid;
     for (std::size_t k = 0; k < demos.size(); ++k) {
       const int ticks = static_cast<int>(demos[k]->f.size());
       const JointVector start = clampToLimits(arm, demos[k]->start);
@@ -79,6 +90,19 @@ std::map<std::string, MovementRuns> closedLoop(const ModelFile& model, const Arm
       still.push_back(tools::nearestDemo(tools::handPath(arm, std::vector<JointVector>(q.size(), start)), hands).dtw_m);
       speed.push_back(run.speed_m_s);
       loops.push_back(run.loops);
+      if (codes.empty()) continue;
+      const std::string& movement = model.header.movement_names[m];
+      const std::string& named = codes[m].names[static_cast<std::size_t>(runCodeIndex(codes[m], start))];
+      const std::vector<JointVector> f =
+          tools::makeDemoReference(arm, tools::parseMovement(movement), kTrainingSeed,
+                                   std::stoi(named.substr(named.rfind('_') + 1)), centroids.at(movement))
+              .target;
+      const tools::HandPath named_hand = tools::handPath(arm, f);
+      const tools::HandPath replay_hand =
+          tools::handPath(arm, tools::trackDemo(sim, period_s, servoStepGain(sim.params), f, start, ticks));
+      replay.push_back(tools::scoreRun(replay_hand, held).nearest.dtw_m);
+      code_fid.push_back(rt::dtwMeanDistance(tools::handPath(arm, q), named_hand));
+      replay_fid.push_back(rt::dtwMeanDistance(replay_hand, named_hand));
     }
     MovementRuns r;
     r.dtw_m = tools::median(dtw);
@@ -87,6 +111,14 @@ std::map<std::string, MovementRuns> closedLoop(const ModelFile& model, const Arm
     r.speed_ratio = tools::median(speed) / tools::median(held.speed_m_s);
     r.loops_run = tools::median(loops);
     r.loops_demo = tools::median(held.loops);
+    if (!codes.empty()) {
+      r.replay_dtw_m = tools::median(replay);
+      r.code_fidelity_m = tools::median(code_fid);
+      r.replay_fidelity_m = tools::median(replay_fid);
+      MESSAGE(model.header.movement_names[m] << ": medoid replay " << r.replay_dtw_m * 1e3 << " mm; code fidelity "
+                                             << r.code_fidelity_m * 1e3 << " mm (replay " << r.replay_fidelity_m * 1e3
+                                             << " mm)");
+    }
     MESSAGE(model.header.movement_names[m] << ": " << demos.size() << " runs, DTW " << r.dtw_m * 1e3 << " mm (held still "
                                            << r.still_dtw_m * 1e3 << " mm, demonstrations' NN "
                                            << r.demo_nn_dtw_m * 1e3 << " mm), speed ratio " << r.speed_ratio << ", loops "
@@ -203,7 +235,7 @@ Scores scoreAs(const std::string& path, const ArmModel& arm, const ModelFile& mo
   s.zero = sum_zero / n;
   s.repeat = sum_repeat / n;
   if (!codes.empty()) s.run_code = sum_coded / n;
-  if (model.header.conditioning == Conditioning::kAutonomous) s.runs = closedLoop(model, arm, data, all);
+  if (model.header.conditioning == Conditioning::kAutonomous) s.runs = closedLoop(model, arm, data, all, codes, centroid_map);
   MESSAGE(path << ": " << val.size() << " validation demonstrations, " << s.samples << " samples; MSE rad^2: model "
                << s.model << (codes.empty() ? "" : " (with the runs' codes " + std::to_string(s.run_code) + ")")
                << ", zero action " << s.zero << ", repeat last " << s.repeat);
@@ -245,19 +277,27 @@ TEST_CASE("models/default.bin beats both baselines and reaches at most half the 
 // it acts out its own run (the run code of the training demonstrations' medoid nearest the start),
 // whose phase is not the held-out demonstration's, so its one-step MSE may well exceed the zero
 // action's (models/autonomous.md states both). The card's one-step figures are reproduced
-// (score); on every movement the runs must come within twice the distance between two validation
-// demonstrations (and beat an arm held at its start), and whole_arm's must make its loops at its
-// speed (docs/evaluate.md's bars), as the card states.
-TEST_CASE("models/autonomous.bin's runs from its validation starts make the movement") {
+// (score). The bars of docs/evaluate.md that the card shows met on the validation set: on every
+// movement the runs come within twice the distance between two validation demonstrations (and
+// beat an arm held at its start) and nearer the demonstration their code names than the nearest
+// held-out one (they play their code); elbow and whole_arm draw their loops; whole_arm moves at
+// its speed and comes within max(1.1 x, + 1 mm) of its medoid replay.
+TEST_CASE("models/autonomous.bin's runs from its validation starts make the movement and play their codes") {
   const Scores s = score(modelPath("autonomous.bin"));
   REQUIRE(s.runs.size() == 3);
   for (const auto& [name, r] : s.runs) {
     INFO(name);
     CHECK(r.dtw_m < r.still_dtw_m);
     CHECK(r.dtw_m < 2.0 * r.demo_nn_dtw_m);
+    REQUIRE(r.code_fidelity_m >= 0.0);
+    CHECK(r.code_fidelity_m < r.dtw_m);
+  }
+  for (const std::string name : {"elbow", "whole_arm"}) {
+    INFO(name);
+    CHECK(std::abs(s.runs.at(name).loops_run - s.runs.at(name).loops_demo) <= 1.0);
   }
   const MovementRuns& w = s.runs.at("whole_arm");
   CHECK(w.speed_ratio >= 0.7);
   CHECK(w.speed_ratio <= 1.3);
-  CHECK(std::abs(w.loops_run - w.loops_demo) <= 1.0);
+  CHECK(w.dtw_m <= std::max(1.1 * w.replay_dtw_m, w.replay_dtw_m + 1e-3));
 }
