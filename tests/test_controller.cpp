@@ -2,6 +2,7 @@
 // would drive the robot. Behaviour around the policy (faults, limits, determinism) is tested
 // here with a random small policy; imitation quality with trained models elsewhere.
 #include "nao/controller.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "nao/tools/kmeans.hpp"
 #include "support/random_policy.hpp"

@@ -1,6 +1,7 @@
 // Real-time property of the whole tick: from activate through 6,000 ticks (10 simulated
 // minutes: retargeting, policy, ODE, faults included) nothing is allocated.
 #include "nao/controller.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/alloc_counter.hpp"
 #include "support/random_policy.hpp"

@@ -16,6 +16,7 @@
 // array length, close the socket, heat a joint. It records every actuator packet it received
 // (--log CSV) and a summary (--summary JSON) for the tests and the benchmark.
 #include "nao/arm_model.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/controller.hpp"
 #include "nao/lola.hpp"
 #include "nao/sim_arm.hpp"

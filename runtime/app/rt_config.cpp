@@ -1,4 +1,5 @@
 // Configure-time preparation of a nao_rt run (rt_config.hpp).
+#include "nao/arm_model_io.hpp"
 #include "rt_config.hpp"
 
 #include "rt_live.hpp"
@@ -109,9 +110,7 @@ JointVector startPose(const std::vector<double>& v) {
 
 // --reference none: the start (a model start or --start-pose), the default length, the description.
 void prepareAutonomousStart(const RunOptions& o, PreparedRun& p, std::int64_t& default_ticks) {
-  const ModelHeader& h = p.model.header;
-  const std::vector<ModelStart> starts =
-      modelStarts(h.metadata_json, h.movement_names, p.model_source)[static_cast<std::size_t>(p.movement_index)];
+  const std::vector<ModelStart>& starts = p.model_spec.starts[static_cast<std::size_t>(p.movement_index)];
   const std::string& m = p.spec.movement;
   if (!o.start_pose.empty()) {
     p.q_start = startPose(o.start_pose);
@@ -272,16 +271,15 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
     throw UsageError("--gain-law replaces a reference-conditioned policy; " + p.model_source +
                      " is an autonomous-mode model (the gain law needs the feature-extracted reference)");
   p.centroids = modelKeyPoses(p.model, p.movement_index);
-  p.workspace = modelWorkspace(h.metadata_json, h.movement_names, p.model_source);
-  p.run_codes = modelRunCodes(h.metadata_json, h.movement_names, static_cast<int>(h.arch.d_model), p.model_source);
+  // The starts, workspace, run codes and (next) the retargeting setting, decoded once.
+  p.model_spec = readModelSpec(h, o.controller.retarget, p.model_source);
   // The reference is retargeted the way the model's training data was.
-  p.retarget = modelRetargetSetting(h.metadata_json, o.controller.retarget, p.model_source);
 
   std::int64_t default_ticks = 0;
   switch (p.spec.kind) {
     case ReferenceKind::kFile: {
       auto recorded = std::make_unique<RecordedSource>(
-          makeFileReference(p.arm, p.spec.path, p.spec.movement, p.centroids, p.retarget));
+          makeFileReference(p.arm, p.spec.path, p.spec.movement, p.centroids, p.model_spec.retarget));
       const ReferenceStream& ref = recorded->stream();
       p.reference = &ref;
       p.human = std::move(recorded);

@@ -182,9 +182,9 @@ struct PreparedRun {
   ReferenceSpec spec;
   int movement_index = 0;              ///< into model.header.movement_names
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
-  std::vector<ModelWorkspace> workspace;  ///< the model's demonstrated joint range per movement (may be empty)
-  std::vector<ModelRunCodes> run_codes;   ///< the model's run codes per movement (empty: none)
-  RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
+  /// The model's metadata (starts, workspace, run codes), its retargeting setting applied over
+  /// options.controller.retarget.
+  ModelSpec model_spec;
   std::unique_ptr<HumanSource> human;  ///< the frames the ticks see; nullptr: none (autonomous)
   /// file: the recorded reference (owned by `human`, so it stays put when the run is moved);
   /// nullptr for none.

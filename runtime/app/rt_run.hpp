@@ -20,6 +20,8 @@
 #include "rt_rundir.hpp"
 
 #include "nao/arm_model.hpp"
+#include "nao/attention_shm.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/attention_ring.hpp"
 #include "nao/controller.hpp"
 #include "nao/kinematics.hpp"
@@ -177,7 +179,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       }
     }
     ControllerParams controller_params = options.controller;
-    controller_params.retarget = p.retarget;
+    controller_params.retarget = p.model_spec.retarget;
     // The human's scale d_h is calibrated once per reference, as the training data and the
     // evaluation target were retargeted (one scale per demonstration from all its frames:
     // retargetTargets), not re-estimated per frame: per-frame link lengths jitter with
@@ -188,7 +190,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // A live reference: --human-scale, or each frame's scale from the source (applyLiveHumanScale).
     if (p.live != nullptr && options.human_scale_m > 0.0) controller_params.human.scale_m = options.human_scale_m;
     // Not const: a live source's d_h goes into model.params.human tick by tick.
-    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, p.workspace, p.run_codes);
+    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, p.model_spec.workspace,
+                                                          p.model_spec.run_codes);
     // The robot backend owns its hardware (STYLE 18): the in-process ODE arm, or LoLA's socket.
     std::unique_ptr<RobotBackend> robot_backend;
     LolaBackend* lola = nullptr;
@@ -321,7 +324,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     records.resize(static_cast<std::size_t>(ticks_done));
     totals.stop = stop;
     if (data->run_code >= 0)
-      totals.run_code = p.run_codes[static_cast<std::size_t>(p.movement_index)].names[static_cast<std::size_t>(data->run_code)];
+      totals.run_code = p.model_spec.run_codes[static_cast<std::size_t>(p.movement_index)].names[static_cast<std::size_t>(data->run_code)];
     if (lola) {
       totals.lola = true;
       totals.lola_socket = robot.socket_path;

@@ -4,6 +4,7 @@
 #include "rt_live.hpp"
 
 #include "nao/policy_kernels.hpp"
+#include "nao/attention_shm.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -204,10 +205,10 @@ void finishRun(const RunOptions& o, const PreparedRun& p, const std::vector<Tick
                 {"precision", weightPrecisionName(p.precision)},
                 {"kernel", policyKernelName(activePolicyKernel())}};
   j["reference"] = p.description;
-  j["retarget"] = {{"priority", retargetPriorityName(p.retarget.priority)},
-                   {"lambda_q", p.retarget.lambda_q},
-                   {"posture_weights", std::vector<double>(p.retarget.posture_weights.data(),
-                                                           p.retarget.posture_weights.data() + kNumJoints)}};
+  j["retarget"] = {{"priority", retargetPriorityName(p.model_spec.retarget.priority)},
+                   {"lambda_q", p.model_spec.retarget.lambda_q},
+                   {"posture_weights", std::vector<double>(p.model_spec.retarget.posture_weights.data(),
+                                                           p.model_spec.retarget.posture_weights.data() + kNumJoints)}};
   j["movement"] = p.spec.movement;
   j["realtime"] = o.realtime;
   if (o.realtime) {

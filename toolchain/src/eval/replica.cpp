@@ -1,6 +1,7 @@
 #include "replica.hpp"
 
 #include "nao/controller.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/toolchain_dims.hpp"
