@@ -54,24 +54,10 @@ std::size_t sumOverMatrices(const PolicyArch& arch, Bytes bytes) {
          static_cast<std::size_t>(arch.decoder_layers) * (2 * attention + ffn);
 }
 
-bool endsWith(std::string_view s, std::string_view tail) {
-  return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
-}
-
-}  // namespace
-
-bool isInt8Tensor(std::string_view name) noexcept {
-  if (endsWith(name, ".wq") || endsWith(name, ".wk") || endsWith(name, ".wv") || endsWith(name, ".wo")) return true;
-  // The FFN's four matrices: "<enc|dec>.<l>.ffn.<i>.weight".
-  const std::size_t f = name.find(".ffn.");
-  return f != std::string_view::npos && endsWith(name, ".weight");
-}
-
-namespace {
-
-/// A blob of `size` bytes (64-byte aligned, zero where nothing is written): for each matrix
-/// isInt8Tensor names, in manifest order, `section(spec, out, in)` checks its shape and gives its
-/// bytes, and `write(W, out, in, dst)` fills them. `who` names the caller in the layout errors.
+/// A blob of `size` bytes (64-byte aligned, zero where nothing is written): for each
+/// TensorRole::kMatrix tensor, in manifest order, `section(spec, out, in)` checks its shape and
+/// gives its bytes, and `write(W, out, in, dst)` fills them. `who` names the caller in the layout
+/// errors.
 template <class Section, class Write>
 AlignedBytes buildBlob(const ModelFile& model, std::size_t size, const char* who, Section section, Write write) {
   AlignedBytes blob;
@@ -81,7 +67,7 @@ AlignedBytes buildBlob(const ModelFile& model, std::size_t size, const char* who
   std::size_t off = 0;
   for (std::size_t i = 0; i < model.tensors.size(); ++i) {
     const TensorSpec& t = model.tensors[i].spec;
-    if (!isInt8Tensor(t.name) || t.shape.size() != 2) continue;
+    if (t.role != TensorRole::kMatrix) continue;
     const int in = t.shape[0], out = t.shape[1];  // model.bin matrices are [in, out] row-major
     const std::size_t bytes = section(t, out, in);
     if (off + bytes > blob.size) throw std::logic_error(std::string(who) + ": the manifest's matrices exceed the layout");

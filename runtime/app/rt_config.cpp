@@ -60,6 +60,7 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
     p.model = mappedModelFile(o.compiled, origin);
     p.model_bytes = o.compiled.bytes;
     p.model_offsets = o.compiled.offsets;
+    p.model_extents = o.compiled.extents;
   } else {
     throw std::runtime_error(
         "no model is compiled into this build (models/default.bin did not exist when it was built); pass "

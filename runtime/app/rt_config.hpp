@@ -174,6 +174,7 @@ struct PreparedRun {
   std::string model_source;            ///< "compiled-in" or the --weights path
   const std::uint8_t* model_bytes = nullptr;  ///< compiled-in: the embedded bytes to bind to; else nullptr
   const std::uint64_t* model_offsets = nullptr;  ///< compiled-in: the generated tensor offsets
+  const TensorExtent* model_extents = nullptr;   ///< compiled-in: the generated view extents
   WeightPrecision precision = WeightPrecision::kFp32;
   /// int8: the compiled-in blob (checked) to bind to; nullptr: quantise the model at start-up.
   const std::uint8_t* int8_bytes = nullptr;

@@ -136,7 +136,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // a --weights file: its tensors copied into aligned storage, bound by name.
     PolicyWeights<Dims> weights =
         p.model_bytes != nullptr
-            ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model.header.arch,
+            ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model_extents, p.model.header.arch,
                                         p.model.header.conditioning)
             : bindWeightFile<Dims>(p, weight_storage);
     // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no

@@ -1,6 +1,7 @@
 // Reduced-precision weights (docs/policy.md "int8 weights"): the int8 blob of a model.bin.
 //
-// Every attention projection (wq, wk, wv, wo) and FFN weight matrix is stored as int8 with one
+// Every matrix of role TensorRole::kMatrix in the manifest (policy_config.hpp: the attention
+// projections wq, wk, wv, wo and the FFN weights), in manifest order, is stored as int8 with one
 // float scale per output row (max |row| / 127), its input columns interleaved in pairs for the
 // pmaddwd kernels (policy_kernels.hpp "Reduced precision"). Biases, layer norms, embeddings,
 // the head, the normalisation and the centroids stay fp32. The blob is a pure function of the
@@ -23,7 +24,6 @@
 #include <new>
 #include <stdexcept>
 #include <string>
-#include <string_view>
 #include <type_traits>
 
 namespace nao {
@@ -44,10 +44,6 @@ WeightPrecision parseWeightPrecision(const std::string& s);
 /// compiled-in model (`compiled_in`) the blob `image` carries (int8 or fp32-packed: nao_codegen
 /// --precision), else fp32. nao_rt's run and --info both decide it here. Throws as parseWeightPrecision.
 WeightPrecision runPrecision(const std::string& asked, bool compiled_in, const ModelImage& image);
-
-/// True for the manifest tensors that have an int8 copy (the order of the blob is manifest
-/// order, the same as detail::visitQuantViews).
-bool isInt8Tensor(std::string_view name) noexcept;
 
 /// Quantises one matrix into its blob section (detail::quantSectionBytes(out, in) bytes):
 /// byte (p·out + r)·2 + e = round(W(r, 2p + e) / s(r)), clamped to ±127, then out floats
@@ -99,7 +95,7 @@ void packMatrixFp32(const float* W, int out, int in, float* P);
 /// Bytes of the packed fp32 blob of a model with this architecture (packedPolicyBytes).
 std::size_t packedModelBytes(const PolicyArch& arch);
 
-/// The packed fp32 blob of `model`: the matrices isInt8Tensor names, in manifest order, each
+/// The packed fp32 blob of `model`: the manifest's TensorRole::kMatrix tensors, in its order, each
 /// packed (packMatrixFp32). Configure time: allocates. Throws ModelFileError naming a matrix of a
 /// shape the layout does not take.
 AlignedBytes packModelFp32(const ModelFile& model);

@@ -50,10 +50,8 @@ void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<Ten
       throw std::invalid_argument("policy weights: manifest tensor '" + spec.name + "' (entry " + std::to_string(i) +
                                   ") has no view in PolicyWeights");
     const WeightSlot& slot = slots[it->second];
-    // Row-major [a_0, ..., a_n] is column-major [a_n, a_0 ... a_{n-1}] (a vector: [a_0, 1]).
-    long rows = spec.shape.empty() ? 1 : spec.shape.back();
-    long cols = 1;
-    for (std::size_t k = 0; k + 1 < spec.shape.size(); ++k) cols *= spec.shape[k];
+    const TensorExtent extent = viewExtent(spec);
+    long rows = static_cast<long>(extent.rows), cols = static_cast<long>(extent.cols);
     // A flat view (one dynamic column) takes the tensor whole.
     if (slot.rows == Eigen::Dynamic && slot.cols == 1) {
       rows *= cols;
@@ -64,6 +62,11 @@ void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<Ten
                                   " (Eigen [" + std::to_string(rows) + "," + std::to_string(cols) +
                                   "]), its view is Eigen [" + std::to_string(slot.rows) + "," +
                                   std::to_string(slot.cols) + "]");
+    if (slot.matrix != (spec.role == TensorRole::kMatrix))
+      throw std::invalid_argument("policy weights: tensor '" + spec.name + "' is " +
+                                  (spec.role == TensorRole::kMatrix ? "" : "not ") +
+                                  "a matrix with int8 and packed copies in the manifest, its view " +
+                                  (slot.matrix ? "has" : "has no") + " such copies");
     if (bound[it->second]) throw std::invalid_argument("policy weights: tensor '" + spec.name + "' listed twice");
     if (tensors[i] == nullptr)
       throw std::invalid_argument("policy weights: tensor '" + spec.name + "' (entry " + std::to_string(i) +

@@ -66,7 +66,7 @@ namespace {
 // `age` ticks older than its query; it depends on the age alone, so cached keys stay valid.
 void addAttention(std::vector<TensorSpec>& m, const std::string& p, int d, int heads = 0, int window = 0) {
   for (const char* w : {"q", "k", "v", "o"}) {
-    m.push_back({p + ".w" + w, {d, d}});
+    m.push_back({p + ".w" + w, {d, d}, TensorRole::kMatrix});
     m.push_back({p + ".b" + w, {d}});
   }
   if (heads > 0) m.push_back({p + ".age_bias", {heads, window}});
@@ -81,7 +81,7 @@ void addFfn(std::vector<TensorSpec>& m, const std::string& p, const PolicyArch& 
   int in = a.d_model;
   for (std::size_t k = 0; k <= a.ffn_hidden.size(); ++k) {
     const int out = k < a.ffn_hidden.size() ? a.ffn_hidden[k] : a.d_model;
-    m.push_back({p + "." + std::to_string(k) + ".weight", {in, out}});
+    m.push_back({p + "." + std::to_string(k) + ".weight", {in, out}, TensorRole::kMatrix});
     m.push_back({p + "." + std::to_string(k) + ".bias", {out}});
     in = out;
   }
@@ -130,18 +130,25 @@ std::vector<TensorSpec> policyManifest(const PolicyArch& a) {
     m.push_back({"head.logit.bias", {B}});
     m.push_back({"head.offset.weight", {d, B * C}});
     m.push_back({"head.offset.bias", {B * C}});
-    m.push_back({"head.centers", {B, J, C}});
+    m.push_back({"head.centers", {B, J, C}, TensorRole::kFixed});
   }
   // w_k = exp(-decay k): the weight of the chunk made k ticks ago in the executed action.
-  if (C > 1) m.push_back({"head.ensemble_decay", {1}});
+  if (C > 1) m.push_back({"head.ensemble_decay", {1}, TensorRole::kFixed});
   // Laws the runtime adds to the network's action: gain_j r_j (reference mode; 0 autonomous).
-  m.push_back({"law.gain", {J}});
+  m.push_back({"law.gain", {J}, TensorRole::kFixed});
   for (const char* s : {"q", "a", "r"}) {
-    m.push_back({std::string("norm.") + s + "_mean", {J}});
-    m.push_back({std::string("norm.") + s + "_std", {J}});
+    m.push_back({std::string("norm.") + s + "_mean", {J}, TensorRole::kFixed});
+    m.push_back({std::string("norm.") + s + "_std", {J}, TensorRole::kFixed});
   }
-  m.push_back({"centroids", {a.movements, a.clusters, J}});
+  m.push_back({"centroids", {a.movements, a.clusters, J}, TensorRole::kFixed});
   return m;
+}
+
+TensorExtent viewExtent(const TensorSpec& spec) {
+  TensorExtent e;
+  if (!spec.shape.empty()) e.rows = spec.shape.back();
+  for (std::size_t k = 0; k + 1 < spec.shape.size(); ++k) e.cols *= spec.shape[k];
+  return e;
 }
 
 std::size_t parameterCount(const PolicyArch& arch) {

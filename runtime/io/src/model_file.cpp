@@ -531,7 +531,7 @@ void checkModelImage(const std::uint8_t* data, std::size_t size, std::uint64_t e
 }
 
 ModelFile mappedModelFile(const ModelImage& image, const std::string& origin) {
-  if (image.header == nullptr || (image.tensors > 0 && image.offsets == nullptr))
+  if (image.header == nullptr || (image.tensors > 0 && (image.offsets == nullptr || image.extents == nullptr)))
     fail(origin, "no header or tensor table");
   checkModelImage(image.bytes, image.size, image.checksum, origin);
   ModelFile model;
@@ -548,6 +548,11 @@ ModelFile mappedModelFile(const ModelImage& image, const std::string& origin) {
     const std::size_t bytes = manifest[i].count() * sizeof(float);
     if (offset % kModelAlignment != 0 || offset > end || bytes > end - offset)
       fail(origin, "tensor '" + manifest[i].name + "' at offset " + std::to_string(offset) + " is outside the image");
+    const TensorExtent e = viewExtent(manifest[i]);
+    if (!(image.extents[i] == e))
+      fail(origin, "tensor '" + manifest[i].name + "' has the generated extent [" + std::to_string(image.extents[i].rows) +
+                       "," + std::to_string(image.extents[i].cols) + "], the manifest's is [" + std::to_string(e.rows) +
+                       "," + std::to_string(e.cols) + "]");
     model.tensors.push_back({manifest[i], offset});
   }
   return model;

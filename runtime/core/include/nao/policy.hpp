@@ -375,41 +375,29 @@ PolicyWeights<Dims> bindPolicyWeights(const float* const* tensors, std::size_t c
 }
 
 /// Binds the views of a PolicyWeights to a model.bin image in memory (the compiled-in bytes in
-/// .rodata) at fixed byte offsets, entry i of policyManifest(arch) at base + offsets[i]
-/// (policyViewCount<Dims>(arch.bins, arch.chunk) entries): the compile-time binding of the
-/// compiled-in model (codegen's constexpr kTensorOffsets and architecture, checked against the
-/// manifest by name when the code was generated). No name lookup, no copy, no allocation; the
-/// image must outlive the weights. `arch` must pass checkPolicyArch<Dims> (codegen's does).
+/// .rodata): entry i of policyManifest(arch) at base + offsets[i], its view of extent
+/// extents[i] (codegen's constexpr kTensorOffsets and kTensorExtents, made from the manifest
+/// when the code was generated; mappedModelFile checks them against it once). No name lookup,
+/// no copy, no allocation; the image must outlive the weights. `arch` must pass
+/// checkPolicyArch<Dims> (codegen's does).
 template <class Dims>
-PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::uint64_t* offsets, const PolicyArch& arch,
-                                        Conditioning c) noexcept {
+PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::uint64_t* offsets,
+                                        const TensorExtent* extents, const PolicyArch& arch, Conditioning c) noexcept {
   (void)activePolicyKernel();  // configure time: decide the kernel now, not in the loop
   PolicyWeights<Dims> w;
   detail::setPolicySizes(w, arch, c);
-  const int J = Dims::kTokens, D = Dims::kDModel, M = arch.movements, K = arch.clusters, S = arch.max_steps;
-  const int C = arch.chunk, B = arch.bins;
   std::size_t i = 0;
-  detail::visitWeightViews(w, [&](const detail::ViewName& name, auto& view) {
+  detail::visitWeightViews(w, [&](const detail::ViewName&, auto& view, auto&...) {
     using View = std::remove_reference_t<decltype(view)>;
-    const float* data = reinterpret_cast<const float*>(base + offsets[i++]);
-    if constexpr (View::RowsAtCompileTime != Eigen::Dynamic && View::ColsAtCompileTime != Eigen::Dynamic) {
+    const float* data = reinterpret_cast<const float*>(base + offsets[i]);
+    const TensorExtent e = extents[i++];
+    // A flat view (one dynamic column) takes the tensor whole.
+    if constexpr (View::RowsAtCompileTime == Eigen::Dynamic && View::ColsAtCompileTime == 1)
+      new (&view) View(data, static_cast<long>(e.rows * e.cols), 1);
+    else if constexpr (View::RowsAtCompileTime == Eigen::Dynamic || View::ColsAtCompileTime == Eigen::Dynamic)
+      new (&view) View(data, static_cast<long>(e.rows), static_cast<long>(e.cols));
+    else
       new (&view) View(data);
-    } else {
-      // The runtime extents of the table and head views, by name (the manifest's shapes).
-      const std::string_view n = name.head;
-      long rows = 1, cols = 1;
-      if (n == "embed.movement") rows = D, cols = M;
-      else if (n == "embed.step") rows = D, cols = S;
-      else if (n == "centroids") rows = J, cols = static_cast<long>(M) * K;
-      else if (n == "head.weight") rows = C, cols = D;
-      else if (n == "head.bias") rows = C;
-      else if (n == "head.logit.weight") rows = B, cols = static_cast<long>(J) * D;
-      else if (n == "head.logit.bias") rows = B;
-      else if (n == "head.offset.weight") rows = static_cast<long>(B) * C, cols = D;
-      else if (n == "head.offset.bias") rows = static_cast<long>(B) * C;
-      else if (n == "head.centers") rows = static_cast<long>(B) * J * C;
-      new (&view) View(data, rows, cols);
-    }
   });
   detail::setEnsembleWeights(w);
   return w;
@@ -513,6 +501,22 @@ inline std::size_t touchLines(const void* p, std::size_t bytes, std::uint64_t& s
   sink += s;
   return bytes;
 }
+
+/// Touches a matrix's int8 bytes and scales, or its packed copy, into `bytes`; false if it has
+/// neither (the step reads its fp32 view).
+template <class Q>
+bool touchCopy(const Q& q, std::size_t& bytes, std::uint64_t& sink) noexcept {
+  const std::size_t n = static_cast<std::size_t>(Q::kOut) * Q::kIn;
+  if (q.packed != nullptr) {
+    bytes += touchLines(q.packed, n * sizeof(float), sink);
+    return true;
+  }
+  if (q.w == nullptr) return false;
+  bytes += touchLines(q.w, n, sink);
+  bytes += touchLines(q.scale, static_cast<std::size_t>(Q::kOut) * sizeof(float), sink);
+  return true;
+}
+
 }  // namespace detail
 
 /// Loads every byte the next stepPolicy reads into the cache: each view stepPolicy uses (a
@@ -527,26 +531,12 @@ template <class Dims>
 std::size_t warmPolicy(const PolicyWeights<Dims>& w, const PolicyWorkspace<Dims>& ws, std::uint64_t& sink) noexcept {
   // The visitors take a mutable model (they also bind); nothing here writes through it.
   auto& m = const_cast<PolicyWeights<Dims>&>(w);
-  // The fp32 matrices an int8 model does not read.
-  constexpr std::size_t kQuantCount = 4 * (Dims::kEncoderLayers + 2 * Dims::kDecoderLayers) +
-                                      4 * (Dims::kEncoderLayers + Dims::kDecoderLayers);
-  std::array<const float*, kQuantCount> skip{};
-  std::size_t n_skip = 0, bytes = 0;
-  detail::visitQuantViews(m, [&](const auto& view, auto& q) {
-    using Q = std::remove_reference_t<decltype(q)>;
-    if ((q.w == nullptr && q.packed == nullptr) || n_skip == kQuantCount) return;
-    skip[n_skip++] = view.data();
-    if (q.packed != nullptr) {
-      bytes += detail::touchLines(q.packed, static_cast<std::size_t>(Q::kOut) * Q::kIn * sizeof(float), sink);
-      return;
-    }
-    bytes += detail::touchLines(q.w, static_cast<std::size_t>(Q::kOut) * Q::kIn, sink);
-    bytes += detail::touchLines(q.scale, static_cast<std::size_t>(Q::kOut) * sizeof(float), sink);
-  });
-  detail::visitWeightViews(m, [&](const detail::ViewName&, auto& view) {
+  std::size_t bytes = 0;
+  detail::visitWeightViews(m, [&](const detail::ViewName&, auto& view, auto&... quant) {
     if (view.data() == nullptr) return;
-    for (std::size_t i = 0; i < n_skip; ++i)
-      if (skip[i] == view.data()) return;
+    // A matrix with an int8 or packed copy is read from that copy, not from its fp32 view.
+    if constexpr (sizeof...(quant) == 1)
+      if (detail::touchCopy(quant..., bytes, sink)) return;
     bytes += detail::touchLines(view.data(), static_cast<std::size_t>(view.size()) * sizeof(float), sink);
   });
   return bytes + detail::touchLines(&ws, sizeof(ws), sink);

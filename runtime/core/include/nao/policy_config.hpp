@@ -58,14 +58,41 @@ PolicyArch smallArch();
 /// multiple of heads 4").
 std::string archProblem(const PolicyArch& arch);
 
+/// What a manifest tensor is to the code that reads it.
+enum class TensorRole : std::uint8_t {
+  /// Trained: a weight matrix every layer multiplies by (the attention projections wq, wk, wv,
+  /// wo and the FFN weights). Also held as int8 and packed fp32 copies, in manifest order
+  /// (nao/quantize.hpp; PolicyWeights' QuantView beside its view).
+  kMatrix,
+  /// Trained: any other tensor (embeddings, biases, layer norms, age biases, the head).
+  kTrained,
+  /// Set from the data set, not trained (torch buffers): the normalisation, the key poses, the
+  /// law, the temporal ensemble's decay.
+  kFixed,
+};
+
 struct TensorSpec {
   std::string name;
   std::vector<int> shape;  ///< row-major; matrices [in, out]
+  TensorRole role = TensorRole::kTrained;
   std::size_t count() const;
 };
 
-/// Every tensor of a policy with this architecture, in canonical order (docs/policy.md).
+/// The model contract (DESIGN §8, STYLE 4): every tensor of a policy with this architecture -
+/// name, shape, role - in canonical order (docs/policy.md). model.bin's writer and reader, the
+/// generated code (offsets and extents), the runtime's views (bound by name and checked against
+/// the roles), the int8 and packed blobs (the kMatrix entries, in this order) and the trainer's
+/// torch module (its parameters and buffers by name, shape and role) all follow it.
 std::vector<TensorSpec> policyManifest(const PolicyArch& arch);
+
+/// The extent [rows, cols] of a tensor's Eigen view (column-major): the row-major [a_0, ..., a_n]
+/// is [a_n, a_0 ... a_{n-1}], a vector [a_0] is [a_0, 1].
+struct TensorExtent {
+  std::int64_t rows = 1;
+  std::int64_t cols = 1;
+  bool operator==(const TensorExtent& o) const { return rows == o.rows && cols == o.cols; }
+};
+TensorExtent viewExtent(const TensorSpec& spec);
 
 /// Total float count of the manifest.
 std::size_t parameterCount(const PolicyArch& arch);

@@ -223,6 +223,7 @@ struct WeightSlot {
   std::string name;  ///< manifest name
   int rows;          ///< Eigen shape of the view; Eigen::Dynamic: the tensor's
   int cols;
+  bool matrix;       ///< the view has an int8 / packed companion (QuantView): TensorRole::kMatrix
   void* view;        ///< the WeightView<rows, cols> to point at the tensor
   void (*rebind)(void* view, const float* data, long rows, long cols);
 };
@@ -262,13 +263,13 @@ void visitNormViews(F& f, const char* head, int layer, const char* mid, LayerNor
 
 template <class Dims, class F>
 void visitAttentionViews(F& f, const char* head, int layer, const char* mid, AttentionWeights<Dims>& a) {
-  f(ViewName{head, layer, mid, "wq"}, a.wq);
+  f(ViewName{head, layer, mid, "wq"}, a.wq, a.wq8);
   f(ViewName{head, layer, mid, "bq"}, a.bq);
-  f(ViewName{head, layer, mid, "wk"}, a.wk);
+  f(ViewName{head, layer, mid, "wk"}, a.wk, a.wk8);
   f(ViewName{head, layer, mid, "bk"}, a.bk);
-  f(ViewName{head, layer, mid, "wv"}, a.wv);
+  f(ViewName{head, layer, mid, "wv"}, a.wv, a.wv8);
   f(ViewName{head, layer, mid, "bv"}, a.bv);
-  f(ViewName{head, layer, mid, "wo"}, a.wo);
+  f(ViewName{head, layer, mid, "wo"}, a.wo, a.wo8);
   f(ViewName{head, layer, mid, "bo"}, a.bo);
 }
 
@@ -280,19 +281,21 @@ void visitAttentionViews(F& f, const char* head, int layer, const char* mid, Tem
 
 template <class Dims, class F>
 void visitFfnViews(F& f, const char* head, int layer, FfnWeights<Dims>& n) {
-  f(ViewName{head, layer, "ffn", "0.weight"}, n.w0);
+  f(ViewName{head, layer, "ffn", "0.weight"}, n.w0, n.w0q);
   f(ViewName{head, layer, "ffn", "0.bias"}, n.b0);
-  f(ViewName{head, layer, "ffn", "1.weight"}, n.w1);
+  f(ViewName{head, layer, "ffn", "1.weight"}, n.w1, n.w1q);
   f(ViewName{head, layer, "ffn", "1.bias"}, n.b1);
-  f(ViewName{head, layer, "ffn", "2.weight"}, n.w2);
+  f(ViewName{head, layer, "ffn", "2.weight"}, n.w2, n.w2q);
   f(ViewName{head, layer, "ffn", "2.bias"}, n.b2);
-  f(ViewName{head, layer, "ffn", "3.weight"}, n.w3);
+  f(ViewName{head, layer, "ffn", "3.weight"}, n.w3, n.w3q);
   f(ViewName{head, layer, "ffn", "3.bias"}, n.b3);
 }
 
-/// Calls f(ViewName, WeightView<R, C>&) for every view of `w`, in the order of
-/// policyManifest (tests/test_compiled_model_alloc.cpp checks the names entry by entry): the
-/// one place that order is written for the runtime. No allocation unless f allocates.
+/// Calls f(ViewName, WeightView<R, C>&) for every view of `w`, in the order of policyManifest
+/// (bindWeightSlots checks name, shape and role entry by entry), and for a matrix of role
+/// TensorRole::kMatrix f(ViewName, WeightView<Out, In>&, QuantView<Out, In>&) with its int8 and
+/// packed companion: the one place that order is written for the runtime. No allocation unless
+/// f allocates.
 template <class Dims, class F>
 void visitWeightViews(PolicyWeights<Dims>& w, F&& f) {
   f(ViewName{"embed.in.weight"}, w.embed_in_weight);
@@ -356,50 +359,32 @@ constexpr std::size_t policyViewCount(int bins, int chunk) {
 template <class Dims>
 std::vector<WeightSlot> weightSlots(PolicyWeights<Dims>& w) {
   std::vector<WeightSlot> s;
-  visitWeightViews(w, [&s](const ViewName& name, auto& view) {
+  visitWeightViews(w, [&s](const ViewName& name, auto& view, auto&... quant) {
     using View = std::remove_reference_t<decltype(view)>;
-    s.push_back({name.str(), View::RowsAtCompileTime, View::ColsAtCompileTime, &view,
+    s.push_back({name.str(), View::RowsAtCompileTime, View::ColsAtCompileTime, sizeof...(quant) == 1, &view,
                  &rebindView<View::RowsAtCompileTime, View::ColsAtCompileTime>});
   });
   return s;
 }
 
 /// Points every slot at its manifest tensor, matched by name; checks that the manifest and the
-/// slots name the same tensors with the same shapes. Throws std::invalid_argument naming the
-/// tensor (runtime/core/src/policy.cpp).
+/// slots name the same tensors with the same shapes, and that exactly the kMatrix tensors have
+/// an int8 / packed companion. Throws std::invalid_argument naming the tensor
+/// (runtime/core/src/policy.cpp).
 void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<TensorSpec>& manifest,
                      const float* const* tensors, std::size_t count);
 
 /// Throws std::invalid_argument describing both architectures if they differ.
 void requireArch(const PolicyArch& compiled, const PolicyArch& given);
 
-/// Calls f(const WeightView<Out, In>&, QuantView<Out, In>&) for every matrix that has an int8
-/// copy in an int8 model, in manifest order (the order of quantizeModelInt8's blob,
-/// codegen/src/quantize.cpp): the attention projections wq, wk, wv, wo and the FFN weights of
-/// every layer.
+/// Calls f(const WeightView<Out, In>&, QuantView<Out, In>&) for every matrix of role
+/// TensorRole::kMatrix, in manifest order: the order of the int8 and packed blobs
+/// (codegen/src/quantize.cpp walks the manifest's kMatrix entries).
 template <class Dims, class F>
 void visitQuantViews(PolicyWeights<Dims>& w, F&& f) {
-  auto attention = [&f](AttentionWeights<Dims>& a) {
-    f(a.wq, a.wq8);
-    f(a.wk, a.wk8);
-    f(a.wv, a.wv8);
-    f(a.wo, a.wo8);
-  };
-  auto ffn = [&f](FfnWeights<Dims>& n) {
-    f(n.w0, n.w0q);
-    f(n.w1, n.w1q);
-    f(n.w2, n.w2q);
-    f(n.w3, n.w3q);
-  };
-  for (auto& e : w.enc) {
-    attention(e.attn);
-    ffn(e.ffn);
-  }
-  for (auto& d : w.dec) {
-    attention(d.self);
-    attention(d.cross);
-    ffn(d.ffn);
-  }
+  visitWeightViews(w, [&f](const ViewName&, auto& view, auto&... quant) {
+    if constexpr (sizeof...(quant) == 1) f(view, quant...);
+  });
 }
 
 /// Bytes of a matrix's section in the int8 blob: Out·In weight bytes, then Out scales, each

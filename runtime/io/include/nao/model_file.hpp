@@ -88,7 +88,8 @@ struct ModelImage {
   std::uint64_t checksum = 0;              ///< the generated kChecksum
   const ModelHeader* header = nullptr;     ///< built from the generated constants
   const std::uint64_t* offsets = nullptr;  ///< the generated kTensorOffsets, manifest order
-  std::size_t tensors = 0;                 ///< entries of `offsets`
+  const TensorExtent* extents = nullptr;   ///< the generated kTensorExtents (the views' extents)
+  std::size_t tensors = 0;                 ///< entries of `offsets` and `extents`
   /// nao_codegen --precision int8: the int8 blob (nao/quantize.hpp) compiled in beside the
   /// model, and its generated FNV-1a 64; nullptr: the model was generated in fp32.
   const std::uint8_t* int8_bytes = nullptr;
@@ -103,7 +104,8 @@ struct ModelImage {
 
 /// `image` as a ModelFile that reads its tensors in place (`mapped`; `bytes` stays empty):
 /// checkModelImage, then the header and the tensor table from the image's constants (shapes from
-/// policyManifest(header->arch), the offsets, each range inside the image). Nothing is decoded
+/// policyManifest(header->arch), the offsets, each range inside the image, each extent the
+/// manifest's viewExtent). Nothing is decoded
 /// and no tensor byte is copied. Throws ModelFileError "<origin>: <problem>".
 ModelFile mappedModelFile(const ModelImage& image, const std::string& origin);
 
