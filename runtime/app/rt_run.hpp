@@ -17,6 +17,7 @@
 #pragma once
 
 #include "rt_config.hpp"
+#include "rt_laws.hpp"
 #include "rt_rundir.hpp"
 
 #include "nao/arm_model.hpp"
@@ -120,9 +121,11 @@ void fillPayload(const TickRecord& rec, const PolicyWorkspace<Dims>& ws, RunPayl
 /// @param out   the human summary (and the configuration line)
 /// @param err   warnings (--realtime not permitted)
 /// @param probe allocation counter around activate ... deactivate; nullptr: not counted
+/// @param law   an action law in place of the policy (nao/controller.hpp ActionLaw); nullptr:
+///              the policy, or the baseline the options name (--blend-law-pole, --gain-law)
 template <class Dims>
 RunReport runController(const RunOptions& options, std::ostream& out, std::ostream& err,
-                        AllocationProbe* probe = nullptr) {
+                        AllocationProbe* probe = nullptr, ActionLaw* law = nullptr) {
   RunReport report;
   try {
     // Configure: everything that can fail or allocate.
@@ -239,6 +242,10 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       robot_backend = std::make_unique<OdeArmBackend>(p.arm, options.sim, clampToLimits(p.arm, p.q_start));
     }
     auto data = std::make_unique<ControllerData<Dims>>(*robot_backend);
+    BlendLaw blend_law(options.controller.blend_law_pole);
+    GainLaw gain_law(options.controller.gain_law);
+    if (law == nullptr && options.controller.blend_law_pole > 0.0) law = &blend_law;
+    if (law == nullptr && options.controller.gain_law > 0.0) law = &gain_law;
     warm.workspace = data->policy.get();
     detail::RingHolder<RunRing<Dims>> rings;
     const AttentionDescriptor descriptor = attentionPayloadDescriptor<RunPayload<Dims>>();
@@ -286,7 +293,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
       if (frame != nullptr) applyLiveHumanScale(p.human->scaleOfLastFrame(), model.params.human);
       TickRecord& rec = records[i];
-      rec = updateController(model, *data, frame);
+      rec = law != nullptr ? updateController(model, *data, frame, *law) : updateController(model, *data, frame);
       // Where the arm should be at the end of the tick: the reference's feature-extracted pose
       // of the next sample (the last one held at the end).
       if (i < n_targets)

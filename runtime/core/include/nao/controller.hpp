@@ -49,7 +49,7 @@ enum ControllerFault : std::uint32_t {
   /// Algorithm 1 hit an iteration cap: the reference is its best feasible pose (see
   /// kFaultRetargetFallback), never worse than the clamped human angles.
   kFaultIkNotConverged = 1u << 3,
-  /// The tick's action (the policy's, or a baseline law's) had a NaN/Inf: the command limiter
+  /// The tick's action (the policy's, or an ActionLaw's) had a NaN/Inf: the command limiter
   /// holds the arm where it is (a = 0; rollout.hpp).
   kFaultPolicyNonFinite = 1u << 4,
   /// The tick's work took longer than the period (counted; the loop stays on the grid).
@@ -116,19 +116,14 @@ struct ControllerParams {
   JointVector home = (JointVector() << 1.40, -0.20, 1.20, 0.50, 0.00).finished();
   RetargetParams retarget;
   HumanKinematicsConfig human;       ///< scale_m > 0 fixes the human scale d_h (else per frame)
-  /// Test hook for the fault-injection tests: ticks in [first, last] replace the policy's
-  /// action with NaN before the non-finite check. -1: never.
-  int inject_policy_nan_first = -1;
-  int inject_policy_nan_last = -1;
   /// Baseline: > 0 replaces the policy by the key-pose blend law its training labels follow,
   /// a = pole^2 a(t-1) + (1 - pole)^2 (r - q) (KeyPoseBlend), driving the same arm,
   /// so a test can measure what the servos alone cost. 0: the policy. Reference mode only.
+  /// Read by nao_rt's run (an ActionLaw), not by the tick.
   double blend_law_pole = 0.0;
   /// Baseline: > 0 replaces the policy by a fixed-gain inversion of a first-order servo,
-  /// a = g (clamp(f(t+1)) - q), on the same feature-extracted target the policy is fed. With
-  /// g = 1 / (1 - exp(-K T)) (sim servo gain K, period T) it is the closed form the execution
-  /// labels would follow if the arm were exactly first order: the bar for what the policy
-  /// learns beyond it. 0: the policy. Reference mode only; excludes blend_law_pole.
+  /// a = g (clamp(f(t+1)) - q), on the same feature-extracted target the policy is fed.
+  /// Reference mode only; excludes blend_law_pole. Read by nao_rt's run, not by the tick.
   double gain_law = 0.0;
   /// Pole of the online feature-extracted reference the policy is fed in reference mode (the
   /// blend of the snapped key poses, as the training data's f; must equal the data's).
@@ -297,63 +292,97 @@ void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>
   data.active = true;
 }
 
-/// One 100 ms tick. `frame` is the human skeleton of this tick in the world frame (nullptr: no
-/// human detected); it is ignored by autonomous-mode models. Returns data.record.
-/// Real-time safe: no allocation, no exception, no I/O.
+/// What a tick's action law reads (rad, joint order), formed after the tick's reference stage.
+struct ActionInput {
+  JointVector q = JointVector::Zero();         ///< measured at the tick's start
+  JointVector a_prev = JointVector::Zero();    ///< the action applied last tick, a(t−1)
+  JointVector key_pose = JointVector::Zero();  ///< r: the key pose the reference snapped to
+  JointVector target = JointVector::Zero();    ///< f(t+1) within the limits: the feature-extracted target
+  std::int64_t tick = 0;
+};
+
+/// What acts in a tick in place of the policy (updateController's second form): the
+/// evaluation's baselines (nao_toolchain evaluate) and the tests' fault injection. The deployed
+/// controller's action is the policy's (policyAction). The tick's other stages - reference,
+/// command limits, robot, record - stay the controller's own.
+struct ActionLaw {
+  virtual ~ActionLaw() = default;
+  /// A short name for the run's summary, e.g. "blend law".
+  virtual const char* name() const = 0;
+  /// a(t), rad per tick, joint order (non-finite: the arm holds, kFaultPolicyNonFinite).
+  /// Called inside the tick: real-time safe, no exception.
+  virtual JointVector action(const ActionInput& in) = 0;
+};
+
+/// The policy's action for the tick: stepPolicy on q, a(t−1) and target − q (docs/policy.md),
+/// with its network part and attention into data.record. Real-time safe.
 template <class Dims>
-const TickRecord& updateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data,
-                                   const SkeletonFrame* frame) {
+JointVector policyAction(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const ActionInput& in) {
+  TickRecord& rec = data.record;
+  PolicyInput p;
+  p.q = in.q.cast<float>();
+  p.a_prev = in.a_prev.cast<float>();
+  p.r = (in.target - in.q).cast<float>();
+  p.movement = data.movement;
+  p.step = static_cast<int>(std::min<std::int64_t>(in.tick, model.policy.max_steps - 1));
+  const JointVector a = stepPolicy(model.policy, *data.policy, p).template cast<double>();
+  rec.a_net = data.policy->net_action.template cast<double>();
+  for (int j = 0; j < kNumJoints; ++j) {
+    rec.att[static_cast<std::size_t>(j)] = data.policy->score[j];
+    rec.attm[static_cast<std::size_t>(j)] = data.policy->mass[j];
+  }
+  return a;
+}
+
+namespace detail {
+
+/// Stage 1 (reference mode): human kinematics -> scaled hand target -> Algorithm 1, into
+/// data.q_ref, and the human's fault bits (bridged gap, lost, timed out) into data.record.
+template <class Dims>
+void referenceStage(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const SkeletonFrame* frame) {
   TickRecord& rec = data.record;
   const ControllerParams& p = model.params;
-  const std::int64_t t0 = data.clock->nowNs();
-  rec.tick = data.tick;
-  rec.t_s = static_cast<double>(data.tick) * p.period_s;
-  rec.fault = 0;
-  rec.a.setZero();
-  rec.a_net.setConstant(std::numeric_limits<double>::quiet_NaN());
-
-  // 1. Reference: human kinematics -> scaled hand target -> Algorithm 1 (reference mode).
-  const bool autonomous = model.policy.conditioning == Conditioning::kAutonomous;
   bool have_human = false;
-  if (!autonomous) {
-    if (frame != nullptr) {
-      humanArmKinematics(p.human, data.human, *frame);
-      if (data.human.flags & kHumanNotFinite) rec.fault |= kFaultNonFiniteKeypoints;
-      have_human = data.human.valid;
-    }
-    if (have_human) {
-      const Eigen::Vector3d p_target = model.arm.p_PJ[0] + scaleHumanEndpoint(model.d_r_m, data.human.d_h_m,
-                                                                               data.human.p_SH_T);
-      const JointVector q_target = data.human.q.template head<kNumJoints>();
-      const RetargetResult& r = solveRetarget(model.arm, p.retarget, data.retarget, p_target, q_target);
-      // The caps of the solve that made q_r.
-      const std::uint32_t kCaps = p.retarget.priority == RetargetPriority::kHand
-                                      ? std::uint32_t{kRetargetXCapHit}
-                                      : std::uint32_t{kRetargetQCapHit | kRetargetInnerCapHit};
-      if (r.flags & kRetargetBadInput) {
-        have_human = false;
-      } else {
-        // A capped solve still gives the best feasible pose (q_r never does worse than clamping).
-        if (r.flags & kCaps) rec.fault |= kFaultIkNotConverged;
-        if (r.flags & kRetargetFallback) rec.fault |= kFaultRetargetFallback;
-        data.q_ref = r.q_r;
-      }
-    }
-    if (have_human) {
-      data.last_human_tick = data.tick;
-    } else if (data.last_human_tick >= 0 && data.tick - data.last_human_tick <= p.human_bridge_ticks) {
-      // A short detector gap: the held reference bridges it.
-      rec.fault |= kFaultHumanBridged;
+  if (frame != nullptr) {
+    humanArmKinematics(p.human, data.human, *frame);
+    if (data.human.flags & kHumanNotFinite) rec.fault |= kFaultNonFiniteKeypoints;
+    have_human = data.human.valid;
+  }
+  if (have_human) {
+    const Eigen::Vector3d p_target = model.arm.p_PJ[0] + scaleHumanEndpoint(model.d_r_m, data.human.d_h_m,
+                                                                             data.human.p_SH_T);
+    const JointVector q_target = data.human.q.template head<kNumJoints>();
+    const RetargetResult& r = solveRetarget(model.arm, p.retarget, data.retarget, p_target, q_target);
+    // The caps of the solve that made q_r.
+    const std::uint32_t kCaps = p.retarget.priority == RetargetPriority::kHand
+                                    ? std::uint32_t{kRetargetXCapHit}
+                                    : std::uint32_t{kRetargetQCapHit | kRetargetInnerCapHit};
+    if (r.flags & kRetargetBadInput) {
+      have_human = false;
     } else {
-      rec.fault |= kFaultNoHuman;
-      const double since_s = static_cast<double>(data.tick - data.last_human_tick) * p.period_s;
-      if (since_s > p.no_human_timeout_s) rec.fault |= kFaultHumanTimeout;
+      // A capped solve still gives the best feasible pose (q_r never does worse than clamping).
+      if (r.flags & kCaps) rec.fault |= kFaultIkNotConverged;
+      if (r.flags & kRetargetFallback) rec.fault |= kFaultRetargetFallback;
+      data.q_ref = r.q_r;
     }
   }
-  const std::int64_t t1 = data.clock->nowNs();
+  if (have_human) {
+    data.last_human_tick = data.tick;
+  } else if (data.last_human_tick >= 0 && data.tick - data.last_human_tick <= p.human_bridge_ticks) {
+    // A short detector gap: the held reference bridges it.
+    rec.fault |= kFaultHumanBridged;
+  } else {
+    rec.fault |= kFaultNoHuman;
+    const double since_s = static_cast<double>(data.tick - data.last_human_tick) * p.period_s;
+    if (since_s > p.no_human_timeout_s) rec.fault |= kFaultHumanTimeout;
+  }
+}
 
-  // 2. Snap to the model's key pose, 3. policy (bypassed while returning home).
-  const JointVector& q = data.robot->measured();
+/// Stage 2: snap q_ref to the model's key pose (rec.key_pose, rec.r) and advance the online
+/// feature-extracted trajectory toward it; returns what an action law reads.
+template <class Dims>
+ActionInput actionInput(const ControllerModel<Dims>& model, ControllerData<Dims>& data) {
+  TickRecord& rec = data.record;
   rec.key_pose = snapToCentroid(model.policy, data.movement, data.q_ref);
   rec.r = centroid(model.policy, data.movement, rec.key_pose).template cast<double>();
   // The feature-extracted target of this tick, f(t+1): the blend toward the key pose in force,
@@ -363,46 +392,39 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
     data.feature_v.setZero();
     data.feature_started = true;
   }
-  {
-    const double pole = p.feature_pole;
-    data.feature_v = pole * pole * data.feature_v + (1.0 - pole) * (1.0 - pole) * (rec.r - data.feature_f);
-    data.feature_f += data.feature_v;
-  }
-  JointVector a = JointVector::Zero();
-  if (rec.fault & kFaultHumanTimeout) {
-    // Toward home at half the velocity limits: no policy input is trustworthy any more.
-    for (int j = 0; j < kNumJoints; ++j) {
-      const double step = 0.5 * model.arm.v_max[j] * p.period_s;
-      a[j] = std::clamp(model.home[j] - q[j], -step, step);
-    }
-  } else if (p.blend_law_pole > 0.0 && !autonomous) {
-    const double pole = p.blend_law_pole;
-    a = pole * pole * data.a_prev + (1.0 - pole) * (1.0 - pole) * (rec.r - q);
-  } else if (p.gain_law > 0.0 && !autonomous) {
-    a = p.gain_law * (clampToLimits(model.arm, data.feature_f) - q);
-  } else {
-    PolicyInput in;
-    in.q = q.cast<float>();
-    in.a_prev = data.a_prev.template cast<float>();
-    in.r = (clampToLimits(model.arm, data.feature_f) - q).template cast<float>();  // target − q (docs/policy.md)
-    in.movement = data.movement;
-    in.step = static_cast<int>(std::min<std::int64_t>(data.tick, model.policy.max_steps - 1));
-    a = stepPolicy(model.policy, *data.policy, in).template cast<double>();
-    rec.a_net = data.policy->net_action.template cast<double>();
-    if (data.tick >= p.inject_policy_nan_first && data.tick <= p.inject_policy_nan_last)
-      a[0] = std::nan("");
-    for (int j = 0; j < kNumJoints; ++j) {
-      rec.att[static_cast<std::size_t>(j)] = data.policy->score[j];
-      rec.attm[static_cast<std::size_t>(j)] = data.policy->mass[j];
-    }
-  }
-  const std::int64_t t2 = data.clock->nowNs();
+  const double pole = model.params.feature_pole;
+  data.feature_v = pole * pole * data.feature_v + (1.0 - pole) * (1.0 - pole) * (rec.r - data.feature_f);
+  data.feature_f += data.feature_v;
+  ActionInput in;
+  in.q = data.robot->measured();
+  in.a_prev = data.a_prev;
+  in.key_pose = rec.r;
+  in.target = clampToLimits(model.arm, data.feature_f);
+  in.tick = data.tick;
+  return in;
+}
 
-  // 4. Command q + a inside the position limits and what the servos can do in one period (a
-  // non-finite action holds), 5. the arm advances one period.
+/// Toward home at half the velocity limits: once the human is gone past the timeout no action
+/// law's input is trustworthy any more.
+template <class Dims>
+JointVector homeAction(const ControllerModel<Dims>& model, const JointVector& q) {
+  JointVector a;
+  for (int j = 0; j < kNumJoints; ++j) {
+    const double step = 0.5 * model.arm.v_max[j] * model.params.period_s;
+    a[j] = std::clamp(model.home[j] - q[j], -step, step);
+  }
+  return a;
+}
+
+/// Stages 4-5: command q + a inside the position limits and what the servos can do in one
+/// period (a non-finite action holds), the arm advances one period; the record's command,
+/// measurement and hand point.
+template <class Dims>
+void commandStage(const ControllerModel<Dims>& model, ControllerData<Dims>& data, JointVector a) {
+  TickRecord& rec = data.record;
   const JointEnvelope* envelope =
       model.workspace.empty() ? nullptr : &model.workspace[static_cast<std::size_t>(data.movement)];
-  rec.q = rolloutStep(model.arm, p.period_s, *data.robot, a, data.step, envelope);
+  rec.q = rolloutStep(model.arm, model.params.period_s, *data.robot, a, data.step, envelope);
   const RolloutStep& step = data.step;
   if (step.limit & kCommandNonFinite) {
     rec.fault |= kFaultPolicyNonFinite;
@@ -416,18 +438,62 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
   data.a_prev = step.a_applied;  // the action as applied is the next tick's a(t-1)
   rec.fault |= data.robot->faults();
   rec.ee = forwardKinematics(model.arm, data.kin, rec.q);
+}
+
+/// One tick with `act(const ActionInput&)` as its action law, timed on the data's clock.
+template <class Dims, class Act>
+const TickRecord& tick(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const SkeletonFrame* frame,
+                       Act&& act) {
+  TickRecord& rec = data.record;
+  const ControllerParams& p = model.params;
+  const std::int64_t t0 = data.clock->nowNs();
+  rec.tick = data.tick;
+  rec.t_s = static_cast<double>(data.tick) * p.period_s;
+  rec.fault = 0;
+  rec.a.setZero();
+  rec.a_net.setConstant(std::numeric_limits<double>::quiet_NaN());
+  if (model.policy.conditioning != Conditioning::kAutonomous) referenceStage(model, data, frame);
+  const std::int64_t t1 = data.clock->nowNs();
+
+  const ActionInput in = actionInput(model, data);
+  const JointVector a = (rec.fault & kFaultHumanTimeout) ? homeAction(model, in.q) : act(in);
+  const std::int64_t t2 = data.clock->nowNs();
+
+  commandStage(model, data, a);
   const std::int64_t t3 = data.clock->nowNs();
   const std::int64_t wait_ns = data.robot->waitNs();
-
-  rec.retarget_us = detail::microseconds(t0, t1);
-  rec.policy_us = detail::microseconds(t1, t2);
-  rec.sim_us = detail::microseconds(t2, t3 - wait_ns);
-  rec.tick_us = detail::microseconds(t0, t3 - wait_ns);
+  rec.retarget_us = microseconds(t0, t1);
+  rec.policy_us = microseconds(t1, t2);
+  rec.sim_us = microseconds(t2, t3 - wait_ns);
+  rec.tick_us = microseconds(t0, t3 - wait_ns);
   if (rec.tick_us > p.period_s * 1e6) rec.fault |= kFaultOverrun;
   for (int b = 0; b < kNumControllerFaults; ++b)
     if (rec.fault & (1u << b)) ++data.fault_counts[static_cast<std::size_t>(b)];
   ++data.tick;
   return rec;
+}
+
+}  // namespace detail
+
+/// One 100 ms tick: (1) reference: human frame -> retarget (reference mode), (2) snap to the
+/// key pose, feature-extracted target, (3) the policy's action (toward home once the human is
+/// gone past the timeout), (4) command within the limits, (5) the robot advances a period.
+/// `frame` is the human skeleton of this tick in the world frame (nullptr: no human detected);
+/// autonomous-mode models ignore it. Returns data.record.
+/// Real-time safe: no allocation, no exception, no I/O.
+template <class Dims>
+const TickRecord& updateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data,
+                                   const SkeletonFrame* frame) {
+  return detail::tick(model, data, frame, [&](const ActionInput& in) { return policyAction(model, data, in); });
+}
+
+/// The same tick with `law`'s action in place of the policy's (an evaluation's baseline, a
+/// test's fault injection): the attention columns stay 0 and a_net NaN unless the law runs
+/// the policy itself (policyAction). Real-time safe if `law` is.
+template <class Dims>
+const TickRecord& updateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data,
+                                   const SkeletonFrame* frame, ActionLaw& law) {
+  return detail::tick(model, data, frame, [&](const ActionInput& in) { return law.action(in); });
 }
 
 /// Ends the run: the arm is commanded to hold where it is (the LoLA backend then ramps the
