@@ -8,7 +8,6 @@ namespace nao::rt {
 
 int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::ostream& out, std::ostream& err) {
   RunOptions& o = cl.run;
-  double emulate_tick_ms = 0.0;
   CLI::App app{
       "nao_rt: the NAO V6 right-arm imitation controller (DESIGN section 9) on the ODE-simulated arm\n"
       "(default) or on a NAO V6 through LoLA (--robot lola, docs/lola.md). It runs any model of its\n"
@@ -129,12 +128,6 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
       ->type_name("MS")
       ->check(CLI::Range(0.0, 11.0))
       ->capture_default_str();
-  app.add_option("--emulate-tick-ms", emulate_tick_ms,
-                 "Busy-wait this long before every tick's work, as a slower CPU would take (tests of\n"
-                 "the LoLA timing; not counted in tick_us)")
-      ->type_name("MS")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->group("");  // the LoLA timing tests' slow CPU
   app.add_option("--log", o.log_dir, "Run directory (created if missing): ticks.csv, attention.bin, summary.json")
       ->type_name("DIR");
   app.add_option("--attention-shm", o.attention_shm,
@@ -158,7 +151,6 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
     err << "nao_rt: " << oneLine(e.what()) << " (nao_rt --help lists the flags)\n";
     return 2;
   }
-  o.emulate_tick_ns = static_cast<std::int64_t>(emulate_tick_ms * 1e6 + 0.5);
   return -1;
 }
 

@@ -78,9 +78,6 @@ struct RunOptions {
   /// LoLA on one thread: load the policy's weights and workspace into the cache in the cycle
   /// before each tick's packet (warmPolicy; --lola-no-warm turns it off, docs/lola.md).
   bool lola_warm = true;
-  /// > 0: busy-wait this long before every tick's work, as a slower CPU would take (tests and
-  /// benchmarks of the LoLA timing; not in tick_us).
-  std::int64_t emulate_tick_ns = 0;
   ControllerClock* clock = nullptr;  ///< stage timings; nullptr: CLOCK_MONOTONIC (tests inject)
   // openpose: only (rt_live.hpp).
   std::string calibration_path;  ///< --calibration: the cameras, our JSON (nao/calibration_json.hpp)

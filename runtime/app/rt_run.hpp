@@ -59,8 +59,6 @@ void leaveRealtime(RealtimeScheduling& s);
 /// Sleeps until the absolute CLOCK_MONOTONIC time t_ns (clock_nanosleep TIMER_ABSTIME; resumes
 /// after signals). Real-time safe.
 void sleepUntilNs(std::int64_t t_ns);
-/// Busy-waits ns nanoseconds (RunOptions::emulate_tick_ns): no syscall but the clock read.
-void spinForNs(std::int64_t ns);
 
 /// Puts a live source's human scale (HumanSource::scaleOfLastFrame) into the controller's human
 /// kinematics for the update of that frame; scale_m 0 leaves the configured one. The only part
@@ -288,7 +286,6 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     std::int64_t ticks_done = 0;
     for (std::int64_t t = 0; t < p.ticks && data->robot->stopReason() == RobotStop::kNone; ++t) {
       if (paced) sleepUntilNs(next_ns);
-      if (options.emulate_tick_ns > 0) spinForNs(options.emulate_tick_ns);
       const std::size_t i = static_cast<std::size_t>(t);
       const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
       if (frame != nullptr) applyLiveHumanScale(p.human->scaleOfLastFrame(), model.params.human);
