@@ -71,21 +71,6 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
       ->type_name("Q")
       ->delimiter(',')
       ->expected(5);
-  app.add_option("--blend-law-pole", o.controller.blend_law_pole,
-                 "Baseline, reference-conditioned models only: replace the policy by the key-pose\n"
-                 "blend law its labels follow, a = p^2 a(t-1) + (1-p)^2 (r - q), with pole p in\n"
-                 "(0, 1) (the training labels: 0.7), on the same arm (default 0: the policy)")
-      ->type_name("P")
-      ->check(CLI::Range(0.0, 0.999999))
-      ->group("");  // the evaluation's baseline, not an operator's flag: not in --help
-  app.add_option("--gain-law", o.controller.gain_law,
-                 "Baseline, reference-conditioned models only: replace the policy by the fixed-gain\n"
-                 "servo inversion a = G (f(t+1) - q) on the policy's feature-extracted target; G = 1 /\n"
-                 "(1 - exp(-K T)) = 1.089 inverts the simulated first-order servo (K 25/s, T 0.1 s)\n"
-                 "exactly (default 0: the policy)")
-      ->type_name("G")
-      ->check(CLI::Range(0.0, 100.0))
-      ->group("");  // the evaluation's baseline
   auto* ticks = app.add_option("--ticks", o.ticks,
                                "Ticks (100 ms each) to run (default: the reference's length; none: the start's\n"
                                "length). Past a reference's end no human is seen")

@@ -209,12 +209,6 @@ RobotSpec parseRobotSpec(const std::string& robot, const std::string& default_so
 
 PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   PreparedRun p;
-  if (!(o.controller.blend_law_pole >= 0.0 && o.controller.blend_law_pole < 1.0))
-    throw UsageError("--blend-law-pole must be in [0, 1)");
-  if (!(o.controller.gain_law >= 0.0 && std::isfinite(o.controller.gain_law)))
-    throw UsageError("--gain-law must be a finite gain >= 0");
-  if (o.controller.gain_law > 0.0 && o.controller.blend_law_pole > 0.0)
-    throw UsageError("--gain-law and --blend-law-pole exclude each other (each replaces the policy)");
   if (o.ticks < 0) throw UsageError("--ticks must be positive");
   if (o.seconds < 0.0 || !std::isfinite(o.seconds)) throw UsageError("--seconds must be positive");
   if (o.ticks > 0 && o.seconds > 0.0) throw UsageError("--ticks and --seconds exclude each other");
@@ -265,12 +259,6 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   if (autonomous_run && h.conditioning != Conditioning::kAutonomous)
     throw std::runtime_error("--reference none needs an autonomous-mode model; " + p.model_source +
                              " is reference-conditioned (it imitates a reference: use file:PATH)");
-  if (o.controller.blend_law_pole > 0.0 && h.conditioning == Conditioning::kAutonomous)
-    throw UsageError("--blend-law-pole replaces a reference-conditioned policy; " + p.model_source +
-                     " is an autonomous-mode model (the blend law needs the snapped human key pose)");
-  if (o.controller.gain_law > 0.0 && h.conditioning == Conditioning::kAutonomous)
-    throw UsageError("--gain-law replaces a reference-conditioned policy; " + p.model_source +
-                     " is an autonomous-mode model (the gain law needs the feature-extracted reference)");
   p.centroids = modelKeyPoses(p.model, p.movement_index);
   // The starts, workspace, run codes and (next) the retargeting setting, decoded once.
   p.model_spec = readModelSpec(h, o.controller.retarget, p.model_source);

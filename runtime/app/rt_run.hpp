@@ -17,7 +17,6 @@
 #pragma once
 
 #include "rt_config.hpp"
-#include "rt_laws.hpp"
 #include "rt_rundir.hpp"
 
 #include "nao/arm_model.hpp"
@@ -270,8 +269,9 @@ std::int64_t runTicks(const RunOptions& options, PreparedRun& p, ControllerModel
 /// @param out   the human summary (and the configuration line)
 /// @param err   warnings (--realtime not permitted)
 /// @param probe allocation counter around activate ... deactivate; nullptr: not counted
-/// @param law   an action law in place of the policy (nao/controller.hpp ActionLaw); nullptr:
-///              the policy, or the baseline the options name (--blend-law-pole, --gain-law)
+/// @param law   an action law in place of the policy (nao/controller.hpp ActionLaw: the
+///              evaluation's baselines, run in process by nao_toolchain evaluate; summary.json
+///              names it); nullptr: the policy
 template <class Dims>
 RunReport runController(const RunOptions& options, std::ostream& out, std::ostream& err,
                         AllocationProbe* probe = nullptr, ActionLaw* law = nullptr) {
@@ -321,10 +321,6 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     const std::unique_ptr<RobotBackend> robot_backend =
         detail::makeRunRobot<Dims>(options, robot, p, probe, warm, totals, lola);
     auto data = std::make_unique<ControllerData<Dims>>(*robot_backend);
-    BlendLaw blend_law(options.controller.blend_law_pole);
-    GainLaw gain_law(options.controller.gain_law);
-    if (law == nullptr && options.controller.blend_law_pole > 0.0) law = &blend_law;
-    if (law == nullptr && options.controller.gain_law > 0.0) law = &gain_law;
     warm.workspace = data->policy.get();
     detail::RunBuffers<Dims> buffers;
     const AttentionDescriptor descriptor = attentionPayloadDescriptor<RunPayload<Dims>>();
@@ -368,6 +364,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     totals.stop = stop;
     if (data->run_code >= 0)
       totals.run_code = p.model_spec.run_codes[static_cast<std::size_t>(p.movement_index)].names[static_cast<std::size_t>(data->run_code)];
+    if (law != nullptr) totals.action_law = law->name();
     if (lola) {
       totals.lola = true;
       totals.lola_socket = robot.socket_path;

@@ -231,8 +231,7 @@ ordered_json summaryJson(const RunOptions& o, const PreparedRun& p, const LoopTo
     // The training demonstration whose code the run followed (a model with run codes).
     j["run_code"] = totals.run_code.empty() ? ordered_json(nullptr) : ordered_json(totals.run_code);
   }
-  if (o.controller.blend_law_pole > 0.0) j["blend_law_pole"] = o.controller.blend_law_pole;
-  if (o.controller.gain_law > 0.0) j["gain_law"] = o.controller.gain_law;
+  if (!totals.action_law.empty()) j["action_law"] = totals.action_law;
   j["model"] = {{"path", p.model_source},
                 {"checksum", hex64(p.model.checksum)},
                 {"conditioning", conditioningName(p.model.header.conditioning)},

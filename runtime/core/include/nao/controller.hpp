@@ -116,15 +116,6 @@ struct ControllerParams {
   JointVector home = (JointVector() << 1.40, -0.20, 1.20, 0.50, 0.00).finished();
   RetargetParams retarget;
   HumanKinematicsConfig human;       ///< scale_m > 0 fixes the human scale d_h (else per frame)
-  /// Baseline: > 0 replaces the policy by the key-pose blend law its training labels follow,
-  /// a = pole^2 a(t-1) + (1 - pole)^2 (r - q) (KeyPoseBlend), driving the same arm,
-  /// so a test can measure what the servos alone cost. 0: the policy. Reference mode only.
-  /// Read by nao_rt's run (an ActionLaw), not by the tick.
-  double blend_law_pole = 0.0;
-  /// Baseline: > 0 replaces the policy by a fixed-gain inversion of a first-order servo,
-  /// a = g (clamp(f(t+1)) - q), on the same feature-extracted target the policy is fed.
-  /// Reference mode only; excludes blend_law_pole. Read by nao_rt's run, not by the tick.
-  double gain_law = 0.0;
   /// Pole of the online feature-extracted reference the policy is fed in reference mode (the
   /// blend of the snapped key poses, as the training data's f; must equal the data's).
   double feature_pole = kFeatureBlendPole;
