@@ -23,7 +23,6 @@
 #include "nao/controller.hpp"
 #include "nao/lola_backend.hpp"
 #include "nao/model_file.hpp"
-#include "nao/model_metadata.hpp"
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
 #include "nao/reference_stream.hpp"

@@ -1,7 +1,6 @@
 // The metadata reader of model.bin (readModelSpec, nao/model_file.hpp) and its retargeting
-// section (nao/model_metadata.hpp).
+// section.
 #include "model_metadata_json.hpp"
-#include "nao/model_metadata.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -38,11 +37,6 @@ RetargetParams detail::retargetFromMetadata(const MetadataJson& j, const Retarge
     }
   }
   return r;
-}
-
-RetargetParams modelRetargetSetting(const std::string& metadata_json, const RetargetParams& defaults,
-                                    const std::string& origin) {
-  return detail::retargetFromMetadata(detail::parseModelMetadata(metadata_json), defaults, origin);
 }
 
 ModelSpec readModelSpec(const ModelHeader& header, const RetargetParams& defaults, const std::string& origin) {

@@ -1,6 +1,5 @@
-// The one decoding of model.bin's metadata JSON (nao_io internal): parsed once, each section
-// decoded from the parsed text (readModelSpec; the per-section readers of model_file.hpp and
-// model_metadata.hpp parse and call the same decoders).
+// The one decoding of model.bin's metadata JSON (nao_io internal): parsed once by readModelSpec,
+// each section decoded from the parsed text.
 #pragma once
 
 #include "nao/model_file.hpp"

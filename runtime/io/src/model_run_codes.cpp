@@ -101,9 +101,4 @@ std::string withModelRunCodes(const std::string& metadata_json, const std::vecto
   return j.dump();
 }
 
-std::vector<ModelRunCodes> modelRunCodes(const std::string& metadata_json, const std::vector<std::string>& movement_names,
-                                         int d_model, const std::string& origin) {
-  return detail::runCodesFromMetadata(detail::parseModelMetadata(metadata_json), movement_names, d_model, origin);
-}
-
 }  // namespace nao

@@ -142,14 +142,4 @@ std::string withModelWorkspace(const std::string& metadata_json, const std::vect
   return j.dump();
 }
 
-ModelStarts modelStarts(const std::string& metadata_json, const std::vector<std::string>& movement_names,
-                        const std::string& origin) {
-  return detail::startsFromMetadata(detail::parseModelMetadata(metadata_json), movement_names, origin);
-}
-
-std::vector<ModelWorkspace> modelWorkspace(const std::string& metadata_json,
-                                           const std::vector<std::string>& movement_names, const std::string& origin) {
-  return detail::workspaceFromMetadata(detail::parseModelMetadata(metadata_json), movement_names, origin);
-}
-
 }  // namespace nao

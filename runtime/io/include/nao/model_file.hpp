@@ -147,55 +147,38 @@ std::vector<TrainedJoint> trainedJoints(const ArmModel& arm);
 
 /// The model's metadata decoded once into its typed form (nao/model_spec.hpp): the starts, the
 /// workspace, the run codes and the retargeting setting (`defaults` where the model records none).
-/// The one reader of the metadata a run uses. Throws ModelFileError, or std::runtime_error for an
-/// unusable retargeting setting, naming `origin`.
+/// The one reader of model.bin's metadata. Throws ModelFileError, or std::runtime_error for an
+/// unusable retargeting setting, naming `origin`. The sections:
+///  - "starts" (DESIGN §7-8: the start states an autonomous run begins from, so that the
+///    runtime never regenerates a demonstration):
+///      "starts": {"<movement>": [{"name": "<demo>", "ticks": N, "q": [q0, q1, q2, q3, q4]}, ...], ...}
+///    one key per movement in movement-index order, each list the held-out demonstrations (the
+///    model's split.val of that movement, in that order): their names, lengths in 10 Hz ticks and
+///    start poses (rad, joint order); empty lists when absent. Refused: not an object, a key that
+///    is not one of the movements or a movement without a key, an entry that is not {"name":
+///    non-empty string, "ticks": integer in 1..kMaxStartTicks, "q": 5 finite numbers}.
+///    Code: model_starts.cpp.
+///  - "workspace": {movement: {"lo": [5], "hi": [5]}}, one entry per movement, widened to the
+///    movement's starts (a demonstration begins at its start); empty when absent. Refused: a
+///    movement missing or unknown, not 5 finite numbers, lo above hi.
+///  - "run_codes" (docs/autonomous.md "A demonstrated run's code": a model trained with a per-run
+///    latent carries, per movement, its training demonstrations' start poses, the code of each -
+///    the latent encoder's mean for the demonstration's clean rollout, projected to d_model: what
+///    is added to every encoder token - and the hand-path DTW between every two of them):
+///      "run_codes": {"<movement>": {"names": [...], "q": [[5]...], "code": [[d]...], "dtw_m": [[n]...]}, ...}
+///    empty when absent (the zero code). A run from q0 takes the code of the medoid of the
+///    kRunCodeNearest starts nearest q0 (the demonstration the evaluator's medoid replay tracks).
+///    Refused: a movement missing or unknown, lists of different lengths, a q that is not 5 finite
+///    numbers, a code that is not d_model finite numbers, a DTW table that is not n × n finite,
+///    non-negative and symmetric. Code: model_run_codes.cpp.
+///  - "data.retarget": {"priority": "hand"|"joints", "lambda_q": x, "posture_weights": [5]}, the
+///    retargeting setting the training data were made with; `defaults` when absent.
 ModelSpec readModelSpec(const ModelHeader& header, const RetargetParams& defaults, const std::string& origin);
-
-// ---------------------------------------------------------------------------------------------
-// Autonomous starts (DESIGN §7-8): the start states an autonomous run begins from, carried in
-// the metadata JSON under "starts" so that the runtime never regenerates a demonstration:
-//   "starts": {"<movement>": [{"name": "<demo>", "ticks": N, "q": [q0, q1, q2, q3, q4]}, ...], ...}
-// one key per movement in movement-index order, each list the held-out demonstrations (the
-// model's split.val of that movement, in that order): their names, lengths in 10 Hz ticks and
-// start poses (rad, joint order). Code: model_starts.cpp.
-
-/// The "starts" of a model's metadata, one list per movement of `movement_names` (empty lists
-/// when the key is absent). Throws ModelFileError "<origin>: ..." when it is present but
-/// unusable: not an object, a key that is not one of the movements or a movement without a key,
-/// an entry that is not {"name": non-empty string, "ticks": integer in 1..kMaxStartTicks,
-/// "q": 5 finite numbers}.
-ModelStarts modelStarts(const std::string& metadata_json, const std::vector<std::string>& movement_names,
-                        const std::string& origin);
-
-/// The "workspace" of a model's metadata, {movement: {"lo": [5], "hi": [5]}}, one entry per
-/// movement of `movement_names`, widened to the metadata's starts of the movement (a
-/// demonstration begins at its start); empty when the key is absent (models that predate it). Throws
-/// ModelFileError "<origin>: ..." when present but unusable (a movement missing or unknown, not 5
-/// finite numbers, lo above hi).
-std::vector<ModelWorkspace> modelWorkspace(const std::string& metadata_json,
-                                           const std::vector<std::string>& movement_names, const std::string& origin);
 
 /// `metadata_json` with "workspace" set (one entry per movement, in that order). Throws
 /// ModelFileError when the metadata is not a JSON object or the lists do not match.
 std::string withModelWorkspace(const std::string& metadata_json, const std::vector<std::string>& movement_names,
                                const std::vector<ModelWorkspace>& workspace);
-
-// ---------------------------------------------------------------------------------------------
-// Run codes (docs/autonomous.md "A demonstrated run's code"): a model trained with a per-run
-// latent carries, per movement, its training demonstrations' start poses, the code of each (the
-// latent encoder's mean for the demonstration's clean rollout, projected to d_model: what is
-// added to every encoder token) and the hand-path DTW between every two of them, under
-//   "run_codes": {"<movement>": {"names": [...], "q": [[5]...], "code": [[d]...], "dtw_m": [[n]...]}, ...}
-// A run from q0 takes the code of the medoid of the kRunCodeNearest starts nearest q0 (the
-// demonstration the evaluator's medoid replay tracks). Code: model_run_codes.cpp.
-
-/// The "run_codes" of a model's metadata, one entry per movement of `movement_names` (empty
-/// when the key is absent: a model without a run latent runs with the zero code). Throws
-/// ModelFileError "<origin>: ..." when present but unusable: a movement missing or unknown,
-/// lists of different lengths, a q that is not 5 finite numbers, a code that is not `d_model`
-/// finite numbers, a DTW table that is not n × n finite, non-negative and symmetric.
-std::vector<ModelRunCodes> modelRunCodes(const std::string& metadata_json, const std::vector<std::string>& movement_names,
-                                         int d_model, const std::string& origin);
 
 /// `metadata_json` with "run_codes" set (one entry per movement, in that order). Throws
 /// ModelFileError when the metadata is not a JSON object or the lists do not match.
