@@ -5,7 +5,7 @@
 #include "rt_run.hpp"
 
 #include "nao/model_file.hpp"
-#include "support/alloc_counter.hpp"
+#include "alloc_probe.hpp"
 #include "support/random_policy.hpp"
 #include "support/reference_files.hpp"
 #include "support/test_util.hpp"
@@ -20,20 +20,6 @@
 #include <sstream>
 
 using namespace nao;
-
-namespace {
-
-struct CountingProbe final : rt::AllocationProbe {
-  std::optional<CountAllocations> counter;
-  void start() override { counter.emplace(); }
-  std::int64_t stop() override {
-    const std::int64_t n = counter->count();
-    counter.reset();
-    return n;
-  }
-};
-
-}  // namespace
 
 TEST_CASE("a 6,000-tick nao_rt run allocates nothing after activate, and summary.json says so") {
   namespace fs = std::filesystem;

@@ -9,7 +9,7 @@
 #include "rt_run.hpp"
 
 #if NAO_RT_COUNT_ALLOCATIONS
-#include "alloc_counter.hpp"
+#include "alloc_probe.hpp"
 #endif
 
 #include <iostream>
@@ -20,21 +20,11 @@ namespace nao::rt {
 #if NAO_RT_COUNT_ALLOCATIONS
 namespace detail {
 
-// Counts one thread's allocations from activate to deactivate (the counter is per thread:
-// start and stop run on the thread counted): the control thread's, allocations_after_activate.
-struct ThreadProbe : AllocationProbe {
-  std::optional<CountAllocations> counter;
-  void start() override { counter.emplace(); }
-  std::int64_t stop() override {
-    const std::int64_t n = counter->count();
-    counter.reset();
-    return n;
-  }
-};
-
-// The control thread's, and the LoLA I/O thread's as its companion (lola.io_allocations).
-struct CountingProbe final : ThreadProbe {
-  ThreadProbe io;
+// The control thread's count from activate to deactivate (allocations_after_activate; the
+// counter is per thread: start and stop run on the thread counted), and the LoLA I/O thread's
+// as its companion (lola.io_allocations).
+struct ControlAndIoProbe final : CountingProbe {
+  CountingProbe io;
   AllocationProbe* companion() override { return &io; }
 };
 
@@ -70,7 +60,7 @@ int naoRtMain(int argc, const char* const* argv, const ModelImage& compiled, Con
     }
 
 #if NAO_RT_COUNT_ALLOCATIONS
-    detail::CountingProbe probe;
+    detail::ControlAndIoProbe probe;
     detail::ReaderCounter reader;  // outlives the run, whose reader thread it is attached to
     cl.run.reader_allocations = &reader;
     return runMain<Dims>(cl.run, std::cout, std::cerr, &probe);
