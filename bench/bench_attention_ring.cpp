@@ -27,6 +27,7 @@
 //   chrt -f 10 nao_bench --benchmark_filter='BM_Ring' --benchmark_repetitions=10
 //     --benchmark_enable_random_interleaving=true --benchmark_report_aggregates_only=true
 #include "nao/attention_ring.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/kinematics.hpp"
 #include "nao/retarget.hpp"
 

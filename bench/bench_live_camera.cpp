@@ -1,4 +1,4 @@
-// Live camera source latency (runtime/include/nao/live_camera.hpp): a synthesised two-camera
+// Live camera source latency (runtime/live/include/nao/live_camera.hpp): a synthesised two-camera
 // recording (elbow circle, 150 frames = 5 s at 30 fps) replayed in process into fresh camera
 // folders the way OpenPose writes (nao_toolchain replay's code: a plain file in three chunks),
 // the live source reading them, and a control loop taking the newest skeleton.

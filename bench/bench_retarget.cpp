@@ -9,6 +9,7 @@
 // solve, timed on its own (manual time), so the counters give median and p99 per solve.
 // Success = final hand error < 1 mm (our FK; checked outside the timed region).
 #include "nao/retarget.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/tools/retarget_ceres.hpp"
 
 #include <benchmark/benchmark.h>

@@ -8,6 +8,8 @@
 // build's compiled-in default, docs/policy.md "Packed fp32 weights"; the same bits).
 #include "bench_policy_common.hpp"
 #include "nao/controller.hpp"
+#include "nao/arm_model_io.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/quantize.hpp"
 #include "nao/tools/reference_source.hpp"
 

@@ -1,6 +1,7 @@
 // Real-time property: pushing attention records (and sealing them) allocates nothing, into an
 // in-process ring or one in shared memory; neither does reading them.
 #include "nao/attention_ring.hpp"
+#include "nao/attention_shm.hpp"
 #include "support/alloc_counter.hpp"
 
 #include <doctest/doctest.h>

@@ -8,6 +8,7 @@
 #include "rt_run.hpp"
 #include "nao/arm_model.hpp"
 #include "nao/sim_arm.hpp"
+#include "nao/tools/baseline_laws.hpp"
 #include "nao/tools/kmeans.hpp"
 #include "support/reference_files.hpp"
 #include "support/test_util.hpp"
@@ -74,15 +75,16 @@ TEST_CASE("the default model imitates held-out demonstrations inside the limits 
         o.reference = "file:" + test::syntheticReferenceCsv(movement, seed, runDir("references"));
         o.movement = movement;
         o.zero_timing = true;
-        if (baseline == 1) o.controller.blend_law_pole = tools::KeyPoseBlend{}.pole;
-        if (baseline == 2) o.controller.gain_law = kServoInversionGain;
+        tools::BlendLaw blend(tools::KeyPoseBlend{}.pole);
+        tools::GainLaw gain(kServoInversionGain);
+        ActionLaw* const law[] = {nullptr, &blend, &gain};
         const char* const suffix[] = {"", "_law", "_gain"};
         const fs::path dir = runDir(std::string(movement) + "_" + std::to_string(seed) + suffix[baseline]);
         fs::remove_all(dir);
         fs::create_directories(dir.parent_path());
         o.log_dir = dir.string();
         std::ostringstream out, err;
-        const rt::RunReport r = rt::runController<PaperPolicyDims>(o, out, err);
+        const rt::RunReport r = rt::runController<PaperPolicyDims>(o, out, err, nullptr, law[baseline]);
         REQUIRE_MESSAGE(r.status == 0, err.str());
         std::size_t rows = 0;
         const double excess = worstLimitExcess(dir / "ticks.csv", arm, rows);

@@ -19,6 +19,7 @@
 #include <cstring>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <unistd.h>
@@ -28,21 +29,29 @@ using nao::test::CountAllocations;
 
 namespace {
 
+// The views' names in visiting order, and whether each came with an int8 / packed companion.
 template <class Dims>
-std::vector<std::string> visitedNames() {
+std::vector<std::pair<std::string, bool>> visitedViews() {
   PolicyWeights<Dims> w;
-  std::vector<std::string> names;
-  detail::visitWeightViews(w, [&](const detail::ViewName& n, auto&) { names.push_back(n.str()); });
-  return names;
+  std::vector<std::pair<std::string, bool>> views;
+  detail::visitWeightViews(w, [&](const detail::ViewName& n, auto&, auto&... quant) {
+    views.emplace_back(n.str(), sizeof...(quant) == 1);
+  });
+  return views;
 }
 
 template <class Dims>
 void checkVisitOrder() {
   const std::vector<TensorSpec> manifest = policyManifest(Dims::arch());
-  const std::vector<std::string> names = visitedNames<Dims>();
-  REQUIRE(names.size() == manifest.size());
-  CHECK(names.size() == detail::policyViewCount<Dims>(Dims::arch().bins, Dims::arch().chunk));
-  for (std::size_t i = 0; i < names.size(); ++i) CHECK_MESSAGE(names[i] == manifest[i].name, "entry ", i);
+  const std::vector<std::pair<std::string, bool>> views = visitedViews<Dims>();
+  REQUIRE(views.size() == manifest.size());
+  CHECK(views.size() == detail::policyViewCount<Dims>(Dims::arch().bins, Dims::arch().chunk));
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    CHECK_MESSAGE(views[i].first == manifest[i].name, "entry ", i, ": expected ", manifest[i].name, ", got ",
+                  views[i].first);
+    CHECK_MESSAGE(views[i].second == (manifest[i].role == TensorRole::kMatrix), manifest[i].name,
+                  ": an int8 / packed companion exactly for the manifest's matrices");
+  }
 }
 
 // The tensor's first float lies in [lo, hi).
@@ -53,7 +62,7 @@ bool inside(const void* p, const std::uint8_t* lo, const std::uint8_t* hi) {
 
 }  // namespace
 
-TEST_CASE("the runtime visits the policy's views in manifest order, the order the offsets follow") {
+TEST_CASE("the runtime visits the policy's views in manifest order, the order the offsets follow, with int8 copies exactly for the manifest's matrices") {
   checkVisitOrder<PaperPolicyDims>();
   checkVisitOrder<SmallPolicyDims>();
 }
@@ -205,7 +214,7 @@ void checkDamagedBlob(const ModelImage& image, const std::uint8_t* ModelImage::*
 
 }  // namespace
 
-TEST_CASE("a damaged or mismatched image is refused with the checksum") {
+TEST_CASE("a damaged or mismatched image is refused with the checksum, and generated extents that are not the manifest's by name") {
   const ModelImage image = compiled::modelImage();
   std::vector<std::uint8_t> copy(image.bytes, image.bytes + image.size);
   ModelImage damaged = image;
@@ -219,6 +228,13 @@ TEST_CASE("a damaged or mismatched image is refused with the checksum") {
   CHECK_THROWS_WITH_AS(mappedModelFile(other, "compiled-in model"), doctest::Contains("its generated code describes"),
                        ModelFileError);
   CHECK_NOTHROW(mappedModelFile(damaged, "compiled-in model"));
+  // Generated view extents that are not the manifest's: refused, naming the tensor.
+  std::vector<TensorExtent> extents(image.extents, image.extents + image.tensors);
+  std::swap(extents[0].rows, extents[0].cols);
+  ModelImage reshaped = image;
+  reshaped.extents = extents.data();
+  CHECK_THROWS_WITH_AS(mappedModelFile(reshaped, "compiled-in model"),
+                       doctest::Contains("tensor 'embed.in.weight' has the generated extent"), ModelFileError);
   if constexpr (compiled::kInt8Weights)
     checkDamagedBlob(image, &ModelImage::int8_bytes, &ModelImage::int8_size, checkInt8Image, "int8");
   if constexpr (compiled::kPackedWeights)

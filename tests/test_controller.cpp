@@ -2,13 +2,16 @@
 // would drive the robot. Behaviour around the policy (faults, limits, determinism) is tested
 // here with a random small policy; imitation quality with trained models elsewhere.
 #include "nao/controller.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "nao/tools/kmeans.hpp"
+#include "support/policy_faults.hpp"
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
 
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <vector>
@@ -57,13 +60,16 @@ struct Run {
 };
 
 // Runs the reference once; `drop(tick)` true removes the human from that tick, `corrupt` puts
-// NaN into the right shoulder of that tick's frame.
+// NaN into the right shoulder of that tick's frame, `nan_ticks` (first, last) puts NaN into the
+// policy's action on those ticks.
 template <class Drop, class Corrupt>
-Run run(const ControllerParams& params, FakeClock& clock, Drop drop, Corrupt corrupt, int n_ticks = -1) {
+Run run(const ControllerParams& params, FakeClock& clock, Drop drop, Corrupt corrupt, int n_ticks = -1,
+        std::array<int, 2> nan_ticks = {-1, -1}) {
   Fixture& f = fixture();
   const ControllerModel<Dims> model = configureController(f.arm, f.weights, params);
   OdeArmBackend robot(model.arm, SimParams{}, f.ref.target.front());
   ControllerData<Dims> data(robot);
+  test::PolicyWithNan<Dims> nan_policy(model, data, nan_ticks[0], nan_ticks[1]);
   activateController(model, data, f.ref.target.front(), 0, clock);
   Run r;
   const int n = n_ticks > 0 ? n_ticks : static_cast<int>(f.ref.frames.size());
@@ -73,7 +79,9 @@ Run run(const ControllerParams& params, FakeClock& clock, Drop drop, Corrupt cor
     frame = f.ref.frames[i];
     if (corrupt(t)) frame.p_W[kRShoulder].x() = std::nan("");
     const bool present = f.ref.present[i] && !drop(t);
-    r.records.push_back(updateController(model, data, present ? &frame : nullptr));
+    const SkeletonFrame* seen = present ? &frame : nullptr;
+    r.records.push_back(nan_ticks[0] >= 0 ? updateController(model, data, seen, nan_policy)
+                                          : updateController(model, data, seen));
   }
   deactivateController(model, data);
   r.faults = data.fault_counts;
@@ -196,10 +204,7 @@ TEST_CASE("NaN keypoints are counted as a fault, treated as no human, and the ru
 
 TEST_CASE("a non-finite policy output holds the position and is counted") {
   FakeClock clock;
-  ControllerParams params;
-  params.inject_policy_nan_first = 15;
-  params.inject_policy_nan_last = 17;
-  const Run r = run(params, clock, never, never);
+  const Run r = run(ControllerParams{}, clock, never, never, -1, {15, 17});
   for (int t = 15; t <= 17; ++t) {
     const TickRecord& rec = r.records[static_cast<std::size_t>(t)];
     CHECK((rec.fault & kFaultPolicyNonFinite) != 0);

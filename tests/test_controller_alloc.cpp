@@ -1,8 +1,10 @@
 // Real-time property of the whole tick: from activate through 6,000 ticks (10 simulated
 // minutes: retargeting, policy, ODE, faults included) nothing is allocated.
 #include "nao/controller.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/alloc_counter.hpp"
+#include "support/policy_faults.hpp"
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
@@ -27,12 +29,10 @@ void checkNoAllocation(std::uint64_t seed, const PolicyArch& arch = Dims::arch()
   std::vector<JointVector> centroids;
   for (int k = 0; k < weights.clusters; ++k) centroids.push_back(centroid(weights, 1, k).template cast<double>());
   const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, tools::Movement::kWholeArm, 2, 0, centroids);
-  ControllerParams params;
-  params.inject_policy_nan_first = 100;  // exercise the fault paths too
-  params.inject_policy_nan_last = 102;
-  const ControllerModel<Dims> model = configureController(arm, weights, params);
+  const ControllerModel<Dims> model = configureController(arm, weights, ControllerParams{});
   OdeArmBackend robot(model.arm, SimParams{}, ref.target.front());
   ControllerData<Dims> data(robot);
+  test::PolicyWithNan<Dims> policy(model, data, 100, 102);  // the non-finite action's path too
   SteadyClock clock;
   // Frames prepared before counting: dropouts of 5 s every 60 s (home-return path), NaN
   // keypoints every 97th tick.
@@ -53,7 +53,7 @@ void checkNoAllocation(std::uint64_t seed, const PolicyArch& arch = Dims::arch()
     activateController(model, data, ref.target.front(), 1, clock);
     for (int t = 0; t < kTicks; ++t) {
       const std::size_t i = static_cast<std::size_t>(t);
-      faults_seen |= updateController(model, data, present[i] ? &frames[i] : nullptr).fault;
+      faults_seen |= updateController(model, data, present[i] ? &frames[i] : nullptr, policy).fault;
     }
     deactivateController(model, data);
     allocations = count.count();

@@ -1,4 +1,5 @@
 // Real-time property: the human kinematics allocate nothing per frame.
+#include "nao/arm_model_io.hpp"
 #include "nao/human_kinematics.hpp"
 #include "nao/tools/synth.hpp"
 #include "support/alloc_counter.hpp"

@@ -2,6 +2,7 @@
 // file can be wrong is rejected with a message that names the file and the problem.
 #include "nao/model_file.hpp"
 
+#include "support/model_spec.hpp"
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
@@ -540,7 +541,7 @@ TEST_CASE("autonomous starts round-trip through the metadata: one list per movem
   // Keys before stay where they were; "starts" is added at the end, movements in order.
   CHECK(with.rfind(R"({"format":"nao-rt policy metadata 1","split":{"val":["elbow_003"]},"z":1,"starts":{"elbow":)", 0) == 0);
   CHECK(with.find(R"("whole_arm":[])") != std::string::npos);
-  const nao::ModelStarts back = nao::modelStarts(with, movements, kOrigin);
+  const nao::ModelStarts back = nao::test::specOf(with, movements, 128, kOrigin).starts;
   REQUIRE(back.size() == 3);
   REQUIRE(back[0].size() == 2);
   CHECK(back[0][0].name == "elbow_003");
@@ -553,10 +554,10 @@ TEST_CASE("autonomous starts round-trip through the metadata: one list per movem
   // Replacing them again gives the same text (a second model-starts run changes nothing).
   CHECK(nao::withModelStarts(with, movements, starts) == with);
   // No key: no starts, one empty list per movement.
-  const nao::ModelStarts none = nao::modelStarts(meta, movements, kOrigin);
+  const nao::ModelStarts none = nao::test::specOf(meta, movements, 128, kOrigin).starts;
   CHECK(none.size() == 3);
   CHECK(std::all_of(none.begin(), none.end(), [](const auto& l) { return l.empty(); }));
-  CHECK(nao::modelStarts("not json", movements, kOrigin).size() == 3);
+  CHECK(nao::test::specOf("not json", movements, 128, kOrigin).starts.size() == 3);
 }
 
 TEST_CASE("unusable autonomous starts are refused with the origin and what is wrong") {
@@ -565,7 +566,7 @@ TEST_CASE("unusable autonomous starts are refused with the origin and what is wr
   const auto meta = [&](const std::string& elbow, const std::string& extra = "") {
     return R"({"starts":{"elbow":)" + elbow + R"(,"whole_arm":[],"wrist":[])" + extra + "}}";
   };
-  CHECK(nao::modelStarts(meta("[" + ok_entry + "]"), movements, kOrigin)[0].size() == 1);
+  CHECK(nao::test::specOf(meta("[" + ok_entry + "]"), movements, 128, kOrigin).starts[0].size() == 1);
   const std::vector<std::pair<std::string, std::string>> bad = {
       {R"({"starts":[1]})", "not an object"},
       {R"({"starts":{"elbow":[],"whole_arm":[]}})", "no entry for movement 'wrist'"},
@@ -582,8 +583,8 @@ TEST_CASE("unusable autonomous starts are refused with the origin and what is wr
   };
   for (const auto& [text, says] : bad) {
     CAPTURE(text);
-    CHECK_THROWS_WITH_AS(nao::modelStarts(text, movements, kOrigin), doctest::Contains(says.c_str()), ModelFileError);
-    CHECK_THROWS_WITH_AS(nao::modelStarts(text, movements, kOrigin), doctest::Contains("x.bin: metadata \"starts\""),
+    CHECK_THROWS_WITH_AS(nao::test::specOf(text, movements, 128, kOrigin).starts, doctest::Contains(says.c_str()), ModelFileError);
+    CHECK_THROWS_WITH_AS(nao::test::specOf(text, movements, 128, kOrigin).starts, doctest::Contains("x.bin: metadata \"starts\""),
                          ModelFileError);
   }
   nao::ModelStarts wrong(2);
@@ -599,18 +600,18 @@ TEST_CASE("an autonomous model's workspace round-trips through its metadata; a m
   w[1].lo = w[0].lo * 0.5;
   w[1].hi = w[0].hi * 0.5 + nao::JointVector::Constant(0.125);
   const std::string with = nao::withModelWorkspace(R"({"seed":3})", movements, w);
-  const std::vector<nao::ModelWorkspace> back = nao::modelWorkspace(with, movements, "m.bin");
+  const std::vector<nao::ModelWorkspace> back = nao::test::specOf(with, movements, 128, "m.bin").workspace;
   REQUIRE(back.size() == 2);
   for (std::size_t m = 0; m < 2; ++m) {
     CHECK(back[m].lo == w[m].lo);  // exact: the doubles are written round-trip
     CHECK(back[m].hi == w[m].hi);
   }
-  CHECK(nao::modelWorkspace(R"({"seed":3})", movements, "m.bin").empty());  // older models: none
-  CHECK_THROWS_WITH_AS(nao::modelWorkspace(nao::withModelWorkspace("{}", movements, {w[1], w[0]}), {"elbow"}, "m.bin"),
+  CHECK(nao::test::specOf(R"({"seed":3})", movements, 128, "m.bin").workspace.empty());  // older models: none
+  CHECK_THROWS_WITH_AS(nao::test::specOf(nao::withModelWorkspace("{}", movements, {w[1], w[0]}), {"elbow"}, 128, "m.bin").workspace,
                        doctest::Contains("'wave', which is not a movement"), ModelFileError);
   std::vector<nao::ModelWorkspace> bad = w;
   bad[1].lo[3] = bad[1].hi[3] + 0.5;
-  CHECK_THROWS_WITH_AS(nao::modelWorkspace(nao::withModelWorkspace("{}", movements, bad), movements, "m.bin"),
+  CHECK_THROWS_WITH_AS(nao::test::specOf(nao::withModelWorkspace("{}", movements, bad), movements, 128, "m.bin").workspace,
                        doctest::Contains("'wave' has lo above hi"), ModelFileError);
   CHECK_THROWS_AS(nao::withModelWorkspace("{}", movements, {w[0]}), ModelFileError);
 }
@@ -632,7 +633,7 @@ TEST_CASE("run codes round-trip through the metadata bit for bit; malformed ones
       for (std::size_t k = i + 1; k < n; ++k) c.dtw_m[i * n + k] = c.dtw_m[k * n + i] = 0.01 / static_cast<double>(i + k + 3);
   }
   const std::string with = nao::withModelRunCodes(R"({"seed":3})", movements, codes);
-  const std::vector<nao::ModelRunCodes> back = nao::modelRunCodes(with, movements, 4, "m.bin");
+  const std::vector<nao::ModelRunCodes> back = nao::test::specOf(with, movements, 4, "m.bin").run_codes;
   REQUIRE(back.size() == 2);
   for (std::size_t m = 0; m < 2; ++m) {
     CHECK(back[m].names == codes[m].names);
@@ -641,19 +642,19 @@ TEST_CASE("run codes round-trip through the metadata bit for bit; malformed ones
     CHECK(back[m].dtw_m == codes[m].dtw_m);
     CHECK(back[m].d == 4);
   }
-  CHECK(nao::modelRunCodes(R"({"seed":3})", movements, 4, "m.bin").empty());  // no run latent: none
-  CHECK_THROWS_WITH_AS(nao::modelRunCodes(with, movements, 8, "m.bin"), doctest::Contains("code (d_model 8)"), ModelFileError);
-  CHECK_THROWS_WITH_AS(nao::modelRunCodes(with, {"elbow"}, 4, "m.bin"), doctest::Contains("'wave', which is not a movement"),
+  CHECK(nao::test::specOf(R"({"seed":3})", movements, 4, "m.bin").run_codes.empty());  // no run latent: none
+  CHECK_THROWS_WITH_AS(nao::test::specOf(with, movements, 8, "m.bin").run_codes, doctest::Contains("code (d_model 8)"), ModelFileError);
+  CHECK_THROWS_WITH_AS(nao::test::specOf(with, {"elbow"}, 4, "m.bin").run_codes, doctest::Contains("'wave', which is not a movement"),
                        ModelFileError);
-  CHECK_THROWS_WITH_AS(nao::modelRunCodes(with, {"elbow", "wave", "wrist"}, 4, "m.bin"),
+  CHECK_THROWS_WITH_AS(nao::test::specOf(with, {"elbow", "wave", "wrist"}, 4, "m.bin").run_codes,
                        doctest::Contains("no entry for movement 'wrist'"), ModelFileError);
   std::vector<nao::ModelRunCodes> bad = codes;
   bad[0].dtw_m[1] += 1e-3;  // no longer symmetric
-  CHECK_THROWS_WITH_AS(nao::modelRunCodes(nao::withModelRunCodes("{}", movements, bad), movements, 4, "m.bin"),
+  CHECK_THROWS_WITH_AS(nao::test::specOf(nao::withModelRunCodes("{}", movements, bad), movements, 4, "m.bin").run_codes,
                        doctest::Contains("not symmetric"), ModelFileError);
   bad = codes;
   bad[1].q[0][2] = std::nan("");
-  CHECK_THROWS_WITH_AS(nao::modelRunCodes(nao::withModelRunCodes("{}", movements, bad), movements, 4, "m.bin"),
+  CHECK_THROWS_WITH_AS(nao::test::specOf(nao::withModelRunCodes("{}", movements, bad), movements, 4, "m.bin").run_codes,
                        doctest::Contains("'wave' entry 0's q"), ModelFileError);
   bad = codes;
   bad[0].code.pop_back();

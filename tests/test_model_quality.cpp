@@ -178,7 +178,7 @@ Scores scoreAs(const std::string& path, const ArmModel& arm, const ModelFile& mo
   // model.bin carries, which nao_rt rolls out from. The files pipeline (smoothed triangulation)
   // gives them; the in-memory one differs at the first sample, so the model's are used.
   if (model.header.conditioning == Conditioning::kAutonomous) {
-    const ModelStarts starts = modelStarts(model.header.metadata_json, model.header.movement_names, path);
+    const ModelStarts starts = readModelSpec(model.header, RetargetParams{}, path).starts;
     std::size_t found = 0;
     for (tools::PolicyDemo& d : data.demos)
       for (const ModelStart& st : starts[static_cast<std::size_t>(d.movement)])
@@ -201,8 +201,7 @@ Scores scoreAs(const std::string& path, const ArmModel& arm, const ModelFile& mo
   // plus the law (the action itself for a chunk of 1; the ensemble mixes older chunks in). It is
   // taken at the latent's prior mean (the zero code); a model with run codes is also scored as
   // nao_rt runs it, with the code its controller picks from the demonstration's start.
-  const std::vector<ModelRunCodes> codes =
-      modelRunCodes(model.header.metadata_json, model.header.movement_names, Dims::kDModel, path);
+  const std::vector<ModelRunCodes> codes = readModelSpec(model.header, RetargetParams{}, path).run_codes;
   double sum_coded = 0.0;
   for (const tools::PolicySequence& seq : seqs)
     for (const bool coded : {false, true}) {

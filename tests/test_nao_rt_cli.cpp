@@ -120,8 +120,13 @@ TEST_CASE("nao_rt --info describes the compiled-in model, and says when there is
   // As nao_rt's main hands it over: the bytes in place, the header and offsets as constants.
   const nao::ModelFile decoded = nao::decodeModel(bytes, "test");
   std::vector<std::uint64_t> offsets;
-  for (const nao::TensorEntry& t : decoded.tensors) offsets.push_back(t.offset);
-  o.compiled = {bytes.data(), bytes.size(), decoded.checksum, &decoded.header, offsets.data(), offsets.size()};
+  std::vector<nao::TensorExtent> extents;
+  for (const nao::TensorEntry& t : decoded.tensors) {
+    offsets.push_back(t.offset);
+    extents.push_back(nao::viewExtent(t.spec));
+  }
+  o.compiled = {bytes.data(), bytes.size(), decoded.checksum, &decoded.header, offsets.data(), extents.data(),
+                offsets.size()};
   r = info(o);
   CHECK(r.status == 0);
   CHECK(nlohmann::json::parse(r.out)["source"] == "compiled-in");

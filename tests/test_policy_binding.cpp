@@ -122,6 +122,23 @@ TEST_CASE("bindPolicyWeights rejects a wrong tensor count, a null tensor, anothe
                        std::invalid_argument);
 }
 
+TEST_CASE("binding checks the manifest's roles: a matrix role on a view without an int8 copy, or none on one with it, is refused by name") {
+  const TestModel m = randomModel(smallArch(), 7, false);
+  const std::vector<const float*> p = m.pointers();
+  PolicyWeights<SmallPolicyDims> w;
+  detail::setPolicySizes(w, smallArch(), Conditioning::kReference);
+  const std::vector<detail::WeightSlot> slots = detail::weightSlots(w);
+  std::vector<TensorSpec> manifest = policyManifest(smallArch());
+  CHECK_NOTHROW(detail::bindWeightSlots(slots, manifest, p.data(), p.size()));
+  for (const char* name : {"enc.0.attn.wq", "enc.0.attn.bq"}) {
+    std::vector<TensorSpec> flipped = manifest;
+    for (TensorSpec& t : flipped)
+      if (t.name == name) t.role = t.role == TensorRole::kMatrix ? TensorRole::kTrained : TensorRole::kMatrix;
+    CHECK_THROWS_WITH_AS(detail::bindWeightSlots(slots, flipped, p.data(), p.size()),
+                         doctest::Contains((std::string("tensor '") + name + "' is").c_str()), std::invalid_argument);
+  }
+}
+
 namespace {
 
 /// A model.bin image of `model` (manifest order), decoded.
@@ -145,7 +162,7 @@ struct ViewShape {
 template <class Dims>
 std::vector<ViewShape> viewShapes(PolicyWeights<Dims>& w) {
   std::vector<ViewShape> out;
-  detail::visitWeightViews(w, [&](const detail::ViewName& n, auto& view) {
+  detail::visitWeightViews(w, [&](const detail::ViewName& n, auto& view, auto&...) {
     out.push_back({n.str(), view.data(), static_cast<long>(view.rows()), static_cast<long>(view.cols())});
   });
   return out;
@@ -161,13 +178,16 @@ TEST_CASE("bindPolicyWeightsAt on a model.bin image binds what bindPolicyWeights
     const TestModel model = randomModel(arch, 91, false);
     const ModelFile file = modelImage(model, arch, Conditioning::kAutonomous);
     std::vector<std::uint64_t> offsets;
+    std::vector<TensorExtent> extents;
     std::vector<const float*> ptrs;
     for (std::size_t i = 0; i < file.tensors.size(); ++i) {
       offsets.push_back(file.tensors[i].offset);
+      extents.push_back(viewExtent(file.tensors[i].spec));
       ptrs.push_back(file.data(i));
     }
     REQUIRE(offsets.size() == detail::policyViewCount<Dims>(arch.bins, arch.chunk));
-    PolicyWeights<Dims> at = bindPolicyWeightsAt<Dims>(file.bytes.data(), offsets.data(), arch, Conditioning::kAutonomous);
+    PolicyWeights<Dims> at =
+        bindPolicyWeightsAt<Dims>(file.bytes.data(), offsets.data(), extents.data(), arch, Conditioning::kAutonomous);
     PolicyWeights<Dims> by_name = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, Conditioning::kAutonomous);
     const std::vector<ViewShape> a = viewShapes(at), b = viewShapes(by_name);
     REQUIRE(a.size() == b.size());

@@ -9,6 +9,7 @@
 #include "nao/model_file.hpp"
 #include "nao/policy_kernels.hpp"
 #include "nao/controller.hpp"
+#include "nao/tools/baseline_laws.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/random_policy.hpp"
 #include "support/reference_files.hpp"
@@ -310,15 +311,12 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
                            "--realtime", "--log", "--attention-shm", "--info", "--zero-timing", "--precision",
                            "--lola-io-thread", "--lola-io-wait-ms"})
     CHECK_MESSAGE(out.find(flag) != std::string::npos, flag);
-  // The evaluation's baselines and the timing tests' knob work but are not an operator's flags.
-  for (const char* hidden : {"--blend-law-pole", "--gain-law", "--emulate-tick-ms"})
-    CHECK_MESSAGE(out.find(hidden) == std::string::npos, hidden);
 
   for (std::vector<const char*> bad : {std::vector<const char*>{"--bogus"}, {"--ticks", "-3"}, {"--ticks", "ten"},
                                        {"--ticks", "5", "--seconds", "2"}, {"--seed", "1"}, {"--start-demo", "0"},
                                        {"--test-seed", "1"}, {"--start", "-1"}, {"--start-pose", "0,1,2"},
                                        {"--precision", "fp16"},
-                                       {"--emulate-tick-ms", "-1"}, {"--lola-io-wait-ms", "12"}}) {
+                                       {"--emulate-tick-ms", "30"}, {"--lola-io-wait-ms", "12"}}) {
     rt::CommandLine c;
     CAPTURE(bad[0]);
     CHECK(parse(bad, c, out, err) == 2);
@@ -343,15 +341,11 @@ TEST_CASE("the command line: --help exits 0, a bad flag or value exits 2 with on
   CHECK(c.run.precision == "int8");
   CHECK_FALSE(c.info);
   CHECK(c.run.lola.io_thread == (NAO_LOLA_IO_THREAD_DEFAULT != 0));
-  CHECK(c.run.emulate_tick_ns == 0);
 
   rt::CommandLine l;
-  REQUIRE(parse({"--robot", "lola:/tmp/x.sock", "--lola-io-thread", "--lola-io-wait-ms", "2.5", "--emulate-tick-ms",
-                 "30"},
-                l, out, err) == -1);
+  REQUIRE(parse({"--robot", "lola:/tmp/x.sock", "--lola-io-thread", "--lola-io-wait-ms", "2.5"}, l, out, err) == -1);
   CHECK(l.run.lola.io_thread);
   CHECK(l.run.lola.io_wait_ms == doctest::Approx(2.5));
-  CHECK(l.run.emulate_tick_ns == 30'000'000);
   rt::CommandLine one;
   REQUIRE(parse({"--robot", "lola", "--lola-one-thread"}, one, out, err) == -1);
   CHECK_FALSE(one.run.lola.io_thread);
@@ -576,55 +570,39 @@ TEST_CASE("an autonomous model may run against a reference, which then only serv
   CHECK(r.report.faults[0] == 0);  // no_human: the reference is not an input
 }
 
-TEST_CASE("--blend-law-pole runs the blend-law baseline on a reference model, is refused for an autonomous one, and is recorded") {
-  rt::CommandLine cl;
-  std::ostringstream out, err;
-  const char* argv[] = {"nao_rt", "--start", "3", "--blend-law-pole", "0.7"};
-  REQUIRE(rt::parseCommandLine(5, argv, cl, out, err) == -1);
-  CHECK(cl.run.start_index == 3);
-  CHECK(cl.run.controller.blend_law_pole == 0.7);
-  const char* bad[] = {"nao_rt", "--blend-law-pole", "1.5"};
-  CHECK(rt::parseCommandLine(3, bad, cl, out, err) == 2);
-
+TEST_CASE("an action law replaces the policy in the run and is named in summary.json; nao_rt has no flag for one") {
+  for (const char* flag : {"--blend-law-pole", "--gain-law"}) {
+    rt::CommandLine cl;
+    std::ostringstream out, err;
+    const char* argv[] = {"nao_rt", flag, "0.7"};
+    CHECK_MESSAGE(rt::parseCommandLine(3, argv, cl, out, err) == 2, flag << ": expected an unknown flag");
+  }
   const fs::path dir = tempDir("blend_law");
   rt::RunOptions o = recorded(referenceModel(), "elbow", dir);
   o.ticks = 30;
-  o.controller.blend_law_pole = 0.7;
-  const Outcome r = run(o);
+  tools::BlendLaw blend(0.7);
+  const Outcome r = run(o, &blend);
   REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
   const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
-  CHECK(s["blend_law_pole"] == 0.7);
-  // Without the flag: no such key.
+  CHECK(s["action_law"] == "blend law");
+  CHECK(s["policy_ticks"] == 0);
+  // The policy's run: no such key.
   rt::RunOptions policy = recorded(referenceModel(), "elbow", tempDir("blend_law_policy"));
   policy.ticks = 30;
   REQUIRE(run(policy).report.status == 0);
-  CHECK_FALSE(nlohmann::json::parse(bytes(fs::path(policy.log_dir) / "summary.json")).contains("blend_law_pole"));
-
-  rt::RunOptions autonomous = recorded(writeModel("autonomous_law.bin", Conditioning::kAutonomous), "elbow");
-  autonomous.controller.blend_law_pole = 0.7;
-  int status = 0;
-  CHECK(errorLine(autonomous, status).find("autonomous") != std::string::npos);
-  CHECK(status == 2);
+  CHECK_FALSE(nlohmann::json::parse(bytes(fs::path(policy.log_dir) / "summary.json")).contains("action_law"));
 }
 
 
-TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature target, recomputed here from the snapped key poses") {
-  rt::CommandLine cl;
-  std::ostringstream out, err;
-  const char* argv[] = {"nao_rt", "--gain-law", "1.0894"};
-  REQUIRE(rt::parseCommandLine(3, argv, cl, out, err) == -1);
-  CHECK(cl.run.controller.gain_law == 1.0894);
-  const char* bad[] = {"nao_rt", "--gain-law", "-1"};
-  CHECK(rt::parseCommandLine(3, bad, cl, out, err) == 2);
-
+TEST_CASE("the gain law drives the arm by a = G (clamp(f) - q) on the feature target, recomputed here from the snapped key poses") {
   const double gain = 1.0894;
   const fs::path dir = tempDir("gain_law");
   rt::RunOptions o = recorded(referenceModel(), "elbow", dir);
   o.ticks = 60;
-  o.controller.gain_law = gain;
-  const Outcome r = run(o);
+  tools::GainLaw law(gain);
+  const Outcome r = run(o, &law);
   REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
-  CHECK(nlohmann::json::parse(bytes(dir / "summary.json"))["gain_law"] == gain);
+  CHECK(nlohmann::json::parse(bytes(dir / "summary.json"))["action_law"] == "gain law");
 
   // f: the online blend toward the snapped key pose r (pole 0.7), started at rest on r(0); the
   // action is G times its distance, clamped to the limits, from the angles the tick started at.
@@ -658,16 +636,6 @@ TEST_CASE("--gain-law drives the arm by a = G (clamp(f) - q) on the feature targ
   // ticks.csv prints 17 significant digits; q_start is recovered as q_cmd - a (two roundings).
   CHECK(worst < 1e-9);
   CHECK(largest > 1e-3);  // the arm moved: the comparison is not of zeros
-
-  rt::RunOptions both = o;
-  both.controller.blend_law_pole = 0.7;
-  int status = 0;
-  CHECK(errorLine(both, status).find("exclude") != std::string::npos);
-  CHECK(status == 2);
-  rt::RunOptions autonomous = recorded(writeModel("autonomous_gain.bin", Conditioning::kAutonomous), "elbow");
-  autonomous.controller.gain_law = gain;
-  CHECK(errorLine(autonomous, status).find("autonomous") != std::string::npos);
-  CHECK(status == 2);
 }
 
 TEST_CASE("a reference model's law.gain is added by nao_rt: the first action is the net's plus gain times the policy's r") {
@@ -724,9 +692,9 @@ TEST_CASE("summary.json's network share: 1 for an autonomous model, null when an
 
   const fs::path law_dir = tempDir("share_law");
   rt::RunOptions o = recorded(writeModel("share_law.bin", Conditioning::kReference), "elbow", law_dir);
-  o.controller.gain_law = 1.0894;
   o.ticks = 5;
-  const Outcome l = run(o);
+  tools::GainLaw gain(1.0894);
+  const Outcome l = run(o, &gain);
   REQUIRE_MESSAGE(l.report.status == 0, l.report.error);
   const nlohmann::json sl = nlohmann::json::parse(bytes(law_dir / "summary.json"));
   CHECK(sl["policy_ticks"] == 0);

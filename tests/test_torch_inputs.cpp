@@ -145,8 +145,7 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
   // The codes a run chooses from travel in the metadata: one per training demonstration, with
   // its start and the kept weights' P μ of its clean rollout, bit for bit.
   const PolicyData& data = smallData();
-  const std::vector<ModelRunCodes> codes =
-      modelRunCodes(with.header.metadata_json, with.header.movement_names, o.arch.d_model, "latent.bin");
+  const std::vector<ModelRunCodes> codes = readModelSpec(with.header, RetargetParams{}, "latent.bin").run_codes;
   REQUIRE(codes.size() == static_cast<std::size_t>(data.movements()));
   REQUIRE(r.run_codes.size() == codes.size());
   std::size_t n = 0;
@@ -168,7 +167,7 @@ TEST_CASE("training with a run latent: deterministic, another result, the same m
   CHECK(n == r.split.train.size());
   CHECK(modelCard(data, o, r, "cmd", "m.bin").find("| run latent | K 4, KL weight 0.01; " + std::to_string(n) + " run codes") !=
         std::string::npos);
-  CHECK(modelRunCodes(without.header.metadata_json, without.header.movement_names, o.arch.d_model, "none.bin").empty());
+  CHECK(readModelSpec(without.header, RetargetParams{}, "none.bin").run_codes.empty());
 }
 
 TEST_CASE("the moving average of the weights: after one step min(D, 0.1) of the start plus the rest of the trained weights; training goes on from the trained weights; what is scored is the average; resumable") {

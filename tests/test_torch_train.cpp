@@ -10,6 +10,7 @@
 #include "nao/tools/policy_dataset.hpp"
 #include "policy_torch.hpp"
 #include "policy_train.hpp"
+#include "support/model_spec.hpp"
 #include "support/small_policy_data.hpp"
 #include "support/test_util.hpp"
 #include "train_checkpoint.hpp"
@@ -507,7 +508,7 @@ TEST_CASE("an autonomous model's metadata carries the starts of its validation d
   const PolicyData& data = startedData();
   const TrainResult r = trainPolicy(data, smallSim(), o, nullptr);
   const std::string meta = modelMetadata(data, o, r);
-  const ModelStarts starts = modelStarts(meta, data.movement_names, "trained");
+  const ModelStarts starts = nao::test::specOf(meta, data.movement_names, o.arch.d_model, "trained").starts;
   REQUIRE(starts.size() == 3);
   std::size_t listed = 0;
   for (int m = 0; m < 3; ++m) {

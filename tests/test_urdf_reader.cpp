@@ -1,4 +1,4 @@
-// The two URDF readers (runtime/include/nao/urdf_reader.hpp): urdfdom's parser, which the native
+// The two URDF readers (runtime/io/include/nao/urdf_reader.hpp): urdfdom's parser, which the native
 // build uses, and the TinyXML reader of the static robot build (preset nao). The robot must get
 // the arm the tests and the simulator were checked with, so the two must agree bit for bit.
 #include "nao/urdf_reader.hpp"

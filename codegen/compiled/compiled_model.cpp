@@ -50,7 +50,7 @@ const ModelHeader& compiledHeader() {
 ModelImage modelImage() {
   const ModelHeader& header = compiledHeader();
   const ModelBytes b = modelBytes();
-  ModelImage image{b.data, b.size, kChecksum, &header, kTensorOffsets.data(), kTensorOffsets.size()};
+  ModelImage image{b.data, b.size, kChecksum, &header, kTensorOffsets.data(), kTensorExtents.data(), kTensorOffsets.size()};
   if constexpr (kInt8Weights) {
     image.int8_bytes = nao_model_int8;
     image.int8_size = static_cast<std::size_t>(nao_model_int8_end - nao_model_int8);
@@ -68,7 +68,8 @@ static_assert(!kInt8Weights || kInt8Bytes == quantizedPolicyBytes<Dims>(), "the 
 static_assert(!kPackedWeights || kPackedBytes == packedPolicyBytes<Dims>(), "the generated packed blob is not the layout's");
 
 PolicyWeights<Dims> policyWeights() noexcept {
-  PolicyWeights<Dims> w = bindPolicyWeightsAt<Dims>(nao_model_blob, kTensorOffsets.data(), compiledHeader().arch, kConditioning);
+  PolicyWeights<Dims> w = bindPolicyWeightsAt<Dims>(nao_model_blob, kTensorOffsets.data(), kTensorExtents.data(),
+                                                   compiledHeader().arch, kConditioning);
   if constexpr (kInt8Weights) bindQuantizedWeights<Dims>(w, nao_model_int8);
   if constexpr (kPackedWeights) bindPackedWeights<Dims>(w, nao_model_packed);
   return w;

@@ -128,18 +128,21 @@ std::string configHeader(const ModelFile& model, const std::string& source, cons
   s << "inline constexpr Conditioning kConditioning = Conditioning::"
     << (h.conditioning == Conditioning::kReference ? "kReference" : "kAutonomous") << ";\n\n";
 
-  std::vector<std::string> names, offsets, counts;
+  std::vector<std::string> names, offsets, counts, extents;
   for (const TensorEntry& t : model.tensors) {
     names.push_back(cxxString(t.spec.name));
     offsets.push_back(std::to_string(t.offset) + "u");
     counts.push_back(std::to_string(t.spec.count()) + "u");
+    const TensorExtent e = viewExtent(t.spec);
+    extents.push_back("TensorExtent{" + std::to_string(e.rows) + ", " + std::to_string(e.cols) + "}");
   }
   s << "// Tensors in manifest order (policyManifest): name, byte offset from the start of the\n"
-       "// embedded file (a multiple of 64), float count.\n";
+       "// embedded file (a multiple of 64), float count, the extent [rows, cols] of its Eigen view.\n";
   s << "inline constexpr std::size_t kNumTensors = " << model.tensors.size() << ";\n";
   s << array("std::string_view", "kTensorNames", names, 1);
   s << array("std::uint64_t", "kTensorOffsets", offsets, 8);
   s << array("std::uint64_t", "kTensorCounts", counts, 8);
+  s << array("TensorExtent", "kTensorExtents", extents, 4);
   s << "\n/// Index of the tensor named `name` in the manifest, kNumTensors if there is none.\n"
        "constexpr std::size_t tensorIndex(std::string_view name) {\n"
        "  for (std::size_t i = 0; i < kNumTensors; ++i)\n"

@@ -6,6 +6,7 @@
 // it is, and the fields printed (tick, fault, score[5]) sit at fixed offsets at its start
 // (docs/attention_bin.md).
 #include "nao/arm_model.hpp"
+#include "nao/attention_shm.hpp"
 #include "nao/attention_ring.hpp"
 
 #include <CLI/CLI.hpp>

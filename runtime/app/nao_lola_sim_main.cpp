@@ -16,6 +16,7 @@
 // array length, close the socket, heat a joint. It records every actuator packet it received
 // (--log CSV) and a summary (--summary JSON) for the tests and the benchmark.
 #include "nao/arm_model.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/controller.hpp"
 #include "nao/lola.hpp"
 #include "nao/sim_arm.hpp"
@@ -37,6 +38,7 @@
 #include <cstring>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
@@ -110,31 +112,41 @@ struct Stats {
   bool closed_by_injection = false, client_closed = false;
 };
 
-}  // namespace
-
-int main(int argc, char** argv) {
+/// The command line.
+struct Options {
   std::string socket_path, urdf = NAO_DEFAULT_URDF, log_path, summary_path;
   double seconds = 0.0;
   std::vector<double> arm_start = {1.40, -0.20, 1.20, 0.50, 0.00};
+  bool apply_at_once = false;
   Injection inj;
+};
+
+/// The injected faults as events: the cycle each starts at and its value.
+struct Plan {
+  std::vector<Event> drops, delays, garbages, bads, heats, misreads;
+  std::int64_t close_at = -1;
+};
+
+/// -1 when the command line is good, else the exit status (help printed: 0; an error: 2).
+int parseOptions(int argc, char** argv, Options& o) {
+  Injection& inj = o.inj;
   CLI::App app{
       "nao_lola_sim: a simulated NAO V6 behind a LoLA socket (docs/lola.md): the ODE right arm and 20\n"
       "held joints, a 12 ms cycle on the real clock, fault injection by flag. Serves one client at a\n"
       "time until killed or until --seconds elapse.",
       "nao_lola_sim"};
-  app.add_option("--socket", socket_path, "Unix socket path to serve (LoLA's is /tmp/robocup)")->required();
-  app.add_option("--seconds", seconds, "Stop after this long (default: until SIGINT/SIGTERM)")->check(CLI::PositiveNumber);
-  app.add_option("--urdf", urdf, "Robot description of the simulated arm")->capture_default_str();
-  app.add_option("--arm-start", arm_start, "Right arm start pose, 5 angles, rad (default: nao_rt's home pose)")
+  app.add_option("--socket", o.socket_path, "Unix socket path to serve (LoLA's is /tmp/robocup)")->required();
+  app.add_option("--seconds", o.seconds, "Stop after this long (default: until SIGINT/SIGTERM)")->check(CLI::PositiveNumber);
+  app.add_option("--urdf", o.urdf, "Robot description of the simulated arm")->capture_default_str();
+  app.add_option("--arm-start", o.arm_start, "Right arm start pose, 5 angles, rad (default: nao_rt's home pose)")
       ->expected(kNumJoints);
-  bool apply_at_once = false;
-  app.add_flag("--apply-at-once", apply_at_once,
+  app.add_flag("--apply-at-once", o.apply_at_once,
                "Diagnostics: an answer drives the body from its own cycle instead of the next one\n"
                "(lola.md: the next), i.e. a robot without LoLA's one-cycle transport lag");
-  app.add_option("--log", log_path,
+  app.add_option("--log", o.log_path,
                  "CSV of every actuator packet received: cycle, latency_us, in_cycle, then Position and\n"
                  "Stiffness of the 25 joints (written at exit)");
-  app.add_option("--summary", summary_path, "JSON of the counts and round-trip latencies (written at exit)");
+  app.add_option("--summary", o.summary_path, "JSON of the counts and round-trip latencies (written at exit)");
   app.add_option("--drop", inj.drop, "CYCLE:N  do not send the sensor packets of N cycles from CYCLE")->type_name("C:N");
   app.add_option("--delay", inj.delay, "CYCLE:MS  send CYCLE's sensor packet MS milliseconds late")->type_name("C:MS");
   app.add_option("--garbage", inj.garbage, "CYCLE:BYTES  send random bytes instead of CYCLE's sensor packet")
@@ -148,10 +160,16 @@ int main(int argc, char** argv) {
                  "encoder, or an arm held by someone): the client's tracking check must see it")
       ->type_name("C:N");
   app.add_option("--heat", inj.heat, "JOINT:CYCLE  from CYCLE on, LoLA joint JOINT reads 80 degC")->type_name("J:C");
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  return -1;
+}
 
-  // Configure: the arm, the injection plan, the server socket.
-  std::vector<Event> drops, delays, garbages, bads, heats, misreads;
+/// The injection plan from the flags; false (a line on stderr) for a malformed one.
+bool makePlan(const Injection& inj, Plan& plan) {
   auto parseList = [](const std::vector<std::string>& in, std::vector<Event>& out, const char* flag) {
     for (const std::string& s : in) {
       double a = 0, b = 0;
@@ -163,68 +181,192 @@ int main(int argc, char** argv) {
     }
     return true;
   };
-  if (!parseList(inj.drop, drops, "--drop") || !parseList(inj.delay, delays, "--delay") ||
-      !parseList(inj.garbage, garbages, "--garbage") || !parseList(inj.bad_length, bads, "--bad-length") ||
-      !parseList(inj.heat, heats, "--heat") || !parseList(inj.misread, misreads, "--misread"))
-    return 2;
-  for (Event& h : heats) {  // J:C
+  if (!parseList(inj.drop, plan.drops, "--drop") || !parseList(inj.delay, plan.delays, "--delay") ||
+      !parseList(inj.garbage, plan.garbages, "--garbage") || !parseList(inj.bad_length, plan.bads, "--bad-length") ||
+      !parseList(inj.heat, plan.heats, "--heat") || !parseList(inj.misread, plan.misreads, "--misread"))
+    return false;
+  for (Event& h : plan.heats) {  // J:C
     if (h.joint < 0 || h.joint >= kN) {
       std::cerr << "nao_lola_sim: --heat joint must be a LoLA index 0..24\n";
-      return 2;
+      return false;
     }
     h.cycle = static_cast<std::int64_t>(h.value);
   }
+  plan.close_at = inj.close_at;
+  return true;
+}
 
-  nao::SimParams sp;
-  sp.substeps_per_tick = static_cast<int>(lola::kCycleNs / 1'000'000);  // 12 x 1 ms
-  JointVector q_arm0;
-  for (int j = 0; j < kNumJoints; ++j) q_arm0[j] = arm_start[static_cast<std::size_t>(j)];
+/// True when an event's window [cycle, cycle + max(1, value)) holds c; its value into `value`.
+bool inWindow(const std::vector<Event>& ev, std::int64_t c, double& value) {
+  for (const Event& e : ev)
+    if (c >= e.cycle && c < e.cycle + std::max<std::int64_t>(1, static_cast<std::int64_t>(e.value))) {
+      value = e.value;
+      return true;
+    }
+  return false;
+}
+
+/// True when an event starts at c; its value into `value`.
+bool atCycle(const std::vector<Event>& ev, std::int64_t c, double& value) {
+  for (const Event& e : ev)
+    if (c == e.cycle) {
+      value = e.value;
+      return true;
+    }
+  return false;
+}
+
+/// The simulated NAO: the ODE right arm, the 20 held joints, what the client last commanded.
+struct Body {
   std::unique_ptr<nao::SimModel> model;
   std::unique_ptr<nao::SimData> sim;
-  try {
-    model = std::make_unique<nao::SimModel>(nao::makeSimModel(nao::loadArmModel(urdf), sp));
-    q_arm0 = nao::clampToLimits(model->arm, q_arm0);
-    sim = std::make_unique<nao::SimData>(*model, q_arm0);
-  } catch (const std::exception& e) {
-    std::cerr << "nao_lola_sim: " << e.what() << "\n";
-    return 1;
-  }
-
-  sockaddr_un addr{};
-  if (socket_path.size() >= sizeof(addr.sun_path)) {
-    std::cerr << "nao_lola_sim: socket path too long\n";
-    return 2;
-  }
-  const int server = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-  addr.sun_family = AF_UNIX;
-  std::memcpy(addr.sun_path, socket_path.c_str(), socket_path.size());
-  ::unlink(socket_path.c_str());
-  if (server < 0 || ::bind(server, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0 ||
-      ::listen(server, 1) != 0) {
-    std::cerr << "nao_lola_sim: cannot serve '" << socket_path << "': " << std::strerror(errno) << "\n";
-    return 1;
-  }
-  struct sigaction sa {};
-  sa.sa_handler = onQuit;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
-  std::signal(SIGPIPE, SIG_IGN);
-
-  const std::int64_t t_begin = nao::monotonicNs();
-  const std::int64_t t_end = seconds > 0 ? t_begin + static_cast<std::int64_t>(seconds * 1e9) : INT64_MAX;
-  std::mt19937 rng(7);
-  Stats st;
-  std::vector<RxRow> rows;
-  rows.reserve(seconds > 0 ? static_cast<std::size_t>(seconds / 0.012) + 16 : 100000);
-  std::vector<double> latencies_us;
-  latencies_us.reserve(rows.capacity());
-
-  // Body state.
-  std::array<float, kN> position = startPose(q_arm0);
-  std::array<float, kN> applied_pos = position, applied_stiff{};  // stiffness 0 until commanded
-  std::array<float, kN> latest_pos = position, latest_stiff{};
+  std::array<float, kN> position{};
+  std::array<float, kN> applied_pos{}, applied_stiff{};  // stiffness 0 until commanded
+  std::array<float, kN> latest_pos{}, latest_stiff{};
   bool have_latest = false;
+};
+
+/// One cycle of the body with what was applied: the arm's physics (gearbox hold below
+/// kGearHoldStiffness), every other joint's first-order lag toward its command.
+void advanceBody(Body& b, double dt) {
+  JointVector q_cmd, scale;
+  for (int j = 0; j < kNumJoints; ++j) {
+    const auto i = static_cast<std::size_t>(lola::kRightArmLolaIndex[j]);
+    const double s = b.applied_stiff[i];
+    scale[j] = std::max(s, kGearHoldStiffness);
+    q_cmd[j] = s < kGearHoldStiffness ? b.sim->q[j] : static_cast<double>(b.applied_pos[i]);
+  }
+  nao::setSimTorqueScale(*b.model, *b.sim, scale);
+  nao::stepSim(*b.model, *b.sim, q_cmd);
+  for (int i = 0; i < kN; ++i) {
+    const auto u = static_cast<std::size_t>(i);
+    const double k = 25.0 * std::clamp<double>(b.applied_stiff[u], 0.0, 1.0);
+    b.position[u] += static_cast<float>((b.applied_pos[u] - b.position[u]) * (1.0 - std::exp(-k * dt)));
+  }
+  for (int j = 0; j < kNumJoints; ++j)
+    b.position[static_cast<std::size_t>(lola::kRightArmLolaIndex[j])] = static_cast<float>(b.sim->q[j]);
+}
+
+/// The socket and what travels over it.
+struct Link {
+  int client = -1;
+  std::array<char, lola::kMaxPacketBytes> tx{};
+  std::array<char, 16384> rx{};
+  std::size_t rx_len = 0;
+  std::vector<std::int64_t> sent_cycle_queue;  // sensor packets awaiting an answer (cycle numbers)
+  std::vector<std::int64_t> sent_time_queue;
+};
+
+/// The cycle's sensor packet into link.tx (its bytes into n), or the injected fault instead of
+/// it; false when the packet is dropped.
+bool sensorBytes(const Plan& plan, std::int64_t cycle, Body& b, lola::SensorPacket& sensor, Link& link,
+                 std::mt19937& rng, Stats& st, std::size_t& n) {
+  double v = 0;
+  sensor.position = b.position;
+  if (inWindow(plan.misreads, cycle, v)) sensor.position[21] += 0.5f;
+  sensor.stiffness = b.applied_stiff;
+  for (const Event& h : plan.heats)
+    if (cycle >= h.cycle) sensor.temperature[static_cast<std::size_t>(h.joint)] = 80.0f;
+  n = lola::writeSensorPacket(sensor, link.tx.data(), link.tx.size());
+  if (inWindow(plan.drops, cycle, v)) {
+    ++st.dropped;
+    return false;
+  }
+  if (atCycle(plan.garbages, cycle, v)) {
+    n = std::min<std::size_t>(static_cast<std::size_t>(std::max(1.0, v)), link.tx.size());
+    for (std::size_t k = 0; k < n; ++k) link.tx[k] = static_cast<char>(rng() & 0xff);
+    ++st.garbage;
+  } else if (inWindow(plan.bads, cycle, v)) {
+    // The same map with Position one entry short: a whole, well-formed message of the wrong shape.
+    std::string bytes(link.tx.data(), n);
+    const std::string key("\xa8" "Position\xdc\x00\x19", 12);  // fixstr "Position", array16 of 25
+    const auto at = bytes.find(key);
+    if (at != std::string::npos) {
+      bytes[at + 11] = 0x18;                    // 24 entries
+      bytes.erase(at + 12 + 4 * 5, 5);          // drop one float32 (5 bytes)
+    }
+    n = bytes.size();
+    std::memcpy(link.tx.data(), bytes.data(), n);
+    ++st.bad_length;
+  }
+  return true;
+}
+
+/// Sends n bytes of link.tx and queues the cycle for its answer.
+void sendSensor(Link& link, std::size_t n, std::int64_t cycle, Stats& st) {
+  const std::int64_t t_sent = nao::monotonicNs();
+  std::size_t off = 0;
+  while (off < n) {
+    const ssize_t w = ::send(link.client, link.tx.data() + off, n - off, MSG_NOSIGNAL);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) break;
+    off += static_cast<std::size_t>(w);
+  }
+  ++st.sent;
+  link.sent_cycle_queue.push_back(cycle);
+  link.sent_time_queue.push_back(t_sent);
+}
+
+/// Parses the actuator packets in link.rx: the latest is applied from the next cycle, each
+/// answer is matched with the oldest unanswered sensor packet.
+void takeAnswers(Link& link, lola::LolaReader& reader, std::int64_t cycle, std::int64_t next_deadline, Body& b,
+                 std::vector<RxRow>& rows, std::vector<double>& latencies_us, Stats& st) {
+  for (;;) {
+    const lola::ParseResult pr = reader.parse(link.rx.data(), link.rx_len);
+    if (pr.status == lola::ParseStatus::kIncomplete) {
+      if (link.rx_len == link.rx.size()) link.rx_len = 0;
+      return;
+    }
+    if (pr.status == lola::ParseStatus::kBadSyntax) {
+      ++st.malformed_received;
+      link.rx_len = 0;
+      return;
+    }
+    std::memmove(link.rx.data(), link.rx.data() + pr.consumed, link.rx_len - pr.consumed);
+    link.rx_len -= pr.consumed;
+    if (pr.status == lola::ParseStatus::kBadContent) {
+      ++st.malformed_received;
+      continue;
+    }
+    const std::int64_t t_rx = nao::monotonicNs();
+    b.latest_pos = reader.actuator().position;
+    b.latest_stiff = reader.actuator().stiffness;
+    b.have_latest = true;
+    if (link.sent_cycle_queue.empty()) {
+      ++st.extra_answers;
+      continue;
+    }
+    const std::int64_t answered_cycle = link.sent_cycle_queue.front();
+    const double lat_us = static_cast<double>(t_rx - link.sent_time_queue.front()) * 1e-3;
+    link.sent_cycle_queue.erase(link.sent_cycle_queue.begin());
+    link.sent_time_queue.erase(link.sent_time_queue.begin());
+    const bool in_cycle = answered_cycle == cycle && t_rx < next_deadline;
+    ++st.answered;
+    if (in_cycle) ++st.in_cycle;
+    latencies_us.push_back(lat_us);
+    rows.push_back(RxRow{answered_cycle, lat_us, in_cycle, reader.actuator()});
+  }
+}
+
+/// Reads answers until the cycle's deadline; false when the client closed the socket.
+bool readUntil(Link& link, lola::LolaReader& reader, std::int64_t cycle, std::int64_t next_deadline, Body& b,
+               std::vector<RxRow>& rows, std::vector<double>& latencies_us, Stats& st) {
+  for (;;) {
+    const std::int64_t now = nao::monotonicNs();
+    if (now >= next_deadline || g_quit != 0) return true;
+    pollfd pfd{link.client, POLLIN, 0};
+    const int pr = ::poll(&pfd, 1, static_cast<int>(std::max<std::int64_t>(1, (next_deadline - now) / 1'000'000)));
+    if (pr <= 0) continue;
+    const ssize_t r = ::recv(link.client, link.rx.data() + link.rx_len, link.rx.size() - link.rx_len, MSG_DONTWAIT);
+    if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR)) return false;
+    if (r < 0) continue;
+    link.rx_len += static_cast<std::size_t>(r);
+    takeAnswers(link, reader, cycle, next_deadline, b, rows, latencies_us, st);
+  }
+}
+
+/// A NAO sitting still: constant temperatures, currents, IMU, feet, sonar, battery and config.
+lola::SensorPacket restingSensor() {
   lola::SensorPacket sensor;
   sensor.temperature.fill(static_cast<float>(kAmbientC));
   sensor.current.fill(0.05f);
@@ -234,217 +376,102 @@ int main(int argc, char** argv) {
   sensor.battery = {0.9f, -1.2f, 0.0f, 33.0f};
   const char* config[4] = {"P0000074A05S94700017", "6.0.0", "P0000073A03S94600016", "6.0.0"};
   for (int i = 0; i < 4; ++i) std::snprintf(sensor.robot_config[static_cast<std::size_t>(i)].data(), lola::kRobotConfigChars, "%s", config[i]);
-  std::array<char, lola::kMaxPacketBytes> tx{};
-  std::array<char, 16384> rx{};
-  std::size_t rx_len = 0;
-  lola::LolaReader reader(lola::PacketKind::kActuator);
+  return sensor;
+}
 
-  int client = -1;
+/// Serves clients on `server`, one at a time, every 12 ms until SIGINT/SIGTERM, `t_end`, or an
+/// injected close; the answers into rows and latencies_us.
+void serve(int server, const Options& o, const Plan& plan, Body& b, std::vector<RxRow>& rows,
+           std::vector<double>& latencies_us, Stats& st) {
+  const std::int64_t t_begin = nao::monotonicNs();
+  const std::int64_t t_end = o.seconds > 0 ? t_begin + static_cast<std::int64_t>(o.seconds * 1e9) : INT64_MAX;
+  std::mt19937 rng(7);
+  lola::SensorPacket sensor = restingSensor();
+  Link link;
+  lola::LolaReader reader(lola::PacketKind::kActuator);
   std::int64_t cycle = 0;
   std::int64_t next_deadline = 0;
-  std::vector<std::int64_t> sent_cycle_queue;  // sensor packets awaiting an answer (cycle numbers)
-  std::vector<std::int64_t> sent_time_queue;
   const double dt = static_cast<double>(lola::kCycleNs) * 1e-9;
-
-  auto inWindow = [](const std::vector<Event>& ev, std::int64_t c, double& value) {
-    for (const Event& e : ev)
-      if (c >= e.cycle && c < e.cycle + std::max<std::int64_t>(1, static_cast<std::int64_t>(e.value))) {
-        value = e.value;
-        return true;
-      }
-    return false;
-  };
-  auto atCycle = [](const std::vector<Event>& ev, std::int64_t c, double& value) {
-    for (const Event& e : ev)
-      if (c == e.cycle) {
-        value = e.value;
-        return true;
-      }
-    return false;
-  };
-
   while (g_quit == 0 && nao::monotonicNs() < t_end) {
-    if (client < 0) {
+    if (link.client < 0) {
       pollfd pfd{server, POLLIN, 0};
       if (::poll(&pfd, 1, 50) <= 0) continue;
-      client = ::accept4(server, nullptr, nullptr, SOCK_CLOEXEC);
-      if (client < 0) continue;
+      link.client = ::accept4(server, nullptr, nullptr, SOCK_CLOEXEC);
+      if (link.client < 0) continue;
       next_deadline = nao::monotonicNs();
-      rx_len = 0;
-      sent_cycle_queue.clear();
-      sent_time_queue.clear();
+      link.rx_len = 0;
+      link.sent_cycle_queue.clear();
+      link.sent_time_queue.clear();
     }
 
     // 1. The body advances one cycle with what was applied.
-    if (apply_at_once && have_latest) {
-      applied_pos = latest_pos;
-      applied_stiff = latest_stiff;
+    if (o.apply_at_once && b.have_latest) {
+      b.applied_pos = b.latest_pos;
+      b.applied_stiff = b.latest_stiff;
     }
-    if (cycle > 0) {
-      JointVector q_cmd, scale;
-      for (int j = 0; j < kNumJoints; ++j) {
-        const auto i = static_cast<std::size_t>(lola::kRightArmLolaIndex[j]);
-        const double s = applied_stiff[i];
-        scale[j] = std::max(s, kGearHoldStiffness);
-        q_cmd[j] = s < kGearHoldStiffness ? sim->q[j] : static_cast<double>(applied_pos[i]);
-      }
-      nao::setSimTorqueScale(*model, *sim, scale);
-      nao::stepSim(*model, *sim, q_cmd);
-      for (int i = 0; i < kN; ++i) {
-        const auto u = static_cast<std::size_t>(i);
-        const double k = 25.0 * std::clamp<double>(applied_stiff[u], 0.0, 1.0);
-        position[u] += static_cast<float>((applied_pos[u] - position[u]) * (1.0 - std::exp(-k * dt)));
-      }
-      for (int j = 0; j < kNumJoints; ++j)
-        position[static_cast<std::size_t>(lola::kRightArmLolaIndex[j])] = static_cast<float>(sim->q[j]);
-    }
+    if (cycle > 0) advanceBody(b, dt);
     // What the client answered during the last cycle applies from now on (lola.md: from the
     // next cycle), so a sensor packet's answer first moves the body one cycle after it.
-    if (have_latest) {
-      applied_pos = latest_pos;
-      applied_stiff = latest_stiff;
+    if (b.have_latest) {
+      b.applied_pos = b.latest_pos;
+      b.applied_stiff = b.latest_stiff;
     }
 
     // 2. The sensor packet (or the injected fault instead of it).
-    double v = 0;
-    if (inj.close_at >= 0 && cycle >= inj.close_at) {
-      ::close(client);
-      client = -1;
+    if (plan.close_at >= 0 && cycle >= plan.close_at) {
+      ::close(link.client);
+      link.client = -1;
       st.closed_by_injection = true;
       break;
     }
-    sensor.position = position;
-    if (inWindow(misreads, cycle, v)) sensor.position[21] += 0.5f;
-    sensor.stiffness = applied_stiff;
-    for (const Event& h : heats)
-      if (cycle >= h.cycle) sensor.temperature[static_cast<std::size_t>(h.joint)] = 80.0f;
-    std::size_t n = lola::writeSensorPacket(sensor, tx.data(), tx.size());
-    bool send = true;
-    if (inWindow(drops, cycle, v)) {
-      send = false;
-      ++st.dropped;
-    } else if (atCycle(garbages, cycle, v)) {
-      n = std::min<std::size_t>(static_cast<std::size_t>(std::max(1.0, v)), tx.size());
-      for (std::size_t b = 0; b < n; ++b) tx[b] = static_cast<char>(rng() & 0xff);
-      ++st.garbage;
-    } else if (inWindow(bads, cycle, v)) {
-      // The same map with Position one entry short: a whole, well-formed message of the wrong shape.
-      std::string bytes(tx.data(), n);
-      const std::string key("\xa8" "Position\xdc\x00\x19", 12);  // fixstr "Position", array16 of 25
-      const auto at = bytes.find(key);
-      if (at != std::string::npos) {
-        bytes[at + 11] = 0x18;                    // 24 entries
-        bytes.erase(at + 12 + 4 * 5, 5);          // drop one float32 (5 bytes)
-      }
-      n = bytes.size();
-      std::memcpy(tx.data(), bytes.data(), n);
-      ++st.bad_length;
-    }
-    if (atCycle(delays, cycle, v)) {
+    std::size_t n = 0;
+    const bool send = sensorBytes(plan, cycle, b, sensor, link, rng, st, n);
+    double v = 0;
+    if (atCycle(plan.delays, cycle, v)) {
       ++st.delayed;
       sleepUntil(nao::monotonicNs() + static_cast<std::int64_t>(v * 1e6));
     }
-    if (send) {
-      const std::int64_t t_sent = nao::monotonicNs();
-      std::size_t off = 0;
-      while (off < n) {
-        const ssize_t w = ::send(client, tx.data() + off, n - off, MSG_NOSIGNAL);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) break;
-        off += static_cast<std::size_t>(w);
-      }
-      ++st.sent;
-      sent_cycle_queue.push_back(cycle);
-      sent_time_queue.push_back(t_sent);
-    }
+    if (send) sendSensor(link, n, cycle, st);
     ++st.cycles;
     next_deadline += lola::kCycleNs;
 
     // 3. Until the next deadline: read answers; the latest is applied from the next cycle.
-    bool closed = false;
-    for (;;) {
-      const std::int64_t now = nao::monotonicNs();
-      if (now >= next_deadline || g_quit != 0) break;
-      pollfd pfd{client, POLLIN, 0};
-      const int pr = ::poll(&pfd, 1, static_cast<int>(std::max<std::int64_t>(1, (next_deadline - now) / 1'000'000)));
-      if (pr <= 0) continue;
-      const ssize_t r = ::recv(client, rx.data() + rx_len, rx.size() - rx_len, MSG_DONTWAIT);
-      if (r == 0 || (r < 0 && errno != EAGAIN && errno != EINTR)) {
-        closed = true;
-        break;
-      }
-      if (r < 0) continue;
-      rx_len += static_cast<std::size_t>(r);
-      for (;;) {
-        const lola::ParseResult pr2 = reader.parse(rx.data(), rx_len);
-        if (pr2.status == lola::ParseStatus::kIncomplete) {
-          if (rx_len == rx.size()) rx_len = 0;
-          break;
-        }
-        if (pr2.status == lola::ParseStatus::kBadSyntax) {
-          ++st.malformed_received;
-          rx_len = 0;
-          break;
-        }
-        std::memmove(rx.data(), rx.data() + pr2.consumed, rx_len - pr2.consumed);
-        rx_len -= pr2.consumed;
-        if (pr2.status == lola::ParseStatus::kBadContent) {
-          ++st.malformed_received;
-          continue;
-        }
-        const std::int64_t t_rx = nao::monotonicNs();
-        latest_pos = reader.actuator().position;
-        latest_stiff = reader.actuator().stiffness;
-        have_latest = true;
-        if (sent_cycle_queue.empty()) {
-          ++st.extra_answers;
-          continue;
-        }
-        const std::int64_t answered_cycle = sent_cycle_queue.front();
-        const double lat_us = static_cast<double>(t_rx - sent_time_queue.front()) * 1e-3;
-        sent_cycle_queue.erase(sent_cycle_queue.begin());
-        sent_time_queue.erase(sent_time_queue.begin());
-        const bool in_cycle = answered_cycle == cycle && t_rx < next_deadline;
-        ++st.answered;
-        if (in_cycle) ++st.in_cycle;
-        latencies_us.push_back(lat_us);
-        rows.push_back(RxRow{answered_cycle, lat_us, in_cycle, reader.actuator()});
-      }
-    }
-    if (closed) {
-      ::close(client);
-      client = -1;
+    if (!readUntil(link, reader, cycle, next_deadline, b, rows, latencies_us, st)) {
+      ::close(link.client);
+      link.client = -1;
       st.client_closed = true;
       // One client per run in our tests: serve the next one from the same body state.
     }
     ++cycle;
-    if (client >= 0) sleepUntil(next_deadline);
+    if (link.client >= 0) sleepUntil(next_deadline);
   }
-  if (client >= 0) ::close(client);
-  ::close(server);
-  ::unlink(socket_path.c_str());
+  if (link.client >= 0) ::close(link.client);
+}
 
-  // Output.
-  if (!log_path.empty()) {
-    std::ofstream f(log_path);
-    f << "cycle,latency_us,in_cycle";
-    for (int i = 0; i < kN; ++i) f << ",pos_" << lola::kLolaJointNames[static_cast<std::size_t>(i)];
-    for (int i = 0; i < kN; ++i) f << ",stiff_" << lola::kLolaJointNames[static_cast<std::size_t>(i)];
-    f << "\n";
-    char buf[64];
-    for (const RxRow& r : rows) {
-      f << r.cycle << "," << r.latency_us << "," << (r.in_cycle ? 1 : 0);
-      for (float x : r.packet.position) {
-        std::snprintf(buf, sizeof buf, ",%.9g", static_cast<double>(x));
-        f << buf;
-      }
-      for (float x : r.packet.stiffness) {
-        std::snprintf(buf, sizeof buf, ",%.9g", static_cast<double>(x));
-        f << buf;
-      }
-      f << "\n";
+/// --log: every actuator packet received, one CSV row each.
+void writeLog(const std::string& path, const std::vector<RxRow>& rows) {
+  std::ofstream f(path);
+  f << "cycle,latency_us,in_cycle";
+  for (int i = 0; i < kN; ++i) f << ",pos_" << lola::kLolaJointNames[static_cast<std::size_t>(i)];
+  for (int i = 0; i < kN; ++i) f << ",stiff_" << lola::kLolaJointNames[static_cast<std::size_t>(i)];
+  f << "\n";
+  char buf[64];
+  for (const RxRow& r : rows) {
+    f << r.cycle << "," << r.latency_us << "," << (r.in_cycle ? 1 : 0);
+    for (float x : r.packet.position) {
+      std::snprintf(buf, sizeof buf, ",%.9g", static_cast<double>(x));
+      f << buf;
     }
+    for (float x : r.packet.stiffness) {
+      std::snprintf(buf, sizeof buf, ",%.9g", static_cast<double>(x));
+      f << buf;
+    }
+    f << "\n";
   }
+}
+
+/// --summary: the counts and the round-trip percentiles (nearest rank) as JSON.
+std::string summaryJson(const Stats& st, std::vector<double> latencies_us) {
   std::sort(latencies_us.begin(), latencies_us.end());
   auto pct = [&](double p) {
     if (latencies_us.empty()) return 0.0;
@@ -460,7 +487,73 @@ int main(int argc, char** argv) {
      << ",\n  \"client_closed\": " << (st.client_closed ? "true" : "false") << ",\n  \"round_trip_us\": {\"p50\": "
      << pct(0.50) << ", \"p99\": " << pct(0.99) << ", \"max\": " << (latencies_us.empty() ? 0.0 : latencies_us.back())
      << ", \"n\": " << latencies_us.size() << "}\n}\n";
-  if (!summary_path.empty()) std::ofstream(summary_path) << js.str();
+  return js.str();
+}
+
+/// The server socket at `path` (shorter than sun_path; a stale one removed), listening; -1 (a
+/// line on stderr) if not.
+int listenOn(const std::string& path) {
+  sockaddr_un addr{};
+  const int server = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  addr.sun_family = AF_UNIX;
+  std::memcpy(addr.sun_path, path.c_str(), path.size());
+  ::unlink(path.c_str());
+  if (server < 0 || ::bind(server, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) != 0 ||
+      ::listen(server, 1) != 0) {
+    std::cerr << "nao_lola_sim: cannot serve '" << path << "': " << std::strerror(errno) << "\n";
+    return -1;
+  }
+  return server;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  if (const int status = parseOptions(argc, argv, o); status >= 0) return status;
+  // Configure: the injection plan, the arm, the server socket.
+  Plan plan;
+  if (!makePlan(o.inj, plan)) return 2;
+  nao::SimParams sp;
+  sp.substeps_per_tick = static_cast<int>(lola::kCycleNs / 1'000'000);  // 12 x 1 ms
+  JointVector q_arm0;
+  for (int j = 0; j < kNumJoints; ++j) q_arm0[j] = o.arm_start[static_cast<std::size_t>(j)];
+  Body body;
+  try {
+    body.model = std::make_unique<nao::SimModel>(nao::makeSimModel(nao::loadArmModel(o.urdf), sp));
+    q_arm0 = nao::clampToLimits(body.model->arm, q_arm0);
+    body.sim = std::make_unique<nao::SimData>(*body.model, q_arm0);
+  } catch (const std::exception& e) {
+    std::cerr << "nao_lola_sim: " << e.what() << "\n";
+    return 1;
+  }
+  body.position = startPose(q_arm0);
+  body.applied_pos = body.latest_pos = body.position;
+  if (o.socket_path.size() >= sizeof(sockaddr_un{}.sun_path)) {
+    std::cerr << "nao_lola_sim: socket path too long\n";
+    return 2;
+  }
+  const int server = listenOn(o.socket_path);
+  if (server < 0) return 1;
+  struct sigaction sa {};
+  sa.sa_handler = onQuit;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  std::signal(SIGPIPE, SIG_IGN);
+
+  Stats st;
+  std::vector<RxRow> rows;
+  rows.reserve(o.seconds > 0 ? static_cast<std::size_t>(o.seconds / 0.012) + 16 : 100000);
+  std::vector<double> latencies_us;
+  latencies_us.reserve(rows.capacity());
+  serve(server, o, plan, body, rows, latencies_us, st);
+  ::close(server);
+  ::unlink(o.socket_path.c_str());
+
+  if (!o.log_path.empty()) writeLog(o.log_path, rows);
+  const std::string summary = summaryJson(st, latencies_us);
+  if (!o.summary_path.empty()) std::ofstream(o.summary_path) << summary;
   std::cerr << "nao_lola_sim: " << st.cycles << " cycles, " << st.sent << " sent, " << st.answered << " answered ("
             << st.in_cycle << " within the cycle)\n";
   return 0;

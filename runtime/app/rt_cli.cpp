@@ -8,7 +8,6 @@ namespace nao::rt {
 
 int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::ostream& out, std::ostream& err) {
   RunOptions& o = cl.run;
-  double emulate_tick_ms = 0.0;
   CLI::App app{
       "nao_rt: the NAO V6 right-arm imitation controller (DESIGN section 9) on the ODE-simulated arm\n"
       "(default) or on a NAO V6 through LoLA (--robot lola, docs/lola.md). It runs any model of its\n"
@@ -72,21 +71,6 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
       ->type_name("Q")
       ->delimiter(',')
       ->expected(5);
-  app.add_option("--blend-law-pole", o.controller.blend_law_pole,
-                 "Baseline, reference-conditioned models only: replace the policy by the key-pose\n"
-                 "blend law its labels follow, a = p^2 a(t-1) + (1-p)^2 (r - q), with pole p in\n"
-                 "(0, 1) (the training labels: 0.7), on the same arm (default 0: the policy)")
-      ->type_name("P")
-      ->check(CLI::Range(0.0, 0.999999))
-      ->group("");  // the evaluation's baseline, not an operator's flag: not in --help
-  app.add_option("--gain-law", o.controller.gain_law,
-                 "Baseline, reference-conditioned models only: replace the policy by the fixed-gain\n"
-                 "servo inversion a = G (f(t+1) - q) on the policy's feature-extracted target; G = 1 /\n"
-                 "(1 - exp(-K T)) = 1.089 inverts the simulated first-order servo (K 25/s, T 0.1 s)\n"
-                 "exactly (default 0: the policy)")
-      ->type_name("G")
-      ->check(CLI::Range(0.0, 100.0))
-      ->group("");  // the evaluation's baseline
   auto* ticks = app.add_option("--ticks", o.ticks,
                                "Ticks (100 ms each) to run (default: the reference's length; none: the start's\n"
                                "length). Past a reference's end no human is seen")
@@ -129,12 +113,6 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
       ->type_name("MS")
       ->check(CLI::Range(0.0, 11.0))
       ->capture_default_str();
-  app.add_option("--emulate-tick-ms", emulate_tick_ms,
-                 "Busy-wait this long before every tick's work, as a slower CPU would take (tests of\n"
-                 "the LoLA timing; not counted in tick_us)")
-      ->type_name("MS")
-      ->check(CLI::Range(0.0, 1000.0))
-      ->group("");  // the LoLA timing tests' slow CPU
   app.add_option("--log", o.log_dir, "Run directory (created if missing): ticks.csv, attention.bin, summary.json")
       ->type_name("DIR");
   app.add_option("--attention-shm", o.attention_shm,
@@ -158,7 +136,6 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
     err << "nao_rt: " << oneLine(e.what()) << " (nao_rt --help lists the flags)\n";
     return 2;
   }
-  o.emulate_tick_ns = static_cast<std::int64_t>(emulate_tick_ms * 1e6 + 0.5);
   return -1;
 }
 

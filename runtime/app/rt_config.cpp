@@ -1,4 +1,5 @@
 // Configure-time preparation of a nao_rt run (rt_config.hpp).
+#include "nao/arm_model_io.hpp"
 #include "rt_config.hpp"
 
 #include "rt_live.hpp"
@@ -59,6 +60,7 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
     p.model = mappedModelFile(o.compiled, origin);
     p.model_bytes = o.compiled.bytes;
     p.model_offsets = o.compiled.offsets;
+    p.model_extents = o.compiled.extents;
   } else {
     throw std::runtime_error(
         "no model is compiled into this build (models/default.bin did not exist when it was built); pass "
@@ -109,9 +111,7 @@ JointVector startPose(const std::vector<double>& v) {
 
 // --reference none: the start (a model start or --start-pose), the default length, the description.
 void prepareAutonomousStart(const RunOptions& o, PreparedRun& p, std::int64_t& default_ticks) {
-  const ModelHeader& h = p.model.header;
-  const std::vector<ModelStart> starts =
-      modelStarts(h.metadata_json, h.movement_names, p.model_source)[static_cast<std::size_t>(p.movement_index)];
+  const std::vector<ModelStart>& starts = p.model_spec.starts[static_cast<std::size_t>(p.movement_index)];
   const std::string& m = p.spec.movement;
   if (!o.start_pose.empty()) {
     p.q_start = startPose(o.start_pose);
@@ -209,12 +209,6 @@ RobotSpec parseRobotSpec(const std::string& robot, const std::string& default_so
 
 PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   PreparedRun p;
-  if (!(o.controller.blend_law_pole >= 0.0 && o.controller.blend_law_pole < 1.0))
-    throw UsageError("--blend-law-pole must be in [0, 1)");
-  if (!(o.controller.gain_law >= 0.0 && std::isfinite(o.controller.gain_law)))
-    throw UsageError("--gain-law must be a finite gain >= 0");
-  if (o.controller.gain_law > 0.0 && o.controller.blend_law_pole > 0.0)
-    throw UsageError("--gain-law and --blend-law-pole exclude each other (each replaces the policy)");
   if (o.ticks < 0) throw UsageError("--ticks must be positive");
   if (o.seconds < 0.0 || !std::isfinite(o.seconds)) throw UsageError("--seconds must be positive");
   if (o.ticks > 0 && o.seconds > 0.0) throw UsageError("--ticks and --seconds exclude each other");
@@ -265,23 +259,16 @@ PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   if (autonomous_run && h.conditioning != Conditioning::kAutonomous)
     throw std::runtime_error("--reference none needs an autonomous-mode model; " + p.model_source +
                              " is reference-conditioned (it imitates a reference: use file:PATH)");
-  if (o.controller.blend_law_pole > 0.0 && h.conditioning == Conditioning::kAutonomous)
-    throw UsageError("--blend-law-pole replaces a reference-conditioned policy; " + p.model_source +
-                     " is an autonomous-mode model (the blend law needs the snapped human key pose)");
-  if (o.controller.gain_law > 0.0 && h.conditioning == Conditioning::kAutonomous)
-    throw UsageError("--gain-law replaces a reference-conditioned policy; " + p.model_source +
-                     " is an autonomous-mode model (the gain law needs the feature-extracted reference)");
   p.centroids = modelKeyPoses(p.model, p.movement_index);
-  p.workspace = modelWorkspace(h.metadata_json, h.movement_names, p.model_source);
-  p.run_codes = modelRunCodes(h.metadata_json, h.movement_names, static_cast<int>(h.arch.d_model), p.model_source);
+  // The starts, workspace, run codes and (next) the retargeting setting, decoded once.
+  p.model_spec = readModelSpec(h, o.controller.retarget, p.model_source);
   // The reference is retargeted the way the model's training data was.
-  p.retarget = modelRetargetSetting(h.metadata_json, o.controller.retarget, p.model_source);
 
   std::int64_t default_ticks = 0;
   switch (p.spec.kind) {
     case ReferenceKind::kFile: {
       auto recorded = std::make_unique<RecordedSource>(
-          makeFileReference(p.arm, p.spec.path, p.spec.movement, p.centroids, p.retarget));
+          makeFileReference(p.arm, p.spec.path, p.spec.movement, p.centroids, p.model_spec.retarget));
       const ReferenceStream& ref = recorded->stream();
       p.reference = &ref;
       p.human = std::move(recorded);

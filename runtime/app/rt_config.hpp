@@ -23,7 +23,6 @@
 #include "nao/controller.hpp"
 #include "nao/lola_backend.hpp"
 #include "nao/model_file.hpp"
-#include "nao/model_metadata.hpp"
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
 #include "nao/reference_stream.hpp"
@@ -78,9 +77,6 @@ struct RunOptions {
   /// LoLA on one thread: load the policy's weights and workspace into the cache in the cycle
   /// before each tick's packet (warmPolicy; --lola-no-warm turns it off, docs/lola.md).
   bool lola_warm = true;
-  /// > 0: busy-wait this long before every tick's work, as a slower CPU would take (tests and
-  /// benchmarks of the LoLA timing; not in tick_us).
-  std::int64_t emulate_tick_ns = 0;
   ControllerClock* clock = nullptr;  ///< stage timings; nullptr: CLOCK_MONOTONIC (tests inject)
   // openpose: only (rt_live.hpp).
   std::string calibration_path;  ///< --calibration: the cameras, our JSON (nao/calibration_json.hpp)
@@ -174,6 +170,7 @@ struct PreparedRun {
   std::string model_source;            ///< "compiled-in" or the --weights path
   const std::uint8_t* model_bytes = nullptr;  ///< compiled-in: the embedded bytes to bind to; else nullptr
   const std::uint64_t* model_offsets = nullptr;  ///< compiled-in: the generated tensor offsets
+  const TensorExtent* model_extents = nullptr;   ///< compiled-in: the generated view extents
   WeightPrecision precision = WeightPrecision::kFp32;
   /// int8: the compiled-in blob (checked) to bind to; nullptr: quantise the model at start-up.
   const std::uint8_t* int8_bytes = nullptr;
@@ -182,9 +179,9 @@ struct PreparedRun {
   ReferenceSpec spec;
   int movement_index = 0;              ///< into model.header.movement_names
   std::vector<JointVector> centroids;  ///< the movement's key poses, rad
-  std::vector<ModelWorkspace> workspace;  ///< the model's demonstrated joint range per movement (may be empty)
-  std::vector<ModelRunCodes> run_codes;   ///< the model's run codes per movement (empty: none)
-  RetargetParams retarget;             ///< options.controller.retarget with the model's setting applied
+  /// The model's metadata (starts, workspace, run codes), its retargeting setting applied over
+  /// options.controller.retarget.
+  ModelSpec model_spec;
   std::unique_ptr<HumanSource> human;  ///< the frames the ticks see; nullptr: none (autonomous)
   /// file: the recorded reference (owned by `human`, so it stays put when the run is moved);
   /// nullptr for none.

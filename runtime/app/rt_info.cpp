@@ -1,6 +1,7 @@
 #include "rt_info.hpp"
 
 #include "nao/arm_model.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/policy_kernels.hpp"
 #include "nao/quantize.hpp"
 
@@ -56,8 +57,9 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source, con
   for (const TrainedJoint& t : h.joints)
     joints.push_back({{"name", t.name}, {"lower", t.lower}, {"upper", t.upper}, {"velocity", t.velocity}});
   j["joints"] = std::move(joints);
+  const ModelSpec spec = readModelSpec(h, RetargetParams{}, source);
   // The autonomous starts per movement (nao_rt --reference none --start I): name and length.
-  const ModelStarts starts = modelStarts(h.metadata_json, h.movement_names, source);
+  const ModelStarts& starts = spec.starts;
   ordered_json by_movement = ordered_json::object();
   for (std::size_t m = 0; m < starts.size(); ++m) {
     ordered_json list = ordered_json::array();
@@ -66,7 +68,7 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source, con
   }
   j["starts"] = std::move(by_movement);
   // A run latent's codes per movement (chosen at activate): how many, not the table itself.
-  const std::vector<ModelRunCodes> codes = modelRunCodes(h.metadata_json, h.movement_names, static_cast<int>(h.arch.d_model), source);
+  const std::vector<ModelRunCodes>& codes = spec.run_codes;
   ordered_json code_counts = ordered_json::object();
   for (std::size_t m = 0; m < h.movement_names.size(); ++m) code_counts[h.movement_names[m]] = m < codes.size() ? codes[m].size() : 0;
   j["run_codes"] = std::move(code_counts);

@@ -11,12 +11,6 @@
 
 namespace nao::rt {
 
-void spinForNs(std::int64_t ns) {
-  const std::int64_t end = monotonicNs() + ns;
-  while (monotonicNs() < end) {
-  }
-}
-
 void sleepUntilNs(std::int64_t t_ns) {
   timespec ts{};
   ts.tv_sec = static_cast<time_t>(t_ns / 1000000000);

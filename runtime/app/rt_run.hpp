@@ -20,6 +20,8 @@
 #include "rt_rundir.hpp"
 
 #include "nao/arm_model.hpp"
+#include "nao/attention_shm.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/attention_ring.hpp"
 #include "nao/controller.hpp"
 #include "nao/kinematics.hpp"
@@ -56,8 +58,6 @@ void leaveRealtime(RealtimeScheduling& s);
 /// Sleeps until the absolute CLOCK_MONOTONIC time t_ns (clock_nanosleep TIMER_ABSTIME; resumes
 /// after signals). Real-time safe.
 void sleepUntilNs(std::int64_t t_ns);
-/// Busy-waits ns nanoseconds (RunOptions::emulate_tick_ns): no syscall but the clock read.
-void spinForNs(std::int64_t ns);
 
 /// Puts a live source's human scale (HumanSource::scaleOfLastFrame) into the controller's human
 /// kinematics for the update of that frame; scale_m 0 leaves the configured one. The only part
@@ -113,14 +113,168 @@ void fillPayload(const TickRecord& rec, const PolicyWorkspace<Dims>& ws, RunPayl
 
 }  // namespace detail
 
+namespace detail {
+
+/// The run's policy weights: the compiled-in model's views at the generated offsets into
+/// .rodata (no lookup, no copy), or a --weights file's tensors copied into `storage` and bound by
+/// name; then the int8 or packed fp32 copy the run's precision asks for, compiled in or made
+/// into `copy`. Releases the decoded file copy first (one fp32 copy resident at a time).
+/// Configure time: allocates, throws.
+template <class Dims>
+PolicyWeights<Dims> bindRunWeights(PreparedRun& p, WeightStorage& storage, AlignedBytes& copy) {
+  PolicyWeights<Dims> weights =
+      p.model_bytes != nullptr
+          ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model_extents, p.model.header.arch,
+                                      p.model.header.conditioning)
+          : bindWeightFile<Dims>(p, storage);
+  // The views point into the compiled-in bytes or `storage`: the decoded file copy is no longer
+  // read, so its memory goes back now, before an int8 or packed copy is made from the views
+  // (docs/embedded.md, RSS).
+  std::vector<std::uint8_t>().swap(p.model.bytes);
+  if (p.precision == WeightPrecision::kInt8) {
+    if constexpr (int8Supported<Dims>()) {
+      const std::uint8_t* blob = p.int8_bytes;
+      if (blob == nullptr) {
+        copy = quantizePolicyInt8<Dims>(weights);
+        blob = copy.data.get();
+      }
+      if (quantizedModelBytes(p.model.header.arch) != quantizedPolicyBytes<Dims>())
+        throw std::logic_error("nao_rt: the int8 blob of the model is not the compiled layout's size");
+      bindQuantizedWeights<Dims>(weights, blob);
+    } else {
+      throw std::runtime_error("--precision int8: this architecture has an odd or over-512 input size; int8 "
+                               "needs even input sizes up to 512");
+    }
+  }
+  // fp32-packed: the same floats in the kernels' block order, compiled in (nao_codegen
+  // --precision fp32-packed) or made at start-up.
+  if (p.precision == WeightPrecision::kFp32Packed) {
+    if constexpr (packedSupported<Dims>()) {
+      const std::uint8_t* blob = p.packed_bytes;
+      if (blob == nullptr) {
+        copy = packPolicyFp32<Dims>(weights);
+        blob = copy.data.get();
+      }
+      if (packedModelBytes(p.model.header.arch) != packedPolicyBytes<Dims>())
+        throw std::logic_error("nao_rt: the packed blob of the model is not the compiled layout's size");
+      bindPackedWeights<Dims>(weights, blob);
+    } else {
+      throw std::runtime_error("--precision fp32-packed: this architecture has a matrix the packed layout does "
+                               "not take (outputs in multiples of 32, inputs of 16)");
+    }
+  }
+  return weights;
+}
+
+/// What the LoLA cycle before a tick's packet warms (LolaParams::before_tick).
+template <class Dims>
+struct WarmContext {
+  const PolicyWeights<Dims>* weights;
+  const PolicyWorkspace<Dims>* workspace;
+  std::uint64_t sink;
+};
+
+/// The robot a run drives (STYLE 18; the backend owns its hardware): LoLA through its socket,
+/// opened here, with the I/O thread's probe and the warming before each tick's packet; or the
+/// in-process ODE arm at the run's start. Configure time: allocates, throws.
+template <class Dims>
+std::unique_ptr<RobotBackend> makeRunRobot(const RunOptions& options, const RobotSpec& robot, const PreparedRun& p,
+                                           AllocationProbe* probe, WarmContext<Dims>& warm, LoopTotals& totals,
+                                           LolaBackend*& lola) {
+  lola = nullptr;
+  if (!robot.lola) return std::make_unique<OdeArmBackend>(p.arm, options.sim, clampToLimits(p.arm, p.q_start));
+  LolaParams lola_params = options.lola;
+  lola_params.socket_path = robot.socket_path;
+  // The I/O thread's own count (summary.json lola.io_allocations), not the control thread's.
+  lola_params.io_probe = probe != nullptr ? probe->companion() : nullptr;
+  if (options.lola_warm && !lola_params.io_thread) {
+    lola_params.before_tick = [](void* c) {
+      auto* w = static_cast<WarmContext<Dims>*>(c);
+      warmPolicy(*w->weights, *w->workspace, w->sink);
+    };
+    lola_params.before_tick_context = &warm;
+  }
+  installLolaStopSignals();
+  auto backend = std::make_unique<LolaBackend>(p.arm, lola_params);
+  lola = backend.get();
+  totals.lola_io_scheduling = backend->ioThreadScheduling();
+  return backend;
+}
+
+/// The run's attention records and the buffers the loop fills, all allocated before activate.
+template <class Dims>
+struct RunBuffers {
+  RingHolder<RunRing<Dims>> rings;
+  std::unique_ptr<RunPayload<Dims>> payload = std::make_unique<RunPayload<Dims>>();
+  std::vector<TickRecord> records;
+};
+
+/// The ticks from activate to deactivate (no allocation, no I/O, no exception): each tick's
+/// human frame, the controller's update (the policy, or `law` in its place), the evaluation
+/// target's hand point, the overrun bookkeeping when paced, the attention record into the ring.
+/// Returns the ticks done (fewer than p.ticks when the robot stops the run).
+template <class Dims>
+std::int64_t runTicks(const RunOptions& options, PreparedRun& p, ControllerModel<Dims>& model,
+                      ControllerData<Dims>& data, ActionLaw* law, bool paced, RunBuffers<Dims>& buffers,
+                      LoopTotals& totals) {
+  // The evaluation target of a recorded reference (its feature-extracted trajectory).
+  const std::vector<JointVector>* target = p.has_targets ? &p.reference->target : nullptr;
+  const std::size_t n_targets = target != nullptr ? target->size() : 0;
+  const std::int64_t period_ns = static_cast<std::int64_t>(options.controller.period_s * 1e9 + 0.5);
+  ArmData kin_ref;
+  RunRing<Dims>& ring = buffers.rings.ring();
+  std::int64_t next_ns = monotonicNs();
+  std::int64_t ticks_done = 0;
+  for (std::int64_t t = 0; t < p.ticks && data.robot->stopReason() == RobotStop::kNone; ++t) {
+    if (paced) sleepUntilNs(next_ns);
+    const std::size_t i = static_cast<std::size_t>(t);
+    const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
+    if (frame != nullptr) applyLiveHumanScale(p.human->scaleOfLastFrame(), model.params.human);
+    TickRecord& rec = buffers.records[i];
+    rec = law != nullptr ? updateController(model, data, frame, *law) : updateController(model, data, frame);
+    // Where the arm should be at the end of the tick: the reference's feature-extracted pose
+    // of the next sample (the last one held at the end).
+    if (i < n_targets)
+      rec.ee_ref = forwardKinematics(p.arm, kin_ref, (*target)[std::min(i + 1, n_targets - 1)]);
+    else
+      rec.ee_ref.setConstant(std::numeric_limits<double>::quiet_NaN());
+    if (paced) {
+      // Overrun: the tick ended after the next grid point. Stay on the grid: the next tick
+      // starts at the first grid point still ahead.
+      const std::int64_t deadline = next_ns + period_ns;
+      const std::int64_t now = monotonicNs();
+      if (now > deadline) {
+        rec.fault |= kFaultOverrun;
+        const std::int64_t missed = (now - deadline) / period_ns + 1;
+        totals.skipped_periods += missed;
+        next_ns = deadline + missed * period_ns;
+      } else {
+        next_ns = deadline;
+      }
+    } else {
+      // Back to back there is no deadline to miss: the fault column stays free of timing.
+      rec.fault &= ~static_cast<std::uint32_t>(kFaultOverrun);
+    }
+    fillPayload<Dims>(rec, *data.policy, *buffers.payload);
+    pushFromRT(ring, *buffers.payload);
+    ticks_done = t + 1;
+  }
+  return ticks_done;
+}
+
+}  // namespace detail
+
 /// Runs nao_rt once with the policy compiled as Dims (see the top of this file). Never throws:
 /// a problem ends the run with report.status != 0 and report.error set (one line).
 /// @param out   the human summary (and the configuration line)
 /// @param err   warnings (--realtime not permitted)
 /// @param probe allocation counter around activate ... deactivate; nullptr: not counted
+/// @param law   an action law in place of the policy (nao/controller.hpp ActionLaw: the
+///              evaluation's baselines, run in process by nao_toolchain evaluate; summary.json
+///              names it); nullptr: the policy
 template <class Dims>
 RunReport runController(const RunOptions& options, std::ostream& out, std::ostream& err,
-                        AllocationProbe* probe = nullptr) {
+                        AllocationProbe* probe = nullptr, ActionLaw* law = nullptr) {
   RunReport report;
   try {
     // Configure: everything that can fail or allocate.
@@ -130,54 +284,10 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     const bool paced = options.realtime && !robot.lola;
     PreparedRun p = prepareRun(options, Dims::arch());
     WeightStorage weight_storage;
-    // The compiled-in model: views at the generated offsets into .rodata (no lookup, no copy);
-    // a --weights file: its tensors copied into aligned storage, bound by name.
-    PolicyWeights<Dims> weights =
-        p.model_bytes != nullptr
-            ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model.header.arch,
-                                        p.model.header.conditioning)
-            : bindWeightFile<Dims>(p, weight_storage);
-    // The views point into the compiled-in bytes or weight_storage: the decoded file copy is no
-    // longer read, so its memory goes back now, before an int8 or packed copy is made from the
-    // views (one fp32 copy resident at a time: docs/embedded.md, RSS).
-    std::vector<std::uint8_t>().swap(p.model.bytes);
-    // int8: the compiled-in blob where it lies, or the same bytes made from the fp32 views.
-    // copy_storage: the int8 or packed copy made at start-up (none for a compiled-in one).
-    AlignedBytes copy_storage;
-    if (p.precision == WeightPrecision::kInt8) {
-      if constexpr (int8Supported<Dims>()) {
-        const std::uint8_t* blob = p.int8_bytes;
-        if (blob == nullptr) {
-          copy_storage = quantizePolicyInt8<Dims>(weights);
-          blob = copy_storage.data.get();
-        }
-        if (quantizedModelBytes(p.model.header.arch) != quantizedPolicyBytes<Dims>())
-          throw std::logic_error("nao_rt: the int8 blob of the model is not the compiled layout's size");
-        bindQuantizedWeights<Dims>(weights, blob);
-      } else {
-        throw std::runtime_error("--precision int8: this architecture has an odd or over-512 input size; int8 "
-                                 "needs even input sizes up to 512");
-      }
-    }
-    // fp32-packed: the same floats in the kernels' block order, compiled in (nao_codegen
-    // --precision fp32-packed) or made at start-up.
-    if (p.precision == WeightPrecision::kFp32Packed) {
-      if constexpr (packedSupported<Dims>()) {
-        const std::uint8_t* blob = p.packed_bytes;
-        if (blob == nullptr) {
-          copy_storage = packPolicyFp32<Dims>(weights);
-          blob = copy_storage.data.get();
-        }
-        if (packedModelBytes(p.model.header.arch) != packedPolicyBytes<Dims>())
-          throw std::logic_error("nao_rt: the packed blob of the model is not the compiled layout's size");
-        bindPackedWeights<Dims>(weights, blob);
-      } else {
-        throw std::runtime_error("--precision fp32-packed: this architecture has a matrix the packed layout does "
-                                 "not take (outputs in multiples of 32, inputs of 16)");
-      }
-    }
+    AlignedBytes copy_storage;  // the int8 or packed copy made at start-up (none compiled in)
+    const PolicyWeights<Dims> weights = detail::bindRunWeights<Dims>(p, weight_storage, copy_storage);
     ControllerParams controller_params = options.controller;
-    controller_params.retarget = p.retarget;
+    controller_params.retarget = p.model_spec.retarget;
     // The human's scale d_h is calibrated once per reference, as the training data and the
     // evaluation target were retargeted (one scale per demonstration from all its frames:
     // retargetTargets), not re-estimated per frame: per-frame link lengths jitter with
@@ -188,16 +298,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // A live reference: --human-scale, or each frame's scale from the source (applyLiveHumanScale).
     if (p.live != nullptr && options.human_scale_m > 0.0) controller_params.human.scale_m = options.human_scale_m;
     // Not const: a live source's d_h goes into model.params.human tick by tick.
-    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, p.workspace, p.run_codes);
-    // The robot backend owns its hardware (STYLE 18): the in-process ODE arm, or LoLA's socket.
-    std::unique_ptr<RobotBackend> robot_backend;
-    LolaBackend* lola = nullptr;
-    // What the cycle before a tick's packet warms (LolaParams::before_tick).
-    struct WarmContext {
-      const PolicyWeights<Dims>* weights;
-      const PolicyWorkspace<Dims>* workspace;
-      std::uint64_t sink;
-    } warm{&model.policy, nullptr, 0};
+    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, p.model_spec.workspace,
+                                                      p.model_spec.run_codes);
+    detail::WarmContext<Dims> warm{&model.policy, nullptr, 0};
     LoopTotals totals;
     RealtimeScheduling rt;
     // Left on every way out, an exception included (runController also runs inside tests).
@@ -214,45 +317,20 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
             << " without it\n";
       totals.realtime_scheduling = rt.warning.empty() ? "SCHED_FIFO + mlockall" : rt.warning;
     }
-    if (robot.lola) {
-      // The socket is opened here, before activate.
-      LolaParams lola_params = options.lola;
-      lola_params.socket_path = robot.socket_path;
-      // The I/O thread's own count (summary.json lola.io_allocations), not the control thread's.
-      lola_params.io_probe = probe != nullptr ? probe->companion() : nullptr;
-      if (options.lola_warm && !lola_params.io_thread) {
-        lola_params.before_tick = [](void* c) {
-          auto* w = static_cast<WarmContext*>(c);
-          warmPolicy(*w->weights, *w->workspace, w->sink);
-        };
-        lola_params.before_tick_context = &warm;
-      }
-      installLolaStopSignals();
-      auto backend = std::make_unique<LolaBackend>(p.arm, lola_params);
-      lola = backend.get();
-      totals.lola_io_scheduling = backend->ioThreadScheduling();
-      robot_backend = std::move(backend);
-    } else {
-      robot_backend = std::make_unique<OdeArmBackend>(p.arm, options.sim, clampToLimits(p.arm, p.q_start));
-    }
+    LolaBackend* lola = nullptr;
+    const std::unique_ptr<RobotBackend> robot_backend =
+        detail::makeRunRobot<Dims>(options, robot, p, probe, warm, totals, lola);
     auto data = std::make_unique<ControllerData<Dims>>(*robot_backend);
     warm.workspace = data->policy.get();
-    detail::RingHolder<RunRing<Dims>> rings;
+    detail::RunBuffers<Dims> buffers;
     const AttentionDescriptor descriptor = attentionPayloadDescriptor<RunPayload<Dims>>();
     if (options.attention_shm.empty())
-      rings.local = std::make_unique<RunRing<Dims>>(descriptor);
+      buffers.rings.local = std::make_unique<RunRing<Dims>>(descriptor);
     else
-      rings.shared = std::make_unique<SharedAttentionRing<RunRing<Dims>>>(options.attention_shm, descriptor);
-    RunRing<Dims>& ring = rings.ring();
-    auto payload = std::make_unique<RunPayload<Dims>>();
-    std::vector<TickRecord> records(static_cast<std::size_t>(p.ticks));
-    ArmData kin_ref;
+      buffers.rings.shared = std::make_unique<SharedAttentionRing<RunRing<Dims>>>(options.attention_shm, descriptor);
+    buffers.records.resize(static_cast<std::size_t>(p.ticks));
     SteadyClock steady;
     ControllerClock& clock = options.clock != nullptr ? *options.clock : steady;
-    // The evaluation target of a recorded reference (its feature-extracted trajectory).
-    const std::vector<JointVector>* target = p.has_targets ? &p.reference->target : nullptr;
-    const std::size_t n_targets = target != nullptr ? target->size() : 0;
-    const std::int64_t period_ns = static_cast<std::int64_t>(options.controller.period_s * 1e9 + 0.5);
 
     out << "nao_rt: " << p.description << " -> movement " << p.spec.movement << ", model " << p.model_source << ", " << p.ticks << " ticks ("
         << static_cast<double>(p.ticks) * options.controller.period_s << " s), "
@@ -274,54 +352,19 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     if (probe != nullptr) probe->start();
     const std::int64_t wall0 = monotonicNs();
     activateController(model, *data, p.q_start, p.movement_index, clock);
-    std::int64_t next_ns = monotonicNs();
-    std::int64_t ticks_done = 0;
-    for (std::int64_t t = 0; t < p.ticks && data->robot->stopReason() == RobotStop::kNone; ++t) {
-      if (paced) sleepUntilNs(next_ns);
-      if (options.emulate_tick_ns > 0) spinForNs(options.emulate_tick_ns);
-      const std::size_t i = static_cast<std::size_t>(t);
-      const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
-      if (frame != nullptr) applyLiveHumanScale(p.human->scaleOfLastFrame(), model.params.human);
-      TickRecord& rec = records[i];
-      rec = updateController(model, *data, frame);
-      // Where the arm should be at the end of the tick: the reference's feature-extracted pose
-      // of the next sample (the last one held at the end).
-      if (i < n_targets)
-        rec.ee_ref = forwardKinematics(p.arm, kin_ref, (*target)[std::min(i + 1, n_targets - 1)]);
-      else
-        rec.ee_ref.setConstant(std::numeric_limits<double>::quiet_NaN());
-      if (paced) {
-        // Overrun: the tick ended after the next grid point. Stay on the grid: the next tick
-        // starts at the first grid point still ahead.
-        const std::int64_t deadline = next_ns + period_ns;
-        const std::int64_t now = monotonicNs();
-        if (now > deadline) {
-          rec.fault |= kFaultOverrun;
-          const std::int64_t missed = (now - deadline) / period_ns + 1;
-          totals.skipped_periods += missed;
-          next_ns = deadline + missed * period_ns;
-        } else {
-          next_ns = deadline;
-        }
-      } else {
-        // Back to back there is no deadline to miss: the fault column stays free of timing.
-        rec.fault &= ~static_cast<std::uint32_t>(kFaultOverrun);
-      }
-      detail::fillPayload<Dims>(rec, *data->policy, *payload);
-      pushFromRT(ring, *payload);
-      ticks_done = t + 1;
-    }
+    const std::int64_t ticks_done = detail::runTicks(options, p, model, *data, law, paced, buffers, totals);
     const RobotStop stop = data->robot->stopReason();
     deactivateController(model, *data);
-    closeFromRT(ring);
+    closeFromRT(buffers.rings.ring());
     totals.wall_s = static_cast<double>(monotonicNs() - wall0) * 1e-9;
     if (probe != nullptr) totals.allocations = probe->stop();
     if (reader_counter != nullptr) totals.reader_allocations = reader_counter->count() - reader_allocations0;
     leaveRealtime(rt);
-    records.resize(static_cast<std::size_t>(ticks_done));
+    buffers.records.resize(static_cast<std::size_t>(ticks_done));
     totals.stop = stop;
     if (data->run_code >= 0)
-      totals.run_code = p.run_codes[static_cast<std::size_t>(p.movement_index)].names[static_cast<std::size_t>(data->run_code)];
+      totals.run_code = p.model_spec.run_codes[static_cast<std::size_t>(p.movement_index)].names[static_cast<std::size_t>(data->run_code)];
+    if (law != nullptr) totals.action_law = law->name();
     if (lola) {
       totals.lola = true;
       totals.lola_socket = robot.socket_path;
@@ -329,7 +372,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       totals.lola_latency_ns = lola->latenciesNs();
     }
 
-    finishRun(options, p, records, attentionRingView(ring), totals, out, report);
+    finishRun(options, p, buffers.records, attentionRingView(buffers.rings.ring()), totals, out, report);
     report.status = 0;
     if (stop == RobotStop::kLinkLost) {
       report.status = kExitRobotLinkLost;

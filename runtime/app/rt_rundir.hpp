@@ -54,6 +54,8 @@ struct LoopTotals {
   /// The training demonstration whose run code the policy ran with (summary.json "run_code");
   /// empty: none (the zero code, or a model without run codes).
   std::string run_code;
+  /// The ActionLaw that acted in place of the policy (summary.json "action_law"); empty: the policy.
+  std::string action_law;
 };
 
 /// ticks.csv's header line (no newline): the contract's columns in order.

@@ -3,6 +3,7 @@
 #include "fuzz_util.hpp"
 
 #include "nao/arm_model.hpp"
+#include "nao/arm_model_io.hpp"
 
 #include <string>
 

@@ -1,10 +1,11 @@
 // Fuzz target: URDF text -> ArmModel through the TinyXML reader of the static robot build
-// (parseUrdfTinyXml + armModelFromUrdf, runtime/include/nao/urdf_reader.hpp), behind the same text
+// (parseUrdfTinyXml + armModelFromUrdf, runtime/io/include/nao/urdf_reader.hpp), behind the same text
 // guard as parseArmModel. Either a rejection with a reason, an arm whose numbers are usable, or
 // ArmModelError.
 #include "fuzz_util.hpp"
 
 #include "nao/text_guard.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/urdf_reader.hpp"
 
 #include <string>

@@ -2,6 +2,7 @@
 // (encodeModel): a tiny architecture of each conditioning (a few KB, where the trained models
 // are 24 MB), and the damaged files the reader must refuse. Run: nao_fuzz_model_seeds DIR.
 #include "nao/file_io.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/model_file.hpp"
 
 #include <algorithm>

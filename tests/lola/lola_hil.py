@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Hardware-in-the-loop tests of nao_rt's LoLA backend (docs/lola.md), one CTest test per case.
 
-    lola_hil.py --nao-rt BIN --sim BIN --toolchain BIN CASE
+    lola_hil.py --nao-rt BIN [--slow-rt BIN] --sim BIN --toolchain BIN CASE
 
 The human references are recorded ones: demonstration 0 of run seed 1000001 (toolchain/nao demo's),
 synthesised and triangulated by nao_toolchain into the case's temporary directory.
@@ -19,8 +19,8 @@ CASE:
   io:M         movement:M with --lola-io-thread (the I/O on a thread of its own) and --realtime
                (SCHED_FIFO + mlockall, inherited by the I/O thread).
   iofault:F    fault:F with --lola-io-thread.
-  slow:io_thread  30 ms ticks (--emulate-tick-ms): late answers on one thread, none with
-               --lola-io-thread.
+  slow:io_thread  ticks 30 ms longer (--slow-rt, nao_rt_slow_cpu: nao_rt on a slower CPU): late
+               answers on one thread, none with --lola-io-thread.
 
 Every process runs under a timeout; a hang fails the test.
 """
@@ -439,15 +439,16 @@ SLOW_TICK_MS = 30  # the Atom's tick is estimated at 10-27 ms (docs/embedded.md)
 
 
 def case_slow(a, tmp):
-    """A tick of 30 ms (--emulate-tick-ms): on one thread the packets that come during it wait
-    (late answers); with --lola-io-thread every packet is still answered within its cycle."""
+    """Ticks 30 ms longer (nao_rt_slow_cpu: a slower CPU): on one thread the packets that come
+    during a tick wait (late answers); with --lola-io-thread every packet is still answered within
+    its cycle."""
     results = {}
     for mode, flags in (("one thread", ["--lola-answer-first"]), ("io thread", ["--lola-io-thread"])):
         d = os.path.join(tmp, mode.replace(" ", "_"))
         os.makedirs(d)
         sim = Sim(a.sim, d)
-        rc, _ = run_rt(a.nao_rt, ["--robot", "lola:" + sim.path, *reference(a, tmp, "elbow"), "--ticks", "60",
-                                  "--emulate-tick-ms", str(SLOW_TICK_MS), "--log", os.path.join(d, "run"), *flags], 80)
+        rc, _ = run_rt(a.slow_rt, [str(SLOW_TICK_MS), "--robot", "lola:" + sim.path, *reference(a, tmp, "elbow"),
+                                   "--ticks", "60", "--log", os.path.join(d, "run"), *flags], 80)
         ss, rows = sim.stop()
         check(rc == 0, f"{mode}: exits 0 (got {rc})")
         s = summary_of(os.path.join(d, "run"))
@@ -481,6 +482,7 @@ def case_slow(a, tmp):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--nao-rt", required=True)
+    ap.add_argument("--slow-rt", help="nao_rt_slow_cpu (the slow:io_thread case)")
     ap.add_argument("--sim", required=True)
     ap.add_argument("--toolchain", required=True, help="nao_toolchain (synth, triangulate: the references)")
     ap.add_argument("case")
@@ -494,6 +496,8 @@ def main():
         elif kind == "iofault":
             case_fault(a, arg, tmp, ["--lola-io-thread"])
         elif kind == "slow" and arg == "io_thread":
+            if not a.slow_rt:
+                raise SystemExit("slow:io_thread needs --slow-rt (nao_rt_slow_cpu)")
             case_slow(a, tmp)
         elif kind == "fault":
             case_fault(a, arg, tmp)

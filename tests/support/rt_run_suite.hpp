@@ -71,10 +71,11 @@ struct Outcome {
   std::string out, err;
 };
 
-inline Outcome run(const rt::RunOptions& o) {
+/// runController of `o`, with `law` in place of the policy if given.
+inline Outcome run(const rt::RunOptions& o, ActionLaw* law = nullptr) {
   std::ostringstream out, err;
   Outcome r;
-  r.report = rt::runController<Dims>(o, out, err);
+  r.report = rt::runController<Dims>(o, out, err, nullptr, law);
   r.out = out.str();
   r.err = err.str();
   return r;

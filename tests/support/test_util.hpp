@@ -2,6 +2,7 @@
 #pragma once
 
 #include "nao/arm_model.hpp"
+#include "nao/arm_model_io.hpp"
 
 #include <filesystem>
 #include <cstdlib>

@@ -1,5 +1,6 @@
 // nao_toolchain gap: the embodiment gap of held-out synthetic demonstrations, measured.
 #include "nao/tools/command.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/tools/embodiment_gap.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "nao/tools/retarget_cli.hpp"

@@ -1,5 +1,6 @@
 // nao_toolchain retarget: a triangulated (or ground-truth) skeleton CSV -> NAO joint trajectories.
 #include "nao/tools/command.hpp"
+#include "nao/arm_model_io.hpp"
 #include "nao/tools/retarget_cli.hpp"
 #include "nao/tools/retarget_pipeline.hpp"
 

@@ -1,4 +1,5 @@
 #include "nao/tools/linear_ar.hpp"
+#include "nao/sim_arm.hpp"
 
 #include "nao/kinematics.hpp"
 #include "nao/robot_backend.hpp"

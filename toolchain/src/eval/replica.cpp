@@ -1,6 +1,7 @@
 #include "replica.hpp"
 
 #include "nao/controller.hpp"
+#include "nao/sim_arm.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/toolchain_dims.hpp"
@@ -25,9 +26,8 @@ std::vector<ReplicaTick> replay(const ModelFile& model, const ArmModel& arm, con
   const PolicyWeights<Dims> weights =
       bindPolicyWeights<Dims>(tensors.data(), tensors.size(), model.header.arch, model.header.conditioning);
   const ModelHeader& h = model.header;
-  const ControllerModel<Dims> cm =
-      configureController(arm, weights, ControllerParams{}, modelWorkspace(h.metadata_json, h.movement_names, "model"),
-                          modelRunCodes(h.metadata_json, h.movement_names, static_cast<int>(h.arch.d_model), "model"));
+  const ModelSpec spec = readModelSpec(h, RetargetParams{}, "model");
+  const ControllerModel<Dims> cm = configureController(arm, weights, ControllerParams{}, spec.workspace, spec.run_codes);
   OdeArmBackend robot(arm, sim_params, clampToLimits(arm, start));
   ControllerData<Dims> data(robot);
   ZeroClock clock;

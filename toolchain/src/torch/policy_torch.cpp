@@ -12,24 +12,30 @@ std::string lastComponent(const std::string& name) { return name.substr(name.rfi
 
 std::vector<std::int64_t> shape64(const std::vector<int>& shape) { return {shape.begin(), shape.end()}; }
 
-// Every parameter and buffer of the module tree by its dotted name.
-std::map<std::string, torch::Tensor> namedTensors(const torch::nn::Module& m) {
-  std::map<std::string, torch::Tensor> out;
-  for (const auto& p : m.named_parameters()) out.emplace(p.key(), p.value());
-  for (const auto& b : m.named_buffers()) out.emplace(b.key(), b.value());
+// Every parameter and buffer of the module tree by its dotted name, and whether it is a buffer.
+std::map<std::string, std::pair<torch::Tensor, bool>> namedTensors(const torch::nn::Module& m) {
+  std::map<std::string, std::pair<torch::Tensor, bool>> out;
+  for (const auto& p : m.named_parameters()) out.emplace(p.key(), std::pair{p.value(), false});
+  for (const auto& b : m.named_buffers()) out.emplace(b.key(), std::pair{b.value(), true});
   return out;
 }
 
+// The module's tensors in manifest order, checked against the manifest's names, shapes and
+// roles (a buffer is a TensorRole::kFixed tensor, a parameter a trained one).
 std::vector<std::pair<std::string, torch::Tensor>> inManifestOrder(const torch::nn::Module& m, const PolicyArch& arch) {
-  std::map<std::string, torch::Tensor> named = namedTensors(m);
+  std::map<std::string, std::pair<torch::Tensor, bool>> named = namedTensors(m);
   std::vector<std::pair<std::string, torch::Tensor>> out;
   for (const TensorSpec& spec : policyManifest(arch)) {
     const auto it = named.find(spec.name);
     if (it == named.end()) throw std::logic_error("policy module has no tensor '" + spec.name + "'");
-    if (it->second.sizes().vec() != shape64(spec.shape))
-      throw std::logic_error("policy module tensor '" + spec.name + "' has shape " +
-                             c10::str(it->second.sizes()) + ", the manifest says " + c10::str(shape64(spec.shape)));
-    out.emplace_back(spec.name, it->second);
+    const auto& [tensor, buffer] = it->second;
+    if (tensor.sizes().vec() != shape64(spec.shape))
+      throw std::logic_error("policy module tensor '" + spec.name + "' has shape " + c10::str(tensor.sizes()) +
+                             ", the manifest says " + c10::str(shape64(spec.shape)));
+    if (buffer != (spec.role == TensorRole::kFixed))
+      throw std::logic_error("policy module tensor '" + spec.name + "' is a " + (buffer ? "buffer" : "parameter") +
+                             ", the manifest says it is " + (buffer ? "trained" : "set from the data"));
+    out.emplace_back(spec.name, tensor);
     named.erase(it);
   }
   if (!named.empty()) throw std::logic_error("policy module tensor '" + named.begin()->first + "' is not in the manifest");
@@ -274,10 +280,13 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
   // Initialise in manifest order, so the draws from the seeded generator do not depend on how
   // the module tree happens to be registered.
   torch::NoGradGuard no_grad;
-  for (auto& [name, t] : inManifestOrder(*this, arch_)) {
+  const std::vector<TensorSpec> manifest = policyManifest(arch_);
+  const std::vector<std::pair<std::string, torch::Tensor>> tensors = inManifestOrder(*this, arch_);
+  for (std::size_t i = 0; i < tensors.size(); ++i) {
+    const auto& [name, tensor] = tensors[i];
+    if (manifest[i].role == TensorRole::kFixed) continue;  // buffers, set above
+    torch::Tensor t = tensor;
     const std::string last = lastComponent(name);
-    if (name.rfind("norm.", 0) == 0 || name == "centroids" || name == "head.ensemble_decay" || name == "law.gain")
-      continue;  // buffers, set above
     if (name == "embed.step" && conditioning == Conditioning::kReference)
       t.zero_();
     else if (name == "embed.joint_enc" || name == "embed.movement" || name == "embed.step" || name == "embed.joint_dec")
