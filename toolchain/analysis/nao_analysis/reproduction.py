@@ -461,7 +461,7 @@ def reproduction_markdown(docs, command):
         L += ["```", "%s" % docs[s]["command"], "```", ""]
     L += ["Models: %s. How each seed's model and rollouts are made: docs/analysis.md, \"Regenerating "
           "docs/reproduction.md\" (seed 1 is models/autonomous.bin, its card models/autonomous.md; seed N's card is "
-          "docs/reproduction/seed_N_model.md)." % " · ".join(models), "",
+          "models/seeds/seed_N.md)." % " · ".join(models), "",
           "Paper: %s, sections 4.1–4.2, Table 2." % CITATION, ""]
     L += verdict_section(found, seeds)
     L += mi_section(found_mi, seeds)
