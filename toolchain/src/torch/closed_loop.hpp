@@ -1,4 +1,4 @@
-// Closed-loop training (docs/autonomous.md "Training in closed loop"): the net rolled out in
+// Closed-loop training (docs/autonomous.md "How it is trained"): the net rolled out in
 // libtorch the way nao_rt runs it - streamed tick by tick (policy_stream.hpp) through the
 // command limiter and the trainer's copy of the arm (arm_copy_torch.hpp) - from training starts,
 // perturbed starts and starts between two demonstrations, each with the run code the runtime

@@ -161,7 +161,7 @@ std::vector<TrainedJoint> trainedJoints(const ArmModel& arm);
 ///  - "workspace": {movement: {"lo": [5], "hi": [5]}}, one entry per movement, widened to the
 ///    movement's starts (a demonstration begins at its start); empty when absent. Refused: a
 ///    movement missing or unknown, not 5 finite numbers, lo above hi.
-///  - "run_codes" (docs/autonomous.md "A demonstrated run's code": a model trained with a per-run
+///  - "run_codes" (docs/autonomous.md "How a run commits to a variant": a model trained with a per-run
 ///    latent carries, per movement, its training demonstrations' start poses, the code of each -
 ///    the latent encoder's mean for the demonstration's clean rollout, projected to d_model: what
 ///    is added to every encoder token - and the hand-path DTW between every two of them):
