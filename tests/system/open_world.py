@@ -52,7 +52,9 @@ class OpenWorld(unittest.TestCase):
         run([os.path.join(BUILD, "bin", "nao_test_recordings"), "--out", cls.rec, "--movements", ",".join(MOVEMENTS),
              "--per-movement", "8", "--seed", "3"])
         cls.train_out = run([os.path.join(ROOT, "toolchain", "nao"), "train", "--recordings", cls.rec, "--out", cls.model,
-                             "--config", "small", "--epochs", "3", "--procs", "1", "--work", os.path.join(cls.tmp, "work")])
+                             "--config", "small", "--epochs", "3", "--procs", "1", "--work", os.path.join(cls.tmp, "work"),
+                             # The recipe's closed loop, cut short like its teacher-forced epochs.
+                             "--closed-loop-epochs", "2"])
         built = run([os.path.join(ROOT, "toolchain", "nao"), "build", "--model", cls.model])
         cls.nao_rt = built.strip().splitlines()[-1]
         cls.build_tree = os.path.dirname(os.path.dirname(cls.nao_rt))
