@@ -280,7 +280,7 @@ TEST_CASE("archConstants is the one table of compile-time dimensions: the config
     return v;
   };
   // SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 8> (nao/policy_weights.hpp): the table
-  // sizes and the head (movements, key poses, steps, chunk, bins) are runtime extents.
+  // sizes and the head (movements, key poses, steps, chunk) are runtime extents.
   CHECK(arguments(nao::smallArch()) == std::vector<int>{32, 4, 2, 2, 64, 64, 64, 8});
   CHECK(arguments(nao::paperArch()) == std::vector<int>{128, 4, 4, 4, 512, 512, 512, 20});
   CHECK(nao::SmallPolicyDims::arch() == nao::smallArch());

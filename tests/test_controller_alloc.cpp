@@ -74,10 +74,9 @@ TEST_CASE("6,000 controller ticks with the small policy allocate nothing") { che
 
 TEST_CASE("6,000 controller ticks with the paper policy allocate nothing") { checkNoAllocation<PaperPolicyDims>(4); }
 
-TEST_CASE("6,000 controller ticks with a small bins head of chunk 5 (the temporal ensemble) allocate nothing") {
+TEST_CASE("6,000 controller ticks with a small policy of chunk 5 (the temporal ensemble) allocate nothing") {
   PolicyArch arch = SmallPolicyDims::arch();
   arch.chunk = 5;
-  arch.bins = 8;
   checkNoAllocation<SmallPolicyDims>(6, arch);
 }
 

@@ -122,7 +122,7 @@ TEST_CASE("model.bin is little-endian with the documented fixed header") {
   CHECK(std::memcmp(b.data(), "NAOPOLCY", 8) == 0);
   CHECK(getU32(b, 8) == 3);
   const nao::PolicyArch a = nao::smallArch();
-  // ..., max_steps, window, chunk, bins, conditioning
+  // ..., max_steps, window, chunk, bins (always 0), conditioning
   const std::uint32_t fields[14] = {32, 4, 2, 2, 3, 5, 3, 3, 10, 256, 8, 1, 0, 0};
   for (int i = 0; i < 14; ++i) CHECK(getU32(b, 16 + 4 * static_cast<std::size_t>(i)) == fields[i]);
   CHECK(getU32(b, 72) == static_cast<std::uint32_t>(a.ffn_hidden[0]));
@@ -352,6 +352,13 @@ TEST_CASE("decodeModel rejects an unusable architecture, and encodeModel refuses
   putU32(b, 68, 2);  // conditioning
   reseal(b);
   CHECK(decodeError(b) == "x.bin: header: conditioning 2 is neither 0 (reference) nor 1 (autonomous)");
+
+  // The format's bins field: an action-bins head is not something this runtime runs.
+  b = smallModelBytes();
+  putU32(b, 64, 8);
+  reseal(b);
+  CHECK(decodeError(b) ==
+        "x.bin: header: the model has an action-bins head (bins 8); this runtime runs the regression head only (bins 0)");
 
   nao::PolicyArch bad = nao::smallArch();
   bad.d_model = 30;

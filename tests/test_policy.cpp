@@ -1,9 +1,8 @@
 // The streaming policy forward pass (nao/policy.hpp) against an independent double-precision
 // reference written here from docs/policy.md: the whole sequence at once, every layer over all
 // T·J tokens with the sliding-window mask and the age bias (plain loops over the manifest
-// tensors by name, row-vector convention, no Eigen, no rings), the head (a regressed chunk, or
-// the bin with the largest logit plus its offset), the temporal ensemble of the last C chunks and
-// the law; the attention ablation (body parts masked) against the same reference with those keys'
+// tensors by name, row-vector convention, no Eigen, no rings), the head (a regressed chunk), the
+// temporal ensemble of the last C chunks and the law; the attention ablation (body parts masked) against the same reference with those keys'
 // logits −∞. Plus the properties the architecture promises: attention rows sum to 1, the decoder
 // is causal across joints, the encoder causal in time with a finite receptive field, the
 // conditioning inputs that must not matter do not, a reset stream repeats bitwise (the binding
@@ -48,8 +47,6 @@ struct Reference {                // one tick
   std::vector<double> action;     // [J]: the executed action (ensemble + law)
   std::vector<double> net_action; // [J]: the ensemble alone
   std::vector<double> chunk;      // [J·C], entry j·C + c: this tick's a_j(t + c), rad
-  int bin = -1;                   // bins head: the bin with the largest logit
-  double bin_margin = 0.0;        // its logit less the runner-up's (the pick is not a near tie)
   std::vector<double> cross;      // [l][h][i][j], α summed over the window's ticks
   std::vector<double> score;      // [J]
   std::vector<double> mass;       // [J]
@@ -126,46 +123,18 @@ class ReferencePolicy {
  private:
   enum class Mask { kWindow, kJointsCausal };
 
-  // docs/policy.md "Head", normalised units, then rad. Regression: head.weight [d, C], head.bias
-  // [C] on each action token. Bins: logit(b) = Σ_j y_j · head.logit.weight[j, :, b] + bias(b);
-  // the first largest wins; its center [b, j, c] plus the offset y_j · head.offset.weight[:, b·C + c].
+  // docs/policy.md "Head", normalised units, then rad: head.weight [d, C], head.bias [C] on
+  // each action token.
   void head(const Tokens& yn, int tk, Reference& r) const {
-    const int C = a_.chunk, B = a_.bins;
+    const int C = a_.chunk;
     const auto token = [&](int j) -> const std::vector<double>& { return yn[static_cast<std::size_t>(tk * J_ + j)]; };
     r.chunk.assign(static_cast<std::size_t>(J_ * C), 0.0);
-    if (B == 0) {
-      for (int j = 0; j < J_; ++j)
-        for (int c = 0; c < C; ++c) {
-          double v = t("head.bias")[static_cast<std::size_t>(c)];
-          for (int k = 0; k < d_; ++k) v += token(j)[k] * t("head.weight")[static_cast<std::size_t>(k * C + c)];
-          r.chunk[static_cast<std::size_t>(j * C + c)] = v;
-        }
-    } else {
-      std::vector<double> logit(static_cast<std::size_t>(B));
-      for (int b = 0; b < B; ++b) {
-        double z = t("head.logit.bias")[static_cast<std::size_t>(b)];
-        for (int j = 0; j < J_; ++j)
-          for (int k = 0; k < d_; ++k)
-            z += token(j)[k] * t("head.logit.weight")[static_cast<std::size_t>((j * d_ + k) * B + b)];
-        logit[static_cast<std::size_t>(b)] = z;
+    for (int j = 0; j < J_; ++j)
+      for (int c = 0; c < C; ++c) {
+        double v = t("head.bias")[static_cast<std::size_t>(c)];
+        for (int k = 0; k < d_; ++k) v += token(j)[k] * t("head.weight")[static_cast<std::size_t>(k * C + c)];
+        r.chunk[static_cast<std::size_t>(j * C + c)] = v;
       }
-      int best = 0;
-      for (int b = 1; b < B; ++b)
-        if (logit[static_cast<std::size_t>(b)] > logit[static_cast<std::size_t>(best)]) best = b;
-      double second = -INFINITY;
-      for (int b = 0; b < B; ++b)
-        if (b != best) second = std::max(second, logit[static_cast<std::size_t>(b)]);
-      r.bin = best;
-      r.bin_margin = logit[static_cast<std::size_t>(best)] - second;
-      for (int j = 0; j < J_; ++j)
-        for (int c = 0; c < C; ++c) {
-          const int col = best * C + c;
-          double v = t("head.centers")[static_cast<std::size_t>((best * J_ + j) * C + c)] +
-                     t("head.offset.bias")[static_cast<std::size_t>(col)];
-          for (int k = 0; k < d_; ++k) v += token(j)[k] * t("head.offset.weight")[static_cast<std::size_t>(k * B * C + col)];
-          r.chunk[static_cast<std::size_t>(j * C + c)] = v;
-        }
-    }
     for (int j = 0; j < J_; ++j)
       for (int c = 0; c < C; ++c) {
         double& v = r.chunk[static_cast<std::size_t>(j * C + c)];
@@ -365,9 +334,6 @@ void checkAgainstReference(const PolicyArch& arch, std::uint64_t seed, int ticks
     const std::vector<Reference> r_all = ref.run(seq, c);
     resetPolicyStream(*ws);
     Worst wa, wn, wk, wc, ws_, wo, wm, wp;
-    double smallest_margin = INFINITY;
-    int bins_differ = 0;
-    std::vector<int> bins_seen;
     for (int tk = 0; tk < ticks; ++tk) {
       const Eigen::Matrix<float, 5, 1> action = stepPolicy(w, *ws, seq[static_cast<std::size_t>(tk)]);
       const Reference& r = r_all[static_cast<std::size_t>(tk)];
@@ -378,13 +344,6 @@ void checkAgainstReference(const PolicyArch& arch, std::uint64_t seed, int ticks
         for (int k = 0; k < C; ++k)
           wk.note(ws->chunk(j, k), r.chunk[static_cast<std::size_t>(j * C + k)],
                   at + "chunk(" + std::to_string(j) + ", " + std::to_string(k) + ")");
-      if (arch.bins > 0) {
-        smallest_margin = std::min(smallest_margin, r.bin_margin);
-        bins_differ += ws->bin != r.bin;
-        if (std::find(bins_seen.begin(), bins_seen.end(), r.bin) == bins_seen.end()) bins_seen.push_back(r.bin);
-      } else {
-        CHECK(ws->bin == -1);
-      }
       for (int l = 0; l < LD; ++l)
         for (int h = 0; h < H; ++h)
           for (int i = 0; i < J; ++i)
@@ -401,7 +360,7 @@ void checkAgainstReference(const PolicyArch& arch, std::uint64_t seed, int ticks
       // The comparison is not vacuous: the actions are not all equal to one value.
       CHECK(action.maxCoeff() - action.minCoeff() > 1e-3f);
     }
-    INFO(conditioningName(c), ", ", ticks, " ticks, window ", W, ", chunk ", C, ", bins ", arch.bins);
+    INFO(conditioningName(c), ", ", ticks, " ticks, window ", W, ", chunk ", C);
     CHECK_MESSAGE(wa.err <= 1e-5, "actions: worst ", wa.where);
     CHECK_MESSAGE(wn.err <= 1e-5, "net actions: worst ", wn.where);
     CHECK_MESSAGE(wk.err <= 1e-5, "chunks: worst ", wk.where);
@@ -410,13 +369,6 @@ void checkAgainstReference(const PolicyArch& arch, std::uint64_t seed, int ticks
     CHECK_MESSAGE(wm.err <= 1e-5, "mass: worst ", wm.where);
     CHECK_MESSAGE(wp.err <= 1e-5, "age profile: worst ", wp.where);
     CHECK_MESSAGE(wo.err <= 1e-5, "cross_out: worst ", wo.where);
-    if (arch.bins > 0) {
-      // The reference's pick is clear of float rounding at every tick, the runtime made the same
-      // one, and the rollout used more than one bin.
-      CHECK_MESSAGE(smallest_margin > 1e-3, "a near tie of two logits: margin ", smallest_margin);
-      CHECK(bins_differ == 0);
-      CHECK(bins_seen.size() >= 2);
-    }
     // The law: reference mode adds law.gain ⊙ r to the network's action, autonomous mode nothing.
     if (c == Conditioning::kAutonomous) CHECK(bitwiseEqual(ws->action, ws->net_action));
     if (c == Conditioning::kReference) CHECK_FALSE(bitwiseEqual(ws->action, ws->net_action));
@@ -445,7 +397,7 @@ TEST_CASE("odd dimensions (no multiple of the packet width, a window of 3) match
   // d_model 36 / head dim 9 / FFN 20-13-7 exercise the kernel's leftover rows and columns; two
   // movements, four key poses, 16 step rows.
   using Odd = PolicyDims<36, 4, 1, 2, 20, 13, 7, 3>;
-  checkAgainstReference<Odd>(archOf<Odd>(1, 0, 2, 4, 16), 303, 11);
+  checkAgainstReference<Odd>(archOf<Odd>(1, 2, 4, 16), 303, 11);
 }
 
 TEST_CASE("a regressed chunk of 5 with the temporal ensemble (decay 0.3) and the law matches the reference, small dims") {
@@ -454,11 +406,9 @@ TEST_CASE("a regressed chunk of 5 with the temporal ensemble (decay 0.3) and the
   checkAgainstReference<SmallPolicyDims>(archOf<SmallPolicyDims>(5), 111, 3 * SmallPolicyDims::kWindow + 3);
 }
 
-TEST_CASE("a bins head (8 bins, chunk 3): the bin with the largest logit plus its offset, ensembled, matches the reference") {
-  checkAgainstReference<SmallPolicyDims>(archOf<SmallPolicyDims>(3, 8), 121, 3 * SmallPolicyDims::kWindow + 3);
-  // A bins head of one action per tick, odd dimensions (the head's dot products at d = 36).
+TEST_CASE("a regressed chunk of 3 at odd dimensions (the head's dot products at d = 36) matches the reference") {
   using Odd = PolicyDims<36, 4, 1, 2, 20, 13, 7, 3>;
-  checkAgainstReference<Odd>(archOf<Odd>(1, 5, 2, 4, 16), 134, 30);
+  checkAgainstReference<Odd>(archOf<Odd>(3, 2, 4, 16), 134, 30);
 }
 
 TEST_CASE("the encoder is causal in time with a finite receptive field: tick 0 reaches exactly the ticks within (LE + 1)(W − 1)") {

@@ -118,11 +118,10 @@ TEST_CASE("10,000 policy steps with the small dimensions allocate nothing, both 
   }
 }
 
-TEST_CASE("10,000 policy steps with a chunk of 5 and 8 action bins allocate nothing, both conditioning modes") {
+TEST_CASE("10,000 policy steps with a chunk of 5 allocate nothing, both conditioning modes") {
   constexpr int kSteps = 10000;
   PolicyArch arch = SmallPolicyDims::arch();
   arch.chunk = 5;
-  arch.bins = 8;
   for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
     double sink = 0.0;
     const std::int64_t n_alloc = allocationsOverSteps<SmallPolicyDims>(c, kSteps, sink, false, arch);

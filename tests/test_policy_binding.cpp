@@ -1,6 +1,6 @@
 // Binding a policy's weights (nao/policy.hpp): bindPolicyWeights views each manifest tensor in
 // place with the head's extents, refuses what the runtime cannot run, and bindPolicyWeightsAt
-// binds the same views from a model.bin image; model.bin format 3 carries the chunk and the bins.
+// binds the same views from a model.bin image; model.bin format 3 carries the chunk.
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "support/policy_test_model.hpp"
@@ -44,30 +44,23 @@ TEST_CASE("bindPolicyWeights views each tensor in place: Eigen [out, in] is the 
   CHECK(f.w.head_weight(0, 17) == f.model["head.weight"][17]);  // [d, C = 1]
   CHECK(f.w.law_gain(3) == f.model["law.gain"][3]);
   CHECK(f.w.conditioning == Conditioning::kReference);
-  CHECK((f.w.chunk == 1 && f.w.bins == 0 && f.w.movements == 3 && f.w.clusters == 10 && f.w.max_steps == 256));
+  CHECK((f.w.chunk == 1 && f.w.movements == 3 && f.w.clusters == 10 && f.w.max_steps == 256));
   CHECK(f.w.ensemble_weight[0][0] == 1.0f);
 }
 
-TEST_CASE("a bins head's views: logits [B, J·d], offsets [B·C, d], centers [B·J·C], and the ensemble's weights from its decay") {
-  constexpr int D = SmallPolicyDims::kDModel, J = 5, B = 6, C = 4;
-  Fixture<SmallPolicyDims> f(6, Conditioning::kAutonomous, false, archOf<SmallPolicyDims>(C, B, 2, 7, 40));
-  CHECK((f.w.chunk == C && f.w.bins == B && f.w.movements == 2 && f.w.clusters == 7 && f.w.max_steps == 40));
+TEST_CASE("a chunked head's views: head.weight [C, d], head.bias [C], and the ensemble's weights from its decay") {
+  constexpr int D = SmallPolicyDims::kDModel, C = 4;
+  Fixture<SmallPolicyDims> f(6, Conditioning::kAutonomous, false, archOf<SmallPolicyDims>(C, 2, 7, 40));
+  CHECK((f.w.chunk == C && f.w.movements == 2 && f.w.clusters == 7 && f.w.max_steps == 40));
   CHECK((f.w.embed_movement.cols() == 2 && f.w.embed_step.cols() == 40 && f.w.centroids.cols() == 14));
-  const std::vector<float>& lw = f.model["head.logit.weight"];   // [J, d, B]
-  const std::vector<float>& ow = f.model["head.offset.weight"];  // [d, B·C]
-  const std::vector<float>& ob = f.model["head.offset.bias"];    // [B·C]
-  const std::vector<float>& ct = f.model["head.centers"];        // [B, J, C]
-  REQUIRE((f.w.head_logit_weight.rows() == B && f.w.head_logit_weight.cols() == J * D));
-  REQUIRE((f.w.head_offset_weight.rows() == B * C && f.w.head_offset_weight.cols() == D));
-  REQUIRE(f.w.head_centers.rows() == B * J * C);
-  for (int b = 0; b < B; ++b)
-    for (int j = 0; j < J; ++j)
-      for (int k = 0; k < D; k += 7) CHECK(f.w.head_logit_weight(b, j * D + k) == lw[static_cast<std::size_t>((j * D + k) * B + b)]);
-  for (int r = 0; r < B * C; ++r) {
-    CHECK(f.w.head_offset_weight(r, 11) == ow[static_cast<std::size_t>(11 * B * C + r)]);
-    CHECK(f.w.head_offset_bias(r) == ob[static_cast<std::size_t>(r)]);
+  const std::vector<float>& hw = f.model["head.weight"];  // [d, C]
+  const std::vector<float>& hb = f.model["head.bias"];    // [C]
+  REQUIRE((f.w.head_weight.rows() == C && f.w.head_weight.cols() == D));
+  REQUIRE(f.w.head_bias.rows() == C);
+  for (int c = 0; c < C; ++c) {
+    for (int k = 0; k < D; k += 5) CHECK(f.w.head_weight(c, k) == hw[static_cast<std::size_t>(k * C + c)]);
+    CHECK(f.w.head_bias(c) == hb[static_cast<std::size_t>(c)]);
   }
-  CHECK(f.w.head_centers((3 * J + 2) * C + 1) == ct[static_cast<std::size_t>((3 * J + 2) * C + 1)]);
   // w_k ∝ exp(−decay k) over the k < n chunks that exist, rows summing to 1.
   const double decay = f.model["head.ensemble_decay"][0];
   REQUIRE(decay == doctest::Approx(0.3));
@@ -83,16 +76,16 @@ TEST_CASE("a bins head's views: logits [B, J·d], offsets [B·C, d], centers [B�
   }
 }
 
-TEST_CASE("bindPolicyWeights rejects a wrong tensor count, a null tensor, another computation, and a chunk or bin count beyond the runtime's") {
+TEST_CASE("bindPolicyWeights rejects a wrong tensor count, a null tensor, another computation, and a chunk beyond the runtime's") {
   const TestModel m = randomModel(smallArch(), 7, false);
   const std::vector<const float*> p = m.pointers();
   const Conditioning c = Conditioning::kReference;
   CHECK_NOTHROW(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), smallArch(), c));
   CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size() - 1, smallArch(), c), std::invalid_argument);
   CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size() + 1, smallArch(), c), std::invalid_argument);
-  // The small model's tensors are not a paper model, nor one with a bins head.
+  // The small model's tensors are not a paper model, nor one with a chunk of 4 (its ensemble decay).
   CHECK_THROWS_AS(bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), smallArch(), c), std::invalid_argument);
-  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), archOf<SmallPolicyDims>(1, 4), c),
+  CHECK_THROWS_AS(bindPolicyWeights<SmallPolicyDims>(p.data(), p.size(), archOf<SmallPolicyDims>(4), c),
                   std::invalid_argument);
   // A chunk of 3 bound as one (the pointers carry no shapes: the file's table is checked
   // against the manifest by the reader, test_model_file).
@@ -107,11 +100,9 @@ TEST_CASE("bindPolicyWeights rejects a wrong tensor count, a null tensor, anothe
   CHECK_NOTHROW(checkPolicyArch<SmallPolicyDims>(smallArch()));
   CHECK_THROWS_AS(checkPolicyArch<PaperPolicyDims>(smallArch()), std::invalid_argument);
   // The tables and the head are the model's: any sizes bind to the same compiled dimensions.
-  CHECK_NOTHROW(checkPolicyArch<SmallPolicyDims>(archOf<SmallPolicyDims>(kPolicyMaxChunk, kPolicyMaxBins, 17, 3, 9)));
+  CHECK_NOTHROW(checkPolicyArch<SmallPolicyDims>(archOf<SmallPolicyDims>(kPolicyMaxChunk, 17, 3, 9)));
   CHECK_THROWS_WITH_AS(checkPolicyArch<SmallPolicyDims>(archOf<SmallPolicyDims>(kPolicyMaxChunk + 1)),
                        doctest::Contains("chunk 33"), std::invalid_argument);
-  CHECK_THROWS_WITH_AS(checkPolicyArch<SmallPolicyDims>(archOf<SmallPolicyDims>(1, kPolicyMaxBins + 1)),
-                       doctest::Contains("bins 1025"), std::invalid_argument);
   PolicyArch window = smallArch();
   window.window = 9;
   CHECK_THROWS_WITH_AS(checkPolicyArch<SmallPolicyDims>(window), doctest::Contains("window 9"), std::invalid_argument);
@@ -172,9 +163,8 @@ std::vector<ViewShape> viewShapes(PolicyWeights<Dims>& w) {
 
 TEST_CASE("bindPolicyWeightsAt on a model.bin image binds what bindPolicyWeights binds: every view, the head's extents, the same steps bit for bit") {
   using Dims = SmallPolicyDims;
-  for (const PolicyArch& arch : {archOf<Dims>(), archOf<Dims>(5), archOf<Dims>(3, 8, 2, 4, 30)}) {
+  for (const PolicyArch& arch : {archOf<Dims>(), archOf<Dims>(5), archOf<Dims>(3, 2, 4, 30)}) {
     CAPTURE(arch.chunk);
-    CAPTURE(arch.bins);
     const TestModel model = randomModel(arch, 91, false);
     const ModelFile file = modelImage(model, arch, Conditioning::kAutonomous);
     std::vector<std::uint64_t> offsets;
@@ -185,7 +175,7 @@ TEST_CASE("bindPolicyWeightsAt on a model.bin image binds what bindPolicyWeights
       extents.push_back(viewExtent(file.tensors[i].spec));
       ptrs.push_back(file.data(i));
     }
-    REQUIRE(offsets.size() == detail::policyViewCount<Dims>(arch.bins, arch.chunk));
+    REQUIRE(offsets.size() == detail::policyViewCount<Dims>(arch.chunk));
     PolicyWeights<Dims> at =
         bindPolicyWeightsAt<Dims>(file.bytes.data(), offsets.data(), extents.data(), arch, Conditioning::kAutonomous);
     PolicyWeights<Dims> by_name = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, Conditioning::kAutonomous);
@@ -193,7 +183,7 @@ TEST_CASE("bindPolicyWeightsAt on a model.bin image binds what bindPolicyWeights
     REQUIRE(a.size() == b.size());
     for (std::size_t i = 0; i < a.size(); ++i) CHECK_MESSAGE(a[i] == b[i], a[i].name);
     CHECK(at.ensemble_weight == by_name.ensemble_weight);
-    CHECK((at.chunk == arch.chunk && at.bins == arch.bins && at.movements == arch.movements));
+    CHECK((at.chunk == arch.chunk && at.movements == arch.movements));
     std::mt19937_64 rng(92);
     const auto ws_at = makePolicyWorkspace<Dims>(), ws_name = makePolicyWorkspace<Dims>();
     for (int tk = 0; tk < 2 * Dims::kWindow; ++tk) {
@@ -203,14 +193,13 @@ TEST_CASE("bindPolicyWeightsAt on a model.bin image binds what bindPolicyWeights
   }
 }
 
-TEST_CASE("model.bin format 3 carries the chunk and the bins: a bins model round-trips, tensor for tensor, through a file") {
+TEST_CASE("model.bin format 3 carries the chunk: a chunked model round-trips, tensor for tensor, through a file") {
   using Dims = SmallPolicyDims;
-  const PolicyArch arch = archOf<Dims>(3, 8, 2, 4, 30);
+  const PolicyArch arch = archOf<Dims>(3, 2, 4, 30);
   const TestModel model = randomModel(arch, 93, false);
   const ModelFile image = modelImage(model, arch, Conditioning::kAutonomous);
   CHECK(image.header.arch == arch);
   CHECK(image.header.arch.chunk == 3);
-  CHECK(image.header.arch.bins == 8);
   CHECK(image.header.conditioning == Conditioning::kAutonomous);
   const std::string path = test::writeTempFile("policy_head_v3.bin", "");
   ModelHeader h = image.header;
@@ -224,9 +213,9 @@ TEST_CASE("model.bin format 3 carries the chunk and the bins: a bins model round
     CHECK(file.tensors[i].spec.shape == model.manifest[i].shape);
     CHECK(std::memcmp(file.data(i), model.data[i].data(), model.data[i].size() * sizeof(float)) == 0);
   }
-  CHECK_NOTHROW(file.find("head.centers"));
+  CHECK_NOTHROW(file.find("head.weight"));
   CHECK_NOTHROW(file.find("head.ensemble_decay"));
-  CHECK_THROWS_AS(file.find("head.weight"), ModelFileError);  // a bins head has no regression weights
+  CHECK_THROWS_AS(file.find("head.centers"), ModelFileError);  // no tensor of another head
   // The header and the tensors must agree: another chunk is another manifest.
   ModelHeader other = h;
   other.arch.chunk = 2;

@@ -160,7 +160,7 @@ PolicyInput randomInput(std::mt19937_64& rng, int movement, int step) {
   return test::randomPolicyInput(rng, movement, step, 2.0);
 }
 
-/// What a step records, as raw floats: actions, α of every decoder layer, score, cross_out, the chunk and the bin.
+/// What a step records, as raw floats: actions, α of every decoder layer, score, cross_out and the chunk.
 template <class Dims>
 std::vector<float> recordOf(const PolicyWorkspace<Dims>& ws) {
   std::vector<float> r(ws.action.data(), ws.action.data() + ws.action.size());
@@ -171,7 +171,6 @@ std::vector<float> recordOf(const PolicyWorkspace<Dims>& ws) {
   r.insert(r.end(), ws.age_profile.data(), ws.age_profile.data() + ws.age_profile.size());
   r.insert(r.end(), ws.cross_out.data(), ws.cross_out.data() + ws.cross_out.size());
   r.insert(r.end(), ws.chunk.data(), ws.chunk.data() + ws.chunk.size());
-  r.push_back(static_cast<float>(ws.bin));
   return r;
 }
 
@@ -483,10 +482,9 @@ TEST_CASE("stepPolicy records the same bits under SSE and AVX2: odd dims (leftov
   noteAvx2Absent();
 }
 
-TEST_CASE("stepPolicy records the same bits under SSE and AVX2: a bins head of chunk 3 (the chunk and the bin too)") {
+TEST_CASE("stepPolicy records the same bits under SSE and AVX2: a chunk of 3 (the whole chunk too)") {
   PolicyArch arch = SmallPolicyDims::arch();
   arch.chunk = 3;
-  arch.bins = 8;
   const int compared = checkStepBitIdentical<SmallPolicyDims>(4000, 2, 40, arch);
   CHECK(compared == (haveAvx2() ? 2 * 2 * 40 : 0));
   noteAvx2Absent();

@@ -60,12 +60,11 @@ TEST_CASE("ticks.csv's header is exactly the contract's columns, in order") {
 }
 
 TEST_CASE("the weight storage of a --weights model holds its tensors 64-byte aligned, each padded to 64 bytes with zeros") {
-  PolicyArch bins = smallArch();
-  bins.chunk = 4;
-  bins.bins = 6;
-  for (const PolicyArch& arch : {smallArch(), bins}) {
-    CAPTURE(arch.bins);
-    const ModelFile model = readModelFile(writeModel("storage_" + std::to_string(arch.bins) + ".bin",
+  PolicyArch chunked = smallArch();
+  chunked.chunk = 4;
+  for (const PolicyArch& arch : {smallArch(), chunked}) {
+    CAPTURE(arch.chunk);
+    const ModelFile model = readModelFile(writeModel("storage_" + std::to_string(arch.chunk) + ".bin",
                                                      Conditioning::kReference, "{}", arch));
     std::size_t padded = 0;
     for (const TensorSpec& t : policyManifest(arch)) padded += (t.count() + 15) / 16 * 16;
@@ -84,7 +83,6 @@ TEST_CASE("the weight storage of a --weights model holds its tensors 64-byte ali
     }
     // The storage binds as the model (views by name, the head's sizes from the header).
     const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
-    CHECK(w.bins == arch.bins);
     CHECK(w.chunk == arch.chunk);
   }
 }
@@ -751,13 +749,12 @@ TEST_CASE("the online reference is the offline one: nao_rt retargets with the de
   }
 }
 
-TEST_CASE("an autonomous model with a bins head of chunk 5 runs in nao_rt, deterministically, and summary.json records its head") {
+TEST_CASE("an autonomous model with a chunk of 5 runs in nao_rt, deterministically, and summary.json records its head") {
   PolicyArch arch = smallArch();
   arch.chunk = 5;
-  arch.bins = 8;
-  const std::string model = writeModel("autonomous_bins.bin", Conditioning::kAutonomous, startsMetadata(), arch, 9);
+  const std::string model = writeModel("autonomous_chunk.bin", Conditioning::kAutonomous, startsMetadata(), arch, 9);
   std::vector<std::string> ticks;
-  for (const char* name : {"bins_a", "bins_b"}) {
+  for (const char* name : {"chunk_a", "chunk_b"}) {
     const fs::path dir = tempDir(name);
     rt::RunOptions o = options(model, "none", dir);
     o.movement = "elbow";
@@ -768,13 +765,13 @@ TEST_CASE("an autonomous model with a bins head of chunk 5 runs in nao_rt, deter
     CHECK(r.report.ticks == 20);
     const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
     CHECK(s["model"]["chunk"] == 5);
-    CHECK(s["model"]["bins"] == 8);
+    CHECK_FALSE(s["model"].contains("bins"));
     CHECK(s["faults"]["policy_nonfinite"] == 0);
     ticks.push_back(bytes(dir / "ticks.csv"));
   }
   CHECK(ticks[0] == ticks[1]);
-  // The arm moves under the bins head's actions (not a held pose).
-  const auto t = test::readCsvColumns(suiteDir() / "bins_a" / "ticks.csv");
+  // The arm moves under the ensembled chunks' actions (not a held pose).
+  const auto t = test::readCsvColumns(suiteDir() / "chunk_a" / "ticks.csv");
   const std::vector<double>& q1 = t.at("q_cmd_1");
   CHECK(*std::max_element(q1.begin(), q1.end()) - *std::min_element(q1.begin(), q1.end()) > 1e-4);
 }

@@ -13,8 +13,8 @@ extern "C" const std::uint8_t nao_model_packed_end[];
 namespace nao::compiled {
 
 static_assert(kFormatVersion == kModelFormatVersion, "the generated config is of another model.bin format");
-static_assert(kNumTensors == detail::policyViewCount<Dims>(kBins, kChunk), "the generated tensor table is not the manifest's");
-static_assert(kChunk >= 1 && kChunk <= kPolicyMaxChunk && kBins >= 0 && kBins <= kPolicyMaxBins,
+static_assert(kNumTensors == detail::policyViewCount<Dims>(kChunk), "the generated tensor table is not the manifest's");
+static_assert(kChunk >= 1 && kChunk <= kPolicyMaxChunk,
               "the compiled-in model's head is beyond the runtime's");
 static_assert(kJointNames.size() == static_cast<std::size_t>(kTokens), "one joint per token");
 
@@ -31,7 +31,6 @@ ModelHeader makeHeader() {
   h.arch.clusters = kClusters;
   h.arch.max_steps = kMaxSteps;
   h.arch.chunk = kChunk;
-  h.arch.bins = kBins;
   h.conditioning = kConditioning;
   for (std::size_t j = 0; j < kJointNames.size(); ++j)
     h.joints.push_back({std::string(kJointNames[j]), kJointLower[j], kJointUpper[j], kJointVelocity[j]});

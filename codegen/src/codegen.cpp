@@ -91,7 +91,6 @@ std::vector<ArchConstant> archConstants(const PolicyArch& a) {
   c.push_back({"kMaxSteps", a.max_steps, false});
   c.push_back({"kWindow", a.window, true});
   c.push_back({"kChunk", a.chunk, false});
-  c.push_back({"kBins", a.bins, false});
   return c;
 }
 

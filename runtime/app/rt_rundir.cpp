@@ -236,7 +236,6 @@ ordered_json summaryJson(const RunOptions& o, const PreparedRun& p, const LoopTo
                 {"checksum", hex64(p.model.checksum)},
                 {"conditioning", conditioningName(p.model.header.conditioning)},
                 {"chunk", p.model.header.arch.chunk},
-                {"bins", p.model.header.arch.bins},
                 {"precision", weightPrecisionName(p.precision)},
                 {"kernel", policyKernelName(activePolicyKernel())}};
   j["reference"] = p.description;

@@ -37,8 +37,7 @@ struct TestModel {
 
 /// Random weights shaped like a real initialisation (Xavier-uniform matrices), with non-zero
 /// biases, layer-norm parameters and embeddings large enough that every term shows in the output.
-/// A bins head gets logits of a few units (the bin changes from tick to tick, no near ties) and
-/// centers spread over the normalised range; law.gain is about 1; head.ensemble_decay is `decay`.
+/// law.gain is about 1; head.ensemble_decay is `decay`.
 inline TestModel randomModel(const PolicyArch& arch, std::uint64_t seed, bool zero_step_embedding, double decay = 0.3) {
   const auto startsWith = [](const std::string& s, const char* p) { return s.rfind(p, 0) == 0; };
   const auto endsWith = [](const std::string& s, const std::string& e) {
@@ -64,10 +63,6 @@ inline TestModel randomModel(const PolicyArch& arch, std::uint64_t seed, bool ze
         x = uniform(rng, -0.5, 0.5);
       else if (endsWith(n, ".age_bias"))
         x = uniform(rng, -1.0, 1.0);  // a clear preference of ages, different per head
-      else if (n == "head.logit.weight")
-        x = uniform(rng, -1.5, 1.5);  // logits that move with the input: rollouts switch bins
-      else if (n == "head.centers")
-        x = uniform(rng, -1.0, 1.0);
       else if (n == "head.ensemble_decay")
         x = static_cast<float>(decay);
       else if (endsWith(n, ".gain"))
@@ -95,10 +90,9 @@ inline bool bitwiseEqual(const Eigen::Matrix<float, 5, 1>& a, const Eigen::Matri
 
 /// The architecture of Dims with these table and head sizes.
 template <class Dims>
-PolicyArch archOf(int chunk = 1, int bins = 0, int movements = 3, int clusters = 10, int max_steps = 256) {
+PolicyArch archOf(int chunk = 1, int movements = 3, int clusters = 10, int max_steps = 256) {
   PolicyArch a = Dims::arch();
   a.chunk = chunk;
-  a.bins = bins;
   a.movements = movements;
   a.clusters = clusters;
   a.max_steps = max_steps;

@@ -87,9 +87,6 @@ void requireArch(const PolicyArch& compiled, const PolicyArch& given) {
   if (given.chunk > kPolicyMaxChunk)
     throw std::invalid_argument("policy architecture: chunk " + std::to_string(given.chunk) + " is above the runtime's " +
                                 std::to_string(kPolicyMaxChunk));
-  if (given.bins > kPolicyMaxBins)
-    throw std::invalid_argument("policy architecture: bins " + std::to_string(given.bins) + " is above the runtime's " +
-                                std::to_string(kPolicyMaxBins));
 }
 
 }  // namespace nao::detail

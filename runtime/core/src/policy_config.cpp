@@ -16,7 +16,7 @@ bool PolicyArch::operator==(const PolicyArch& o) const {
   return d_model == o.d_model && heads == o.heads && encoder_layers == o.encoder_layers &&
          decoder_layers == o.decoder_layers && ffn_hidden == o.ffn_hidden && tokens == o.tokens &&
          features == o.features && movements == o.movements && clusters == o.clusters && max_steps == o.max_steps &&
-         window == o.window && chunk == o.chunk && bins == o.bins;
+         window == o.window && chunk == o.chunk;
 }
 
 PolicyArch paperArch() { return PolicyArch{}; }
@@ -50,7 +50,6 @@ std::string archProblem(const PolicyArch& a) {
   if (!positive(a.max_steps, 100000)) return "max_steps " + std::to_string(a.max_steps) + " is not in 1..100000";
   if (!positive(a.window, 1000)) return "window " + std::to_string(a.window) + " is not in 1..1000 ticks";
   if (!positive(a.chunk, 100)) return "chunk " + std::to_string(a.chunk) + " is not in 1..100 ticks";
-  if (a.bins < 0 || a.bins > 4096) return "bins " + std::to_string(a.bins) + " is not in 0..4096";
   return {};
 }
 
@@ -118,20 +117,10 @@ std::vector<TensorSpec> policyManifest(const PolicyArch& a) {
     addFfn(m, p + ".ffn", a);
   }
   addNorm(m, "dec.norm", d);
-  const int C = a.chunk, B = a.bins;
-  if (B == 0) {
-    // Token j's row of the chunk: a_j(t) .. a_j(t+C-1), normalised.
-    m.push_back({"head.weight", {d, C}});
-    m.push_back({"head.bias", {C}});
-  } else {
-    // Logits: the sum over the action tokens of each token's share; offsets: token j's row of
-    // every bin's chunk offset; centers: the bins themselves, normalised.
-    m.push_back({"head.logit.weight", {J, d, B}});
-    m.push_back({"head.logit.bias", {B}});
-    m.push_back({"head.offset.weight", {d, B * C}});
-    m.push_back({"head.offset.bias", {B * C}});
-    m.push_back({"head.centers", {B, J, C}, TensorRole::kFixed});
-  }
+  const int C = a.chunk;
+  // Token j's row of the chunk: a_j(t) .. a_j(t+C-1), normalised.
+  m.push_back({"head.weight", {d, C}});
+  m.push_back({"head.bias", {C}});
   // w_k = exp(-decay k): the weight of the chunk made k ticks ago in the executed action.
   if (C > 1) m.push_back({"head.ensemble_decay", {1}, TensorRole::kFixed});
   // Laws the runtime adds to the network's action: gain_j r_j (reference mode; 0 autonomous).

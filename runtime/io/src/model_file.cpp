@@ -358,7 +358,10 @@ PolicyArch toArch(const RawHeader& h, const std::string& origin) {
   a.max_steps = dim(kMaxSteps);
   a.window = dim(kWindow);
   a.chunk = dim(kChunk);
-  a.bins = dim(kBins);
+  // The field stays in the format; this runtime has the regression head only.
+  if (h.fields[kBins] != 0)
+    fail(origin, "header: the model has an action-bins head (bins " + std::to_string(h.fields[kBins]) +
+                     "); this runtime runs the regression head only (bins 0)");
   return a;
 }
 
@@ -467,7 +470,7 @@ std::vector<std::uint8_t> encodeModel(const ModelHeader& header, const std::vect
   w.u32(kModelFormatVersion);
   w.u32(static_cast<std::uint32_t>(header_size));
   for (int v : {a.d_model, a.heads, a.encoder_layers, a.decoder_layers, static_cast<int>(a.ffn_hidden.size()), a.tokens,
-                a.features, a.movements, a.clusters, a.max_steps, a.window, a.chunk, a.bins})
+                a.features, a.movements, a.clusters, a.max_steps, a.window, a.chunk, 0 /* bins */})
     w.u32(static_cast<std::uint32_t>(v));
   w.u32(static_cast<std::uint32_t>(header.conditioning));
   for (int width : a.ffn_hidden) w.u32(static_cast<std::uint32_t>(width));

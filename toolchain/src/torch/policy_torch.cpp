@@ -242,7 +242,6 @@ PolicyNetImpl::PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning)
     : arch_(arch), conditioning_(conditioning) {
   const std::string problem = archProblem(arch);
   if (!problem.empty()) throw std::invalid_argument("policy architecture: " + problem);
-  if (arch.bins != 0) throw std::invalid_argument("policy architecture: the head regresses the chunk (bins 0)");
   const int d = arch.d_model, n_joints = arch.tokens;
 
   embed = register_module("embed", std::make_shared<torch::nn::Module>());

@@ -162,8 +162,8 @@ class PolicyNetImpl : public torch::nn::Module {
   /// Parameters initialised per docs/policy.md from torch's global generator (seed it first with
   /// torch::manual_seed): matrices Xavier-uniform, biases 0, LN gain 1 / bias 0, embeddings
   /// N(0, 0.02²); embed.step zero and frozen (requires_grad false) in reference mode. Buffers:
-  /// norm means 0, stds 1, centroids 0. The head regresses the chunk: throws
-  /// std::invalid_argument for an architecture with action bins.
+  /// norm means 0, stds 1, centroids 0. Throws std::invalid_argument for an unusable
+  /// architecture.
   PolicyNetImpl(const PolicyArch& arch, Conditioning conditioning);
 
   /// The head's output for a normalised batch of sequences; fills `attention` if given (memory

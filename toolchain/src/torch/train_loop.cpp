@@ -60,7 +60,6 @@ void check(const PolicyData& data, const TrainOptions& o) {
   if (o.max_epochs < 1) throw UserError("epochs must be at least 1");
   if (o.patience < 1) throw UserError("patience must be at least 1");
   if (!(o.lr > 0.0)) throw UserError("learning rate must be positive");
-  if (o.arch.bins != 0) throw UserError("the trainer's head is a regression of the chunk (bins 0)");
   if (o.latent_dims < 0) throw UserError("the run latent's dimensions must not be negative (0: none)");
   if (!(o.ema_decay >= 0.0 && o.ema_decay < 1.0)) throw UserError("the moving average's decay must be in [0, 1)");
   // Reference mode's action follows the human, so a run latent would change nothing but the

@@ -51,13 +51,13 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
 }  // namespace
 
 bool hasRuntimeStep(const PolicyArch& arch) {
-  return arch.chunk <= kPolicyMaxChunk && arch.bins <= kPolicyMaxBins && hasToolchainDims(arch);
+  return arch.chunk <= kPolicyMaxChunk && hasToolchainDims(arch);
 }
 
 std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
                                const PolicyNet& net, const std::vector<ModelRunCodes>* codes) {
-  if (net->arch().chunk > kPolicyMaxChunk || net->arch().bins > kPolicyMaxBins)
-    throw UserError("rollouts through the runtime's step: the chunk or the bins exceed what the runtime holds");
+  if (net->arch().chunk > kPolicyMaxChunk)
+    throw UserError("rollouts through the runtime's step: the chunk exceeds what the runtime holds");
   return withToolchainDims(net->arch(), "rollouts through the runtime's step", [&](auto dims) {
     return runsWith<typename decltype(dims)::type>(data, demos, sim, net, codes);
   });

@@ -18,7 +18,7 @@ namespace nao::tools {
 struct EpochStats;
 
 /// True if the toolchain holds the runtime's step for `arch`'s computation (hasToolchainDims;
-/// any table sizes, chunk and bins up to the runtime's bounds). Other
+/// any table sizes, a chunk up to the runtime's bound). Other
 /// computations are rolled out by the nao_rt built for them (`toolchain/nao build --model`).
 bool hasRuntimeStep(const PolicyArch& arch);
 

@@ -123,8 +123,6 @@ struct PolicyWorkspace {
   Chunk chunk = Chunk::Zero();
   /// The chunks of the last C ticks: the one made at tick τ in slot τ % C.
   std::array<Chunk, kPolicyMaxChunk> chunk_ring{};
-  Eigen::Matrix<float, kPolicyMaxBins, 1> logits = Eigen::Matrix<float, kPolicyMaxBins, 1>::Zero();  ///< first B used
-  int bin = -1;                          ///< the bin picked this tick (-1: regression head)
   /// The network's action a(t), rad: the temporal ensemble of the chunks' entries for this tick.
   JointVec net_action = JointVec::Zero();
   JointVec action = JointVec::Zero();    ///< actions a(t), rad per step: net_action plus the model's law
@@ -334,7 +332,6 @@ void setPolicySizes(PolicyWeights<Dims>& w, const PolicyArch& arch, Conditioning
   w.clusters = arch.clusters;
   w.max_steps = arch.max_steps;
   w.chunk = arch.chunk;
-  w.bins = arch.bins;
   w.conditioning = c;
 }
 
@@ -659,7 +656,7 @@ inline float dotInOrder(const A& a, const B& b, int size) {
 }  // namespace detail
 
 /// The second part of a step: the decoder over the J action tokens of the tick encodePolicyTick
-/// made, and the head, into ws.chunk (rad; column c is a(t + c)), ws.logits and ws.bin. The
+/// made, and the head, into ws.chunk (rad; column c is a(t + c)). The
 /// attention record (ws.cross, ws.mass, ws.score, ws.age_profile, ws.cross_out) is this
 /// decoding's. `masked` (bit j: body part j) leaves those parts' keys out of every decoder
 /// layer's cross-attention over the whole window: the attention ablation (0 in a normal step).
@@ -702,33 +699,12 @@ void decodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, u
   }
   detail::layerNorm<Dims>(ws.y, w.dec_norm, ws.h);
 
-  // The head, normalised units, then rad. Regression: token j's row of the chunk. Bins: the
-  // logits are the tokens' shares summed; the first largest wins; its center plus its offset.
-  const int C = w.chunk, B = w.bins;
-  if (B == 0) {
-    ws.bin = -1;
-    for (int j = 0; j < J; ++j)
-      for (int c = 0; c < C; ++c)
-        ws.chunk(j, c) = detail::dotInOrder(w.head_weight.row(c), ws.h.col(j), D) + w.head_bias(c);
-  } else {
-    for (int b = 0; b < B; ++b) {
-      float z = w.head_logit_bias(b);
-      for (int j = 0; j < J; ++j) z += detail::dotInOrder(w.head_logit_weight.row(b).segment(j * D, D), ws.h.col(j), D);
-      ws.logits(b) = z;
-    }
-    int best = 0;
-    for (int b = 1; b < B; ++b)
-      if (ws.logits(b) > ws.logits(best)) best = b;
-    ws.bin = best;
-    for (int j = 0; j < J; ++j)
-      for (int c = 0; c < C; ++c) {
-        const int r = best * C + c;
-        ws.chunk(j, c) = w.head_centers((best * J + j) * C + c) +
-                         (detail::dotInOrder(w.head_offset_weight.row(r), ws.h.col(j), D) + w.head_offset_bias(r));
-      }
-  }
+  // The head: token j's row of the chunk, normalised units, then rad.
+  const int C = w.chunk;
   for (int j = 0; j < J; ++j)
-    for (int c = 0; c < C; ++c) ws.chunk(j, c) = ws.chunk(j, c) * w.a_std(j) + w.a_mean(j);
+    for (int c = 0; c < C; ++c)
+      ws.chunk(j, c) = (detail::dotInOrder(w.head_weight.row(c), ws.h.col(j), D) + w.head_bias(c)) * w.a_std(j) +
+                       w.a_mean(j);
 }
 
 /// The network's action for this tick from ws.chunk and the chunks of the last C − 1 ticks (the

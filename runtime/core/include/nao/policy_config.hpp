@@ -40,9 +40,6 @@ struct PolicyArch {
   /// chunk); the executed action averages the chunks of the last C ticks (temporal ensembling).
   /// 1: the next action only.
   int chunk = 1;
-  /// B: 0, the head regresses the chunk; >= 1, it picks one of B action bins (key chunks of the
-  /// training labels, k-means) by its logits and adds that bin's offset (docs/policy.md "Head").
-  int bins = 0;
 
   bool operator==(const PolicyArch& o) const;
   bool operator!=(const PolicyArch& o) const { return !(*this == o); }

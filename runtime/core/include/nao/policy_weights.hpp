@@ -32,7 +32,7 @@ namespace nao {
 /// Compile-time dimensions of a policy's computation (STYLE 3). The runtime supports exactly three
 /// FFN hidden layers; a model.bin with another count has a different PolicyArch and is rejected
 /// by checkPolicyArch. The sizes of the model's tables - movements M, key poses K, step rows S,
-/// the action chunk C and the action bins B - are the bound model's (PolicyWeights), not
+/// and the action chunk C - are the bound model's (PolicyWeights), not
 /// compile-time: they are lookups and a small head, and one compiled runtime serves every model
 /// of these dimensions, whatever movements it was trained on (docs/policy.md).
 template <int D, int H, int LE, int LD, int F0, int F1, int F2, int W = 20>
@@ -83,10 +83,9 @@ struct PolicyDims {
 using PaperPolicyDims = PolicyDims<128, 4, 4, 4, 512, 512, 512, 20>;
 using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 8>;
 
-/// Largest action chunk C and number of action bins B a runtime holds (the workspace's chunk
-/// ring and logits); archProblem's caps are above, bindPolicyWeights refuses a model beyond these.
+/// Largest action chunk C a runtime holds (the workspace's chunk ring); archProblem's cap is
+/// above, bindPolicyWeights refuses a model beyond it.
 inline constexpr int kPolicyMaxChunk = 32;
-inline constexpr int kPolicyMaxBins = 1024;
 
 /// Read-only fixed-size view of one manifest tensor, Eigen shape [rows, cols] column-major. R or C
 /// Eigen::Dynamic: that extent is the bound model's (tables and head; PolicyDims).
@@ -177,7 +176,6 @@ struct PolicyWeights {
   int clusters = 1;   ///< K key poses per movement
   int max_steps = 1;  ///< S step rows
   int chunk = 1;      ///< C actions per token and tick
-  int bins = 0;       ///< B action bins; 0: the head regresses the chunk
 
   WeightView<D, 3> embed_in_weight{nullptr};   ///< columns: q, a(t-1), r features
   WeightView<D, 1> embed_in_bias{nullptr};
@@ -191,15 +189,9 @@ struct PolicyWeights {
   LayerNormWeights<Dims> enc_norm;
   std::array<DecoderLayerWeights<Dims>, Dims::kDecoderLayers> dec;
   LayerNormWeights<Dims> dec_norm;
-  // The head (docs/policy.md "Head"), normalised units. Regression (bins == 0):
+  // The head (docs/policy.md "Head"), normalised units: a regression of the chunk.
   WeightView<X, D> head_weight{nullptr, 0, D};  ///< [C, d]: row c, a_j(t + c) of token j
   WeightView<X, 1> head_bias{nullptr, 0, 1};    ///< [C]
-  // Bins (bins >= 1):
-  WeightView<X, X> head_logit_weight{nullptr, 0, 0};  ///< [B, J·d]: columns j·d .. j·d+d−1, token j's share
-  WeightView<X, 1> head_logit_bias{nullptr, 0, 1};    ///< [B]
-  WeightView<X, D> head_offset_weight{nullptr, 0, D}; ///< [B·C, d]: row b·C + c, bin b's a_j(t + c) offset
-  WeightView<X, 1> head_offset_bias{nullptr, 0, 1};   ///< [B·C]
-  WeightView<X, 1> head_centers{nullptr, 0, 1};       ///< [B·J·C]: element (b·J + j)·C + c
   WeightView<X, 1> head_ensemble_decay{nullptr, 0, 1};  ///< [1] when C > 1: w_k = exp(−decay·k)
   WeightView<J, 1> q_mean{nullptr}, q_std{nullptr};  ///< rad
   WeightView<J, 1> a_mean{nullptr}, a_std{nullptr};  ///< rad per step
@@ -324,16 +316,8 @@ void visitWeightViews(PolicyWeights<Dims>& w, F&& f) {
     visitFfnViews(f, "dec", l, d.ffn);
   }
   visitNormViews(f, "dec.norm", -1, nullptr, w.dec_norm);
-  if (w.bins == 0) {
-    f(ViewName{"head.weight"}, w.head_weight);
-    f(ViewName{"head.bias"}, w.head_bias);
-  } else {
-    f(ViewName{"head.logit.weight"}, w.head_logit_weight);
-    f(ViewName{"head.logit.bias"}, w.head_logit_bias);
-    f(ViewName{"head.offset.weight"}, w.head_offset_weight);
-    f(ViewName{"head.offset.bias"}, w.head_offset_bias);
-    f(ViewName{"head.centers"}, w.head_centers);
-  }
+  f(ViewName{"head.weight"}, w.head_weight);
+  f(ViewName{"head.bias"}, w.head_bias);
   if (w.chunk > 1) f(ViewName{"head.ensemble_decay"}, w.head_ensemble_decay);
   f(ViewName{"law.gain"}, w.law_gain);
   f(ViewName{"norm.q_mean"}, w.q_mean);
@@ -345,12 +329,11 @@ void visitWeightViews(PolicyWeights<Dims>& w, F&& f) {
   f(ViewName{"centroids"}, w.centroids);
 }
 
-/// Number of views of a PolicyWeights<Dims> with `bins` action bins and chunk `chunk` (= entries
-/// of its policyManifest).
+/// Number of views of a PolicyWeights<Dims> with chunk `chunk` (= entries of its policyManifest).
 template <class Dims>
-constexpr std::size_t policyViewCount(int bins, int chunk) {
+constexpr std::size_t policyViewCount(int chunk) {
   constexpr std::size_t norm = 2, attention = 8, temporal = 9, ffn = 8;
-  const std::size_t head = (bins == 0 ? 2 : 5) + (chunk > 1 ? 1 : 0) + 1;
+  const std::size_t head = 2 + (chunk > 1 ? 1 : 0) + 1;
   return 8 + Dims::kEncoderLayers * (norm + temporal + norm + ffn) + norm +
          Dims::kDecoderLayers * (norm + attention + norm + temporal + norm + ffn) + norm + head + 6 + 1;
 }
@@ -399,8 +382,7 @@ constexpr std::size_t quantSectionBytes(std::size_t out, std::size_t in) {
 
 /// Throws std::invalid_argument (naming both) if `arch`, e.g. the header of a model.bin, does
 /// not have the compiled Dims' computation (another FFN depth included), is unusable
-/// (archProblem), or has a chunk or a bin count beyond the runtime's (kPolicyMaxChunk,
-/// kPolicyMaxBins). The table sizes (movements, key poses, step rows) may be anything. Configure
+/// (archProblem), or has a chunk beyond the runtime's (kPolicyMaxChunk). The table sizes (movements, key poses, step rows) may be anything. Configure
 /// time.
 template <class Dims>
 void checkPolicyArch(const PolicyArch& arch) {

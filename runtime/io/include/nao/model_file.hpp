@@ -15,7 +15,7 @@
 namespace nao {
 
 inline constexpr char kModelMagic[8] = {'N', 'A', 'O', 'P', 'O', 'L', 'C', 'Y'};
-inline constexpr std::uint32_t kModelFormatVersion = 3;  ///< 3: action chunks and bins, law tensors
+inline constexpr std::uint32_t kModelFormatVersion = 3;  ///< 3: action chunks, the bins field (always 0), law tensors
 inline constexpr std::size_t kModelAlignment = 64;  ///< tensor data offsets are multiples of this
 
 /// A model.bin that cannot be used: the message names the file and the problem.

@@ -15,7 +15,7 @@
 
 namespace nao::tools {
 
-/// True if `a` and `b` compute the same step (everything the dimensions fix; chunk, bins, the
+/// True if `a` and `b` compute the same step (everything the dimensions fix; the chunk, the
 /// movements and the clock are bound at run time).
 inline bool sameComputation(const PolicyArch& a, const PolicyArch& b) {
   return a.d_model == b.d_model && a.heads == b.heads && a.encoder_layers == b.encoder_layers &&
