@@ -70,18 +70,18 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   if (o.ema_decay > 0.0) t["ema_decay"] = o.ema_decay;
   if (o.latent_dims > 0) t["run_latent"] = {{"dims", o.latent_dims}, {"kl_weight", o.latent_kl}};
   if (o.closed_loop.enabled()) {
-    const ClosedLoopOptions& c = o.closed_loop;
-    t["closed_loop"] = {{"epochs", c.epochs},
-                        {"lr", c.lr},
-                        {"batch", c.batch},
-                        {"horizon", c.horizon},
-                        {"horizon_growth", c.horizon_growth},
-                        {"starts", c.starts},
-                        {"perturb_rad", c.perturb_rad},
-                        {"grad_clip", c.grad_clip},
-                        {"hand_weight", c.hand_weight},
-                        {"limit_weight", c.limit_weight},
-                        {"action_weight", c.action_weight}};
+    const ClosedLoopOptions& cl = o.closed_loop;
+    t["closed_loop"] = {{"epochs", cl.epochs},
+                        {"lr", cl.lr},
+                        {"batch", cl.batch},
+                        {"horizon", cl.horizon},
+                        {"horizon_growth", cl.horizon_growth},
+                        {"starts", cl.starts},
+                        {"perturb_rad", cl.perturb_rad},
+                        {"grad_clip", cl.grad_clip},
+                        {"hand_weight", cl.hand_weight},
+                        {"limit_weight", cl.limit_weight},
+                        {"action_weight", cl.action_weight}};
   }
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"
@@ -160,6 +160,51 @@ ModelHeader modelHeader(const PolicyData& data, const TrainOptions& o, const Tra
   h.metadata_json = modelMetadata(data, o, r);
   return h;
 }
+
+namespace {
+
+// The card's table of epochs: losses, the closed loop's hand error, the rollouts' scores, time.
+void cardEpochs(std::ostream& s, const PolicyData& data, const TrainOptions& o, const TrainResult& r) {
+  char buf[256];
+  s << "## Per epoch\n\n";
+  const bool rollouts = o.select_by_rollout;
+  s << "| epoch | train loss | val loss | val MSE (rad^2) |"
+    << (rollouts ? " rollout DTW mm (movements made of all; per movement: DTW, speed ratio, loops run / demos) |" : "")
+    << " s | samples/s |\n|---|---|---|---|" << (rollouts ? "---|" : "") << "---|---|\n";
+  for (const EpochStats& e : r.history) {
+    std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e |", e.epoch, e.epoch == r.best_epoch ? " *" : "",
+                  e.train_loss, e.val_loss, e.val_mse_rad2);
+    s << buf;
+    if (std::isfinite(e.closed_loop_hand_rms_m)) {
+      // A closed-loop epoch: its loss is the rollouts', with their hand error against the targets.
+      std::snprintf(buf, sizeof buf, " closed loop, hand %.1f mm (own %.1f, perturbed %.1f, between %.1f);",
+                    1e3 * e.closed_loop_hand_rms_m, 1e3 * e.closed_loop_kind_rms_m[0], 1e3 * e.closed_loop_kind_rms_m[1],
+                    1e3 * e.closed_loop_kind_rms_m[2]);
+      s << buf;
+    }
+    if (rollouts) {
+      std::snprintf(buf, sizeof buf, " %.1f (makes %d of %zu)", 1e3 * e.rollout_dtw_m, e.movements_made,
+                    data.movement_names.size());  // resumed epochs keep the count, not the rollouts
+      s << buf;
+      for (std::size_t m = 0; m < e.rollouts.size(); ++m) {
+        std::snprintf(buf, sizeof buf, "%s%s %.1f, %.2f, %.1f/%.1f", m == 0 ? "; " : "; ", data.movement_names[m].c_str(),
+                      1e3 * e.rollouts[m].dtw_m, e.rollouts[m].speed_ratio, e.rollouts[m].loops_run,
+                      e.rollouts[m].loops_demo);
+        s << buf;
+        if (std::isfinite(e.rollouts[m].code_fidelity_m)) {
+          std::snprintf(buf, sizeof buf, ", plays %.1f", 1e3 * e.rollouts[m].code_fidelity_m);
+          s << buf;
+        }
+      }
+      s << " |";
+    }
+    std::snprintf(buf, sizeof buf, " %.1f | %.0f |\n", e.seconds,
+                  e.seconds > 0.0 ? static_cast<double>(e.samples) / e.seconds : 0.0);
+    s << buf;
+  }
+}
+
+}  // namespace
 
 std::string modelCard(const PolicyData& data, const TrainOptions& o, const TrainResult& r,
                       const std::string& command_line, const std::string& model_path) {
@@ -291,42 +336,7 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "The gain law reads r = f(t+1) − q, the tick's target, which an autonomous model does not see: there it is a "
        "bound on what the target alone explains, not a competitor.\n\n";
 
-  s << "## Per epoch\n\n";
-  const bool rollouts = o.select_by_rollout;
-  s << "| epoch | train loss | val loss | val MSE (rad^2) |"
-    << (rollouts ? " rollout DTW mm (movements made of all; per movement: DTW, speed ratio, loops run / demos) |" : "")
-    << " s | samples/s |\n|---|---|---|---|" << (rollouts ? "---|" : "") << "---|---|\n";
-  for (const EpochStats& e : r.history) {
-    std::snprintf(buf, sizeof buf, "| %d%s | %.6f | %.6f | %.4e |", e.epoch, e.epoch == r.best_epoch ? " *" : "",
-                  e.train_loss, e.val_loss, e.val_mse_rad2);
-    s << buf;
-    if (std::isfinite(e.closed_loop_hand_rms_m)) {
-      // A closed-loop epoch: its loss is the rollouts', with their hand error against the targets.
-      std::snprintf(buf, sizeof buf, " closed loop, hand %.1f mm (own %.1f, perturbed %.1f, between %.1f);",
-                    1e3 * e.closed_loop_hand_rms_m, 1e3 * e.closed_loop_kind_rms_m[0], 1e3 * e.closed_loop_kind_rms_m[1],
-                    1e3 * e.closed_loop_kind_rms_m[2]);
-      s << buf;
-    }
-    if (rollouts) {
-      std::snprintf(buf, sizeof buf, " %.1f (makes %d of %zu)", 1e3 * e.rollout_dtw_m, e.movements_made,
-                    data.movement_names.size());  // resumed epochs keep the count, not the rollouts
-      s << buf;
-      for (std::size_t m = 0; m < e.rollouts.size(); ++m) {
-        std::snprintf(buf, sizeof buf, "%s%s %.1f, %.2f, %.1f/%.1f", m == 0 ? "; " : "; ", data.movement_names[m].c_str(),
-                      1e3 * e.rollouts[m].dtw_m, e.rollouts[m].speed_ratio, e.rollouts[m].loops_run,
-                      e.rollouts[m].loops_demo);
-        s << buf;
-        if (std::isfinite(e.rollouts[m].code_fidelity_m)) {
-          std::snprintf(buf, sizeof buf, ", plays %.1f", 1e3 * e.rollouts[m].code_fidelity_m);
-          s << buf;
-        }
-      }
-      s << " |";
-    }
-    std::snprintf(buf, sizeof buf, " %.1f | %.0f |\n", e.seconds,
-                  e.seconds > 0.0 ? static_cast<double>(e.samples) / e.seconds : 0.0);
-    s << buf;
-  }
+  cardEpochs(s, data, o, r);
   s << "\n## Command\n\n```\n" << command_line << "\n```\n";
   if (r.world_size > 1)
     s << "\nRank 0's command: every rank R of the " << r.world_size
