@@ -128,6 +128,17 @@ class OpenWorld(unittest.TestCase):
                 self.assertIn(r["named_demo"], detail["training_demos"])
                 with open(os.path.join(out, r["run_dir"], "summary.json")) as f:
                     self.assertEqual(json.load(f)["run_code"], r["named_demo"], "%s: the run's code" % r["start"])
+            # toolchain/analysis/training_fidelity.py remakes these runs from detail.json and
+            # scores them on its own (Python DTW, the data set's features): the same figures.
+            mine = os.path.join(self.tmp, "fidelity_%s.json" % m)
+            run(["/usr/bin/python3", os.path.join(ROOT, "toolchain", "analysis", "training_fidelity.py"), "--detail",
+                 os.path.join(out, "detail.json"), "--model", self.model, "--nao-rt", self.nao_rt, "--data",
+                 os.path.join(self.tmp, "work"), "--starts", "heldout", "--per-movement", "0", "--out", mine])
+            with open(mine) as f:
+                remade = json.load(f)[m]["runs"]
+            self.assertEqual([r["named_demo"] for r in remade], [r["named_demo"] for r in detail["runs"]])
+            for a, b in zip(remade, detail["runs"]):
+                self.assertAlmostEqual(a["code_fidelity_m"], b["code_fidelity_m"], delta=1e-6, msg=b["start"])
             self.assertGreater(s[m]["autonomous_dtw_m"], 0.0)
             self.assertLessEqual(s[m]["joint_range_excess_rad"], 0.1)
             self.assertEqual(s[m]["network_share"], 1.0, "nothing analytic is added to an autonomous model's action")
