@@ -6,9 +6,9 @@ demonstrations' own starts, beside evaluate's from the held-out starts.
 DTW from each run to the demonstration its run code names (the medoid of the 5 training
 demonstrations nearest its start). This script makes the same runs from training starts:
 nao_rt from each training demonstration's first executed pose (retarget.csv qx, as evaluate
-starts a held-out run of a synthetic data set), for that demonstration's length, and the DTW from the run's hand path to
-the forward kinematics of the named demonstration's features.csv (run_code in the run's
-summary.json). With `--starts heldout` it remakes evaluate's own runs instead (detail.json's
+starts a held-out run of a synthetic data set), for that demonstration's length, and the DTW
+from the run's hand path to the forward kinematics of the named demonstration's features.csv
+(run_code in the run's summary.json). With `--starts heldout` it remakes evaluate's own runs instead (detail.json's
 start_q and ticks): a cross-check of this script against detail.json's code_fidelity_m.
 
 If the runs from training starts are as far from their code as the held-out ones, the model
@@ -32,7 +32,9 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from nao_analysis.kinematics import DEFAULT_URDF, hand_position, load_arm_model  # noqa: E402
+from nao_analysis.rundir import read_summary, read_ticks  # noqa: E402
 from nao_analysis.units import dtw_mean_distances  # noqa: E402
+from autonomous_ceiling import read_features  # noqa: E402
 
 
 def columns(path, names):
@@ -48,7 +50,7 @@ def columns(path, names):
 
 
 def features(data, demo):
-    return columns(os.path.join(data, demo, "features.csv"), ["f_%d" % j for j in range(5)])
+    return read_features(os.path.join(data, demo, "features.csv"))[1]
 
 
 def training_start(args, demo):
@@ -69,12 +71,12 @@ def run(args, arm, movement, start_of, out_dir):
     done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     if done.returncode != 0:
         raise SystemExit("training_fidelity: nao_rt failed for %s (exit %d):\n%s" % (demo, done.returncode, done.stdout))
-    with open(os.path.join(log, "summary.json")) as f:
-        code = json.load(f).get("run_code")
+    code = read_summary(os.path.join(log, "summary.json")).get("run_code")
     if not code:
         raise SystemExit("training_fidelity: %s has no run codes (an autonomous run-code model is needed)" % args.model)
+    ticks_csv = read_ticks(os.path.join(log, "ticks.csv"))
     at_rest = hand_position(arm, np.clip(start, arm.q_min, arm.q_max)[None, :])
-    return code, np.vstack([at_rest, columns(os.path.join(log, "ticks.csv"), ["ee_x", "ee_y", "ee_z"])])
+    return code, np.vstack([at_rest, np.column_stack([ticks_csv[c] for c in ("ee_x", "ee_y", "ee_z")])])
 
 
 def main():
