@@ -1,4 +1,4 @@
-// Attention ring: what a reader costs the writer (DESIGN §9: readers never slow the writer).
+// Attention ring: what a reader costs the writer (readers must never slow the writer).
 //
 // Every benchmark pushes one paper-size record (AttentionPayload<4, 4, 128, 20>, 4304 bytes) per
 // iteration into the default 1024-slot ring (4.3 MB: the writer walks through it like the

@@ -88,7 +88,7 @@ if(NAO_WITH_TORCH)
                         "install the Debian package 'libtorch-dev', or configure with -DNAO_WITH_TORCH=OFF "
                         "to build everything else.")
   endif()
-  # Gloo's headers: libtorch's c10d process group (data-parallel training, DESIGN section 13)
+  # Gloo's headers: libtorch's c10d process group (data-parallel training, docs/training.md)
   # includes them; the library itself is already libtorch's dependency.
   find_package(Gloo QUIET CONFIG)
   nao_require(Gloo_FOUND "Gloo (c10d's collective backend)" libgloo-dev)

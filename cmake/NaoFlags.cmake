@@ -3,7 +3,7 @@ add_library(nao_flags INTERFACE)
 target_compile_options(nao_flags INTERFACE
   -Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion
   # Determinism: no fused multiply-add contraction, so results do not depend on what the
-  # compiler chose to fuse (DESIGN section 9).
+  # compiler chose to fuse.
   -ffp-contract=off)
 if(NAO_STATIC)
   # The robot build: one self-contained executable (glibc, libstdc++, ODE, TinyXML inside), so it

@@ -1,4 +1,4 @@
-// The attention ring (DESIGN §9): single-writer seqlock ring, in process, in POSIX shared
+// The attention ring: single-writer seqlock ring, in process, in POSIX shared
 // memory (same process and a forked reader process), and its attention.bin dump.
 #include "nao/attention_ring.hpp"
 #include "nao/attention_shm.hpp"

@@ -1,4 +1,4 @@
-// Temporal coherence of the retargeting (DESIGN section 5) on movements the synthesiser does not
+// Temporal coherence of the retargeting (docs/retargeting.md) on movements the synthesiser does not
 // draw (tests/recordings: a wave with the hand above the shoulder, a reach, a lateral raise
 // through the horizontal), through the real pipeline: the recordings' OpenPose folders ->
 // triangulateDemo -> human angles -> Algorithm 1 with Ceres (what `nao_toolchain triangulate

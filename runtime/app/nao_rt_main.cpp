@@ -1,4 +1,4 @@
-// nao_rt: the NAO V6 right-arm imitation controller runtime (DESIGN section 9, docs/nao_rt.md).
+// nao_rt: the NAO V6 right-arm imitation controller runtime (docs/nao_rt.md).
 //
 // The policy is compiled in (models/default.bin through nao_codegen at build time); --weights
 // loads another model.bin of the same architecture. This file only binds nao_rt's main

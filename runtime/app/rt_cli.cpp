@@ -9,7 +9,7 @@ namespace nao::rt {
 int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::ostream& out, std::ostream& err) {
   RunOptions& o = cl.run;
   CLI::App app{
-      "nao_rt: the NAO V6 right-arm imitation controller (DESIGN section 9) on the ODE-simulated arm\n"
+      "nao_rt: the NAO V6 right-arm imitation controller (docs/nao_rt.md) on the ODE-simulated arm\n"
       "(default) or on a NAO V6 through LoLA (--robot lola, docs/lola.md). It runs any model of its\n"
       "compiled architecture (--weights); toolchain/nao build --model FILE builds one for another.\n"
       "Configures everything (URDF, policy, reference, attention ring, run buffers), then runs the\n"

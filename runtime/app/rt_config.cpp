@@ -90,7 +90,7 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
   try {
     nao::detail::requireArch(compiled_arch, p.model.header.arch);
   } catch (const std::invalid_argument& e) {
-    // The architecture is a build choice (DESIGN §8): say which build runs this model.
+    // The compiled architecture is a build choice: say which build runs this model.
     throw std::runtime_error(origin + ": " + e.what() + "; build a nao_rt for it: toolchain/nao build --model " +
                              origin);
   }

@@ -1,4 +1,4 @@
-// What a nao_rt run is told and everything configured before its loop (DESIGN §9, docs/nao_rt.md):
+// What a nao_rt run is told and everything configured before its loop (docs/nao_rt.md):
 // the options (rt_cli.hpp fills them), the model (compiled-in or --weights, checked; its weights
 // bound), the robot spec, and the human reference the ticks see.
 //
@@ -69,7 +69,7 @@ struct RunOptions {
   std::string log_dir;         ///< run directory; empty: no files
   std::string attention_shm;   ///< POSIX shared-memory name of the attention ring; empty: in process
   bool zero_timing = false;    ///< write the *_us columns of ticks.csv as 0 (byte-comparable files)
-  ControllerParams controller; ///< fault timeouts, home pose, retargeting (defaults: DESIGN §9)
+  ControllerParams controller; ///< fault timeouts, home pose, retargeting
   SimParams sim;               ///< the in-process ODE arm (--robot ode)
   /// ode (the in-process arm, default) or lola[:SOCKET] (LoLA, default socket /tmp/robocup).
   std::string robot = "ode";
@@ -205,7 +205,7 @@ struct PreparedRun {
 PreparedRun prepareRun(const RunOptions& options, const PolicyArch& compiled_arch);
 
 // ---------------------------------------------------------------------------------------------
-// Weights of a --weights file (DESIGN §8): copied at configure time into 64-byte aligned storage
+// Weights of a --weights file: copied at configure time into 64-byte aligned storage
 // that exists only when a file is loaded. The compiled-in model is bound in place and costs
 // nothing here.
 

@@ -1,4 +1,4 @@
-// nao_rt's main (DESIGN section 9, docs/nao_rt.md) for a compiled architecture Dims: the command
+// nao_rt's main (docs/nao_rt.md) for a compiled architecture Dims: the command
 // line (rt_cli), the model info (rt_info), and the run (rt_run) with the counting allocator's
 // probes that summary.json's allocation counts come from. nao_rt_main.cpp instantiates it with
 // the compiled-in model; tests/lola's slower-CPU nao_rt with a clock of its own.

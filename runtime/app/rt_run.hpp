@@ -1,4 +1,4 @@
-// One nao_rt run (DESIGN §9): configure (rt_config.hpp: URDF, model, reference, robot), activate,
+// One nao_rt run: configure (rt_config.hpp: URDF, model, reference, robot), activate,
 // the 10 Hz loop, deactivate, then the run directory and the printed summary (rt_rundir.hpp).
 //
 // A library (nao_rt_run) so that tests run it in process. runController is a template on the
@@ -174,7 +174,7 @@ struct WarmContext {
   std::uint64_t sink;
 };
 
-/// The robot a run drives (STYLE 18; the backend owns its hardware): LoLA through its socket,
+/// The robot a run drives (the backend owns its hardware): LoLA through its socket,
 /// opened here, with the I/O thread's probe and the warming before each tick's packet; or the
 /// in-process ODE arm at the run's start. Configure time: allocates, throws.
 template <class Dims>

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# nao_rt is the runtime only (DESIGN §9): no runtime target links a toolchain library, and no
+# nao_rt is the runtime only: no runtime target links a toolchain library, and no
 # runtime executable holds toolchain code (the synthesiser, k-means, the offline triangulation,
 # the evaluation: everything in namespace nao::tools).
 #   usage: check_runtime_links.sh LINK_REPORT EXECUTABLE...

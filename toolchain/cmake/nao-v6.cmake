@@ -1,4 +1,4 @@
-# CMake toolchain file for the NAO V6 (DESIGN section 12; docs/embedded.md).
+# CMake toolchain file for the NAO V6 (docs/embedded.md).
 #
 # The robot's CPU is an Intel Atom E3845 (Bay Trail, "silvermont" cores: x86-64 with SSE4.2,
 # no AVX, no FMA). Its OS is older than this Debian 12 build host, so the executables are linked

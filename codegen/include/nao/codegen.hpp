@@ -1,5 +1,5 @@
 // nao_codegen: turns a checked model.bin into the sources that compile it into nao_rt
-// (docs/policy.md "codegen", DESIGN §8): a constexpr config header, a header with the
+// (docs/policy.md "codegen and binding"): a constexpr config header, a header with the
 // PolicyDims alias, and an assembler file that .incbin's a copy of the model into .rodata.
 // Build-time code: allocates, throws, does I/O.
 #pragma once

@@ -1,4 +1,4 @@
-"""Attention–motion analysis of nao_rt run directories (DESIGN section 10, docs/analysis.md).
+"""Attention–motion analysis of nao_rt run directories (docs/analysis.md).
 
 Modules, one topic each:
   rundir      read and validate a run directory (ticks.csv, attention.bin, summary.json)

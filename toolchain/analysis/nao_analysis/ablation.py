@@ -1,4 +1,4 @@
-"""Does the attention point where the action depends? The ablation check of DESIGN section 10.
+"""Does the attention point where the action depends? The ablation check (docs/analysis.md).
 
 nao_rt writes, per autonomous run, `ablation.csv`: every tick the last decoder layer's
 cross-attention mass of each body part (mass_j, as in attention.bin) and ||delta a||, rad, the

@@ -189,7 +189,7 @@ def figure_motion(run, label, out_dir):
 
 
 def key_pose_phase(run):
-    """Movement phase of every tick: the key pose (k-means++ centroid, DESIGN section 6) the
+    """Movement phase of every tick: the key pose (k-means++ centroid) the
     reference snapped to, numbered 1, 2, ... in the order the run first reaches them."""
     r = run.joint_matrix("r")
     _, first, inverse = np.unique(r, axis=0, return_index=True, return_inverse=True)

@@ -1,4 +1,4 @@
-"""Forward kinematics of the NAO V6 right arm, read from the project's URDF (DESIGN section 3).
+"""Forward kinematics of the NAO V6 right arm, read from the project's URDF.
 
 Used for the figures only: the robot's stick figure and the hand path of the retargeted human
 reference q_ref (ticks.csv has the robot's hand point ee_* and the feature-extracted target
@@ -21,7 +21,7 @@ HAND_JOINT = "RHandPoint"  # the fixed joint whose child is the hand point r_han
 
 @dataclass(frozen=True)
 class ArmModel:
-    """The chain torso -> 5 revolute joints -> hand point, in DESIGN section 3's joint order."""
+    """The chain torso -> 5 revolute joints -> hand point, in the project's joint order."""
     X_PJ: np.ndarray   # (5, 4, 4) each joint frame in its parent joint frame at q = 0
     axis_J: np.ndarray  # (5, 3) each joint's rotation axis in its own frame (unit)
     X_WH: np.ndarray   # (4, 4) hand point frame in the wrist (RWristYaw) frame

@@ -1,4 +1,4 @@
-"""Table 2 on the paper's protocol (DESIGN section 10): many autonomous rollouts per movement
+"""Table 2 on the paper's protocol (docs/analysis.md): many autonomous rollouts per movement
 (`nao_toolchain evaluate` writes one per held-out demonstration), pooled with the distinct
 rollout as the unit.
 

@@ -246,7 +246,7 @@ def report_html(runs, labels, rows, figures, options, command, findings=None):
     parts = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
              "<title>nao-rt attention–motion analysis</title><style>%s</style></head><body>" % CSS,
              "<h1>nao-rt attention–motion analysis</h1>",
-             '<p class="note">Paper Table 2 and Figs. 8–16 from nao_rt runs (DESIGN §10), with what the '
+             '<p class="note">Paper Table 2 and Figs. 8–16 from nao_rt runs, with what the '
              "paper lacks: bootstrap confidence intervals, shift-test p-values and the null of every mutual "
              "information (runs that repeat one rollout count once).</p>",
              "<h2>Command</h2><pre>%s</pre>" % html.escape(command),

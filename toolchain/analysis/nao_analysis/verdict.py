@@ -1,4 +1,4 @@
-"""The rule that decides whether one of the paper's findings is reproduced (DESIGN section 10).
+"""The rule that decides whether one of the paper's findings is reproduced (docs/analysis.md).
 
 A finding names Table 2 rows (paper.PAPER_FINDINGS: movement x joint). It is reproduced only
 when every named row holds on each of N_SEEDS training seeds; a row holds on a seed when our

@@ -1,4 +1,4 @@
-// The LoLA robot backend (DESIGN §9, docs/lola.md): nao_rt --robot lola[:SOCKET] drives a NAO V6
+// The LoLA robot backend (docs/lola.md): nao_rt --robot lola[:SOCKET] drives a NAO V6
 // (or nao_lola_sim) through LoLA's Unix stream socket.
 //
 // Threads and time: by default everything runs on the control thread (io_thread: see below).

@@ -1,4 +1,4 @@
-// The attention ring buffer (DESIGN §9): the last Capacity attention records of the controller,
+// The attention ring buffer: the last Capacity attention records of the controller,
 // written by one thread (the control thread) and read by any number of readers, in this process
 // or in another one through POSIX shared memory, without ever blocking or slowing the writer.
 //
@@ -25,7 +25,7 @@
 // is never used. A payload must therefore be trivially copyable and must not be read field by
 // field in place: copy it out with readFromNonRT first.
 //
-// Thread names (STYLE 7): *FromRT functions are for the one writer thread and are real-time
+// Thread names say the side: *FromRT functions are for the one writer thread and are real-time
 // safe; *FromNonRT functions are for readers and never block the writer. The rest
 // (recordsWritten, latestRecord, ...) are safe on any thread.
 #pragma once

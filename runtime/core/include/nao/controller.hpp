@@ -1,10 +1,10 @@
-// The 10 Hz imitation controller (DESIGN §9): human frame -> human kinematics + scaling ->
+// The 10 Hz imitation controller: human frame -> human kinematics + scaling ->
 // fixed-size LM retargeting (Algorithm 1) -> snap to the model's key pose -> policy ->
 // rolloutStep (rollout.hpp: command q_t + a_t within the position and velocity limits -> robot
 // backend -> measured q) -> record. The robot backend (robot_backend.hpp: the ODE arm or LoLA)
 // is built by the caller and owns its hardware; the controller only drives it.
 //
-// Lifecycle (STYLE 6): configureController builds everything that allocates (ControllerModel,
+// Lifecycle: configureController builds everything that allocates (ControllerModel,
 // ControllerData); activateController puts the arm at its start pose; updateController runs one
 // tick; deactivateController ends the run. Between activate and deactivate nothing allocates,
 // blocks, throws or does I/O: in-loop anomalies are fault bits in the tick record, counted, each
@@ -90,7 +90,7 @@ inline constexpr std::array<const char*, kNumControllerFaults> kControllerFaultN
     "command_limited", "retarget_fallback", "robot_link_lost", "robot_packet_gap", "robot_malformed_packet",
     "joint_hot", "tracking_error", "safe_stop", "human_bridged", "outside_workspace"};
 
-/// Injected monotonic clock (STYLE 6): the real one reads CLOCK_MONOTONIC, tests drive time.
+/// Injected monotonic clock: the real one reads CLOCK_MONOTONIC, tests drive time.
 struct ControllerClock {
   virtual ~ControllerClock() = default;
   /// Nanoseconds on a monotonic scale. Real-time safe.

@@ -1,4 +1,4 @@
-// The feature-extracted trajectory of a demonstration (DESIGN §6): its retargeted poses
+// The feature-extracted trajectory of a demonstration: its retargeted poses
 // snapped to the movement's key poses and joined with the original segment timing by a
 // critically damped blend. nao_rt scores a recorded reference against it; the toolchain's
 // clustering writes it (features.csv) and trains on it. The controller feeds the policy the
@@ -11,7 +11,7 @@
 
 namespace nao {
 
-/// The pole of the key-pose blend that makes the feature-extracted trajectory (DESIGN §6; the
+/// The pole of the key-pose blend that makes the feature-extracted trajectory (the
 /// controller's online blend and KeyPoseBlend): f(t+1) = f(t) + v(t),
 /// v(t) = pole² v(t−1) + (1 − pole)² (c(t) − f(t)), f(0) = c(0), v(−1) = 0.
 inline constexpr double kFeatureBlendPole = 0.7;
@@ -19,7 +19,7 @@ inline constexpr double kFeatureBlendPole = 0.7;
 /// Index of the centroid nearest to q (Euclidean in joint space; ties go to the lower index).
 int nearestCentroid(const std::vector<JointVector>& centroids, const JointVector& q);
 
-/// How a feature-extracted trajectory moves between key poses (DESIGN §6): once per 10 Hz tick,
+/// How a feature-extracted trajectory moves between key poses: once per 10 Hz tick,
 ///   v(t) = (1 − γ) v(t−1) + κ (c(t) − f(t)),   f(t+1) = f(t) + v(t),   v(−1) = 0,
 /// with c(t) the key pose of the segment tick t is in. A critically damped second-order approach
 /// with both poles at `pole` (γ = 1 − pole², κ = (1 − pole)²): smooth, no overshoot, and
@@ -36,7 +36,7 @@ struct KeyPoseBlend {
   }
 };
 
-/// Feature-extracted trajectory (DESIGN §6): the measured samples are labelled by nearest
+/// Feature-extracted trajectory: the measured samples are labelled by nearest
 /// centroid; each run of equal labels is a segment whose key pose is its centroid, in force from
 /// the segment's first sample (the original segment timing); the trajectory starts at the first
 /// key pose at rest and follows `blend` toward the key pose in force, one step per output

@@ -1,5 +1,5 @@
 // The error of the runtime's input parsers (calibration JSON, OpenPose frames): configure-time
-// and reader-thread code only (DESIGN §5 tier 2), never the control loop. The message is one
+// and reader-thread code only, never the control loop. The message is one
 // line that names the input (file, camera, field) and the problem.
 #pragma once
 

@@ -1,5 +1,5 @@
-// What a model.bin carries for a run beyond its tensors (DESIGN §8, "model.bin is
-// self-sufficient"), as types: the autonomous starts, the demonstrated workspace, the run codes
+// What a model.bin carries for a run beyond its tensors (a run needs
+// nothing else), as types: the autonomous starts, the demonstrated workspace, the run codes
 // and the retargeting setting. nao_io decodes the file's metadata into a ModelSpec once, at
 // configure time (readModelSpec, nao/model_file.hpp); the controller only reads it.
 #pragma once

@@ -1,8 +1,8 @@
 // The imitation policy's forward pass (docs/policy.md): a pre-layer-norm encoder-decoder
-// Transformer over time x body part (DESIGN §7), streamed one tick at a time as fixed-size
+// Transformer over time x body part (docs/policy.md), streamed one tick at a time as fixed-size
 // float Eigen code.
 //
-// Model/data split (STYLE 1): PolicyWeights<Dims> (policy_weights.hpp) holds fixed-size
+// Model/data split: PolicyWeights<Dims> (policy_weights.hpp) holds fixed-size
 // Eigen::Map views of the manifest tensors; PolicyWorkspace<Dims> holds every intermediate, the
 // key/value rings of the last W ticks, the chunks of the last C ticks and the attention record.
 // stepPolicy reads the first, writes the second, and allocates nothing, throws nothing, does no I/O.
@@ -134,7 +134,7 @@ std::unique_ptr<PolicyWorkspace<Dims>> makePolicyWorkspace() {
   return std::make_unique<PolicyWorkspace<Dims>>();
 }
 
-/// One step's inputs, joint order (DESIGN §3).
+/// One step's inputs, joint order (RShoulderPitch .. RWristYaw).
 struct PolicyInput {
   Eigen::Matrix<float, 5, 1> q = Eigen::Matrix<float, 5, 1>::Zero();       ///< joint state, rad
   Eigen::Matrix<float, 5, 1> a_prev = Eigen::Matrix<float, 5, 1>::Zero();  ///< previous action, rad

@@ -1,6 +1,6 @@
 // The policy's architecture and its manifest: the one table of tensor names and shapes that
 // the model.bin writer and reader, the code generator, the runtime's views and the shape
-// tests all walk (docs/policy.md, DESIGN §7-8).
+// tests all walk (docs/policy.md).
 #pragma once
 
 #include <cstddef>
@@ -12,7 +12,7 @@ namespace nao {
 
 /// What the encoder is conditioned on. Data in model.bin, not a compiled architecture.
 enum class Conditioning : std::uint32_t {
-  kReference = 0,   ///< r_j(t): the snapped human key pose (DESIGN §7)
+  kReference = 0,   ///< r_j(t): the snapped human key pose
   kAutonomous = 1,  ///< paper §4.1: movement + step embeddings, no reference
 };
 
@@ -34,7 +34,7 @@ struct PolicyArch {
   int clusters = 10;                           ///< key poses per movement (k-means K)
   int max_steps = 256;                         ///< step-embedding rows (autonomous mode)
   /// W: ticks of history the encoder and the cross-attention see (the current tick included),
-  /// 20 ticks = 2 s at 10 Hz (DESIGN §7). The runtime keeps a key/value ring of W ticks.
+  /// 20 ticks = 2 s at 10 Hz. The runtime keeps a key/value ring of W ticks.
   int window = 20;
   /// C: actions each action token predicts per tick, a(t) .. a(t+C-1) of its joint (an action
   /// chunk); the executed action averages the chunks of the last C ticks (temporal ensembling).
@@ -75,7 +75,7 @@ struct TensorSpec {
   std::size_t count() const;
 };
 
-/// The model contract (DESIGN §8, STYLE 4): every tensor of a policy with this architecture -
+/// The model contract, the one manifest: every tensor of a policy with this architecture -
 /// name, shape, role - in canonical order (docs/policy.md). model.bin's writer and reader, the
 /// generated code (offsets and extents), the runtime's views (bound by name and checked against
 /// the roles), the int8 and packed blobs (the kMatrix entries, in this order) and the trainer's

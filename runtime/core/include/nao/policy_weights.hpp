@@ -1,4 +1,4 @@
-// The policy's model (STYLE 1, DESIGN §7-8): the compile-time dimensions of its computation
+// The policy's model: the compile-time dimensions of its computation
 // (PolicyDims), the read-only views of every manifest tensor (PolicyWeights: model.bin data,
 // .incbin'd by codegen or copied into aligned storage), their binding by manifest name or at
 // generated offsets, and the int8 and packed fp32 copies the step may read instead. The step that
@@ -29,7 +29,7 @@
 
 namespace nao {
 
-/// Compile-time dimensions of a policy's computation (STYLE 3). The runtime supports exactly three
+/// Compile-time dimensions of a policy's computation. The runtime supports exactly three
 /// FFN hidden layers; a model.bin with another count has a different PolicyArch and is rejected
 /// by checkPolicyArch. The sizes of the model's tables - movements M, key poses K, step rows S,
 /// and the action chunk C - are the bound model's (PolicyWeights), not

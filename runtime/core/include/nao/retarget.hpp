@@ -1,6 +1,6 @@
 // Retargeting, paper Algorithm 1 (eqs. 3-6): per frame, the end-effector-priority pose q_x, the
 // joint-priority pose q_q, and the imitation reference q_r (one of the two, chosen by
-// RetargetParams::priority; hand priority by default, DESIGN section 5) of the NAO arm for a scaled
+// RetargetParams::priority; hand priority by default, docs/retargeting.md) of the NAO arm for a scaled
 // human hand target x_target and human joint angles q_target. Online version: fixed-size,
 // allocation-free, deterministic.
 //
@@ -18,7 +18,7 @@
 //   q_r = q_x (priority hand) or q_q (priority joints), after the fallback check below
 // The warm start is the previous frame's q_x (the first frame starts from q_goal).
 //
-// Temporal coherence (DESIGN section 5). A frame is one tick of a trajectory NAO must execute,
+// Temporal coherence (docs/retargeting.md). A frame is one tick of a trajectory NAO must execute,
 // so from the second frame on the solves also have
 //   - a step bound |q_j - q_prev,j| <= v_max,j T (T = step_time_s, v_max the URDF velocity
 //     limits), intersected with the joint limits: a box both solvers project onto like the
@@ -113,7 +113,7 @@ enum RetargetFlags : std::uint32_t {
   kRetargetStepBound = 1u << 10,
 };
 
-/// Where the imitation reference q_r lies on the hand <-> joints trade-off (DESIGN section 5).
+/// Where the imitation reference q_r lies on the hand <-> joints trade-off (docs/retargeting.md).
 enum class RetargetPriority : std::uint8_t {
   kHand = 0,    ///< q_r = q_x: the hand on x_target, the human's posture in the null space
   kJoints = 1,  ///< q_r = q_q: the human's joint angles first, the hand pulled toward x_target
@@ -276,7 +276,7 @@ const RetargetResult& runAlgorithm1(const ArmModel& model, const RetargetParams&
   result.iterations_outer = 0;
   result.iterations_total = 0;
 
-  // In-loop anomaly: hold the previous pose, never throw (STYLE 5).
+  // In-loop anomaly: hold the previous pose, never throw (a flag in the result).
   if (!p_target_TH.allFinite() || !q_target.allFinite()) {
     result.flags |= kRetargetBadInput;
     if (!history.has_warm_start) {

@@ -1,6 +1,6 @@
 // From a recorded 3D human skeleton sequence to NAO joint trajectories: human kinematics with the
 // demonstration's own scale, paper eq. 2 scaling onto the robot, then Algorithm 1 per frame
-// (DESIGN §5). nao_rt prepares a recorded reference with it (the runtime's fixed-size LM); the
+// (docs/retargeting.md). nao_rt prepares a recorded reference with it (the runtime's fixed-size LM); the
 // toolchain's retargeting runs the same sequence with Ceres (tools/retarget_pipeline.hpp).
 // Configure-time code: allocates, throws InputError.
 #pragma once

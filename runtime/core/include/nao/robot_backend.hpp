@@ -1,4 +1,4 @@
-// The robot behind the controller (DESIGN §9, STYLE 18): one small interface in the style of
+// The robot behind the controller: one small interface in the style of
 // ros2_control's SystemInterface. The controller never knows which robot it drives:
 //  - OdeArmBackend (sim_arm.hpp, nao_backends): the in-process ODE arm (default; deterministic,
 //    bit for bit);

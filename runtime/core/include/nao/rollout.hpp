@@ -1,5 +1,5 @@
 // The command limiter and the rollout step: what every tick of every rollout does between an
-// action and the arm's next measured pose (DESIGN §9, STYLE 19). The controller calls them once
+// action and the arm's next measured pose, written once. The controller calls them once
 // per tick; the toolchain's rollouts (training data execution, evaluation baselines) call the
 // same functions with their own action laws, so a baseline never re-spells the controller.
 //

@@ -1,5 +1,5 @@
-// model.bin: one versioned little-endian file holding a trained policy (docs/policy.md,
-// DESIGN §8). Written by `nao_toolchain train`, read by nao_rt, nao_codegen and the tests.
+// model.bin: one versioned little-endian file holding a trained policy (docs/policy.md).
+// Written by `nao_toolchain train`, read by nao_rt, nao_codegen and the tests.
 // Configure-time code: reading and writing allocate and may throw.
 #pragma once
 
@@ -149,7 +149,7 @@ std::vector<TrainedJoint> trainedJoints(const ArmModel& arm);
 /// workspace, the run codes and the retargeting setting (`defaults` where the model records none).
 /// The one reader of model.bin's metadata. Throws ModelFileError, or std::runtime_error for an
 /// unusable retargeting setting, naming `origin`. The sections:
-///  - "starts" (DESIGN §7-8: the start states an autonomous run begins from, so that the
+///  - "starts" (the start states an autonomous run begins from, so that the
 ///    runtime never regenerates a demonstration):
 ///      "starts": {"<movement>": [{"name": "<demo>", "ticks": N, "q": [q0, q1, q2, q3, q4]}, ...], ...}
 ///    one key per movement in movement-index order, each list the held-out demonstrations (the

@@ -1,7 +1,7 @@
-// A recorded human reference (DESIGN §9, nao_rt --reference file:PATH): a 10 Hz skeleton CSV
+// A recorded human reference (nao_rt --reference file:PATH, docs/nao_rt.md): a 10 Hz skeleton CSV
 // prepared at configure time into fixed buffers the 10 Hz loop only reads, with the
 // demonstration's calibrated human scale (one d_h from all its frames, as the training data was
-// retargeted) and its evaluation target: the feature-extracted trajectory (DESIGN §6) of the same
+// retargeted) and its evaluation target: the feature-extracted trajectory of the same
 // demonstration, built with the model's key poses and the runtime's own retargeting.
 // Configure-time code: reads files, allocates, throws InputError.
 #pragma once

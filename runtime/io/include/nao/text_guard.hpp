@@ -1,4 +1,4 @@
-// Checks run on a text file before a recursive parser sees it (DESIGN §5 tier 2: configure
+// Checks run on a text file before a recursive parser sees it (at configure
 // time). TinyXML (under urdfdom) recurses once per element and reads a UTF-8 sequence's
 // length off its lead byte; nlohmann::json recurses in dump(), copy and compare. Hostile text
 // could overflow the stack or make the parser read past the buffer: these bound what the

@@ -1,4 +1,4 @@
-// Live camera source of nao_rt (`--reference openpose:DIR0,DIR1[,...]`, DESIGN §9): OpenPose
+// Live camera source of nao_rt (`--reference openpose:DIR0,DIR1[,...]`, docs/cameras.md): OpenPose
 // running with `--write_json DIR` on two or more synchronised, calibrated cameras, one folder
 // per camera, one file per frame (`<name>_<12 digits>_keypoints.json`), each written plainly
 // (not renamed into place) as its frame is processed.

@@ -1,4 +1,4 @@
-// Multi-camera triangulation of one OpenPose capture frame into a 3D skeleton (DESIGN §4): the
+// Multi-camera triangulation of one OpenPose capture frame into a 3D skeleton: the
 // per-frame core shared by nao_rt's live camera source (nao/live_camera.hpp) and the
 // toolchain's offline triangulation of whole recordings (nao/tools/triangulate.hpp, which adds
 // the sequence rules: bone lengths over the capture, gap interpolation, resampling).

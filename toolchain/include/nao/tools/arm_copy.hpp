@@ -1,4 +1,4 @@
-// A copy of the simulated arm for training in closed loop (DESIGN §7, docs/autonomous.md): the
+// A copy of the simulated arm for training in closed loop (docs/autonomous.md): the
 // servo law of sim_arm.hpp integrated joint by joint, without the rigid-body dynamics.
 //
 // The ODE arm's hinges follow their motor's target velocity whenever the torque cap allows it,

@@ -1,4 +1,4 @@
-// The embodiment gap made measurable (DESIGN section 5, docs/retargeting.md): which human DoFs
+// The embodiment gap made measurable (docs/retargeting.md "The gap, measured"): which human DoFs
 // draw a demonstration's hand path, and what retargeting changes against the naive mapping
 // "the human's joint angles, clamped to NAO's limits".
 #pragma once

@@ -1,5 +1,5 @@
 // k-means++ key poses of robot joint trajectories (paper §3.3, eqs. 7-10, Algorithm 2) and the
-// feature-extracted trajectories built from them (DESIGN §6).
+// feature-extracted trajectories built from them (docs/formats.md "Key poses").
 #pragma once
 
 #include "nao/arm_model.hpp"

@@ -1,4 +1,4 @@
-// The linear autoregressive baseline of the autonomous mode (STYLE 16): per movement
+// The linear autoregressive baseline of the autonomous mode: per movement
 // and joint, the action a_j(t) = f_j(t+1) − f_j(t) of the feature-extracted trajectory f
 // predicted by least squares from the joint's own angle and its past actions,
 //

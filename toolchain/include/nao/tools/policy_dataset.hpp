@@ -107,7 +107,7 @@ std::vector<ModelWorkspace> demonstratedWorkspace(const PolicyData& data);
 PolicyData makePolicyData(const std::map<std::string, std::vector<JointVector>>& centroids,
                           std::vector<PolicyDemo> demos);
 
-/// How the training rollouts are executed (DESIGN §7, "execution dynamics"; docs/policy.md
+/// How the training rollouts are executed (docs/policy.md
 /// "Data"). Each demonstration's feature-extracted trajectory f is followed by the simulated,
 /// servo-lagged ODE arm (nao::SimModel, the arm nao_rt drives) under the *expert*: at every tick
 /// the command c(t) for which the arm, from its present dynamic state, ends the tick at f(t+1)

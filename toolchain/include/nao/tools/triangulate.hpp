@@ -1,4 +1,4 @@
-// Multi-camera triangulation of OpenPose keypoints into a 3D skeleton (DESIGN section 4).
+// Multi-camera triangulation of OpenPose keypoints into a 3D skeleton.
 //
 // The per-frame core (subject selection, DLT + Ceres refinement, camera consensus, MidHip of
 // BODY_25B) is the runtime's (nao/triangulation.hpp), shared with nao_rt's live camera source;
