@@ -24,7 +24,7 @@
 //   BM_Layout_Strided / _Packed  24 MB of 512x512 matrices x 5 tokens with the AVX-512 product in
 //                          model.bin's column-major layout and repacked block by block (below),
 //                          each layout's matrices one aligned block
-//   BM_Int8Layout_Pairs / _Quads  4 MB of int8 512x512 matrices x 5 8-bit tokens with vpdpbusd:
+//   BM_Int8Layout_Pairs / _Quads  4 MB of int8 512x512 matrices x 5 7-bit tokens with vpdpbusd:
 //                          the blob's pairs interleaved by vpermt2w (the runtime's kernel), and a
 //                          candidate layout with each row's 4 inputs side by side (below)
 // BM_Policy_Libtorch (bench_policy_torch.cpp) is libtorch eager on the same weights.
@@ -412,9 +412,9 @@ void runLayout(benchmark::State& state, bool packed) {
 #endif
 
 #if NAO_POLICY_HAVE_AVX2
-// BM_Int8Layout_Pairs / BM_Int8Layout_Quads: what the int8 blob's layout costs the 8-bit
+// BM_Int8Layout_Pairs / BM_Int8Layout_Quads: what the int8 blob's layout costs the 7-bit
 // products (2026-11-26). 16 distinct 512x512 int8 matrices (4 MB: the FFN's w1 and w2 of the
-// paper model's 8 layers) times J = 5 non-negative tokens (the 8-bit range), one sweep per
+// paper model's 8 layers) times J = 5 non-negative tokens (the 7-bit range), one sweep per
 // iteration:
 //   _Pairs: the runtime's kernel (accumulateInt8QuadsAvx512) on quantizeMatrixInt8's blob, whose
 //           pairs of inputs are interleaved: 2 vpermt2w per 10 vpdpbusd make each lane one row's

@@ -2,8 +2,10 @@
 //
 // Every matrix of role TensorRole::kMatrix in the manifest (policy_config.hpp: the attention
 // projections wq, wk, wv, wo and the FFN weights), in manifest order, is stored as int8 with one
-// float scale per output row (max |row| / 127), its input columns interleaved in pairs for the
-// pmaddwd kernels (policy_kernels.hpp "Reduced precision"). Biases, layer norms, embeddings,
+// float scale per output row (max |row| / 127), its input columns interleaved in pairs
+// (policy_kernels.hpp "Reduced precision": the pmaddwd kernels read one pair per int32 lane, the
+// pmaddubsw/vpdpbusd ones the lines of two pairs interleaved into a row's four inputs). ±127: any
+// weight byte keeps pmaddubsw's pair sums of 7-bit tokens exact. Biases, layer norms, embeddings,
 // the head, the normalisation and the centroids stay fp32. The blob is a pure function of the
 // model's fp32 tensors: nao_codegen --precision int8 writes it next to the compiled-in model and
 // nao_rt --weights FILE --precision int8 makes the same bytes at start-up.

@@ -10,6 +10,10 @@
 
 #include "nao/policy_kernels/lanes.hpp"
 
+#if defined(__SSE2__) && defined(__GNUC__)
+#include <tmmintrin.h>
+#endif
+
 namespace nao {
 namespace detail {
 
@@ -21,38 +25,50 @@ namespace detail {
 //       round(W(r, 2p + e) / sw(r)), |·| <= 127 (quantizeMatrixInt8, codegen/src/quantize.cpp)
 //   sw  float [Out], max_k |W(r, k)| / 127
 //   X   one range per product, L levels: if no entry of X is negative (the FFN's inputs after
-//       its ReLUs, 78 % of the paper model's weights) L = 255 (8 bits, unsigned), else
+//       its ReLUs, 78 % of the paper model's weights) L = 127 (7 bits, unsigned), else
 //       L = 32767 (16 bits, signed); each column t: xq = round(X(:, t) · L / max|X(:, t)|),
 //       sx(t) = max|X(:, t)| / L (quantizeTokensInt8)
 //   Y(r, t) = b(r) + float(Σ_k Wq(r, k) xq(k, t)) · (sw(r) · sx(t))
 //
-// SSE2 and AVX2: one pmaddwd multiplies a row's pair of int8 weights (sign-extended to int16) by
-// the token's pair of xq (as int16) and adds the two products into an int32 lane. AVX-512 VNNI:
-// 8-bit tokens go through vpdpbusd (four unsigned token bytes times four signed weights, and
-// the accumulator, in one instruction: 64 products per zmm), 16-bit ones through vpdpwssd (32).
-// 8 bits everywhere measured 3.5x the action error for 5 % less time (docs/policy.md). Integer
+// 16-bit tokens: one pmaddwd multiplies a row's pair of int8 weights (sign-extended to int16) by
+// the token's pair of xq (as int16) and adds the two products into an int32 lane (AVX-512 VNNI:
+// vpdpwssd, the add too). 7-bit tokens: pmaddubsw multiplies four token bytes (unsigned) by a
+// row's four weight bytes (signed), adding them in int16 pairs, pmaddwd by ones adds the pairs
+// into an int32 lane (SSSE3, AVX2: twice the products per multiply of the widened path, and no
+// widening); AVX-512 VNNI: vpdpbusd, all in one. pmaddubsw saturates its int16 pair sums, which
+// is why the unsigned range is 7 bits: |a0·w0 + a1·w1| <= 2 · 127 · 128 = 32512 < 32767 for any
+// weight byte (the blob holds ±127) and any token byte in [0, 127], so no sum is ever clipped.
+// 8 bits with a shifted signed range measured 3.5x the action error (docs/policy.md). Integer
 // sums are exact (|Σ| <= 512 · 127 · 32767 < 2^31 for In <= 512), so every kernel gives the same
 // bits in any order; only the final conversion and two multiplies round (in one fixed order).
 
 /// Largest In the int32 accumulators of the int8 kernels cannot overflow for.
 inline constexpr int kInt8MaxIn = 512;
 
-/// The J columns of one product quantised (quantizeTokensInt8 fills pairs, sx and positive; its
-/// AVX-512 form also quads when positive). Lives on the stack of affineTokensInt8.
+/// The J columns of one product quantised (quantizeTokensInt8 and its AVX-512 form fill pairs, sx
+/// and positive, and quads when positive). Lives on the stack of affineTokensInt8.
 template <int In, int J>
 struct QuantTokens {
   static constexpr int kPairs = In / 2;
   static constexpr int kQuads = In % 4 == 0 ? In / 4 : 0;  ///< byte quads only when In % 4 == 0
   /// Lane p of column t: xq(2p, t) in the low int16, xq(2p + 1, t) in the high one.
   alignas(64) std::int32_t pairs[J * kPairs];
-  /// Lane q of column t: the four bytes xq(4q .. 4q + 3, t) (vpdpbusd's broadcast operand).
+  /// Lane q of column t: the four bytes xq(4q .. 4q + 3, t) (the broadcast operand of pmaddubsw
+  /// and vpdpbusd), when positive.
   alignas(64) std::int32_t quads[J * (kQuads > 0 ? kQuads : 1)];
   float sx[J];
-  bool positive;  ///< xq in [0, 255] (no negative entry in X), else in [-32767, 32767]
+  bool positive;  ///< xq in [0, 127] (no negative entry in X), else in [-32767, 32767]
 };
 
-/// The largest quantised magnitude of a product's range.
-inline constexpr float int8TokenLevels(bool positive) { return positive ? 255.0f : 32767.0f; }
+/// The largest quantised magnitude of a product's range (127: see pmaddubsw above).
+inline constexpr float int8TokenLevels(bool positive) { return positive ? 127.0f : 32767.0f; }
+
+/// xq(k, t) of quantised tokens (tests and the scalar rows).
+template <int In, int J>
+inline int quantToken(const QuantTokens<In, J>& x, int k, int t) {
+  const std::int32_t pair = x.pairs[t * (In / 2) + k / 2];
+  return static_cast<std::int16_t>(k % 2 == 0 ? (pair & 0xffff) : (pair >> 16));
+}
 
 /// Entries k0 .. n−1 of one token (k0 even) as int16 pairs: round-to-nearest-even(x · inv),
 /// clamped to [lo, hi] (the vector quantisers' tails).
@@ -66,7 +82,7 @@ inline void quantizePairsScalar(const float* x, std::int32_t* out, int k0, int n
 
 /// Quantises the J columns of X [In, J] (column-major) into x.pairs, x.sx and x.positive (the
 /// ranges above). A column with a non-finite entry gets xq = 0 and sx = NaN, so its outputs are
-/// NaN as in the fp32 path; an all-zero column gets sx = 0. Does not fill quads.
+/// NaN as in the fp32 path; an all-zero column gets sx = 0. Fills quads when positive.
 template <int In, int J>
 inline void quantizeTokensInt8(const float* X, QuantTokens<In, J>& x) {
   static_assert(In % 2 == 0, "the int8 kernels take input columns in pairs");
@@ -111,6 +127,8 @@ inline void quantizeTokensInt8(const float* X, QuantTokens<In, J>& x) {
   for (int t = 0; t < J; ++t) {
     const float* xc = X + t * In;
     std::int32_t* out = x.pairs + t * (In / 2);
+    auto* bytes = reinterpret_cast<std::uint8_t*>(x.quads + t * QuantTokens<In, J>::kQuads);
+    const bool bytes_too = QuantTokens<In, J>::kQuads > 0 && x.positive;
     const float m = mx[t];
     // q = round-to-nearest-even(x · hi / m), in [lo, hi] (the product may round up past hi:
     // clamped). cvtps2dq rounds like nearbyint in the default rounding mode. m below ~1e-36
@@ -119,6 +137,8 @@ inline void quantizeTokensInt8(const float* X, QuantTokens<In, J>& x) {
     const float inv = hi / m;
     if (poison[t] != 0.0f || m == 0.0f || !(inv <= std::numeric_limits<float>::max())) {  // NaN != 0
       for (int p = 0; p < In / 2; ++p) out[p] = 0;
+      if (bytes_too)
+        for (int q = 0; q < QuantTokens<In, J>::kQuads; ++q) x.quads[t * QuantTokens<In, J>::kQuads + q] = 0;
       x.sx[t] = poison[t] != 0.0f ? std::numeric_limits<float>::quiet_NaN() : 0.0f;
       continue;
     }
@@ -136,20 +156,18 @@ inline void quantizeTokensInt8(const float* X, QuantTokens<In, J>& x) {
         b = _mm_or_si128(_mm_and_si128(_mm_cmpgt_epi32(b, lim), lim), _mm_andnot_si128(_mm_cmpgt_epi32(b, lim), b));
         b = _mm_or_si128(_mm_and_si128(_mm_cmplt_epi32(b, nlim), nlim), _mm_andnot_si128(_mm_cmplt_epi32(b, nlim), b));
         // Eight int16 in order x[k] .. x[k+7]: as int32 lanes, the pairs (2p, 2p+1).
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(out + k / 2), _mm_packs_epi32(a, b));
+        const __m128i w = _mm_packs_epi32(a, b);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(out + k / 2), w);
+        // In [0, 127] when positive: the same eight values as bytes.
+        if (bytes_too) _mm_storel_epi64(reinterpret_cast<__m128i*>(bytes + k), _mm_packus_epi16(w, w));
       }
     }
 #endif
     quantizePairsScalar(xc, out, k, In, inv, lo, hi);
+    if (bytes_too)
+      for (int i = k; i < In; ++i) bytes[i] = static_cast<std::uint8_t>(quantToken(x, i, t));
     x.sx[t] = m / hi;
   }
-}
-
-/// xq(k, t) of quantised tokens (tests and the scalar rows).
-template <int In, int J>
-inline int quantToken(const QuantTokens<In, J>& x, int k, int t) {
-  const std::int32_t pair = x.pairs[t * (In / 2) + k / 2];
-  return static_cast<std::int16_t>(k % 2 == 0 ? (pair & 0xffff) : (pair >> 16));
 }
 
 #if NAO_POLICY_HAVE_AVX2
@@ -215,7 +233,7 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void quantizeTokensInt8Avx512(const
         __m512i a = _mm512_maskz_cvtps_epi32(kAll, _mm512_mul_ps(_mm512_loadu_ps(xc + k), vinv));
         a = _mm512_maskz_max_epi32(kAll, _mm512_maskz_min_epi32(kAll, a, lim), nlim);
         _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + k / 2), _mm512_maskz_cvtepi32_epi16(kAll, a));
-        // The low byte of each lane: xq in [0, 255] as an unsigned byte.
+        // The low byte of each lane: xq in [0, 127] as an unsigned byte.
         if (bytes_too) _mm_storeu_si128(reinterpret_cast<__m128i*>(bytes + k), _mm512_maskz_cvtepi32_epi8(kAll, a));
       }
     }
@@ -355,6 +373,89 @@ inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std
 }
 #endif  // __SSE2__
 
+#if defined(__SSE2__) && defined(__GNUC__)
+// The 7-bit kernels' instruction set: SSSE3 (pmaddubsw). The robot build's -march=silvermont has
+// it; an x86-64 build without -march tags the kernels and asks the CPU once (every x86-64 CPU
+// since 2006 has it; one without runs the pmaddwd kernel instead, the same bits).
+#define NAO_INT8_SSSE3_TARGET target("ssse3")
+#if defined(__SSSE3__)
+inline bool int8HaveSsse3() noexcept { return true; }
+#else
+inline const bool g_int8_ssse3 = [] {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("ssse3") != 0;
+}();
+inline bool int8HaveSsse3() noexcept { return g_int8_ssse3; }
+#endif
+
+/// xs[k][t] = the token quad q0 + k of column t in every lane (q0 = p0 / 2, k < pc / 2).
+template <int In, int J>
+__attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void broadcastStripQuadsSsse3(
+    const QuantTokens<In, J>& x, int p0, int pc, __m128i (*xs)[J]) {
+  constexpr int Q = QuantTokens<In, J>::kQuads;
+  for (int k = 0; k < pc / 2; ++k)
+    for (int t = 0; t < J; ++t) xs[k][t] = _mm_set1_epi32(x.quads[t * Q + p0 / 2 + k]);
+}
+
+/// Rows r .. r+3 of the product of 7-bit tokens over pairs p0 .. p0+pc-1 (one strip, pc even):
+/// per quad of inputs, the rows' 8 bytes of pairs 2k and 2k+1 interleaved by words
+/// (punpcklwd) give each row's four consecutive weights in one int32 lane; pmaddubsw (token
+/// bytes unsigned, weights signed; exact, see above) then pmaddwd by ones makes each lane one
+/// row's sum. Four rows, J accumulators: with eight rows and 2·J GCC spilled a third of them.
+/// `xs[k][t]`: the strip's token quads, broadcast; `share`: this block's pc·8 bytes of the next
+/// strip to prefetch, or null.
+template <int Out, int In, int J>
+__attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void accumulateInt8QuadBlock4Ssse3(
+    const std::int8_t* Wq, const __m128i (*xs)[J], std::int32_t* acc, int p0, int pc, int r,
+    const std::int8_t* share) {
+  const __m128i ones = _mm_set1_epi16(1);
+  __m128i a[J];
+  for (int t = 0; t < J; ++t) a[t] = _mm_setzero_si128();
+  const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
+  // Not unrolled: unrolled, GCC hoisted the multiplies of several quads and spilled their results.
+#pragma GCC unroll 1
+  for (int k = 0; k < pc / 2; ++k) {
+#if defined(__GNUC__)
+    if (share != nullptr && (k & 3) == 0) __builtin_prefetch(share + 16 * k, 0, kInt8PrefetchLocality);
+#endif
+    const std::int8_t* w0 = w + static_cast<std::ptrdiff_t>(2 * k) * Out * 2;
+    const __m128i l0 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(w0));
+    const __m128i l1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(w0 + static_cast<std::ptrdiff_t>(Out) * 2));
+    const __m128i v = _mm_unpacklo_epi16(l0, l1);  // rows r..r+3, inputs 4k'..4k'+3 each
+#pragma GCC unroll 8
+    for (int t = 0; t < J; ++t) a[t] = _mm_add_epi32(a[t], _mm_madd_epi16(_mm_maddubs_epi16(xs[k][t], v), ones));
+  }
+  for (int t = 0; t < J; ++t) {
+    auto* y = reinterpret_cast<__m128i*>(acc + t * Out + r);
+    _mm_storeu_si128(y, p0 == 0 ? a[t] : _mm_add_epi32(_mm_loadu_si128(y), a[t]));
+  }
+}
+
+/// The int8 product of 7-bit tokens (x.positive) with SSSE3 (the NAO's Atom), In % 4 == 0:
+/// strips of kInt8Strip pairs; in each, blocks of 4 rows with J int32 accumulators in xmm
+/// registers. Rows left over: the scalar rows. The strip's token quads are broadcast once into
+/// `xs` (each block then loads them: without it GCC spilled half the accumulators).
+template <int Out, int In, int J>
+__attribute__((NAO_INT8_SSSE3_TARGET, noinline)) void accumulateInt8QuadsSsse3(const std::int8_t* Wq,
+                                                                               const QuantTokens<In, J>& x,
+                                                                               std::int32_t* acc) {
+  static_assert(In % 4 == 0 && In <= kInt8MaxIn && kInt8Strip % 2 == 0, "int8 quad kernel: In a multiple of 4");
+  constexpr int P = In / 2;
+  constexpr int kRows = Out / 4 * 4;
+  __m128i xs[kInt8Strip / 2][J];
+  for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
+    const int pc = std::min(kInt8Strip, P - p0);
+    const bool more = p0 + pc < P;  // the next strip of this matrix, as in accumulateInt8Sse
+    const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
+    broadcastStripQuadsSsse3<In, J>(x, p0, pc, xs);
+    for (int r = 0; r < kRows; r += 4)
+      accumulateInt8QuadBlock4Ssse3<Out, In, J>(Wq, xs, acc, p0, pc, r,
+                                                more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
+  }
+  if constexpr (Out % 4 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, x.pairs, acc, kRows);
+}
+#endif  // __SSE2__ && __GNUC__
+
 #if NAO_POLICY_HAVE_AVX2
 /// The int8 product with AVX2: strips of kInt8Strip pairs; in each, blocks of 8 rows (16
 /// weight bytes per pair, sign-extended by one vpmovsxbw load), J int32 accumulators in ymm
@@ -390,6 +491,65 @@ __attribute__((target("avx2"), noinline)) void accumulateInt8Avx2(const std::int
     }
   }
   if constexpr (Out % 8 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, xp, acc, kRows);
+}
+
+/// The int8 product of 7-bit tokens (x.positive) with AVX2, In % 4 == 0: strips of kInt8Strip
+/// pairs; in each, blocks of 16 rows (one 32-byte line of each pair), each quad of inputs
+/// interleaved and multiplied as in accumulateInt8QuadBlock8Ssse3 with 2·J int32 accumulators
+/// in ymm registers (vpunpck{l,h}wd work in 128-bit lanes: rows 0-3 and 8-11 in one register,
+/// 4-7 and 12-15 in the other, put in order at the store). Rows left over: blocks of 4 (the
+/// SSSE3 ones), then the scalar rows.
+template <int Out, int In, int J>
+__attribute__((target("avx2"), noinline)) void accumulateInt8QuadsAvx2(const std::int8_t* Wq, const QuantTokens<In, J>& x,
+                                                                         std::int32_t* acc) {
+  static_assert(In % 4 == 0 && In <= kInt8MaxIn && kInt8Strip % 2 == 0, "int8 quad kernel: In a multiple of 4");
+  constexpr int P = In / 2, Q = In / 4;
+  constexpr int kRows16 = Out / 16 * 16, kRows = Out / 4 * 4;
+  const __m256i ones = _mm256_set1_epi16(1);
+  for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
+    const int pc = std::min(kInt8Strip, P - p0);
+    const bool more = p0 + pc < P;
+    const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
+    const int q0 = p0 / 2;
+    for (int r = 0; r < kRows16; r += 16) {
+      __m256i a0[J], a1[J];
+      for (int t = 0; t < J; ++t) a0[t] = a1[t] = _mm256_setzero_si256();
+      const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
+      const std::int8_t* share = more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr;  // pc·32 bytes
+      // Not unrolled: unrolled, GCC stored the accumulators to the stack every other quad.
+#pragma GCC unroll 1
+      for (int k = 0; k < pc / 2; ++k) {
+        if (more) __builtin_prefetch(share + 64 * k, 0, kInt8PrefetchLocality);
+        const std::int8_t* w0 = w + static_cast<std::ptrdiff_t>(2 * k) * Out * 2;
+        const __m256i l0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(w0));
+        const __m256i l1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(w0 + static_cast<std::ptrdiff_t>(Out) * 2));
+        const __m256i lo = _mm256_unpacklo_epi16(l0, l1);  // rows 0-3 | 8-11
+        const __m256i hi = _mm256_unpackhi_epi16(l0, l1);  // rows 4-7 | 12-15
+#pragma GCC unroll 8
+        for (int t = 0; t < J; ++t) {
+          const __m256i xb = _mm256_set1_epi32(x.quads[t * Q + q0 + k]);
+          a0[t] = _mm256_add_epi32(a0[t], _mm256_madd_epi16(_mm256_maddubs_epi16(xb, lo), ones));
+          a1[t] = _mm256_add_epi32(a1[t], _mm256_madd_epi16(_mm256_maddubs_epi16(xb, hi), ones));
+        }
+      }
+      for (int t = 0; t < J; ++t) {
+        const __m256i y0 = _mm256_permute2x128_si256(a0[t], a1[t], 0x20);  // rows 0-7
+        const __m256i y1 = _mm256_permute2x128_si256(a0[t], a1[t], 0x31);  // rows 8-15
+        auto* d0 = reinterpret_cast<__m256i*>(acc + t * Out + r);
+        auto* d1 = reinterpret_cast<__m256i*>(acc + t * Out + r + 8);
+        _mm256_storeu_si256(d0, p0 == 0 ? y0 : _mm256_add_epi32(_mm256_loadu_si256(d0), y0));
+        _mm256_storeu_si256(d1, p0 == 0 ? y1 : _mm256_add_epi32(_mm256_loadu_si256(d1), y1));
+      }
+    }
+    if constexpr (kRows > kRows16) {
+      __m128i xs[kInt8Strip / 2][J];
+      broadcastStripQuadsSsse3<In, J>(x, p0, pc, xs);
+      for (int r = kRows16; r < kRows; r += 4)
+        accumulateInt8QuadBlock4Ssse3<Out, In, J>(Wq, xs, acc, p0, pc, r,
+                                                  more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
+    }
+  }
+  if constexpr (Out % 4 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, x.pairs, acc, kRows);
 }
 
 /// The share of the next strip of an int8 matrix (pairs p0 + pc ..) that the block of rows from
@@ -571,12 +731,28 @@ inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float
     return;
   } else if (kernel == PolicyKernel::kAvx2) {
     quantizeTokensInt8<In, J>(X, x);
-    accumulateInt8Avx2<Out, In, J>(Wq, x.pairs, acc);
+    if constexpr (QuantTokens<In, J>::kQuads > 0) {
+      if (x.positive)
+        accumulateInt8QuadsAvx2<Out, In, J>(Wq, x, acc);
+      else
+        accumulateInt8Avx2<Out, In, J>(Wq, x.pairs, acc);
+    } else {
+      accumulateInt8Avx2<Out, In, J>(Wq, x.pairs, acc);
+    }
   } else
 #endif
   {
     quantizeTokensInt8<In, J>(X, x);
-#if defined(__SSE2__)
+#if defined(__SSE2__) && defined(__GNUC__)
+    if constexpr (QuantTokens<In, J>::kQuads > 0) {
+      if (x.positive && int8HaveSsse3())
+        accumulateInt8QuadsSsse3<Out, In, J>(Wq, x, acc);
+      else
+        accumulateInt8Sse<Out, In, J>(Wq, x.pairs, acc);
+    } else {
+      accumulateInt8Sse<Out, In, J>(Wq, x.pairs, acc);
+    }
+#elif defined(__SSE2__)
     accumulateInt8Sse<Out, In, J>(Wq, x.pairs, acc);
 #else
     accumulateRowsInt8Scalar<Out, In, J>(Wq, x.pairs, acc, 0);
