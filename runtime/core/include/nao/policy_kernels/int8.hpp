@@ -403,8 +403,10 @@ __attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void broadcastStrip
 /// bytes unsigned, weights signed; exact, see above) then pmaddwd by ones makes each lane one
 /// row's sum. Four rows, J accumulators: with eight rows and 2·J GCC spilled a third of them.
 /// `xs[k][t]`: the strip's token quads, broadcast; `share`: this block's pc·8 bytes of the next
-/// strip to prefetch, or null.
-template <int Out, int In, int J>
+/// strip to prefetch, or null. kLegacyAdd (only where no VEX code surrounds it): the sum added
+/// by a paddd into the accumulator itself; GCC added into the product and copied it back (one
+/// movdqa per multiply-add, a fifth of the loop's instructions on the two-wide Atom).
+template <int Out, int In, int J, bool kLegacyAdd>
 __attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void accumulateInt8QuadBlock4Ssse3(
     const std::int8_t* Wq, const __m128i (*xs)[J], std::int32_t* acc, int p0, int pc, int r,
     const std::int8_t* share) {
@@ -423,7 +425,13 @@ __attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void accumulateInt8
     const __m128i l1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(w0 + static_cast<std::ptrdiff_t>(Out) * 2));
     const __m128i v = _mm_unpacklo_epi16(l0, l1);  // rows r..r+3, inputs 4k'..4k'+3 each
 #pragma GCC unroll 8
-    for (int t = 0; t < J; ++t) a[t] = _mm_add_epi32(a[t], _mm_madd_epi16(_mm_maddubs_epi16(xs[k][t], v), ones));
+    for (int t = 0; t < J; ++t) {
+      const __m128i p = _mm_madd_epi16(_mm_maddubs_epi16(xs[k][t], v), ones);
+      if constexpr (kLegacyAdd)
+        __asm__("paddd %1, %0" : "+x"(a[t]) : "x"(p));
+      else
+        a[t] = _mm_add_epi32(a[t], p);
+    }
   }
   for (int t = 0; t < J; ++t) {
     auto* y = reinterpret_cast<__m128i*>(acc + t * Out + r);
@@ -449,7 +457,7 @@ __attribute__((NAO_INT8_SSSE3_TARGET, noinline)) void accumulateInt8QuadsSsse3(c
     const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
     broadcastStripQuadsSsse3<In, J>(x, p0, pc, xs);
     for (int r = 0; r < kRows; r += 4)
-      accumulateInt8QuadBlock4Ssse3<Out, In, J>(Wq, xs, acc, p0, pc, r,
+      accumulateInt8QuadBlock4Ssse3<Out, In, J, true>(Wq, xs, acc, p0, pc, r,
                                                 more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
   }
   if constexpr (Out % 4 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, x.pairs, acc, kRows);
@@ -545,7 +553,7 @@ __attribute__((target("avx2"), noinline)) void accumulateInt8QuadsAvx2(const std
       __m128i xs[kInt8Strip / 2][J];
       broadcastStripQuadsSsse3<In, J>(x, p0, pc, xs);
       for (int r = kRows16; r < kRows; r += 4)
-        accumulateInt8QuadBlock4Ssse3<Out, In, J>(Wq, xs, acc, p0, pc, r,
+        accumulateInt8QuadBlock4Ssse3<Out, In, J, false>(Wq, xs, acc, p0, pc, r,
                                                   more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
     }
   }
