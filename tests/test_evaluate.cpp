@@ -229,3 +229,35 @@ TEST_CASE("the neighbour replays are the 5 training demonstrations nearest the s
   MESSAGE("neighbour replays: worst hand-path DTW to their own demonstration " << worst * 1e3 << " mm");
   CHECK(&r.medoidQ() == &r.q[static_cast<std::size_t>(std::find(r.demos.begin(), r.demos.end(), r.medoid) - r.demos.begin())]);
 }
+
+TEST_CASE("speed against the replay: a run that is its replay moves at 1, one at half its displacement per tick at 0.5") {
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const SimModel sim = makeSimModel(arm);
+  const double period = 0.1, gain = servoStepGain(sim.params);
+  // A demonstration circling the shoulder, its medoid replay from a start off it.
+  std::vector<JointVector> f;
+  const JointVector mid = 0.5 * (arm.q_min + arm.q_max);
+  for (int t = 0; t < 80; ++t) {
+    JointVector q = mid;
+    q[0] += 0.15 * std::cos(0.25 * t);
+    q[1] += 0.15 * std::sin(0.25 * t);
+    f.push_back(q);
+  }
+  const HandPath replay = handPath(arm, trackDemo(sim, period, gain, f, f.front() + JointVector::Constant(0.02), 80));
+  // The same path at half the displacement per tick (shrunk about its first point) and at twice.
+  HandPath half, twice;
+  for (const Eigen::Vector3d& p : replay) {
+    half.push_back(replay.front() + 0.5 * (p - replay.front()));
+    twice.push_back(replay.front() + 2.0 * (p - replay.front()));
+  }
+  const std::vector<double> ratio = speedVsReplay({replay, half, twice}, {replay, replay, replay}, period);
+  REQUIRE(ratio.size() == 3);
+  CHECK(ratio[0] == 1.0);
+  CHECK(ratio[1] == doctest::Approx(0.5).epsilon(1e-12));
+  CHECK(ratio[2] == doctest::Approx(2.0).epsilon(1e-12));
+  // Against another replay it is that replay's speed that divides: the half-speed path is the bar.
+  CHECK(speedVsReplay({replay}, {half}, period).front() == doctest::Approx(2.0).epsilon(1e-12));
+  // A replay that holds still has no speed to compare with; the counts must match.
+  CHECK(std::isnan(speedVsReplay({replay}, {HandPath(80, replay.front())}, period).front()));
+  CHECK_THROWS_AS(speedVsReplay({replay, half}, {replay}, period), std::invalid_argument);
+}

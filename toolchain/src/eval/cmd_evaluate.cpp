@@ -337,6 +337,7 @@ void runBaselines(const Args& a, const Setup& s, std::vector<MovementWork>& work
 struct AutonomousScores {
   std::vector<double> auto_dtw, medoid_dtw, neighbour_dtw, ar_dtw, speed, loops, share, excess;
   std::vector<double> code_fidelity, replay_fidelity, replay_speed, replay_loops;
+  std::vector<double> speed_vs_replay;  ///< per run: its middle-phase speed over its medoid replay's
   std::vector<HandPath> run_hands, replay_hands;
   std::size_t distinct = 0, replay_distinct = 0;  ///< distinctRuns of the runs' and the replays' hand paths
   json runs = json::array();
@@ -398,6 +399,7 @@ AutonomousScores scoreAutonomousRuns(const Setup& s, const SimModel& sim, const 
     const RunScore replay_score = scoreRun(r.replay_hands.back(), held);
     r.replay_speed.push_back(replay_score.speed_m_s);
     r.replay_loops.push_back(replay_score.loops);
+    r.speed_vs_replay.push_back(speedVsReplay({run.hand}, {r.replay_hands.back()}, s.period_s).front());
     const Rollout ar_run = rolloutOnSim(sim, sim_data, s.period_s, w.held.start[i], ticks,
                                         [&](const JointVector& q, const std::vector<JointVector>& past) {
                                           return linearArAction(ar, q, past);
@@ -416,6 +418,7 @@ AutonomousScores scoreAutonomousRuns(const Setup& s, const SimModel& sim, const 
                      {"named_demo", w.train.names[static_cast<std::size_t>(rep5.medoid)]},
                      {"code_fidelity_m", r.code_fidelity.back()},
                      {"replay_fidelity_m", r.replay_fidelity.back()},
+                     {"speed_vs_replay", r.speed_vs_replay.back()},
                      {"medoid_replay_dtw_m", r.medoid_dtw.back()},
                      {"neighbour_replay_dtw_m", each},
                      {"linear_ar_dtw_m", r.ar_dtw.back()}};
@@ -493,6 +496,7 @@ json movementSummary(const Setup& s, const MovementWork& w, const HeldOutScores&
   m["medoid_replay_loops_median"] = numberOrNull(median(r.replay_loops));
   m["code_fidelity_m"] = numberOrNull(median(r.code_fidelity));
   m["replay_fidelity_m"] = numberOrNull(median(r.replay_fidelity));
+  m["speed_vs_replay"] = numberOrNull(median(r.speed_vs_replay));
   m["joint_range_excess_rad"] = r.excess.empty() ? 0.0 : *std::max_element(r.excess.begin(), r.excess.end());
   m["autonomous_runs"] = r.auto_dtw.size();
   m["heldout_demos"] = w.held.size();
@@ -511,6 +515,7 @@ json movementSummary(const Setup& s, const MovementWork& w, const HeldOutScores&
   m["linear_ar_dtw_per_run_m"] = r.ar_dtw;
   m["code_fidelity_per_run_m"] = r.code_fidelity;
   m["replay_fidelity_per_run_m"] = r.replay_fidelity;
+  m["speed_vs_replay_per_run"] = r.speed_vs_replay;
   m["demo_nn_dtw_per_demo_m"] = held.nn_dtw_m;
   return m;
 }

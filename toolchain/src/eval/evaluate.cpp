@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <stdexcept>
 
 namespace nao::tools {
 
@@ -155,6 +156,17 @@ RunScore scoreRun(const HandPath& run, const HeldOutScores& held) {
   r.speed_m_s = middleRmsSpeed(run, held.period_s);
   r.loops = loopCount(run, held.plane);
   return r;
+}
+
+std::vector<double> speedVsReplay(const std::vector<HandPath>& runs, const std::vector<HandPath>& replays,
+                                  double period_s) {
+  if (runs.size() != replays.size()) throw std::invalid_argument("speedVsReplay: one replay per run");
+  std::vector<double> ratio;
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const double replay = middleRmsSpeed(replays[i], period_s);
+    ratio.push_back(replay > 0.0 ? middleRmsSpeed(runs[i], period_s) / replay : std::numeric_limits<double>::quiet_NaN());
+  }
+  return ratio;
 }
 
 Rollout trackDemoRollout(const ArmModel& arm, RobotBackend& robot, double period_s, double gain,

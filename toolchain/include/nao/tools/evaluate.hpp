@@ -57,6 +57,14 @@ struct RunScore {
 };
 RunScore scoreRun(const HandPath& run, const HeldOutScores& held);
 
+/// Per run, its middle-phase RMS hand speed (middleRmsSpeed) divided by its replay's: `replays[i]`
+/// is run i's medoid replay (the demonstration it plays, tracked from the same start for as many
+/// ticks), so 1 is a run at the speed of what it plays, whatever the held-out demonstrations'
+/// speed. NaN where either has no middle stretch or the replay holds still. Throws
+/// std::invalid_argument when the counts differ.
+std::vector<double> speedVsReplay(const std::vector<HandPath>& runs, const std::vector<HandPath>& replays,
+                                  double period_s);
+
 /// The demonstrations of one movement an evaluation uses: their names, feature-extracted
 /// trajectories f (the model's key poses), starts and hand paths.
 struct DemoSet {
