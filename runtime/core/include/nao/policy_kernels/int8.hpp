@@ -397,51 +397,64 @@ __attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void broadcastStrip
     for (int t = 0; t < J; ++t) xs[k][t] = _mm_set1_epi32(x.quads[t * Q + p0 / 2 + k]);
 }
 
-/// Rows r .. r+3 of the product of 7-bit tokens over pairs p0 .. p0+pc-1 (one strip, pc even):
-/// per quad of inputs, the rows' 8 bytes of pairs 2k and 2k+1 interleaved by words
-/// (punpcklwd) give each row's four consecutive weights in one int32 lane; pmaddubsw (token
-/// bytes unsigned, weights signed; exact, see above) then pmaddwd by ones makes each lane one
-/// row's sum. Four rows, J accumulators: with eight rows and 2·J GCC spilled a third of them.
-/// `xs[k][t]`: the strip's token quads, broadcast; `share`: this block's pc·8 bytes of the next
-/// strip to prefetch, or null. kLegacyAdd (only where no VEX code surrounds it): the sum added
-/// by a paddd into the accumulator itself; GCC added into the product and copied it back (one
-/// movdqa per multiply-add, a fifth of the loop's instructions on the two-wide Atom).
-template <int Out, int In, int J, bool kLegacyAdd>
-__attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void accumulateInt8QuadBlock4Ssse3(
+/// Rows r .. r+4R-1 (R = 1 or 2) of the product of 7-bit tokens over pairs p0 .. p0+pc-1 (one
+/// strip, pc even): per quad of inputs, the rows' bytes of pairs 2k and 2k+1 interleaved by
+/// words (punpck{l,h}wd) give each row's four consecutive weights in one int32 lane; pmaddubsw
+/// (token bytes unsigned, weights signed; exact, see above) then pmaddwd by ones makes each lane
+/// one row's sum. `xs[k][t]`: the strip's token quads, broadcast; `share`: this block's pc·8R
+/// bytes of the next strip to prefetch, or null. kLegacyAdd (only where no VEX code surrounds
+/// it): each sum added by a paddd into its accumulator; GCC added the accumulator into the
+/// product and copied it back (one movdqa per multiply-add, a fifth of the loop's instructions
+/// on the two-wide Atom) and, with 2·J accumulators, spilled a third of them.
+template <int Out, int In, int J, int R, bool kLegacyAdd>
+__attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void accumulateInt8QuadBlockSsse3(
     const std::int8_t* Wq, const __m128i (*xs)[J], std::int32_t* acc, int p0, int pc, int r,
     const std::int8_t* share) {
+  static_assert(R == 1 || R == 2, "blocks of 4 or 8 rows");
   const __m128i ones = _mm_set1_epi16(1);
-  __m128i a[J];
-  for (int t = 0; t < J; ++t) a[t] = _mm_setzero_si128();
+  __m128i a[R][J];
+  for (int i = 0; i < R; ++i)
+    for (int t = 0; t < J; ++t) a[i][t] = _mm_setzero_si128();
   const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
   // Not unrolled: unrolled, GCC hoisted the multiplies of several quads and spilled their results.
 #pragma GCC unroll 1
   for (int k = 0; k < pc / 2; ++k) {
 #if defined(__GNUC__)
-    if (share != nullptr && (k & 3) == 0) __builtin_prefetch(share + 16 * k, 0, kInt8PrefetchLocality);
+    if (share != nullptr && (k & (4 / R - 1)) == 0) __builtin_prefetch(share + 16 * R * k, 0, kInt8PrefetchLocality);
 #endif
     const std::int8_t* w0 = w + static_cast<std::ptrdiff_t>(2 * k) * Out * 2;
-    const __m128i l0 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(w0));
-    const __m128i l1 = _mm_loadl_epi64(reinterpret_cast<const __m128i*>(w0 + static_cast<std::ptrdiff_t>(Out) * 2));
-    const __m128i v = _mm_unpacklo_epi16(l0, l1);  // rows r..r+3, inputs 4k'..4k'+3 each
-#pragma GCC unroll 8
-    for (int t = 0; t < J; ++t) {
-      const __m128i p = _mm_madd_epi16(_mm_maddubs_epi16(xs[k][t], v), ones);
-      if constexpr (kLegacyAdd)
-        __asm__("paddd %1, %0" : "+x"(a[t]) : "x"(p));
-      else
-        a[t] = _mm_add_epi32(a[t], p);
+    const std::int8_t* w1 = w0 + static_cast<std::ptrdiff_t>(Out) * 2;
+    __m128i v[R];
+    if constexpr (R == 2) {
+      const __m128i l0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(w0));
+      const __m128i l1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(w1));
+      v[0] = _mm_unpacklo_epi16(l0, l1);  // rows r..r+3, inputs 4k'..4k'+3 each
+      v[1] = _mm_unpackhi_epi16(l0, l1);  // rows r+4..r+7
+    } else {
+      v[0] = _mm_unpacklo_epi16(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(w0)),
+                                _mm_loadl_epi64(reinterpret_cast<const __m128i*>(w1)));
     }
+#pragma GCC unroll 8
+    for (int t = 0; t < J; ++t)
+#pragma GCC unroll 2
+      for (int i = 0; i < R; ++i) {
+        const __m128i p = _mm_madd_epi16(_mm_maddubs_epi16(xs[k][t], v[i]), ones);
+        if constexpr (kLegacyAdd)
+          __asm__("paddd %1, %0" : "+x"(a[i][t]) : "x"(p));
+        else
+          a[i][t] = _mm_add_epi32(a[i][t], p);
+      }
   }
-  for (int t = 0; t < J; ++t) {
-    auto* y = reinterpret_cast<__m128i*>(acc + t * Out + r);
-    _mm_storeu_si128(y, p0 == 0 ? a[t] : _mm_add_epi32(_mm_loadu_si128(y), a[t]));
-  }
+  for (int i = 0; i < R; ++i)
+    for (int t = 0; t < J; ++t) {
+      auto* y = reinterpret_cast<__m128i*>(acc + t * Out + r + 4 * i);
+      _mm_storeu_si128(y, p0 == 0 ? a[i][t] : _mm_add_epi32(_mm_loadu_si128(y), a[i][t]));
+    }
 }
 
 /// The int8 product of 7-bit tokens (x.positive) with SSSE3 (the NAO's Atom), In % 4 == 0:
-/// strips of kInt8Strip pairs; in each, blocks of 4 rows with J int32 accumulators in xmm
-/// registers. Rows left over: the scalar rows. The strip's token quads are broadcast once into
+/// strips of kInt8Strip pairs; in each, blocks of 8 rows with 2·J int32 accumulators in xmm
+/// registers, then one of 4 rows. Rows left over: the scalar rows. The strip's token quads are broadcast once into
 /// `xs` (each block then loads them: without it GCC spilled half the accumulators).
 template <int Out, int In, int J>
 __attribute__((NAO_INT8_SSSE3_TARGET, noinline)) void accumulateInt8QuadsSsse3(const std::int8_t* Wq,
@@ -456,9 +469,13 @@ __attribute__((NAO_INT8_SSSE3_TARGET, noinline)) void accumulateInt8QuadsSsse3(c
     const bool more = p0 + pc < P;  // the next strip of this matrix, as in accumulateInt8Sse
     const std::int8_t* next = Wq + static_cast<std::ptrdiff_t>(p0 + pc) * Out * 2;
     broadcastStripQuadsSsse3<In, J>(x, p0, pc, xs);
-    for (int r = 0; r < kRows; r += 4)
-      accumulateInt8QuadBlock4Ssse3<Out, In, J, true>(Wq, xs, acc, p0, pc, r,
-                                                more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
+    int r = 0;
+    for (; r + 8 <= kRows; r += 8)
+      accumulateInt8QuadBlockSsse3<Out, In, J, 2, true>(Wq, xs, acc, p0, pc, r,
+                                                        more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
+    for (; r < kRows; r += 4)
+      accumulateInt8QuadBlockSsse3<Out, In, J, 1, true>(Wq, xs, acc, p0, pc, r,
+                                                        more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
   }
   if constexpr (Out % 4 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, x.pairs, acc, kRows);
 }
@@ -553,8 +570,8 @@ __attribute__((target("avx2"), noinline)) void accumulateInt8QuadsAvx2(const std
       __m128i xs[kInt8Strip / 2][J];
       broadcastStripQuadsSsse3<In, J>(x, p0, pc, xs);
       for (int r = kRows16; r < kRows; r += 4)
-        accumulateInt8QuadBlock4Ssse3<Out, In, J, false>(Wq, xs, acc, p0, pc, r,
-                                                  more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
+        accumulateInt8QuadBlockSsse3<Out, In, J, 1, false>(Wq, xs, acc, p0, pc, r,
+                                                           more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr);
     }
   }
   if constexpr (Out % 4 != 0) accumulateRowsInt8Scalar<Out, In, J>(Wq, x.pairs, acc, kRows);
