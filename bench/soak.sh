@@ -122,7 +122,18 @@ wait_exit() {  # PID TENTHS: wait until PID ends (at most TENTHS/10 s, then SIGK
   wait "$1" 2>/dev/null
   RC=$?
 }
-rel() { sed "s|$tmp|TMP|g; s|$root/||g"; }
+rel() { sed "s|$tmp/bin/|$build/bin/|g; s|$tmp|TMP|g; s|$root/||g"; }
+
+# The binaries as they are now: a rebuild of build/ during the soak cannot swap them.
+mkdir -p "$tmp/bin"
+binaries=""
+for exe in "$rt" "$sim" "$tail_bin"; do
+  cp -p "$exe" "$tmp/bin/" || die 2 "cannot copy $exe"
+  binaries+="${exe##*/} $(date -u -r "$exe" '+%Y-%m-%d %H:%M UTC') md5 $(md5sum "$exe" | cut -c1-12); "
+done
+rt="$tmp/bin/nao_rt"
+sim="$tmp/bin/nao_lola_sim"
+tail_bin="$tmp/bin/nao_attn_tail"
 
 sim_rt=(chrt -f 50)
 chrt -f 50 true 2>/dev/null || sim_rt=()
@@ -424,6 +435,7 @@ shm_left3=0
 # --- the report --------------------------------------------------------------------------------------
 {
   echo "minutes=$minutes"
+  echo "binaries=$binaries"
   echo "n_faults=$n_faults"
   echo "schedule=every $spacing s from $first s, SIGINT at $stop_s s (nao_rt --seconds $run_s)"
   echo "rt_rc=$rt_rc"
@@ -483,6 +495,7 @@ sim = load("sim.json")
 minutes = int(P["minutes"])
 say(f"# bench/soak.sh --minutes {minutes} (repository root, release build): the whole stack on LoLA, live cameras and the shared-memory attention ring")
 say(f"date: {P['date_before']} to {P['date_after']}; host: {P['host']}; commit {P['commit']}")
+say(f"binaries (copied at the start): {P['binaries']}")
 say(f"load average before: {P['load_before']}")
 say(f"load average after:  {P['load_after']}")
 say("commands:")
