@@ -326,15 +326,40 @@ inline constexpr int kInt8Strip = 16;
 inline constexpr int kInt8PrefetchLocality = 0;
 
 #if defined(__SSE2__)
+#if defined(__GNUC__) && !defined(__AVX__)
+/// Where the int8 kernels may add a product into its accumulator by an explicit legacy-encoded
+/// paddd (GCC otherwise added into the product and copied it back, and spilled accumulators):
+/// not in a build whose code is VEX-encoded (-mavx), where it would mix encodings.
+inline constexpr bool kInt8LegacyAdd = true;
+#else
+inline constexpr bool kInt8LegacyAdd = false;
+#endif
+
+/// acc += p (int32 lanes), by a paddd into acc itself when kAsm && kInt8LegacyAdd.
+template <bool kAsm>
+__attribute__((always_inline)) inline void addInt8Sums(__m128i& acc, __m128i p) {
+#if defined(__GNUC__)
+  if constexpr (kAsm && kInt8LegacyAdd) {
+    __asm__("paddd %1, %0" : "+x"(acc) : "x"(p));
+    return;
+  }
+#endif
+  acc = _mm_add_epi32(acc, p);
+}
+
 /// The int8 product with SSE2 (the NAO's Atom and every x86-64): strips of kInt8Strip pairs;
-/// in each, blocks of 8 rows with 2·J int32 accumulators in xmm registers.
+/// in each, the strip's token pairs broadcast once, then blocks of 8 rows with 2·J int32
+/// accumulators in xmm registers (each sum added in place: see kInt8LegacyAdd).
 template <int Out, int In, int J>
 inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std::int32_t* acc) {
   static_assert(In % 2 == 0 && In <= kInt8MaxIn, "int8 kernel: In even and at most kInt8MaxIn");
   constexpr int P = In / 2;
   constexpr int kRows = Out / 8 * 8;
+  __m128i xs[kInt8Strip][J];
   for (int p0 = 0; p0 < P; p0 += kInt8Strip) {
     const int pc = std::min(kInt8Strip, P - p0);
+    for (int i = 0; i < pc; ++i)
+      for (int t = 0; t < J; ++t) xs[i][t] = _mm_set1_epi32(xp[t * P + p0 + i]);
     // The next strip of this matrix (none after the last: no address outside it is formed):
     // 16 bytes of it per pair and block of this strip, so the block's share is pc·16 bytes.
     const bool more = p0 + pc < P;
@@ -345,7 +370,7 @@ inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std
       for (int t = 0; t < J; ++t) a0[t] = a1[t] = _mm_setzero_si128();
       const std::int8_t* w = Wq + static_cast<std::ptrdiff_t>(p0) * Out * 2 + r * 2;
       const std::int8_t* share = more ? next + static_cast<std::ptrdiff_t>(r) * 2 * pc : nullptr;
-#pragma GCC unroll 2
+#pragma GCC unroll 1
       for (int i = 0; i < pc; ++i) {
 #if defined(__GNUC__)
         if (more && (i & 3) == 0) __builtin_prefetch(share + 16 * i, 0, kInt8PrefetchLocality);
@@ -356,9 +381,8 @@ inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std
         const __m128i hi = _mm_srai_epi16(_mm_unpackhi_epi8(v, v), 8);  // rows r+4..r+7
 #pragma GCC unroll 8
         for (int t = 0; t < J; ++t) {
-          const __m128i x = _mm_set1_epi32(xp[t * P + p0 + i]);
-          a0[t] = _mm_add_epi32(a0[t], _mm_madd_epi16(lo, x));
-          a1[t] = _mm_add_epi32(a1[t], _mm_madd_epi16(hi, x));
+          addInt8Sums<true>(a0[t], _mm_madd_epi16(xs[i][t], lo));
+          addInt8Sums<true>(a1[t], _mm_madd_epi16(xs[i][t], hi));
         }
       }
       for (int t = 0; t < J; ++t) {
@@ -403,9 +427,9 @@ __attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void broadcastStrip
 /// (token bytes unsigned, weights signed; exact, see above) then pmaddwd by ones makes each lane
 /// one row's sum. `xs[k][t]`: the strip's token quads, broadcast; `share`: this block's pc·8R
 /// bytes of the next strip to prefetch, or null. kLegacyAdd (only where no VEX code surrounds
-/// it): each sum added by a paddd into its accumulator; GCC added the accumulator into the
-/// product and copied it back (one movdqa per multiply-add, a fifth of the loop's instructions
-/// on the two-wide Atom) and, with 2·J accumulators, spilled a third of them.
+/// it, see kInt8LegacyAdd): each sum added by a paddd into its accumulator; GCC added the
+/// accumulator into the product and copied it back (one movdqa per multiply-add, a fifth of the
+/// loop's instructions on the two-wide Atom) and, with 2·J accumulators, spilled a third of them.
 template <int Out, int In, int J, int R, bool kLegacyAdd>
 __attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void accumulateInt8QuadBlockSsse3(
     const std::int8_t* Wq, const __m128i (*xs)[J], std::int32_t* acc, int p0, int pc, int r,
@@ -438,11 +462,7 @@ __attribute__((NAO_INT8_SSSE3_TARGET, always_inline)) inline void accumulateInt8
     for (int t = 0; t < J; ++t)
 #pragma GCC unroll 2
       for (int i = 0; i < R; ++i) {
-        const __m128i p = _mm_madd_epi16(_mm_maddubs_epi16(xs[k][t], v[i]), ones);
-        if constexpr (kLegacyAdd)
-          __asm__("paddd %1, %0" : "+x"(a[i][t]) : "x"(p));
-        else
-          a[i][t] = _mm_add_epi32(a[i][t], p);
+        addInt8Sums<kLegacyAdd>(a[i][t], _mm_madd_epi16(_mm_maddubs_epi16(xs[k][t], v[i]), ones));
       }
   }
   for (int i = 0; i < R; ++i)
