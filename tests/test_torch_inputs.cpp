@@ -247,3 +247,32 @@ TEST_CASE("the inputs' options are refused where they mean nothing: reference mo
   decay.ema_decay = 1.0;
   CHECK_THROWS_WITH_AS(trainPolicy(smallData(), smallSim(), decay, nullptr), doctest::Contains("[0, 1)"), UserError);
 }
+
+TEST_CASE("the execution cache is keyed by the data's content: the same data reads it, one changed sample executes again") {
+  const std::string cache =
+      (std::filesystem::temp_directory_path() / "nao_rt_tests" / ("keyed_execution_" + std::to_string(::getpid()))).string();
+  std::filesystem::remove_all(cache);
+  const auto entries = [&] {
+    std::size_t n = 0;
+    for (const auto& e : std::filesystem::directory_iterator(cache)) n += e.is_regular_file() ? 1 : 0;
+    return n;
+  };
+  TrainOptions o = smallOptions(91, 1);
+  o.max_batches = 1;
+  o.execution_cache = cache;
+  const TrainResult first = trainPolicy(smallData(), smallSim(), o, nullptr);
+  REQUIRE(entries() == 2);  // <key>.train and <key>.val
+  const TrainResult again = trainPolicy(smallData(), smallSim(), o, nullptr);
+  CHECK(entries() == 2);
+  CHECK(again.history.back().train_loss == first.history.back().train_loss);
+
+  // The same demonstrations and names, one sample of one feature trajectory moved by one ulp:
+  // a different data set, so a new key and a new execution, never the cached sequences.
+  PolicyData changed = smallData();
+  double& sample = changed.demos[5].f[20][2];
+  sample = std::nextafter(sample, 1.0);
+  const TrainResult redone = trainPolicy(changed, smallSim(), o, nullptr);
+  CHECK(redone.fingerprint != first.fingerprint);
+  CHECK(entries() == 4);
+  std::filesystem::remove_all(cache);
+}
