@@ -22,6 +22,7 @@
 # measurement uses it). Takes about two minutes. Exit status 0, or 1 with a message.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+ARGS="$*"
 TICKS=20
 OUT="$ROOT/bench/results/embedded.txt"
 NATIVE_DIR="$ROOT/build"
@@ -74,7 +75,7 @@ done
 objdump -d --no-show-raw-insn "$ROBOT" >"$work/robot.dis"
 load_after="$(cut -d' ' -f1-3 /proc/loadavg)"
 
-python3 - "$ROOT" "$ROBOT" "$NATIVE" "$MODEL" "$TICKS" "$work" "$load_before" "$load_after" "$OUT" "$*" "$SKELETON" <<'PY'
+python3 - "$ROOT" "$ROBOT" "$NATIVE" "$MODEL" "$TICKS" "$work" "$load_before" "$load_after" "$OUT" "$ARGS" "$SKELETON" <<'PY'
 import collections, datetime, json, os, re, resource, subprocess, sys
 
 root, robot, native, model, ticks, work, load_before, load_after, out_path, args, skeleton = sys.argv[1:]
