@@ -34,13 +34,15 @@ namespace detail {
 // the token's pair of xq (as int16) and adds the two products into an int32 lane (AVX-512 VNNI:
 // vpdpwssd, the add too). 7-bit tokens: pmaddubsw multiplies four token bytes (unsigned) by a
 // row's four weight bytes (signed), adding them in int16 pairs, pmaddwd by ones adds the pairs
-// into an int32 lane (SSSE3, AVX2: twice the products per multiply of the widened path, and no
-// widening); AVX-512 VNNI: vpdpbusd, all in one. pmaddubsw saturates its int16 pair sums, which
-// is why the unsigned range is 7 bits: |a0·w0 + a1·w1| <= 2 · 127 · 128 = 32512 < 32767 for any
-// weight byte (the blob holds ±127) and any token byte in [0, 127], so no sum is ever clipped.
-// 8 bits with a shifted signed range measured 3.5x the action error (docs/policy.md). Integer
-// sums are exact (|Σ| <= 512 · 127 · 32767 < 2^31 for In <= 512), so every kernel gives the same
-// bits in any order; only the final conversion and two multiplies round (in one fixed order).
+// into an int32 lane (SSSE3, AVX2: twice pmaddwd's products per instruction, but with the
+// widening pmaddwd the same multiplies per product; what it saves is the weights' widening and
+// the instructions around the multiplies); AVX-512 VNNI: vpdpbusd, all in one. pmaddubsw
+// saturates its int16 pair sums, which is why the unsigned range is 7 bits:
+// |a0·w0 + a1·w1| <= 2 · 127 · 128 = 32512 < 32767 for any weight byte (the blob holds ±127) and
+// any token byte in [0, 127], so no sum is ever clipped. 8-bit signed tokens everywhere measured
+// 3.5x the action error (docs/policy.md). Integer sums are exact (|Σ| <= 512 · 127 · 32767 <
+// 2^31 for In <= 512), so every kernel gives the same bits in any order; only the final
+// conversion and two multiplies round (in one fixed order).
 
 /// Largest In the int32 accumulators of the int8 kernels cannot overflow for.
 inline constexpr int kInt8MaxIn = 512;
@@ -172,7 +174,7 @@ inline void quantizeTokensInt8(const float* X, QuantTokens<In, J>& x) {
 
 #if NAO_POLICY_HAVE_AVX2
 /// quantizeTokensInt8 with 16 lanes (kAvx512): the same maxima, tests, products, roundings and
-/// clamps, so the same pairs and scales; also the byte quads of an 8-bit product.
+/// clamps, so the same pairs and scales and (7-bit products) the same byte quads.
 template <int In, int J>
 __attribute__((NAO_AVX512_TARGET, noinline)) void quantizeTokensInt8Avx512(const float* X, QuantTokens<In, J>& x) {
   static_assert(In % 2 == 0, "the int8 kernels take input columns in pairs");
