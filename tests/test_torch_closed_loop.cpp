@@ -3,12 +3,16 @@
 // forward; the differentiable arm tick (arm_copy_torch.hpp) against the copy it wraps and its
 // gradient against central differences; a whole unroll (stream + limiter + arm copy) against
 // nao_rt's controller driving the ODE arm; and the closed-loop loss's gradient reaching the net.
+// Also the trainer's on-policy options: each start's code as the runtime picks it, whole-run
+// segments, DAgger's expert labels and rounds, and selection's speed against the replay.
 #include "arm_copy_torch.hpp"
 #include "closed_loop.hpp"
 #include "nao/controller.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/arm_copy.hpp"
 #include "nao/tools/command.hpp"
+#include "nao/tools/evaluate.hpp"
+#include "nao/tools/policy_execution.hpp"
 #include "policy_stream.hpp"
 #include "policy_train.hpp"
 #include "train_select.hpp"
@@ -480,4 +484,243 @@ TEST_CASE("selection by code fidelity: a run that is its code's demonstration pl
   CHECK(betterEpoch(close, wild, true));
   CHECK(betterEpoch(far, no_codes, true));
   CHECK_FALSE(betterEpoch(no_codes, far, true));
+}
+
+namespace {
+
+// The closed-loop data of smallData() with every demonstration as a training one (clean rollouts).
+struct ClosedLoopFixture {
+  std::vector<PolicySequence> seqs;
+  RunCodeSource source;
+  ClosedLoopData cl;
+  SequenceTensors train;
+  PolicyNet net{nullptr};
+};
+ClosedLoopFixture closedLoopFixture() {
+  const PolicyData& data = test::smallData();
+  ClosedLoopFixture f;
+  PolicyArch arch = smallChunked();
+  arch.movements = data.movements();
+  arch.clusters = data.clusters();
+  torch::manual_seed(1);
+  f.net = PolicyNet(arch, Conditioning::kAutonomous);
+  std::vector<int> all;
+  for (std::size_t i = 0; i < data.demos.size(); ++i) all.push_back(static_cast<int>(i));
+  ExecutionOptions e;
+  e.noisy_rollouts = 0;
+  f.seqs = executeDemos(data, all, sim(), e, 1);
+  f.net->setNormalisation(normStats(f.seqs));
+  f.train = toTensors(f.net, f.seqs);
+  f.source = runCodeSource(data, f.seqs, arm(), arch.d_model);
+  f.cl = closedLoopData(data, f.source, sim(), kPeriod, ControllerParams{}.workspace_margin_rad);
+  return f;
+}
+
+}  // namespace
+
+TEST_CASE("the trainer pairs every start with the runtime's code: runCodeIndex with the start's own demonstration left out") {
+  const PolicyData& data = test::smallData();
+  const ClosedLoopFixture f = closedLoopFixture();
+  const std::vector<ModelRunCodes>& codes = f.source.codes;
+  int differs_from_own_rule = 0;
+  // Every training start (its own demonstration's), then the closed loop's and DAgger's other starts.
+  REQUIRE(f.cl.own.size() == data.demos.size());
+  for (const ClosedLoopRun& own : f.cl.own) {
+    const ModelRunCodes& c = codes[static_cast<std::size_t>(own.movement)];
+    REQUIRE(c.names[static_cast<std::size_t>(own.source_code)] == data.demos[static_cast<std::size_t>(own.source)].name);
+    CHECK(own.start == clampToLimits(arm(), data.demos[static_cast<std::size_t>(own.source)].start));
+    CHECK(own.code == runCodeIndex(c, own.start, own.source_code));
+    CHECK(own.code != own.source_code);  // a training start is nobody's start: not its own code
+    differs_from_own_rule += own.code != runCodeIndex(c, own.start);
+  }
+  MESSAGE(differs_from_own_rule << " of " << f.cl.own.size()
+                                << " training starts take another code with their own demonstration left out");
+  ClosedLoopOptions o;
+  o.starts = 4;
+  for (const ClosedLoopRun& r : closedLoopEpochRuns(data, f.cl, sim(), kPeriod, o, 1, 3))
+    CHECK(r.code == runCodeIndex(codes[static_cast<std::size_t>(r.movement)], r.start, r.source_code));
+  DaggerOptions d;
+  d.starts = 4;
+  const std::vector<LabelledRun> runs = daggerRuns(data, f.cl, sim(), d, 1, 2);
+  REQUIRE(runs.size() == 4 * data.demos.size());
+  for (std::size_t i = 0; i < runs.size(); ++i) {
+    const LabelledRun& r = runs[i];
+    const auto m = static_cast<std::size_t>(r.movement);
+    CHECK(r.code == runCodeIndex(codes[m], r.start, r.source_code));
+    // It is labelled toward its code's demonstration, for as long as that one lasts.
+    CHECK(data.demos[static_cast<std::size_t>(r.demo)].name == codes[m].names[static_cast<std::size_t>(r.code)]);
+    CHECK(r.ticks == static_cast<int>(data.demos[static_cast<std::size_t>(r.demo)].f.size()) - 1);
+    if (i < f.cl.own.size()) CHECK(r.start == f.cl.own[i].start);  // first the training starts themselves
+  }
+  // Another round draws other starts.
+  CHECK((daggerRuns(data, f.cl, sim(), d, 1, 3).back().start - runs.back().start).norm() > 0.0);
+}
+
+TEST_CASE("whole runs: every run's segment lies in its own length and reaches its end; per-run starts give each run its loss alone") {
+  ClosedLoopFixture f = closedLoopFixture();
+  // Segment starts of a run of n ticks: within 0 .. n − horizon, both ends drawn.
+  const ClosedLoopRun& longest = *std::max_element(f.cl.own.begin(), f.cl.own.end(),
+                                                   [](const ClosedLoopRun& a, const ClosedLoopRun& b) { return a.ticks < b.ticks; });
+  const ClosedLoopRun& shortest = *std::min_element(f.cl.own.begin(), f.cl.own.end(),
+                                                    [](const ClosedLoopRun& a, const ClosedLoopRun& b) { return a.ticks < b.ticks; });
+  REQUIRE(longest.ticks > shortest.ticks);
+  const int horizon = 12;
+  int lowest = longest.ticks, highest = -1;
+  for (std::uint64_t key = 0; key < 4000; ++key) {
+    const int s = closedLoopRunSegmentStart(longest, horizon, key);
+    lowest = std::min(lowest, s);
+    highest = std::max(highest, s);
+  }
+  CHECK(lowest == 0);
+  CHECK(highest == longest.ticks - horizon);  // its last tick is rolled
+  CHECK(highest > shortest.ticks - horizon);  // past where a batch's shortest run would stop it
+  CHECK(closedLoopRunSegmentStart(shortest, shortest.ticks + 5, 7) == 0);
+
+  // Two runs with segments of their own in one batch: each run's loss, ticks and gradient are
+  // those it has alone; equal starts are the single-start loss exactly.
+  ClosedLoopOptions o;
+  RunLatent latent(4, f.net->arch().d_model);
+  const std::vector<const ClosedLoopRun*> both = {&shortest, &longest};
+  const std::vector<int> starts = {3, longest.ticks - horizon};
+  const auto gradOf = [&](const torch::Tensor& loss) {
+    for (torch::Tensor& p : f.net->parameters())
+      if (p.grad().defined()) p.mutable_grad().zero_();
+    for (torch::Tensor& p : latent->parameters())
+      if (p.grad().defined()) p.mutable_grad().zero_();
+    loss.backward();
+    return f.net->head_chunk->weight.grad().clone();
+  };
+  const ClosedLoopLoss together = closedLoopLoss(*f.net, latent.get(), f.train, f.cl, sim(), kPeriod, both, starts, horizon, o);
+  const torch::Tensor g_together = gradOf(together.loss);
+  CHECK(together.ticks == 2 * horizon);
+  double alone_loss = 0.0;
+  torch::Tensor g_alone = torch::zeros_like(g_together);
+  for (std::size_t b = 0; b < 2; ++b) {
+    const ClosedLoopLoss l = closedLoopLoss(*f.net, latent.get(), f.train, f.cl, sim(), kPeriod, {both[b]}, starts[b], horizon, o);
+    CHECK(l.ticks == horizon);
+    CHECK(together.run_hand_sse_m2[b] == doctest::Approx(l.hand_sse_m2).epsilon(1e-9));
+    alone_loss += l.loss.item<double>();
+    g_alone += gradOf(l.loss);
+  }
+  CHECK(together.loss.item<double>() == doctest::Approx(alone_loss).epsilon(1e-9));
+  const double g_scale = g_alone.abs().max().item<double>();
+  REQUIRE(g_scale > 0.0);
+  CHECK((g_together - g_alone).abs().max().item<double>() <= 1e-6 * g_scale);
+  const ClosedLoopLoss same = closedLoopLoss(*f.net, latent.get(), f.train, f.cl, sim(), kPeriod, both, std::vector<int>{3, 3}, horizon, o);
+  const ClosedLoopLoss single = closedLoopLoss(*f.net, latent.get(), f.train, f.cl, sim(), kPeriod, both, 3, horizon, o);
+  CHECK(same.loss.item<double>() == single.loss.item<double>());
+  CHECK(same.ticks == single.ticks);
+}
+
+TEST_CASE("DAgger's labels are the executed demonstrations' expert from the states the policy reached") {
+  const PolicyData& data = test::smallData();
+  ExecutionOptions e;
+  e.noisy_rollouts = 0;
+  const int d = 5;
+  const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
+  const PolicySequence clean = executeDemos(data, {d}, sim(), e, 1).front();
+  const int ticks = static_cast<int>(demo.f.size()) - 1;
+  SimData sim_data(sim(), JointVector::Zero());
+  // A policy that plays the expert's own labels reaches the clean execution's states, and is
+  // labelled as it was.
+  const RolloutPolicy expert = [&](int, int t, const JointVector&, const JointVector&, const JointVector&) {
+    return JointVector(clean.a[static_cast<std::size_t>(t)]);
+  };
+  const PolicySequence same = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, expert, nullptr, e);
+  REQUIRE(same.ticks() == clean.ticks());
+  double worst_q = 0.0, worst_a = 0.0;
+  for (std::size_t t = 0; t < same.ticks(); ++t) {
+    worst_q = std::max(worst_q, (same.q[t] - clean.q[t]).cwiseAbs().maxCoeff());
+    worst_a = std::max(worst_a, (same.a[t] - clean.a[t]).cwiseAbs().maxCoeff());
+  }
+  CHECK(worst_q < 1e-9);
+  CHECK(worst_a < 1e-9);
+  CHECK(same.movement == demo.movement);
+  // A policy that moves half as far: the states fall behind, and the labels are the expert's from
+  // there, toward the same next poses.
+  const RolloutPolicy lagging = [&](int, int t, const JointVector&, const JointVector&, const JointVector&) {
+    return JointVector(0.5 * clean.a[static_cast<std::size_t>(t)]);
+  };
+  const PolicySequence behind = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, lagging, nullptr, e);
+  REQUIRE(behind.ticks() == clean.ticks());
+  CHECK(behind.a.front() == clean.a.front());  // the same state at the start
+  double apart = 0.0;
+  int relabelled = 0;
+  for (std::size_t t = 0; t < behind.ticks(); ++t) {
+    apart = std::max(apart, (behind.q[t] - clean.q[t]).cwiseAbs().maxCoeff());
+    CHECK(behind.r[t] == clampToLimits(arm(), demo.f[t + 1]) - behind.q[t]);
+    relabelled += (behind.a[t] - clean.a[t]).cwiseAbs().maxCoeff() > 1e-6;
+    // The policy's action was applied, not the label.
+    if (t > 0) CHECK((behind.a_prev[t] - 0.5 * clean.a[t - 1]).cwiseAbs().maxCoeff() < 1e-9);
+  }
+  CHECK(apart > 0.01);  // not vacuous: the lagging policy went elsewhere
+  CHECK(relabelled > static_cast<int>(behind.ticks()) / 2);
+}
+
+TEST_CASE("DAgger training: deterministic, aggregates the net's labelled runs round by round, another result than teacher forcing") {
+  torch::set_num_threads(1);
+  TrainOptions tf = test::smallOptions(91, 2);
+  tf.conditioning = Conditioning::kAutonomous;
+  tf.latent_dims = 4;
+  tf.arch.chunk = 3;
+  tf.select_by_rollout = true;
+  TrainOptions o = tf;
+  o.dagger.iterations = 2;
+  o.dagger.epochs = 1;
+  o.dagger.starts = 2;
+  TrainResult r;
+  const std::vector<std::uint8_t> a = test::trainBytes(o, &r), teacher = test::trainBytes(tf);
+  CHECK_MESSAGE(a == test::trainBytes(o), "two DAgger runs with one seed gave different bytes");
+  CHECK_MESSAGE(a != teacher, "the DAgger epochs changed nothing");
+  REQUIRE(r.history.size() == 4);
+  // Each round adds the net's runs: 2 per training demonstration, each as long as its code's demonstration.
+  CHECK(r.history[2].samples > r.history[1].samples);
+  CHECK(r.history[3].samples > r.history[2].samples);
+  CHECK(r.best_epoch > 2);  // a DAgger epoch is kept
+  const nlohmann::json meta = nlohmann::json::parse(decodeModel(a, "dagger.bin").header.metadata_json)["training"];
+  CHECK(meta["dagger"]["iterations"] == 2);
+  CHECK_FALSE(nlohmann::json::parse(decodeModel(teacher, "tf.bin").header.metadata_json)["training"].contains("dagger"));
+  TrainOptions reference = o;
+  reference.conditioning = Conditioning::kReference;
+  reference.latent_dims = 0;
+  reference.select_by_rollout = false;
+  CHECK_THROWS_WITH_AS(trainPolicy(test::smallData(), test::smallSim(), reference, nullptr), doctest::Contains("autonomous"),
+                       UserError);
+}
+
+TEST_CASE("selection's speed against the replay: a run that is its medoid replay moves at exactly 1") {
+  const PolicyData& data = test::smallData();
+  const std::vector<int> val = {1, 5, 9};
+  std::vector<int> train;
+  for (std::size_t i = 0; i < data.demos.size(); ++i)
+    if (std::find(val.begin(), val.end(), static_cast<int>(i)) == val.end()) train.push_back(static_cast<int>(i));
+  ExecutionOptions e;
+  e.noisy_rollouts = 0;
+  const RunCodeSource source = runCodeSource(data, executeDemos(data, train, sim(), e, 1), arm(), 8);
+  SelectionReference ref = selectionReference(data, val, arm(), kPeriod, &source.codes);
+  EpochStats plain;
+  std::vector<PolicyRun> runs;
+  for (const int d : val) {
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
+    const JointVector start = clampToLimits(arm(), demo.start);
+    const ModelRunCodes& c = source.codes[static_cast<std::size_t>(demo.movement)];
+    const std::string& name = c.names[static_cast<std::size_t>(runCodeIndex(c, start))];
+    const auto played = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& x) { return x.name == name; });
+    runs.push_back({d, demo.movement,
+                    trackDemo(sim(), kPeriod, servoStepGain(sim().params), played->f, start, static_cast<int>(demo.f.size()) - 1),
+                    {}});
+  }
+  scoreRuns(runs, ref, arm(), kPeriod, plain, &source.codes);
+  for (const MovementScore& s : plain.rollouts) CHECK(std::isnan(s.speed_vs_replay));  // not asked for
+  addReplaySpeeds(ref, data, val, sim(), kPeriod, source.codes);
+  REQUIRE(ref.replay_speed.size() == data.demos.size());
+  CHECK(std::isnan(ref.replay_speed[0]));  // a training demonstration has none
+  EpochStats st;
+  scoreRuns(runs, ref, arm(), kPeriod, st, &source.codes);
+  int other = 0;
+  for (const MovementScore& s : st.rollouts) {
+    CHECK(s.speed_vs_replay == 1.0);
+    other += std::abs(s.speed_ratio - 1.0) > 1e-3;  // against the held-out demonstrations it is not 1
+  }
+  CHECK(other > 0);
 }

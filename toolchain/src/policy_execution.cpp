@@ -1,6 +1,8 @@
 // Executing demonstrations on the simulated arm (docs/policy.md "Data"): the expert that labels
 // every tick with the command ending it on f(t+1), the clean and noisy executions of the training
 // data, and a policy's runs from the demonstrations' starts.
+#include "nao/tools/policy_execution.hpp"
+
 #include "nao/tools/command.hpp"
 #include "nao/rollout.hpp"
 #include "nao/tools/policy_dataset.hpp"
@@ -191,6 +193,43 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
   for (std::thread& t : pool) t.join();
   if (failure) std::rethrow_exception(failure);
   return out;
+}
+
+PolicySequence executeLabelled(const SimModel& sim_model, SimData& sim, const std::vector<JointVector>& f,
+                               const JointVector& start, int ticks, int movement, const RolloutPolicy& policy,
+                               const JointEnvelope* workspace, const ExecutionOptions& o) {
+  if (!policy) throw UserError("execution: no policy to roll out");
+  if (f.empty()) throw UserError("execution: an empty demonstration to label toward");
+  if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
+  const ArmModel& arm = sim_model.arm;
+  const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
+  PolicySequence s;
+  s.movement = movement;
+  resetSim(sim_model, sim, start);
+  SimSnapshot snap;
+  JointVector q = sim.q, a_prev = JointVector::Zero();
+  for (int t = 0; t < ticks; ++t) {
+    const JointVector target = clampToLimits(arm, f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, f.size() - 1)]);
+    // The expert's label from the state the policy reached (the arm left as it was).
+    JointVector lo, hi;
+    double miss = 0.0;
+    commandBounds(sim_model, q, lo, hi);
+    captureSim(sim, snap);
+    const JointVector c_expert = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
+    s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
+    s.q.push_back(q);
+    s.a_prev.push_back(a_prev);
+    s.r.push_back(target - q);
+    s.a.push_back(c_expert - q);
+    // The policy's own action moves the arm, as the controller applies it.
+    JointVector a = policy(movement, t, q, a_prev, target - q);
+    if (!a.allFinite()) a.setZero();
+    JointVector c;
+    limitCommand(arm, period, q, a, c, workspace);
+    a_prev = c - q;
+    q = stepSim(sim_model, sim, c);
+  }
+  return s;
 }
 
 std::vector<PolicyRun> rolloutPolicy(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim_model,

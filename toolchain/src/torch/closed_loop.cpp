@@ -39,6 +39,14 @@ ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes
   return cl;
 }
 
+int closedLoopCode(const ClosedLoopData& cl, int movement, const JointVector& start, int source) {
+  const auto m = static_cast<std::size_t>(movement);
+  // A movement of one training demonstration has nothing else to play: its own.
+  const int code = cl.codes.at(m).size() > 1 ? runCodeIndex(cl.codes[m], start, source) : runCodeIndex(cl.codes[m], start);
+  if (code < 0) throw std::invalid_argument("closed loop: a movement without training demonstrations");
+  return code;
+}
+
 ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim, double period_s,
                                int movement, const JointVector& start, int ticks, int source) {
   const auto m = static_cast<std::size_t>(movement);
@@ -47,9 +55,7 @@ ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl,
   run.start = clampToLimits(sim.arm, start);
   run.ticks = ticks;
   run.source_code = source;
-  // A movement of one training demonstration has nothing else to play: its own.
-  run.code = cl.codes.at(m).size() > 1 ? runCodeIndex(cl.codes[m], run.start, source) : runCodeIndex(cl.codes[m], run.start);
-  if (run.code < 0) throw std::invalid_argument("closed loop: a movement without training demonstrations");
+  run.code = closedLoopCode(cl, movement, run.start, source);
   const PolicyDemo& demo = data.demos[static_cast<std::size_t>(cl.code_demo[m][static_cast<std::size_t>(run.code)])];
   std::vector<ArmCopyState> states;
   ArmCopyBackend copy(sim, &states);
@@ -65,16 +71,16 @@ ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl,
   return run;
 }
 
-std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
-                                               double period_s, const ClosedLoopOptions& o, std::uint64_t seed,
-                                               int epoch) {
-  std::vector<ClosedLoopRun> runs = cl.own;
+std::vector<ClosedLoopStart> closedLoopStarts(const ClosedLoopData& cl, int starts, double perturb_rad,
+                                              std::uint64_t seed, int epoch) {
+  std::vector<ClosedLoopStart> out;
+  for (const ClosedLoopRun& own : cl.own) out.push_back({own.movement, own.source, own.source_code, 0, own.start});
   for (const ClosedLoopRun& own : cl.own) {
     const auto m = static_cast<std::size_t>(own.movement);
     SplitMix64 rng(splitMix64(seed ^ splitMix64(static_cast<std::uint64_t>(epoch) * 0x100000001b3ull +
                                                 static_cast<std::uint64_t>(own.source))));
     const std::size_t n = cl.codes[m].size();
-    for (int k = 1; k < o.starts; ++k) {
+    for (int k = 1; k < starts; ++k) {
       JointVector start = own.start;
       int kind = 1;
       if (k % 2 == 0 && n >= 2) {
@@ -82,13 +88,43 @@ std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const Clo
         start += rng.uniform() * (other - own.start);
         kind = 2;
       } else {
-        for (int j = 0; j < kNumJoints; ++j) start[j] += o.perturb_rad * rng.normal();
+        for (int j = 0; j < kNumJoints; ++j) start[j] += perturb_rad * rng.normal();
       }
-      ClosedLoopRun run = closedLoopTarget(data, cl, sim, period_s, own.movement, start, own.ticks, own.source_code);
-      run.source = own.source;
-      run.kind = kind;
-      runs.push_back(std::move(run));
+      out.push_back({own.movement, own.source, own.source_code, kind, start});
     }
+  }
+  return out;
+}
+
+std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
+                                               double period_s, const ClosedLoopOptions& o, std::uint64_t seed,
+                                               int epoch) {
+  std::vector<ClosedLoopRun> runs = cl.own;
+  const std::vector<ClosedLoopStart> starts = closedLoopStarts(cl, o.starts, o.perturb_rad, seed, epoch);
+  for (std::size_t i = cl.own.size(); i < starts.size(); ++i) {
+    const ClosedLoopStart& st = starts[i];
+    const ClosedLoopRun& own = cl.own[static_cast<std::size_t>((i - cl.own.size()) / static_cast<std::size_t>(o.starts - 1))];
+    ClosedLoopRun run = closedLoopTarget(data, cl, sim, period_s, st.movement, st.start, own.ticks, st.source_code);
+    run.source = st.source;
+    run.kind = st.kind;
+    runs.push_back(std::move(run));
+  }
+  return runs;
+}
+
+std::vector<LabelledRun> daggerRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
+                                    const DaggerOptions& o, std::uint64_t seed, int round) {
+  std::vector<LabelledRun> runs;
+  // Seeded apart from the closed loop's epochs (closedLoopStarts keys by epoch).
+  for (const ClosedLoopStart& st : closedLoopStarts(cl, o.starts, o.perturb_rad, splitMix64(seed ^ 0xda66e5ull), round)) {
+    LabelledRun r;
+    r.movement = st.movement;
+    r.start = clampToLimits(sim.arm, st.start);
+    r.source_code = st.source_code;
+    r.code = closedLoopCode(cl, st.movement, r.start, st.source_code);
+    r.demo = cl.code_demo[static_cast<std::size_t>(st.movement)][static_cast<std::size_t>(r.code)];
+    r.ticks = static_cast<int>(data.demos[static_cast<std::size_t>(r.demo)].f.size()) - 1;
+    runs.push_back(r);
   }
   return runs;
 }
@@ -102,17 +138,40 @@ int closedLoopSegmentStart(const std::vector<const ClosedLoopRun*>& runs, int ho
   return static_cast<int>(SplitMix64(key).below(static_cast<std::uint64_t>(shortest - horizon + 1)));
 }
 
+int closedLoopRunSegmentStart(const ClosedLoopRun& run, int horizon, std::uint64_t key) {
+  if (run.ticks <= horizon) return 0;
+  return static_cast<int>(SplitMix64(key).below(static_cast<std::uint64_t>(run.ticks - horizon + 1)));
+}
+
 ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, const SequenceTensors& train,
                               const ClosedLoopData& cl, const SimModel& sim, double period_s,
                               const std::vector<const ClosedLoopRun*>& runs, int start_tick, int horizon,
                               const ClosedLoopOptions& o) {
+  return closedLoopLoss(net, latent, train, cl, sim, period_s, runs, std::vector<int>(runs.size(), start_tick), horizon, o);
+}
+
+ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, const SequenceTensors& train,
+                              const ClosedLoopData& cl, const SimModel& sim, double period_s,
+                              const std::vector<const ClosedLoopRun*>& runs, const std::vector<int>& start_ticks,
+                              int horizon, const ClosedLoopOptions& o) {
   const auto n_runs = static_cast<std::int64_t>(runs.size());
-  const std::int64_t J = kNumJoints, t0 = start_tick;
-  // Ticks t0 .. t0 + T − 1 are rolled out (as far as the longest run goes).
-  std::int64_t T = 0;
-  for (const ClosedLoopRun* r : runs) T = std::max<std::int64_t>(T, std::min<std::int64_t>(horizon, r->ticks - t0));
+  const std::int64_t J = kNumJoints;
+  if (start_ticks.size() != runs.size()) throw std::invalid_argument("closed loop: one start tick per run");
+  // Ticks t0 .. t0 + T − 1 are streamed with gradient, t0 the earliest segment start: each run
+  // rolls its own segment (as far as it goes) and follows its target before it.
+  std::int64_t t0 = std::numeric_limits<std::int64_t>::max(), end = 0;
+  for (std::size_t b = 0; b < runs.size(); ++b) {
+    const std::int64_t s = start_ticks[b];
+    if (s < 0 || s >= runs[b]->ticks) throw std::invalid_argument("closed loop: a segment starts after a run's end");
+    t0 = std::min(t0, s);
+    end = std::max<std::int64_t>(end, s + std::min<std::int64_t>(horizon, runs[b]->ticks - s));
+  }
+  if (runs.empty()) t0 = 0;
+  const std::int64_t T = end - t0;
+  bool staggered = false;  // some run starts its segment after t0
+  for (const int s : start_ticks) staggered = staggered || s != t0;
   // Targets after each tick [B,T,·] (held at the run's last entry past its end) and the mask of
-  // the ticks each run has.
+  // each run's segment.
   torch::Tensor q_target = torch::empty({n_runs, T, J}, torch::kFloat64);
   torch::Tensor hand_target = torch::empty({n_runs, T, 3}, torch::kFloat64);
   torch::Tensor f_next = torch::empty({n_runs, T, J}, torch::kFloat64);
@@ -122,14 +181,23 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
   torch::Tensor q = torch::empty({n_runs, J}, torch::kFloat64), v = torch::empty_like(q);
   torch::Tensor env_lo = torch::empty({n_runs, J}, torch::kFloat64), env_hi = torch::empty_like(env_lo);
   torch::Tensor movement = torch::empty({n_runs}, torch::kInt64);
+  // Staggered segments: per tick of the streamed stretch [B,T], whether a run still follows its
+  // target then (before its segment) and whether it is put in the target's state at the tick's
+  // start (up to its segment's first tick), with that state and the target's applied a(t−1).
+  const std::int64_t T_follow = staggered ? T : 0;
+  torch::Tensor follow = torch::zeros({n_runs, T_follow}, torch::kBool), put = torch::zeros_like(follow);
+  torch::Tensor q_follow = torch::zeros({n_runs, T_follow, J}, torch::kFloat64);
+  torch::Tensor v_follow = torch::zeros_like(q_follow), a_follow = torch::zeros_like(q_follow);
   {
+    auto fo = follow.accessor<bool, 2>(), pu = put.accessor<bool, 2>();
+    auto qf = q_follow.accessor<double, 3>(), vf = v_follow.accessor<double, 3>(), af = a_follow.accessor<double, 3>();
     auto qt = q_target.accessor<double, 3>(), ht = hand_target.accessor<double, 3>(), fn = f_next.accessor<double, 3>();
     auto ma = mask.accessor<double, 2>(), qa = q.accessor<double, 2>(), va = v.accessor<double, 2>();
     auto qb = q_before.accessor<double, 3>(), ab = a_before.accessor<double, 3>();
     auto lo = env_lo.accessor<double, 2>(), hi = env_hi.accessor<double, 2>();
     for (std::int64_t b = 0; b < n_runs; ++b) {
       const ClosedLoopRun& r = *runs[static_cast<std::size_t>(b)];
-      if (t0 >= r.ticks) throw std::invalid_argument("closed loop: a segment starts after a run's end");
+      const std::int64_t s = start_ticks[static_cast<std::size_t>(b)];
       const JointEnvelope& e = cl.envelope[static_cast<std::size_t>(r.movement)];
       movement[b] = r.movement;
       for (std::int64_t j = 0; j < J; ++j) {
@@ -144,14 +212,24 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
           ab[b][t][j] = t > 0 ? r.a_applied[static_cast<std::size_t>(t - 1)][j] : 0.0;
         }
       for (std::int64_t t = 0; t < T; ++t) {
-        const std::size_t at = static_cast<std::size_t>(std::min<std::int64_t>(t0 + t + 1, r.ticks));
-        ma[b][t] = t0 + t < r.ticks ? 1.0 : 0.0;
-        const std::size_t tick = static_cast<std::size_t>(std::min<std::int64_t>(t0 + t, r.ticks - 1));
+        const std::int64_t tick_abs = t0 + t;
+        const std::size_t at = static_cast<std::size_t>(std::min<std::int64_t>(tick_abs + 1, r.ticks));
+        ma[b][t] = tick_abs >= s && tick_abs < std::min<std::int64_t>(s + horizon, r.ticks) ? 1.0 : 0.0;
+        const std::size_t tick = static_cast<std::size_t>(std::min<std::int64_t>(tick_abs, r.ticks - 1));
         for (std::int64_t j = 0; j < J; ++j) {
           qt[b][t][j] = r.q[at][j];
           fn[b][t][j] = r.f_next[tick][j];
         }
         for (std::int64_t k = 0; k < 3; ++k) ht[b][t][k] = r.hand[at][k];
+        if (staggered && tick_abs < s) fo[b][t] = true;
+        if (staggered && tick_abs <= s) {
+          pu[b][t] = true;
+          for (std::int64_t j = 0; j < J; ++j) {
+            qf[b][t][j] = r.q[static_cast<std::size_t>(tick_abs)][j];
+            vf[b][t][j] = r.v[static_cast<std::size_t>(tick_abs)][j];
+            af[b][t][j] = tick_abs > 0 ? r.a_applied[static_cast<std::size_t>(tick_abs - 1)][j] : 0.0;
+          }
+        }
       }
     }
   }
@@ -190,10 +268,29 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
   out.loss = torch::zeros({}, torch::kFloat64);
   torch::Tensor run_hand_sse = torch::zeros({n_runs}, torch::kFloat64);
   for (std::int64_t t = 0; t < T; ++t) {
+    torch::Tensor following;  // staggered: [B] the runs that still follow their target at this tick
+    if (staggered) {
+      following = follow.select(1, t);
+      const torch::Tensor f2 = put.select(1, t).view({n_runs, 1});
+      q = torch::where(f2, q_follow.select(1, t), q);
+      v = torch::where(f2, v_follow.select(1, t), v);
+      a_prev = torch::where(f2, a_follow.select(1, t).to(torch::kFloat32), a_prev);
+    }
     in.q = q.to(torch::kFloat32);
     in.a_prev = a_prev;
     in.step = torch::full({n_runs}, t0 + t, torch::kInt64);
     const torch::Tensor a = streamStep(net, stream, in);
+    if (staggered) {
+      // A run that follows its target fills its caches as in the warm-up: without gradient.
+      const auto detachRows = [&](torch::Tensor& x) {
+        std::vector<std::int64_t> shape(static_cast<std::size_t>(x.dim()), 1);
+        shape[0] = n_runs;
+        x = torch::where(following.view(shape), x.detach(), x);
+      };
+      for (std::vector<torch::Tensor>* cache : {&stream.enc_k, &stream.enc_v, &stream.cross_k, &stream.cross_v})
+        for (torch::Tensor& x : *cache) detachRows(x);
+      detachRows(stream.pending);
+    }
     const ArmTick tick = armCopyTick(sim, period_s, q, v, a, env_lo, env_hi);
     const torch::Tensor m = mask.select(1, t);
     // 1 per cm² of hand error and per σ² of joint error; the action the limiter cut, per a-σ².

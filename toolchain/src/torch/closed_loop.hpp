@@ -14,6 +14,7 @@
 #include "policy_torch.hpp"
 #include "run_latent.hpp"
 #include "train_data.hpp"
+#include "train_select.hpp"
 
 #include <Eigen/Core>
 
@@ -39,7 +40,28 @@ struct ClosedLoopOptions {
   /// Rollouts per training demonstration and epoch: its own start, then perturbed starts and
   /// starts between it and another demonstration's, in turn.
   int starts = 3;
+  /// Each run's segment starts at a tick of its own (closedLoopRunSegmentStart) instead of one
+  /// tick per batch below the batch's shortest run: every tick of every run, to its end, can be
+  /// rolled. The batches hold runs of nearby segment starts (a recipe-only option, "closed-loop-whole-runs").
+  bool whole_runs = false;
   bool enabled() const { return epochs > 0; }
+};
+
+/// DAgger (TrainOptions::dagger, docs/autonomous.md): after the teacher-forced epochs, `iterations`
+/// rounds of: the net (the kept weights, the runtime's own step, no gradient) run on the simulated
+/// arm from `starts` starts per training demonstration (its own, perturbed, between two: as the
+/// closed loop draws them), each with the run code the runtime gives it there and for as long as
+/// that code's demonstration; every state it reaches labelled by the executed demonstrations'
+/// expert toward that demonstration; the labelled runs added to the training sequences (their run
+/// latent read from the code's demonstration); then `epochs` teacher-forced epochs over them all.
+/// Recipe-only options ("dagger-iterations", "dagger-epochs", "dagger-starts", "dagger-lr").
+struct DaggerOptions {
+  int iterations = 0;        ///< rounds of rolling out, labelling and training (0: none)
+  int epochs = 2;            ///< teacher-forced epochs per round
+  int starts = 3;            ///< runs per training demonstration and round
+  double lr = 0.0;           ///< Adam, a fresh optimiser from the kept teacher-forced weights (0: the teacher-forced lr)
+  double perturb_rad = 0.05; ///< σ of a perturbed start, per joint
+  bool enabled() const { return iterations > 0; }
 };
 
 /// One closed-loop rollout and its target.
@@ -73,6 +95,12 @@ struct ClosedLoopData {
 ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes, const SimModel& sim, double period_s,
                               double workspace_margin_rad);
 
+/// The run code a rollout of `movement` from `start` (clamped to the limits) takes, drawn around
+/// training demonstration `source` (its index among the movement's run codes): the runtime's
+/// choice there with `source` left out (runCodeIndex(codes, start, source); a movement of one
+/// training demonstration plays its own). An index into the movement's run codes.
+int closedLoopCode(const ClosedLoopData& cl, int movement, const JointVector& start, int source);
+
 /// The target of a run of `movement` from `start` for `ticks` ticks, drawn around training
 /// demonstration `source` (its index among the movement's run codes): the run code the runtime
 /// picks there with `source` left out (runCodeIndex: the runs are to play what a run from a start
@@ -80,6 +108,21 @@ ClosedLoopData closedLoopData(const PolicyData& data, const RunCodeSource& codes
 /// gain law through the arm copy (trackDemo on ArmCopyBackend).
 ClosedLoopRun closedLoopTarget(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim, double period_s,
                                int movement, const JointVector& start, int ticks, int source);
+
+/// A rollout's start, drawn around a training demonstration.
+struct ClosedLoopStart {
+  int movement = 0;
+  int source = -1;       ///< data.demos index of the demonstration it is drawn around
+  int source_code = -1;  ///< the same as an index into the movement's run codes
+  int kind = 0;          ///< 0: its own start, 1: perturbed, 2: between two demonstrations' starts
+  JointVector start = JointVector::Zero();
+};
+
+/// The starts of closedLoopEpochRuns without their targets: first every training demonstration's
+/// own (cl.own's order), then per demonstration `starts` − 1 more in turn, seeded by (seed,
+/// epoch, demonstration).
+std::vector<ClosedLoopStart> closedLoopStarts(const ClosedLoopData& cl, int starts, double perturb_rad,
+                                              std::uint64_t seed, int epoch);
 
 /// The epoch's rollouts: every training demonstration from its own start, then (starts − 1
 /// more) in turn from its start perturbed by N(0, σ²) per joint and from a point between its
@@ -89,6 +132,12 @@ std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const Clo
                                                double period_s, const ClosedLoopOptions& o, std::uint64_t seed,
                                                int epoch);
 
+/// DAgger round `round`'s runs (1-based): the starts of closedLoopStarts (seeded by (seed, round)
+/// apart from the closed loop's), each with the code closedLoopCode gives it and for as many ticks
+/// as that code's demonstration has successors, labelled toward it (LabelledRun::demo).
+std::vector<LabelledRun> daggerRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
+                                    const DaggerOptions& o, std::uint64_t seed, int round);
+
 /// The horizon of closed-loop epoch k (1-based): horizon + (k − 1) · horizon_growth ticks.
 int closedLoopHorizon(const ClosedLoopOptions& o, int k);
 
@@ -96,6 +145,10 @@ int closedLoopHorizon(const ClosedLoopOptions& o, int k);
 /// run's length − horizon (0 when a run is no longer than the horizon: the runs are rolled out
 /// from their starts).
 int closedLoopSegmentStart(const std::vector<const ClosedLoopRun*>& runs, int horizon, std::uint64_t key);
+
+/// Whole runs: where run `run`'s segment starts, a tick drawn uniformly (seeded by `key`) from 0 ..
+/// its own length − horizon (0 when it is no longer than the horizon).
+int closedLoopRunSegmentStart(const ClosedLoopRun& run, int horizon, std::uint64_t key);
 
 /// The loss of rolling `net` out for `runs` over ticks start_tick .. start_tick + horizon − 1
 /// (each run's own ticks).
@@ -117,5 +170,14 @@ ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, c
                               const ClosedLoopData& cl, const SimModel& sim, double period_s,
                               const std::vector<const ClosedLoopRun*>& runs, int start_tick, int horizon,
                               const ClosedLoopOptions& o);
+/// The same with a segment start per run (start_ticks[b] for runs[b]): each run rolls its ticks
+/// start_ticks[b] .. + horizon − 1 (to its end). All runs stream side by side from tick 0; before
+/// its segment a run follows its target's states and actions, its caches filled without
+/// gradient, as in the warm-up; at its segment's first tick it starts from the target's state.
+/// Equal starts give the single-start loss exactly.
+ClosedLoopLoss closedLoopLoss(const PolicyNetImpl& net, RunLatentImpl* latent, const SequenceTensors& train,
+                              const ClosedLoopData& cl, const SimModel& sim, double period_s,
+                              const std::vector<const ClosedLoopRun*>& runs, const std::vector<int>& start_ticks,
+                              int horizon, const ClosedLoopOptions& o);
 
 }  // namespace nao::tools

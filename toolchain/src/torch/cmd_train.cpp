@@ -12,8 +12,12 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <cmath>
+#include <exception>
 #include <fstream>
+#include <functional>
 #include <iostream>
+#include <map>
 #include <memory>
 #include <sstream>
 
@@ -33,6 +37,8 @@ struct TrainArgs {
   double ema = 0.0;
   ClosedLoopOptions closed_loop;
   std::string select = "val-loss", noisy_starts = "own";
+  bool select_speed_vs_replay = false;  // recipe-only options (recipeOnlyOptions)
+  DaggerOptions dagger;
   double val_fraction = 0.2, lr = 6e-5, timeout = 300;
 };
 
@@ -88,6 +94,7 @@ void run(const TrainArgs& a) {
   o.latent_kl = a.latent_kl;
   o.ema_decay = a.ema;
   o.closed_loop = a.closed_loop;
+  o.dagger = a.dagger;
   if (a.window > 0) o.arch.window = a.window;
   if (a.chunk > 0) o.arch.chunk = a.chunk;
   o.dist.world_size = a.world_size;
@@ -100,6 +107,7 @@ void run(const TrainArgs& a) {
   o.execution_cache = a.execution_cache;
   o.max_batches = a.max_batches;
   o.select_by_rollout = a.select == "rollouts";
+  o.select_speed_vs_replay = a.select_speed_vs_replay;
   o.live_progress = isatty(fileno(stdout)) != 0;
   if (a.rank >= a.world_size)
     throw UserError("--rank " + std::to_string(a.rank) + " must be below --world-size " + std::to_string(a.world_size));
@@ -172,10 +180,67 @@ void run(const TrainArgs& a) {
   }
 }
 
+// A recipe-only option: sets its field from the recipe's value as text, or throws UserError.
+using RecipeSetter = std::function<void(const std::string& value)>;
+
+// An integer option of a recipe in [lo, hi].
+RecipeSetter recipeInt(int& field, int lo, int hi) {
+  return [&field, lo, hi](const std::string& v) {
+    std::size_t used = 0;
+    int x = 0;
+    try {
+      x = std::stoi(v, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != v.size() || used == 0 || x < lo || x > hi)
+      throw UserError("'" + v + "' is not an integer in " + std::to_string(lo) + ".." + std::to_string(hi));
+    field = x;
+  };
+}
+
+// A positive number option of a recipe.
+RecipeSetter recipePositive(double& field) {
+  return [&field](const std::string& v) {
+    std::size_t used = 0;
+    double x = 0.0;
+    try {
+      x = std::stod(v, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != v.size() || used == 0 || !(x > 0.0) || !std::isfinite(x)) throw UserError("'" + v + "' is not a positive number");
+    field = x;
+  };
+}
+
+// The training options a recipe file may set that have no command-line flag (the experiments'
+// options: a recipe names them, `train --help` does not grow with them). docs/autonomous.md.
+std::map<std::string, RecipeSetter> recipeOnlyOptions(TrainArgs& a) {
+  std::map<std::string, RecipeSetter> o;
+  // "replay": the rollout selection's speed bar on each run's speed over its medoid replay's.
+  o["select-speed"] = [&a](const std::string& v) {
+    if (v != "replay" && v != "demonstrations") throw UserError("'" + v + "' is not replay or demonstrations");
+    a.select_speed_vs_replay = v == "replay";
+  };
+  // Whole runs: each closed-loop run's segment from a tick of its own, up to its end.
+  o["closed-loop-whole-runs"] = [&a](const std::string& v) {
+    if (v != "true" && v != "false") throw UserError("'" + v + "' is not true or false");
+    a.closed_loop.whole_runs = v == "true";
+  };
+  // DAgger (closed_loop.hpp DaggerOptions).
+  o["dagger-iterations"] = recipeInt(a.dagger.iterations, 0, 1000);
+  o["dagger-epochs"] = recipeInt(a.dagger.epochs, 1, 100000);
+  o["dagger-starts"] = recipeInt(a.dagger.starts, 1, 1000);
+  o["dagger-lr"] = recipePositive(a.dagger.lr);
+  return o;
+}
+
 // The options of a recipe file (models/recipes/<name>.json: {"train": {"<option>": value, ...}})
 // into `cmd`, each as if given on the command line, except those the command line gives itself
-// (it wins). Through CLI11's own results, so every value meets its option's checks.
-void applyRecipe(CLI::App& cmd, const std::string& path) {
+// (it wins). Through CLI11's own results, so every value meets its option's checks. Keys of
+// `recipe_only` (no command-line flag) go to their setters.
+void applyRecipe(CLI::App& cmd, const std::string& path, const std::map<std::string, RecipeSetter>& recipe_only) {
   std::ifstream in(path);
   if (!in) throw UserError("cannot read the recipe " + path);
   nlohmann::json recipe;
@@ -200,6 +265,14 @@ void applyRecipe(CLI::App& cmd, const std::string& path) {
   for (const auto& [key, value] : recipe["train"].items()) {
     if (key == "recipe" || key == "out" || key == "data" || key == "card")
       throw UserError(path + ": '" + key + "' is given on the command line, not in a recipe");
+    if (const auto only = recipe_only.find(key); only != recipe_only.end()) {
+      try {
+        only->second(text(key, value));
+      } catch (const UserError& e) {
+        throw UserError(path + ": " + key + ": " + e.what());
+      }
+      continue;
+    }
     CLI::Option* opt = nullptr;
     try {
       opt = cmd.get_option("--" + key);
@@ -381,7 +454,7 @@ void setup(CLI::App& app) {
                   "the command line's value")
       ->check(CLI::ExistingFile);
   cmd->callback([cmd, args, recipe] {
-    if (!recipe->empty()) applyRecipe(*cmd, *recipe);
+    if (!recipe->empty()) applyRecipe(*cmd, *recipe, recipeOnlyOptions(*args));
     run(*args);
   });
 }

@@ -82,6 +82,12 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
                         {"hand_weight", cl.hand_weight},
                         {"limit_weight", cl.limit_weight},
                         {"action_weight", cl.action_weight}};
+    if (cl.whole_runs) t["closed_loop"]["whole_runs"] = true;
+  }
+  if (o.dagger.enabled()) {
+    const DaggerOptions& d = o.dagger;
+    t["dagger"] = {{"iterations", d.iterations}, {"epochs", d.epochs}, {"starts", d.starts},
+                   {"lr", d.lr > 0.0 ? d.lr : o.lr},  {"perturb_rad", d.perturb_rad}};
   }
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"
@@ -90,6 +96,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
   if (o.dist.world_size > 1) t["world_size"] = o.dist.world_size;
   if (o.max_batches > 0) t["max_batches_per_epoch"] = o.max_batches;
   t["select"] = o.select_by_rollout ? "rollouts" : "validation_loss";
+  if (o.select_speed_vs_replay) t["select_speed"] = "replay";
   t["batch_unit"] = "sequences";
   auto& ex = t["execution"];
   ex["arm"] = "simulated ODE arm of nao_rt (sim_arm), servo-lagged";
@@ -266,8 +273,20 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
       << c.horizon_growth << " per epoch, each batch's from a seeded tick after the target's own history "
       << "(docs/autonomous.md) |\n";
   }
+  if (o.dagger.enabled()) {
+    const DaggerOptions& d = o.dagger;
+    s << "| DAgger | after the " << o.max_epochs << " teacher-forced epochs, " << d.iterations << " rounds of: the net "
+      << "run on the simulated arm (the runtime's step) from " << d.starts << " starts per training demonstration (its "
+      << "own, perturbed by " << d.perturb_rad << " rad, between it and another's), each with the run code nao_rt "
+      << "gives it there and as long as that code's demonstration, every state labelled by the expert toward it, "
+      << "added to the training sequences; then " << d.epochs << " teacher-forced epochs over them all (Adam lr "
+      << (d.lr > 0.0 ? d.lr : o.lr) << ") (docs/autonomous.md) |\n";
+  }
+  if (o.closed_loop.enabled() && o.closed_loop.whole_runs)
+    s << "| closed-loop segments | whole runs: each run's segment from a seeded tick of its own, up to its end |\n";
   s << "| seed | " << o.seed << " |\n";
-  s << "| epochs | " << r.history.size() << " run (cap " << o.max_epochs + o.closed_loop.epochs << ", patience "
+  s << "| epochs | " << r.history.size() << " run (cap "
+    << o.max_epochs + o.closed_loop.epochs + (o.dagger.enabled() ? o.dagger.iterations * o.dagger.epochs : 0) << ", patience "
     << o.patience << "), best " << r.best_epoch << " (exported) |\n";
   if (o.select_by_rollout && o.closed_loop.enabled() && o.latent_dims > 0) {
     s << "| model selection | after every epoch the net (the runtime's streaming inference) is rolled out on the "
@@ -291,6 +310,9 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   } else {
     s << "| model selection | the lowest validation loss |\n";
   }
+  if (o.select_speed_vs_replay)
+    s << "| speed bar | each run's middle-phase speed over its medoid replay's (the demonstration its code names, "
+         "tracked from its start), median 0.7-1.3 |\n";
   if (r.resumed_after == 0) {
     std::snprintf(buf, sizeof buf, "%.1f s (%.2f s per epoch)", r.seconds,
                   r.history.empty() ? 0.0 : r.seconds / static_cast<double>(r.history.size()));

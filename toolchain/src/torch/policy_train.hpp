@@ -48,6 +48,10 @@ struct TrainOptions {
   /// streaming inference, no human input) and scored (RolloutScore); the exported epoch is the
   /// one that makes the most movements, then the lowest DTW (betterEpoch). Patience counts on it too.
   bool select_by_rollout = false;
+  /// With rollout selection and run codes: the speed bar of a made movement on each run's speed
+  /// over its medoid replay's (what it plays, from its start) instead of over the validation
+  /// demonstrations' median (a recipe-only option, "select-speed": "replay").
+  bool select_speed_vs_replay = false;
   /// False: the net does not see the previous action a(t-1) (its input weights, the encoder's
   /// a-feature row and the decoder's action embedding, are held at zero), only q over the window.
   /// A policy fed its own last action can learn to copy it, and in closed loop its errors then
@@ -64,6 +68,10 @@ struct TrainOptions {
   /// Autonomous: after the max_epochs teacher-forced epochs (all of them: patience then counts
   /// in this phase only), closed-loop epochs from the kept weights (closed_loop.hpp).
   ClosedLoopOptions closed_loop;
+  /// Autonomous: DAgger rounds after the teacher-forced epochs, before any closed-loop epochs
+  /// (closed_loop.hpp); patience then counts from the first of them. One rank, not resumed past
+  /// the teacher-forced epochs.
+  DaggerOptions dagger;
 };
 
 /// How the rollouts of one movement went (train_select.hpp): medians over its validation
@@ -76,6 +84,8 @@ struct MovementScore {
   double range_excess_rad = std::numeric_limits<double>::quiet_NaN();  ///< worst excursion beyond the demonstrations' joint range
   /// With run codes: hand-path DTW to the demonstration whose code the run takes
   double code_fidelity_m = std::numeric_limits<double>::quiet_NaN();
+  /// TrainOptions::select_speed_vs_replay: per run its speed over its medoid replay's, the median
+  double speed_vs_replay = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct EpochStats {

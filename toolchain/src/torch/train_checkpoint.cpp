@@ -30,11 +30,17 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint, bool
   if (o.latent_dims > 0) k << "; latent " << o.latent_dims << " " << o.latent_kl;
   if (o.ema_decay > 0.0) k << "; ema " << o.ema_decay;
   if (o.select_by_rollout) k << "; select rollout";
+  if (o.select_speed_vs_replay) k << " speed vs replay";
   const ClosedLoopOptions& c = o.closed_loop;
   if (c.enabled() && !teacher_forced_only)
     k << "; closed loop after " << o.max_epochs << ": lr " << c.lr << " batch " << c.batch
       << " horizon " << c.horizon << " + " << c.horizon_growth << " starts " << c.starts << " perturb " << c.perturb_rad << " clip "
-      << c.grad_clip << " hand " << c.hand_weight << " limit " << c.limit_weight << " action " << c.action_weight;
+      << c.grad_clip << " hand " << c.hand_weight << " limit " << c.limit_weight << " action " << c.action_weight
+      << (c.whole_runs ? " whole runs" : "");
+  const DaggerOptions& d = o.dagger;
+  if (d.enabled() && !teacher_forced_only)
+    k << "; dagger after " << o.max_epochs << ": " << d.iterations << " x " << d.epochs << " starts " << d.starts << " lr "
+      << d.lr << " perturb " << d.perturb_rad;
   return k.str();
 }
 

@@ -1,6 +1,7 @@
 // trainPolicy: the training loop (docs/policy.md, docs/training.md).
 #include "nao/controller.hpp"
 #include "nao/tools/command.hpp"
+#include "nao/tools/splitmix.hpp"
 #include "policy_train.hpp"
 #include "run_latent.hpp"
 #include "train_checkpoint.hpp"
@@ -72,6 +73,9 @@ void check(const PolicyData& data, const TrainOptions& o) {
     throw UserError("a run latent (--run-latent) is for autonomous mode: in reference mode the human gives the variant");
   if (o.select_by_rollout && o.conditioning != Conditioning::kAutonomous)
     throw UserError("model selection on rollouts is for autonomous mode (a reference-mode run needs a human)");
+  if (o.select_speed_vs_replay && !(o.select_by_rollout && o.latent_dims > 0))
+    throw UserError("the speed against the replay is a bar of rollout selection with run codes (--select rollouts, "
+                    "--run-latent)");
   const ClosedLoopOptions& c = o.closed_loop;
   if (c.epochs < 0) throw UserError("closed-loop epochs must not be negative (0: none)");
   if (c.enabled()) {
@@ -84,6 +88,18 @@ void check(const PolicyData& data, const TrainOptions& o) {
     if (!(c.perturb_rad >= 0.0) || !(c.grad_clip >= 0.0) || !(c.hand_weight >= 0.0) || !(c.limit_weight >= 0.0) ||
         !(c.action_weight >= 0.0))
       throw UserError("closed-loop perturbation, clip and loss weights must not be negative");
+  }
+  const DaggerOptions& d = o.dagger;
+  if (d.iterations < 0) throw UserError("DAgger iterations must not be negative (0: none)");
+  if (d.enabled()) {
+    if (o.conditioning != Conditioning::kAutonomous)
+      throw UserError("DAgger is for autonomous mode (a reference-mode run follows a human)");
+    if (d.epochs < 1 || d.starts < 1) throw UserError("DAgger needs at least 1 epoch and 1 start per round");
+    if (!(d.lr >= 0.0) || !(d.perturb_rad >= 0.0)) throw UserError("DAgger's learning rate and perturbation must not be negative");
+    if (o.dist.world_size > 1) throw UserError("DAgger trains on one rank");
+    if (!hasRuntimeStep(o.arch))
+      throw UserError("DAgger rolls the net out through the runtime's step, compiled here for the paper and small "
+                      "dimensions only");
   }
   if (o.select_by_rollout && !hasRuntimeStep(o.arch))
     throw UserError("model selection on rollouts needs the runtime's step, compiled here for the paper and small "
@@ -239,6 +255,9 @@ void resumeFrom(const TrainOptions& o, const std::string& key, TrainState& s, Tr
   }
   s.first_epoch = static_cast<int>(res.history.size()) + 1;
   res.resumed_after = s.first_epoch - 1;
+  // DAgger's aggregated runs are not in a checkpoint: it resumes after the teacher-forced epochs only.
+  if (o.dagger.enabled() && s.first_epoch > o.max_epochs + 1)
+    throw UserError("checkpoint " + o.resume + " is past the teacher-forced epochs: a DAgger run resumes from those only");
   if (s.first_epoch > o.max_epochs + 1)  // the checkpoint's optimiser is the closed-loop one
     static_cast<torch::optim::AdamOptions&>(s.optimiser->param_groups()[0].options()).lr(o.closed_loop.lr);
 }
@@ -254,6 +273,10 @@ struct Loop {
   const SequenceTensors& train;
   const ClosedLoopData& cl;
   double period_s;
+  /// Per training sequence, the sequence whose run the latent reads (empty: each its own; DAgger's
+  /// runs read their code's demonstration).
+  const std::vector<std::size_t>& latent_source;
+  int closed_loop_after;  ///< epochs before the first closed-loop one (teacher-forced and DAgger)
 };
 
 // One optimiser step on the gradient of the global batch's summed loss / global_ticks (each rank
@@ -288,12 +311,53 @@ double samplesPerSecond(const std::vector<EpochStats>& history) {
 
 // The closed-loop phase starts from the kept teacher-forced weights with a fresh optimiser and a
 // fresh moving average.
-void startClosedLoop(const TrainOptions& o, TrainState& s) {
+void startPhase(double lr, TrainState& s) {
   keepBest(s);
   torch::NoGradGuard no_grad;
-  s.optimiser = std::make_unique<torch::optim::Adam>(s.params, torch::optim::AdamOptions(o.closed_loop.lr));
+  s.optimiser = std::make_unique<torch::optim::Adam>(s.params, torch::optim::AdamOptions(lr));
   for (std::size_t i = 0; i < s.ema.size(); ++i) s.ema[i] = s.params[i].detach().clone();
   s.ema_steps = 0;
+}
+
+void startClosedLoop(const TrainOptions& o, TrainState& s) { startPhase(o.closed_loop.lr, s); }
+
+// DAgger round `round`: the net's runs (its scored weights: the moving average where there is
+// one) from the round's starts with the codes the runtime gives them, labelled by the expert,
+// added to the training sequences; their latent reads their code's demonstration.
+void aggregateDagger(const Loop& L, TrainState& s, SequenceTensors& train, std::vector<std::size_t>& latent_source,
+                     RunCodeSource& codes, int round, std::ostream* progress) {
+  const Clock::time_point t0 = Clock::now();
+  if (latent_source.empty())
+    for (std::size_t i = 0; i < train.size(); ++i) latent_source.push_back(i);
+  L.net->eval();
+  s.swapAverage();
+  if (L.latent) updateRunCodes(codes, train, *L.latent);
+  const std::vector<LabelledRun> runs = daggerRuns(L.data, L.cl, L.sim, L.o.dagger, L.o.seed, round);
+  std::vector<PolicySequence> seqs = labelledNetRuns(L.data, runs, L.sim, L.net, codes.codes, L.o.execution);
+  s.swapAverage();
+  L.net->train();
+  for (std::size_t i = 0; i < seqs.size(); ++i) {
+    seqs[i].rollout = -round;  // not a clean rollout (0), whose codes are the run codes
+    const LabelledRun& r = runs[i];
+    latent_source.push_back(L.cl.code_seq[static_cast<std::size_t>(r.movement)][static_cast<std::size_t>(r.code)]);
+  }
+  const SequenceTensors add = toTensors(L.net, seqs);
+  for (std::size_t i = 0; i < add.size(); ++i) {
+    train.qn.push_back(add.qn[i]);
+    train.an.push_back(add.an[i]);
+    train.rn.push_back(add.rn[i]);
+    train.target.push_back(add.target[i]);
+    train.action.push_back(add.action[i]);
+    train.r.push_back(add.r[i]);
+    train.movement.push_back(add.movement[i]);
+  }
+  train.ticks += add.ticks;
+  if (progress) {
+    char line[200];
+    std::snprintf(line, sizeof line, "dagger round %d: %zu runs (%zu ticks) labelled in %.0f s; %zu training sequences",
+                  round, seqs.size(), tickCount(seqs), secondsSince(t0), train.size());
+    *progress << line << std::endl;
+  }
 }
 
 // An epoch's sums over its batches (all ranks' once summed).
@@ -338,38 +402,63 @@ struct LiveLine {
 EpochSums closedLoopEpoch(const Loop& L, TrainState& s, int epoch, LiveLine& live) {
   const TrainOptions& o = L.o;
   EpochSums sums;
-  const int k_cl = epoch - o.max_epochs;
+  const int k_cl = epoch - L.closed_loop_after;
   const std::vector<ClosedLoopRun> runs = closedLoopEpochRuns(L.data, L.cl, L.sim, L.period_s, o.closed_loop, o.seed, k_cl);
   const int horizon = closedLoopHorizon(o.closed_loop, k_cl);
-  const std::vector<std::size_t> order =
+  std::vector<std::size_t> order =
       shuffledIndices(runs.size(), o.seed * 0x9e3779b97f4a7c15ull + 0x5bd1e995ull * static_cast<std::uint64_t>(epoch));
   const auto n_runs = static_cast<std::int64_t>(runs.size());
   const std::int64_t B = o.closed_loop.batch;
   const std::int64_t n_batches = (n_runs + B - 1) / B;
+  // Whole runs: each run's own segment start; the batches take the runs in order of it (so a
+  // batch streams few ticks besides its segments), in a seeded order of batches.
+  std::vector<int> run_start;
+  std::vector<std::size_t> batch_order;
+  if (o.closed_loop.whole_runs) {
+    for (std::size_t i = 0; i < runs.size(); ++i)
+      run_start.push_back(closedLoopRunSegmentStart(
+          runs[i], horizon, splitMix64(o.seed ^ splitMix64(static_cast<std::uint64_t>(epoch) * 1000003ull + i))));
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return run_start[a] < run_start[b]; });
+    batch_order = shuffledIndices(static_cast<std::size_t>(n_batches),
+                                  o.seed * 0x9e3779b97f4a7c15ull + 0x27d4eb2full * static_cast<std::uint64_t>(epoch));
+  }
   const std::int64_t n_run = o.max_batches > 0 ? std::min<std::int64_t>(n_batches, o.max_batches) : n_batches;
   for (std::int64_t k = 0; k < n_run; ++k) {
-    const std::int64_t b = k * B, e = std::min<std::int64_t>(b + B, n_runs);
+    const std::int64_t kb = batch_order.empty() ? k : static_cast<std::int64_t>(batch_order[static_cast<std::size_t>(k)]);
+    const std::int64_t b = kb * B, e = std::min<std::int64_t>(b + B, n_runs);
     // The global batch's runs and where their segments start: every rank knows them.
     std::vector<const ClosedLoopRun*> batch;
-    for (std::int64_t i = b; i < e; ++i) batch.push_back(&runs[order[static_cast<std::size_t>(i)]]);
-    const int t0 = closedLoopSegmentStart(
-        batch, horizon, o.seed * 0x9e3779b97f4a7c15ull + static_cast<std::uint64_t>(epoch) * 1000003ull + static_cast<std::uint64_t>(k));
-    const auto segment = [&](const ClosedLoopRun* r) { return std::min(horizon, r->ticks - t0); };
+    std::vector<int> starts;
+    for (std::int64_t i = b; i < e; ++i) {
+      batch.push_back(&runs[order[static_cast<std::size_t>(i)]]);
+      if (!run_start.empty()) starts.push_back(run_start[order[static_cast<std::size_t>(i)]]);
+    }
+    const int t0 = run_start.empty() ? closedLoopSegmentStart(batch, horizon,
+                                                              o.seed * 0x9e3779b97f4a7c15ull +
+                                                                  static_cast<std::uint64_t>(epoch) * 1000003ull +
+                                                                  static_cast<std::uint64_t>(k))
+                                     : 0;
+    if (starts.empty()) starts.assign(batch.size(), t0);
+    const auto segment = [&](std::size_t i) { return std::min(horizon, batch[i]->ticks - starts[i]); };
     std::int64_t global_ticks = 0;
-    for (const ClosedLoopRun* r : batch) global_ticks += segment(r);
+    for (std::size_t i = 0; i < batch.size(); ++i) global_ticks += segment(i);
     const auto [lo, hi] = L.group ? shardRange(e - b, o.dist.world_size, o.dist.rank) : std::pair<std::int64_t, std::int64_t>{0, e - b};
     s.optimiser->zero_grad();
     if (hi > lo) {
       const std::vector<const ClosedLoopRun*> mine(batch.begin() + lo, batch.begin() + hi);
-      const ClosedLoopLoss l = closedLoopLoss(*L.net, L.latent ? L.latent.get() : nullptr, L.train, L.cl, L.sim,
-                                              L.period_s, mine, t0, horizon, o.closed_loop);
+      const std::vector<int> mine_starts(starts.begin() + lo, starts.begin() + hi);
+      const ClosedLoopLoss l = run_start.empty()
+                                   ? closedLoopLoss(*L.net, L.latent ? L.latent.get() : nullptr, L.train, L.cl, L.sim,
+                                                    L.period_s, mine, t0, horizon, o.closed_loop)
+                                   : closedLoopLoss(*L.net, L.latent ? L.latent.get() : nullptr, L.train, L.cl, L.sim,
+                                                    L.period_s, mine, mine_starts, horizon, o.closed_loop);
       (l.loss / static_cast<double>(global_ticks)).backward();
       sums.loss += l.loss.item<double>();
       sums.hand_sse += l.hand_sse_m2;
       for (std::size_t r = 0; r < mine.size(); ++r) {
         const auto kind = static_cast<std::size_t>(mine[r]->kind);
         sums.kind_sse[kind] += l.run_hand_sse_m2[r];
-        sums.kind_ticks[kind] += segment(mine[r]);
+        sums.kind_ticks[kind] += segment(static_cast<std::size_t>(lo) + r);
       }
     }
     optimiserStep(L, s, o.closed_loop.grad_clip);
@@ -415,7 +504,9 @@ EpochSums teacherForcedEpoch(const Loop& L, TrainState& s, int epoch, LiveLine& 
                                                         static_cast<std::uint64_t>(k)),
                          torch::kFloat32)
                 .slice(0, lo, hi);
-        const RunLatentImpl::Draw draw = L.latent->forward(p, eps);
+        std::vector<std::size_t> source;
+        for (std::size_t i : index) source.push_back(L.latent_source.empty() ? i : L.latent_source[i]);
+        const RunLatentImpl::Draw draw = L.latent->forward(source == index ? p : pad(train, source), eps);
         p.in.z = draw.z_embedded;
         kl = o.latent_kl * (draw.kl * p.mask.sum(1)).sum();
       }
@@ -434,10 +525,10 @@ EpochSums teacherForcedEpoch(const Loop& L, TrainState& s, int epoch, LiveLine& 
 // The epoch's line of progress, up to its tail (time left or why it stops).
 std::string epochLine(const EpochStats& st, const EpochStats& best_stats, int best_epoch, const PolicyData& data,
                       const TrainOptions& o, bool live, int last_epoch, double score_seconds) {
-  const bool closed_loop = st.epoch > o.max_epochs;
+  const bool closed_loop = std::isfinite(st.closed_loop_hand_rms_m);
   char line[320];
   std::string text;  // the per-movement scores have no length bound: kept out of the buffer
-  const std::string phase = closed_loop ? "closed loop " : "";
+  const std::string phase = closed_loop ? "closed loop " : st.epoch > o.max_epochs ? "dagger " : "";
   if (o.select_by_rollout) {
     std::string moves;
     for (std::size_t m = 0; m < st.rollouts.size(); ++m) {
@@ -524,18 +615,22 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   const double period_s = ControllerParams{}.period_s;
   // The codes a run takes at run time (model.bin's "run_codes"), scored with every epoch; the
   // closed-loop phase picks its rollouts' codes and targets from their starts and DTW tables.
+  // DAgger's runs take their codes and targets the same way.
+  const bool on_policy = o.closed_loop.enabled() || o.dagger.enabled();
   RunCodeSource codes;
-  if (latent || o.closed_loop.enabled()) codes = runCodeSource(data, x.train, sim.arm, o.arch.d_model);
+  if (latent || on_policy) codes = runCodeSource(data, x.train, sim.arm, o.arch.d_model);
   ClosedLoopData cl;
-  if (o.closed_loop.enabled())
-    cl = closedLoopData(data, codes, sim, period_s, ControllerParams{}.workspace_margin_rad);
+  if (on_policy) cl = closedLoopData(data, codes, sim, period_s, ControllerParams{}.workspace_margin_rad);
+  std::vector<std::size_t> latent_source;
   s.optimiser = std::make_unique<torch::optim::Adam>(s.params, torch::optim::AdamOptions(o.lr));
   if (o.ema_decay > 0.0)
     for (const torch::Tensor& p : s.params) s.ema.push_back(p.detach().clone());
   s.best_stats.rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
   s.best_stats.val_loss = std::numeric_limits<double>::infinity();
-  // Epochs max_epochs + 1 .. last_epoch are closed-loop ones.
-  const int last_epoch = o.max_epochs + o.closed_loop.epochs;
+  // Epochs max_epochs + 1 .. closed_loop_after are DAgger's, closed_loop_after + 1 .. last_epoch
+  // closed-loop ones.
+  const int closed_loop_after = o.max_epochs + (o.dagger.enabled() ? o.dagger.iterations * o.dagger.epochs : 0);
+  const int last_epoch = closed_loop_after + o.closed_loop.epochs;
   if (!o.resume.empty()) resumeFrom(o, key, s, res);
   if (group) {
     // Ranks that disagree would call different collectives: refuse before the first batch.
@@ -546,21 +641,27 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   SelectionReference ref;
   if (o.select_by_rollout) {
     ref = selectionReference(data, res.split.val, sim.arm, period_s, latent ? &codes.codes : nullptr);
+    if (o.select_speed_vs_replay) addReplaySpeeds(ref, data, res.split.val, sim, period_s, codes.codes);
     res.val_nn_dtw_m = ref.nn_dtw_m;
   }
   // Patience counts within the closed-loop phase when there is one (the teacher-forced epochs all run).
   const auto stopsAfter = [&](int epoch) {
     if (epoch >= last_epoch) return true;
-    if (!o.closed_loop.enabled()) return epoch - res.best_epoch >= o.patience;
+    if (!on_policy) return epoch - res.best_epoch >= o.patience;
     return epoch > o.max_epochs && epoch - std::max(res.best_epoch, o.max_epochs) >= o.patience;
   };
-  const Loop L{data, sim, o, group.get(), net, latent, train, cl, period_s};
+  const Loop L{data, sim, o, group.get(), net, latent, train, cl, period_s, latent_source, closed_loop_after};
 
   const bool done_before = !res.history.empty() && stopsAfter(res.history.back().epoch);
   for (int epoch = s.first_epoch; epoch <= last_epoch && !done_before; ++epoch) {
     const Clock::time_point t_epoch = Clock::now();
-    const bool closed_loop = epoch > o.max_epochs;
-    if (closed_loop && epoch == o.max_epochs + 1) startClosedLoop(o, s);
+    const bool closed_loop = epoch > closed_loop_after;
+    if (closed_loop && epoch == closed_loop_after + 1) startClosedLoop(o, s);
+    const int round_epoch = epoch - o.max_epochs - 1;  // DAgger: epochs since its first
+    if (!closed_loop && round_epoch >= 0 && round_epoch % o.dagger.epochs == 0) {
+      if (round_epoch == 0) startPhase(o.dagger.lr > 0.0 ? o.dagger.lr : o.lr, s);
+      aggregateDagger(L, s, train, latent_source, codes, round_epoch / o.dagger.epochs + 1, progress);
+    }
     net->train();
     LiveLine live_line{live ? progress : nullptr, epoch, last_epoch, t_epoch, Clock::now()};
     EpochSums sums = closed_loop ? closedLoopEpoch(L, s, epoch, live_line) : teacherForcedEpoch(L, s, epoch, live_line);
@@ -591,7 +692,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     // the closed loop starts from (by the teacher-forced rule), whatever a checkpoint's history
     // recorded. A closed-loop model with run codes is trained to play its codes: kept by how
     // faithfully it does.
-    const bool first_closed_loop = epoch == o.max_epochs + 1 && o.closed_loop.enabled();
+    const bool first_closed_loop = epoch == o.max_epochs + 1 && on_policy;
     const bool by_fidelity = epoch > o.max_epochs && latent;
     const bool better = s.best.empty() || first_closed_loop ||
                         (o.select_by_rollout ? betterEpoch(st, s.best_stats, by_fidelity) : st.val_loss < s.best_stats.val_loss);
@@ -609,7 +710,7 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     res.history.push_back(st);
     const bool stop = stopsAfter(epoch);
     if (!o.checkpoint.empty() && o.dist.rank == 0)
-      writeCheckpoint(o.checkpoint, closed_loop ? key : checkpointKey(o, res.fingerprint, true), s.params, *s.optimiser,
+      writeCheckpoint(o.checkpoint, epoch > o.max_epochs ? key : checkpointKey(o, res.fingerprint, true), s.params, *s.optimiser,
                       s.best, res.best_epoch, res.history, s.ema, s.ema_steps);
     if (progress)
       *progress << epochLine(st, s.best_stats, res.best_epoch, data, o, live, last_epoch, score_seconds)

@@ -4,6 +4,7 @@
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
+#include "nao/tools/policy_execution.hpp"
 #include "nao/tools/toolchain_dims.hpp"
 #include "policy_train.hpp"
 #include "rt_metrics.hpp"
@@ -11,6 +12,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 namespace nao::tools {
 namespace {
@@ -48,7 +51,61 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
   return rolloutPolicy(data, demos, sim, policy, workspace.empty() ? nullptr : &workspace);
 }
 
+template <class Dims>
+std::vector<PolicySequence> labelledWith(const PolicyData& data, const std::vector<LabelledRun>& runs,
+                                         const SimModel& sim, const PolicyNet& net,
+                                         const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e) {
+  const std::vector<std::vector<float>> floats = manifestFloats(net);
+  std::vector<const float*> pointers;
+  for (const std::vector<float>& f : floats) pointers.push_back(f.data());
+  const PolicyWeights<Dims> weights =
+      bindPolicyWeights<Dims>(pointers.data(), pointers.size(), net->arch(), net->conditioning());
+  const auto ws = makePolicyWorkspace<Dims>();
+  std::vector<JointEnvelope> workspace;
+  if (ControllerParams{}.workspace_margin_rad >= 0.0)
+    workspace = workspaceEnvelopes(weights, ControllerParams{}.workspace_margin_rad, demonstratedWorkspace(data));
+  SimData sim_data(sim, JointVector::Zero());
+  std::vector<PolicySequence> out;
+  for (const LabelledRun& run : runs) {
+    const ModelRunCodes& c = codes.at(static_cast<std::size_t>(run.movement));
+    if (run.code < 0 || static_cast<std::size_t>(run.code) >= c.size())
+      throw std::invalid_argument("labelled runs: a code index out of range");
+    const float* code = c.code.data() + static_cast<std::size_t>(run.code) * static_cast<std::size_t>(c.d);
+    const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
+                                     const JointVector& r) -> JointVector {
+      if (t == 0) {
+        resetPolicyStream(*ws);
+        setPolicyRunCode(*ws, code);
+      }
+      PolicyInput in;
+      in.q = q.cast<float>();
+      in.a_prev = a_prev.cast<float>();
+      in.r = r.cast<float>();
+      in.movement = movement;
+      in.step = t;
+      return stepPolicy(weights, *ws, in).template cast<double>();
+    };
+    PolicySequence s = executeLabelled(sim, sim_data, data.demos.at(static_cast<std::size_t>(run.demo)).f, run.start,
+                                       run.ticks, run.movement, policy,
+                                       workspace.empty() ? nullptr : &workspace[static_cast<std::size_t>(run.movement)], e);
+    s.demo = run.demo;
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
 }  // namespace
+
+std::vector<PolicySequence> labelledNetRuns(const PolicyData& data, const std::vector<LabelledRun>& runs,
+                                            const SimModel& sim, const PolicyNet& net,
+                                            const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e) {
+  if (net->conditioning() != Conditioning::kAutonomous) throw UserError("labelled runs are for an autonomous model");
+  if (net->arch().chunk > kPolicyMaxChunk)
+    throw UserError("rollouts through the runtime's step: the chunk exceeds what the runtime holds");
+  return withToolchainDims(net->arch(), "rollouts through the runtime's step", [&](auto dims) {
+    return labelledWith<typename decltype(dims)::type>(data, runs, sim, net, codes, e);
+  });
+}
 
 bool hasRuntimeStep(const PolicyArch& arch) {
   return arch.chunk <= kPolicyMaxChunk && hasToolchainDims(arch);
@@ -108,11 +165,30 @@ SelectionReference selectionReference(const PolicyData& data, const std::vector<
   return ref;
 }
 
+void addReplaySpeeds(SelectionReference& ref, const PolicyData& data, const std::vector<int>& val, const SimModel& sim,
+                     double period_s, const std::vector<ModelRunCodes>& codes) {
+  ref.replay_speed.assign(data.demos.size(), kNaN);
+  for (int d : val) {
+    const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
+    const ModelRunCodes& c = codes.at(static_cast<std::size_t>(demo.movement));
+    // The run starts where its demonstrator did and lasts its f's ticks (rolloutPolicy).
+    const JointVector start = clampToLimits(sim.arm, demo.start);
+    const int code = runCodeIndex(c, start);
+    if (code < 0) continue;
+    const std::string& name = c.names[static_cast<std::size_t>(code)];
+    const auto it = std::find_if(data.demos.begin(), data.demos.end(), [&](const PolicyDemo& x) { return x.name == name; });
+    if (it == data.demos.end()) throw std::logic_error("selection: no demonstration '" + name + "' for its run code");
+    const std::vector<JointVector> q =
+        trackDemo(sim, period_s, servoStepGain(sim.params), it->f, start, static_cast<int>(demo.f.size()) - 1);
+    ref.replay_speed[static_cast<std::size_t>(d)] = middleRmsSpeed(handPath(sim.arm, q), period_s);
+  }
+}
+
 void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref, const ArmModel& arm, double period_s,
                EpochStats& st, const std::vector<ModelRunCodes>* codes) {
   const std::size_t nm = ref.demos.size();
   const bool fidelity = codes != nullptr && ref.code_paths.size() == nm;
-  std::vector<std::vector<double>> dtw(nm), speed(nm), loops(nm), played(nm);
+  std::vector<std::vector<double>> dtw(nm), speed(nm), loops(nm), played(nm), vs_replay(nm);
   std::vector<double> excess(nm, 0.0);
   std::vector<bool> broken(nm, false);
   for (const PolicyRun& run : runs) {
@@ -126,6 +202,7 @@ void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref
     const HandPath path = handPath(arm, run.q);
     dtw[m].push_back(nearestDemo(path, ref.demos[m]).dtw_m);
     speed[m].push_back(middleRmsSpeed(path, period_s));
+    if (!ref.replay_speed.empty()) vs_replay[m].push_back(speed[m].back() / ref.replay_speed.at(static_cast<std::size_t>(run.demo)));
     loops[m].push_back(loopCount(path, ref.plane[m]));
     for (const JointVector& q : run.q)
       excess[m] = std::max({excess[m], (q - ref.q_max[m]).maxCoeff(), (ref.q_min[m] - q).maxCoeff()});
@@ -146,10 +223,13 @@ void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref
     s.loops_demo = ref.demo_loops[m];
     s.range_excess_rad = broken[m] ? kNaN : excess[m];
     s.code_fidelity_m = broken[m] || played[m].empty() ? kNaN : median(played[m]);
+    s.speed_vs_replay = broken[m] || vs_replay[m].empty() ? kNaN : median(vs_replay[m]);
+    // The speed a run is held to: the held-out demonstrations', or with replay speeds what it plays.
+    const double pace = ref.replay_speed.empty() ? s.speed_ratio : s.speed_vs_replay;
     // Speed and loops alone are met by a run that is nowhere near the demonstrations (an early
     // epoch's wrist at 4x their nearest-neighbour DTW): it must also come within twice that
     // (unknown with a single validation demonstration: then not asked).
-    const bool made = s.speed_ratio >= 0.7 && s.speed_ratio <= 1.3 && std::abs(s.loops_run - s.loops_demo) <= 1.0 &&
+    const bool made = pace >= 0.7 && pace <= 1.3 && std::abs(s.loops_run - s.loops_demo) <= 1.0 &&
                       s.range_excess_rad <= 0.1 && (!std::isfinite(ref.nn_dtw_m[m]) || s.dtw_m < 2.0 * ref.nn_dtw_m[m]);
     st.makes_movement = st.makes_movement && made;
     st.movements_made += made ? 1 : 0;

@@ -30,6 +30,26 @@ bool hasRuntimeStep(const PolicyArch& arch);
 std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
                                const PolicyNet& net, const std::vector<ModelRunCodes>* codes = nullptr);
 
+/// A run of labelledNetRuns: of `movement` from `start` for `ticks` ticks with the run code of
+/// index `code` among the movement's run codes, labelled toward data.demos[demo].f.
+struct LabelledRun {
+  int movement = 0;
+  int code = -1;
+  int demo = -1;
+  int ticks = 0;
+  JointVector start = JointVector::Zero();
+  int source_code = -1;  ///< the code of the training demonstration its start was drawn around (-1: none)
+};
+
+/// `net`'s runs (the runtime's stepPolicy, as netRuns binds it; an autonomous model keeps to its
+/// workspace envelope) on the simulated ODE arm, each with the code it is given, every tick
+/// labelled by the executed demonstrations' expert toward its demonstration (executeLabelled):
+/// the on-policy states and their labels (DAgger). In list order; demo is set, rollout left 0
+/// for the caller. Throws UserError unless hasRuntimeStep(net->arch()) and autonomous.
+std::vector<PolicySequence> labelledNetRuns(const PolicyData& data, const std::vector<LabelledRun>& runs,
+                                            const SimModel& sim, const PolicyNet& net,
+                                            const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e);
+
 /// What runs of each movement are measured against: its validation demonstrations' hand paths,
 /// the plane loops are counted in, their middle-phase speeds and loops, and the joint range of
 /// all the movement's demonstrations in the data.
@@ -41,16 +61,26 @@ struct SelectionReference {
   std::vector<double> nn_dtw_m;                ///< per movement: the demonstrations' own nearest-neighbour DTW
   /// With run codes: per movement, the hand path of each code's demonstration (the run codes' order).
   std::vector<std::vector<HandPath>> code_paths;
+  /// Empty, or per demonstration of the data (NaN for a training one): the middle-phase speed of
+  /// the medoid replay from its start (its code's demonstration tracked by the gain law for as
+  /// many ticks as its run), which a run's speed is then measured against (addReplaySpeeds).
+  std::vector<double> replay_speed;
 };
 /// `codes` (nullptr: none): the run codes the runs take, whose demonstrations' paths a run's
 /// code fidelity is measured against.
 SelectionReference selectionReference(const PolicyData& data, const std::vector<int>& val, const ArmModel& arm,
                                       double period_s, const std::vector<ModelRunCodes>* codes = nullptr);
 
+/// Fills ref.replay_speed for the validation demonstrations `val` of `data` (`codes` per movement:
+/// the code a run from a demonstration's start takes, runCodeIndex): each run's speed is then
+/// measured against what it plays (speed_vs_replay) instead of the validation demonstrations'.
+void addReplaySpeeds(SelectionReference& ref, const PolicyData& data, const std::vector<int>& val, const SimModel& sim,
+                     double period_s, const std::vector<ModelRunCodes>& codes);
+
 /// Scores `runs` into `st` (rollout_dtw_m, makes_movement, rollouts): per movement the medians of
 /// the DTW to the nearest validation demonstration, of the speed ratio and of the loops, and the
 /// worst excursion beyond the joint range; a movement is made when its runs meet the bars
-/// (EpochStats::makes_movement). With `codes` (and ref.code_paths) also each run's code
+/// (EpochStats::makes_movement; with ref.replay_speed, the speed bar on speed_vs_replay). With `codes` (and ref.code_paths) also each run's code
 /// fidelity: the DTW to the demonstration whose code it takes (runCodeIndex of its start),
 /// their median per movement and its mean over movements. A non-finite run scores NaN (never kept).
 void scoreRuns(const std::vector<PolicyRun>& runs, const SelectionReference& ref, const ArmModel& arm, double period_s,
