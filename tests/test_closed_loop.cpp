@@ -62,7 +62,7 @@ static_assert(kNumControllerFaults == 16 && kFaultHumanBridged == 1u << kBridged
 }  // namespace
 
 TEST_CASE("the default model imitates held-out demonstrations inside the limits within 3 mm RMS, better than the blend law and the servo-inversion gain law under the same servos") {
-  // Baseline in the same run (STYLE 16): the key-pose blend law the policy's labels follow,
+  // Baseline in the same run: the key-pose blend law the policy's labels follow,
   // driving the same servos. What it misses is the servo lag no policy of these labels removes.
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   for (const char* movement : {"whole_arm", "elbow", "wrist"}) {

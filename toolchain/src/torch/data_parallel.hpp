@@ -1,5 +1,5 @@
-// Data-parallel training over libtorch's c10d process groups, Gloo backend (DESIGN §13,
-// docs/training.md). Every rank holds the whole model; gradients and validation sums are
+// Data-parallel training over libtorch's c10d process groups, Gloo backend
+// (docs/training.md). Every rank holds the whole model; gradients and validation sums are
 // summed by Gloo all-reduce. No home-made exchange: this file only wires c10d's stores and
 // ProcessGroupGloo to the training loop. Offline only (libtorch).
 #pragma once

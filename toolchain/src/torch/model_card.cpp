@@ -332,7 +332,7 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
   s << "\n";
 
   s << "## Data\n\n";
-  s << "- retargeting (the clustered reference q_r, DESIGN section 5): "
+  s << "- retargeting (the clustered reference q_r, docs/retargeting.md): "
     << (data.retarget_json.empty() ? std::string("not recorded by the data set") : data.retarget_json) << "\n";
   s << "- fingerprint " << hex64(r.fingerprint) << ", movements";
   for (std::size_t m = 0; m < data.movement_names.size(); ++m) s << (m ? ", " : " ") << m << " = " << data.movement_names[m];

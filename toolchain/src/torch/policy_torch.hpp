@@ -6,7 +6,7 @@
 // centroids are buffers "norm.*" and "centroids". manifestTensors() lists them in manifest
 // order; that list is what model.bin stores.
 //
-// Sequences (DESIGN §7): a batch holds B rollouts of T ticks from tick 0, J joints each; the
+// Sequences: a batch holds B rollouts of T ticks from tick 0, J joints each; the
 // encoder runs over the T·J tokens (τ, j) (index τ·J + j) with the sliding-window causal mask
 // and age bias of the runtime (nao/policy.hpp), each token computed once per sequence.
 //
