@@ -29,6 +29,7 @@
 #
 # Usage: bench/soak.sh [--minutes N (1-60, default 60)] [--build DIR (default build)]
 #                      [--out FILE (default bench/results/soak.txt)] [--keep DIR (copy the run's files)]
+#        bench/soak.sh --report DIR [--out FILE]   (the report again from a --keep folder)
 # Environment: NAO_TOOLCHAIN (default BUILD/bin/nao_toolchain) for synth and replay.
 set -uo pipefail
 
@@ -37,6 +38,7 @@ minutes=60
 build="$root/build"
 out="$root/bench/results/soak.txt"
 keep=""
+report_dir=""
 die() { echo "soak.sh: $2" >&2; exit "$1"; }
 while (($#)); do
   case "$1" in
@@ -44,12 +46,351 @@ while (($#)); do
     --build) build="${2:-}"; shift 2 || die 2 "--build needs a value" ;;
     --out) out="${2:-}"; shift 2 || die 2 "--out needs a value" ;;
     --keep) keep="${2:-}"; shift 2 || die 2 "--keep needs a value" ;;
+    --report) report_dir="${2:-}"; shift 2 || die 2 "--report needs a value" ;;
     -h | --help) sed -n '2,/^set -uo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) die 2 "unknown argument '$1' (see --help)" ;;
   esac
 done
 [[ "$minutes" =~ ^[0-9]+$ ]] && ((minutes >= 1 && minutes <= 60)) ||
   die 2 "--minutes takes a whole number from 1 to 60 (nao_rt runs at most 36,000 ticks)"
+# The report from a run's files (the temporary folder, or a --keep copy): DIR OUT.
+report() {
+  /usr/bin/python3 - "$1" "$2" <<'EOF'
+import collections, csv, json, os, sys
+
+tmp, out = sys.argv[1], sys.argv[2]
+P = collections.defaultdict(lambda: "?", (l.rstrip("\n").split("=", 1) for l in open(os.path.join(tmp, "params.txt")) if "=" in l))
+lines, acc = [], []
+def say(s=""):
+    lines.append(s)
+def accept(ok, what):
+    acc.append((bool(ok), what))
+
+def load(path):
+    try:
+        with open(os.path.join(tmp, path)) as f:
+            return json.load(f)
+    except Exception as e:  # a missing or cut summary is itself a finding
+        return {"_error": str(e)}
+
+s = load("run/summary.json")
+sim = load("sim.json")
+minutes = int(P["minutes"])
+say(f"# bench/soak.sh --minutes {minutes} (repository root, release build): the whole stack on LoLA, live cameras and the shared-memory attention ring")
+say(f"date: {P['date_before']} to {P['date_after']}; host: {P['host']}; commit {P['commit']}")
+say(f"binaries (copied at the start): {P['binaries']}")
+say(f"load average before: {P['load_before']}")
+say(f"load average after:  {P['load_after']}")
+say("commands:")
+for k in ("cmd_synth", "cmd_sim", "cmd_rt", "cmd_replay", "cmd_tail"):
+    say("  " + P[k])
+say(f"faults: {P['n_faults']}, {P['schedule']}, after nao_rt connected to LoLA; kinds in turn: packet gap, garbage "
+    "packet, malformed packets, camera folder gone")
+say(f"scheduling: nao_rt {s.get('realtime_scheduling')} (I/O thread {(s.get('lola') or {}).get('io_thread_scheduling')}); "
+    f"nao_lola_sim {P['sim_scheduling']}; replayers and nao_attn_tail SCHED_OTHER")
+say()
+
+# --- the run
+ticks = s.get("ticks", 0) or 0
+lola = s.get("lola") or {}
+cam = s.get("camera") or {}
+dur = s.get("duration_s") or ticks * 0.1
+say("## The run")
+say(f"ticks {ticks} ({dur / 60:.1f} min of LoLA time; loop wall {s.get('wall_s', 0) / 60:.1f} min), stop: {lola.get('stop')}, "
+    f"nao_rt exit {P['rt_rc']}; the recording ({P['n_frames']} frames a camera) replayed {P['replay_loops']} times")
+tu = s.get("tick_us") or {}
+say(f"tick_us p50 {tu.get('p50', 0):.0f}  p99 {tu.get('p99', 0):.0f}  max {tu.get('max', 0):.0f}; slow_ticks {s.get('slow_ticks')}")
+rtt = lola.get("round_trip_us") or {}
+say(f"LoLA: cycles {lola.get('cycles')}, late answers {lola.get('late')} ({lola.get('late_descheduled')} waiting for a CPU), "
+    f"round trip on nao_rt's side p50 {rtt.get('p50', 0):.0f} p99 {rtt.get('p99', 0):.0f} max {rtt.get('max', 0):.0f} us; "
+    f"sim: {sim.get('sent')} packets sent, {sim.get('answered')} answers (its answered_in_cycle and round trip pair each answer "
+    f"with the oldest unanswered packet, so they mean nothing after the first packet nao_rt rightly leaves unanswered)")
+lat = cam.get("latency_ms") or {}
+say(f"camera: frame file -> tick p50 {lat.get('p50', 0):.1f} p99 {lat.get('p99', 0):.1f} max {lat.get('max', 0):.1f} ms; "
+    + ", ".join(f"{k} {v}" for k, v in cam.items() if k not in ("latency_ms", "human_scale_m", "reader_allocations")))
+say("fault ticks: " + (", ".join(f"{k} {v}" for k, v in (s.get("faults") or {}).items() if v) or "none"))
+say()
+
+# --- ticks.csv and the attention stream
+fault = []
+try:
+    with open(os.path.join(tmp, "run", "ticks.csv")) as f:
+        r = csv.reader(f)
+        hdr = next(r)
+        ti, fi = hdr.index("tick"), hdr.index("fault")
+        for row in r:
+            fault.append(int(float(row[fi])))
+except Exception as e:
+    say(f"ticks.csv: unreadable ({e})")
+n = len(fault)
+
+attn_ticks, attn_fault, bad = [], {}, 0
+with open(os.path.join(tmp, "attn.txt")) as f:
+    for line in f:
+        parts = line.split()
+        if not parts or not parts[0].isdigit():
+            continue
+        attn_ticks.append(int(parts[0]))
+        attn_fault[int(parts[0])] = int(parts[1])
+        if "BAD-CHECKSUM" in line:
+            bad += 1
+try:
+    attn_err = open(os.path.join(tmp, "attn.err")).read()
+except OSError:
+    attn_err = "(attn.err missing)"
+skipped = sum(1 for l in attn_err.splitlines() if "skipped" in l)
+closed = "closed the ring" in attn_err
+in_order = attn_ticks == list(range(len(attn_ticks)))
+same_bits = sum(1 for t in range(min(n, len(attn_ticks))) if attn_fault.get(t) != fault[t])
+att = s.get("attention") or {}
+
+# --- faults: injected, counted, recovered
+HUMAN = 1 | 2 | 16384
+BITS = {"drop": 512, "garbage": 1024, "bad_length": 1024, "camera": HUMAN}
+events = [l.rstrip("\n").split("\t") for l in open(os.path.join(tmp, "events.tsv")) if l.strip()]
+injected = [e for e in events if e[1] in BITS]
+
+def episodes(mask):
+    eps, t = [], 0
+    while t < n:
+        if fault[t] & mask:
+            a = t
+            while t < n and fault[t] & mask:
+                t += 1
+            eps.append((a, t))
+        else:
+            t += 1
+    return eps
+
+eps = {m: episodes(m) for m in set(BITS.values())}
+used = {m: set() for m in eps}
+say("## Faults and recovery")
+say("Recovery: ticks from the first tick with the fault's bits to the first tick without them (ticks.csv; the")
+say("attention stream carries the same bits).")
+say("A LoLA fault is matched with the episode of its bits nearest the tick its cycle falls in (safe start ~75 cycles,")
+say("then 100/12 cycles a tick, less the cycles lost to earlier faults); a camera fault with the first after the move.")
+say(f"{'t [s]':>7}  {'fault':<11} {'expected tick':>14} {'bits from':>9} {'recovery [ticks]':>16}  detail")
+SAFE_START_CYCLES = 75
+recoveries = {k: [] for k in BITS}
+unrecovered = 0
+lost_cycles = 0  # sensor cycles that were no packet nao_rt counts: dropped or malformed
+expected = {}
+for e in injected:
+    t_ms, kind, detail, tick = int(e[0]), e[1], e[2], int(e[3])
+    m = BITS[kind]
+    if kind == "camera":
+        lo, hi, want = tick - 2, tick + 40, tick
+    else:
+        cycle = int(detail.split()[1].split("-")[0].rstrip(":"))
+        want = int((cycle - SAFE_START_CYCLES - lost_cycles) * 12 / 100)
+        lo, hi = want - 12, want + 12
+        lost_cycles += {"drop": int(detail.split(": ")[1].split()[0]) if kind == "drop" else 0,
+                        "garbage": 1, "bad_length": 3}[kind]
+    expected[id(e)] = (lo, hi)
+    cands = [(abs(a - want), i) for i, (a, b) in enumerate(eps[m]) if i not in used[m] and lo <= a <= hi]
+    hit = min(cands)[1] if cands else None
+    if hit is None:
+        unrecovered += 1
+        say(f"{t_ms / 1000:7.1f}  {kind:<11} {want:>14} {'-':>9} {'not seen':>16}  {detail}")
+        continue
+    used[m].add(hit)
+    a, b = eps[m][hit]
+    done = b < n
+    if not done:
+        unrecovered += 1
+    rec_t = b - a
+    recoveries[kind].append(rec_t)
+    other = 0
+    for t in range(a, b):
+        other |= fault[t]
+    say(f"{t_ms / 1000:7.1f}  {kind:<11} {want:>14} {a:>9} {rec_t if done else 'never':>16}  {detail}"
+        + (f"; bits seen {other}" if other != m else ""))
+# Three malformed packets in a row are also 48 ms without a good packet: a packet gap, part of the fault.
+for e in injected:
+    if e[1] != "bad_length":
+        continue
+    lo, hi = expected[id(e)]
+    for i, (a, b) in enumerate(eps[512]):
+        if i not in used[512] and lo <= a <= hi:
+            used[512].add(i)
+            break
+spont = {m: [eps[m][i] for i in range(len(eps[m])) if i not in used[m]] for m in eps}
+# Between two loops each replayer reads its frames before writing again: a short pause of the feed.
+loop_ticks = [int(e[3]) for e in events if e[1] == "loop"]
+at_loop = [ab for ab in spont[HUMAN] if any(t - 3 <= ab[0] <= t + 10 for t in loop_ticks)]
+spont[HUMAN] = [ab for ab in spont[HUMAN] if ab not in at_loop]
+for kind, r in recoveries.items():
+    if r:
+        say(f"  {kind}: recovery {min(r)}-{max(r)} ticks (mean {sum(r) / len(r):.1f}) over {len(r)} faults")
+names = {512: "robot_packet_gap", 1024: "robot_malformed_packet", HUMAN: "no_human/human_timeout/human_bridged"}
+say(f"  episodes of {names[HUMAN]} at a replay loop's start (the replayers reload, the feed pauses): {len(at_loop)} of "
+    f"{len(loop_ticks)} loop starts, {sum(b - a for a, b in at_loop)} ticks in all")
+for m, lst in spont.items():
+    say(f"  episodes of {names[m]} with no fault injected near them: {len(lst)}"
+        + (f" (ticks {', '.join(f'{a}+{b - a}' for a, b in lst[:12])}{' ...' if len(lst) > 12 else ''})" if lst else ""))
+say()
+nk = {k: sum(1 for e in injected if e[1] == k) for k in BITS}
+drop_cycles = sum(int(e[2].split(": ")[1].split()[0]) for e in injected if e[1] == "drop")
+say("## Injected against counted")
+say(f"packet gaps:      {nk['drop']} injected ({drop_cycles} packets not sent; sim dropped {sim.get('dropped')}) + "
+    f"{nk['bad_length']} from the bad-length faults (3 skipped packets: 48 ms without a good one) -> "
+    f"lola.gaps {lola.get('gaps')}, robot_packet_gap on {(s.get('faults') or {}).get('robot_packet_gap')} ticks")
+bad_packets = 3 * nk["bad_length"]
+say(f"malformed:        {nk['garbage']} garbage + {bad_packets} bad-length packets injected (sim: garbage {sim.get('garbage')}, "
+    f"bad_length {sim.get('bad_length')}) -> lola.malformed {lola.get('malformed')}, robot_malformed_packet on "
+    f"{(s.get('faults') or {}).get('robot_malformed_packet')} ticks")
+say(f"camera folder:    {nk['camera']} moves away and back -> folder_gone {cam.get('folder_gone')}, folder_back "
+    f"{cam.get('folder_back')}; the writer restarted {P['replay_restarts']} times")
+say(f"other robot faults: tracking_error {(s.get('faults') or {}).get('tracking_error')}, joint_hot "
+    f"{(s.get('faults') or {}).get('joint_hot')}, robot_link_lost {(s.get('faults') or {}).get('robot_link_lost')}")
+# Counted: the sim did what was asked, nao_rt's counters hold at least the injected faults (more when
+# faults nobody injected came too, listed above) and each injected fault put its bits on a tick.
+counted = (nk["drop"] > 0 and (lola.get("gaps") or 0) >= nk["drop"] + nk["bad_length"] and sim.get("dropped") == drop_cycles
+           and nk["garbage"] + nk["bad_length"] > 0 and (lola.get("malformed") or 0) >= nk["garbage"] + bad_packets
+           and sim.get("garbage") == nk["garbage"] and sim.get("bad_length") == bad_packets
+           and cam.get("folder_gone") == nk["camera"] and cam.get("folder_back") == nk["camera"] and unrecovered == 0)
+extra_gaps = (lola.get("gaps") or 0) - nk["drop"] - nk["bad_length"]
+say()
+
+# --- the attention reader
+say("## Attention reader (nao_attn_tail --from-oldest on the shared-memory ring)")
+say(f"records pushed {att.get('records_written')}, printed {len(attn_ticks)} (ticks 0..{attn_ticks[-1] if attn_ticks else '-'}, "
+    f"consecutive: {in_order}), bad checksums {bad}, skipped-record reports {skipped}, ticks whose fault bits differ from "
+    f"ticks.csv {same_bits}; the reader saw the ring closed: {closed}, exit {P['tail_rc']}; shared memory left: "
+    f"{'yes' if P['shm_left'] == '1' else 'no'}")
+attn_ok = (att.get("records_written") == ticks == len(attn_ticks) == n and in_order and bad == 0 and skipped == 0
+           and same_bits == 0 and closed and P["tail_rc"] == "0" and P["shm_left"] == "0")
+say()
+
+# --- RSS and fds
+samp = [l.split("\t") for l in open(os.path.join(tmp, "samples.tsv")).read().splitlines()[1:] if l]
+samp = [(int(a) / 1000, int(b), int(c), int(d), int(e), float(f)) for a, b, c, d, e, f in samp]
+say("## nao_rt's memory and file descriptors (/proc/PID/status VmRSS, /proc/PID/fd, every 5 s)")
+warm = min(60.0, 0.1 * minutes * 60)
+steady = [x for x in samp if x[0] >= warm]
+rss_ok = fd_ok = False
+if len(steady) >= 4:
+    q = max(1, len(steady) // 4)
+    first_q, last_q = steady[:q], steady[-q:]
+    r0, r1 = max(x[1] for x in first_q), max(x[1] for x in last_q)
+    xs = [x[0] for x in steady]
+    ys = [x[1] for x in steady]
+    mx, my = sum(xs) / len(xs), sum(ys) / len(ys)
+    sxx = sum((x - mx) ** 2 for x in xs)
+    slope = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx * 3600 if sxx else 0.0
+    fds = sorted(set(x[3] for x in steady))
+    thr = sorted(set(x[4] for x in steady if x[4] > 0))  # 0: a read of /proc cut short
+    # The reader thread opens each frame file to read it: a sample may catch one more fd. Growth is
+    # a count above the usual one in two samples in a row, or at the end.
+    base = max(set(x[3] for x in steady), key=lambda v: sum(1 for x in steady if x[3] == v))
+    above = [x for x in steady if x[3] > base]
+    fd_grew = steady[-1][3] > base or any(a[3] > base and b[3] > base for a, b in zip(steady, steady[1:]))
+    say(f"{len(samp)} samples; from {warm:.0f} s on ({len(steady)}): VmRSS first quarter max {r0} kB, last quarter max "
+        f"{r1} kB, min {min(ys)}, max {max(ys)} kB, least-squares slope {slope:+.0f} kB/h; VmHWM at the end {samp[-1][2]} kB")
+    say(f"open fds: {base} in {len(steady) - len(above)} of {len(steady)} samples"
+        + (f", {len(above)} single samples with {', '.join(str(x[3]) for x in above[:5])} (a frame file open at that instant)" if above else "")
+        + f" (first {steady[0][3]}, last {steady[-1][3]}); threads {', '.join(map(str, thr))}; "
+        f"load1 over the run {min(x[5] for x in samp):.2f}-{max(x[5] for x in samp):.2f}")
+    say("VmRSS by minute [kB]: " + " ".join(str(x[1]) for x in samp if int(x[0]) % 60 < 5))
+    steps = []
+    for prev, cur in zip(samp, samp[1:]):
+        if cur[1] != prev[1]:
+            near = [e for e in events if e[1] not in ("loop", "camera_back", "camera_writer")
+                    and prev[0] - 5 <= int(e[0]) / 1000 <= cur[0]]
+            steps.append(f"{cur[0]:.0f} s {cur[1] - prev[1]:+d} kB" + (f" ({near[0][1]} at {int(near[0][0]) / 1000:.0f} s)" if near else ""))
+    say("VmRSS changes: " + ("; ".join(steps) if steps else "none"))
+    rss_ok = r1 <= r0
+    fd_ok = not fd_grew
+else:
+    say(f"too few samples ({len(samp)})")
+say()
+
+# --- run directory
+run_bytes = int(P["run_bytes"])
+say("## Run directory")
+files = sorted(os.listdir(os.path.join(tmp, "run")))
+sizes = ", ".join(f"{f} {os.path.getsize(os.path.join(tmp, 'run', f)) / 1e6:.2f} MB" for f in files)
+grow = os.path.getsize(os.path.join(tmp, "run", "ticks.csv"))
+say(f"{run_bytes / 1e6:.1f} MB after {dur / 60:.1f} min ({sizes}); ticks.csv grows with the run, attention.bin is the "
+    f"last 1,024 records: {((run_bytes - grow) + grow * 3600 / max(dur, 1)) / 1e6:.1f} MB per hour of run")
+cam_b = int(P["cam_bytes"])
+say(f"the camera folders (OpenPose's output, never pruned here): {cam_b / 1e6:.0f} MB, {cam_b / 1e6 * 3600 / max(dur, 1):.0f} MB "
+    "per hour at 2 cameras x 30 fps")
+say()
+
+# --- allocations, overruns, the stop
+say("## Allocations, overruns, the SIGINT stop")
+alloc = s.get("allocations_after_activate")
+say(f"allocations after activate: control thread {alloc}, LoLA I/O thread {lola.get('io_allocations')}; camera reader "
+    f"thread {cam.get('reader_allocations')} (not real-time, allowed to allocate)")
+say(f"overruns {s.get('overruns')} (on LoLA the robot's packets are the clock: nao_rt counts no 100 ms-grid overrun there), "
+    f"lola.overrun_ticks {lola.get('overrun_ticks')} (a tick's command published after its packet's answer was due), "
+    f"slow_ticks {s.get('slow_ticks')}")
+keys = ["ticks", "period_s", "duration_s", "overruns", "faults", "allocations_after_activate", "tick_us", "retarget_us",
+        "policy_us", "sim_us", "slow_ticks", "ee_rmse_m", "network_share", "policy_ticks", "start_q", "model", "reference",
+        "retarget", "movement", "realtime", "realtime_scheduling", "skipped_periods", "zero_timing", "robot", "wall_s",
+        "lola", "camera", "attention"]
+lola_keys = ["socket", "cycles", "late", "late_descheduled", "malformed", "gaps", "hot_cycles", "tracking_cycles",
+             "io_thread", "io_thread_scheduling", "overrun_ticks", "io_allocations", "round_trip_us", "stop"]
+missing = [k for k in keys if k not in s] + ["lola." + k for k in lola_keys if k not in lola]
+run_files = all(os.path.exists(os.path.join(tmp, "run", f)) for f in ("ticks.csv", "attention.bin", "summary.json"))
+say(f"SIGINT after {dur / 60:.1f} min: nao_rt exit {P['rt_rc']} (4 = safe stop on a signal) {int(P['sigint_to_exit_ms']) / 1000:.1f} s "
+    f"later, lola.stop {lola.get('stop')}; summary.json keys missing: {', '.join(missing) or 'none'}; ticks.csv rows {n} "
+    f"(summary ticks {ticks}); ticks.csv, attention.bin, summary.json written: {run_files}")
+stop_ok = (P["rt_rc"] == "4" and lola.get("stop") == "signal" and not missing and n == ticks and run_files
+           and P["rt_ended_early"] == "0")
+say()
+
+# --- hang-up
+s2 = load("run_hangup/summary.json")
+sim2 = load("sim_hangup.json")
+s3 = load("run_restart/summary.json")
+l2 = s2.get("lola") or {}
+say("## Hang-up (nao_rt cannot reconnect: a lost LoLA link ends the run) and restart")
+say("  " + P["cmd_sim_hangup"])
+say("  " + P["cmd_rt_hangup"])
+say("  " + P["cmd_rt_restart"])
+say(f"robot closed the socket at cycle {P['hang_cycle']} (sim closed_by_injection {sim2.get('closed_by_injection')}): nao_rt "
+    f"exit {P['rt2_rc']} (3 = link lost) {int(P['hangup_to_exit_ms']) / 1000:.2f} s later, lola.stop {l2.get('stop')}, "
+    f"robot_link_lost on {(s2.get('faults') or {}).get('robot_link_lost')} tick(s), {s2.get('ticks')} ticks, run directory written: "
+    f"{'_error' not in s2}")
+say(f"restart: a new nao_rt on a new LoLA connection had its first tick {int(P['restart_first_tick_ms']) / 1000:.2f} s after "
+    f"the old one exited; it ran {s3.get('ticks')} ticks, exit {P['rt3_rc']}, stop {(s3.get('lola') or {}).get('stop')}, "
+    f"allocations after activate {s3.get('allocations_after_activate')}; shared memory left: "
+    f"{'yes' if P['shm_left_restart'] == '1' else 'no'}")
+hang_ok = (P["rt2_rc"] == "3" and l2.get("stop") == "link_lost" and (s2.get("faults") or {}).get("robot_link_lost", 0) >= 1
+           and P["rt3_rc"] == "0" and int(P["restart_first_tick_ms"]) >= 0 and P["shm_left_restart"] == "0")
+say()
+
+accept(alloc == 0 and lola.get("io_allocations") == 0, f"0 allocations after activate (control {alloc}, I/O thread {lola.get('io_allocations')})")
+accept(s.get("overruns") == 0 and lola.get("overrun_ticks") == 0,
+       f"0 overruns (overruns {s.get('overruns')}, lola.overrun_ticks {lola.get('overrun_ticks')})")
+accept(rss_ok, "no RSS growth (last quarter's max <= first quarter's max after warm-up)")
+accept(fd_ok, "no fd growth (the open-fd count stays at its usual value)")
+accept(counted, "every injected fault counted (gaps, malformed packets, folder gone/back)")
+accept(unrecovered == 0 and len(injected) == int(P["n_faults"]),
+       f"every injected fault recovered ({len(injected) - unrecovered} of {len(injected)})")
+accept(attn_ok, "no lost or torn attention record (every tick read once, checksums good, bits as ticks.csv)")
+accept(stop_ok, "clean stop on SIGINT, summary.json complete")
+accept(hang_ok, "hang-up: link lost counted, exit 3; restart runs again")
+extra = extra_gaps + len(spont[1024]) + len(spont[HUMAN])
+say("## Acceptance")
+for ok, what in acc:
+    say(f"{'met    ' if ok else 'NOT MET'}  {what}")
+say(f"(not an acceptance item) faults nobody injected: {extra_gaps} packet gaps, {len(spont[1024])} malformed, "
+    f"{len(spont[HUMAN])} human-lost episodes away from faults and loop starts")
+text = "\n".join(lines) + "\n"
+with open(out, "w") as f:
+    f.write(text)
+sys.stdout.write(text)
+sys.exit(0 if all(ok for ok, _ in acc) else 1)
+EOF
+}
+if [[ -n "$report_dir" ]]; then
+  [[ -f "$report_dir/params.txt" ]] || die 2 "$report_dir: not a --keep folder of a soak (no params.txt)"
+  report "$report_dir" "$out"
+  exit $?
+fi
 rt="$build/bin/nao_rt"
 sim="$build/bin/nao_lola_sim"
 tail_bin="$build/bin/nao_attn_tail"
@@ -81,7 +422,7 @@ cleanup() {
   rm -f "/dev/shm/$shm" "/dev/shm/${shm}_restart"
   if [[ -n "$keep" ]]; then
     mkdir -p "$keep" && cp -r "$tmp"/run "$tmp"/run_hangup "$tmp"/run_restart "$tmp"/*.txt "$tmp"/*.json \
-      "$tmp"/*.tsv "$tmp"/*.log "$keep"/ 2>/dev/null
+      "$tmp"/*.tsv "$tmp"/*.log "$tmp"/*.err "$tmp"/*.out "$keep"/ 2>/dev/null
   fi
   rm -rf "$tmp"
   exit "$status"
@@ -472,313 +813,5 @@ shm_left3=0
   echo "cmd_rt_restart=$(echo "${rt3_cmd[*]}" | rel)"
 } >"$tmp/params.txt"
 status=0
-SOAK_TMP="$tmp" /usr/bin/python3 - "$tmp" "$out" <<'EOF' || status=$?
-import csv, json, os, sys
-
-tmp, out = sys.argv[1], sys.argv[2]
-P = dict(l.rstrip("\n").split("=", 1) for l in open(os.path.join(tmp, "params.txt")) if "=" in l)
-lines, acc = [], []
-def say(s=""):
-    lines.append(s)
-def accept(ok, what):
-    acc.append((bool(ok), what))
-
-def load(path):
-    try:
-        with open(os.path.join(tmp, path)) as f:
-            return json.load(f)
-    except Exception as e:  # a missing or cut summary is itself a finding
-        return {"_error": str(e)}
-
-s = load("run/summary.json")
-sim = load("sim.json")
-minutes = int(P["minutes"])
-say(f"# bench/soak.sh --minutes {minutes} (repository root, release build): the whole stack on LoLA, live cameras and the shared-memory attention ring")
-say(f"date: {P['date_before']} to {P['date_after']}; host: {P['host']}; commit {P['commit']}")
-say(f"binaries (copied at the start): {P['binaries']}")
-say(f"load average before: {P['load_before']}")
-say(f"load average after:  {P['load_after']}")
-say("commands:")
-for k in ("cmd_synth", "cmd_sim", "cmd_rt", "cmd_replay", "cmd_tail"):
-    say("  " + P[k])
-say(f"faults: {P['n_faults']}, {P['schedule']}, after nao_rt connected to LoLA; kinds in turn: packet gap, garbage "
-    "packet, malformed packets, camera folder gone")
-say(f"scheduling: nao_rt {s.get('realtime_scheduling')} (I/O thread {(s.get('lola') or {}).get('io_thread_scheduling')}); "
-    f"nao_lola_sim {P['sim_scheduling']}; replayers and nao_attn_tail SCHED_OTHER")
-say()
-
-# --- the run
-ticks = s.get("ticks", 0) or 0
-lola = s.get("lola") or {}
-cam = s.get("camera") or {}
-dur = s.get("duration_s") or ticks * 0.1
-say("## The run")
-say(f"ticks {ticks} ({dur / 60:.1f} min of LoLA time; loop wall {s.get('wall_s', 0) / 60:.1f} min), stop: {lola.get('stop')}, "
-    f"nao_rt exit {P['rt_rc']}; the recording ({P['n_frames']} frames a camera) replayed {P['replay_loops']} times")
-tu = s.get("tick_us") or {}
-say(f"tick_us p50 {tu.get('p50', 0):.0f}  p99 {tu.get('p99', 0):.0f}  max {tu.get('max', 0):.0f}; slow_ticks {s.get('slow_ticks')}")
-rtt = lola.get("round_trip_us") or {}
-say(f"LoLA: cycles {lola.get('cycles')}, late answers {lola.get('late')} ({lola.get('late_descheduled')} waiting for a CPU), "
-    f"round trip on nao_rt's side p50 {rtt.get('p50', 0):.0f} p99 {rtt.get('p99', 0):.0f} max {rtt.get('max', 0):.0f} us; "
-    f"sim: {sim.get('sent')} packets sent, {sim.get('answered')} answers (its answered_in_cycle and round trip pair each answer "
-    f"with the oldest unanswered packet, so they mean nothing after the first packet nao_rt rightly leaves unanswered)")
-lat = cam.get("latency_ms") or {}
-say(f"camera: frame file -> tick p50 {lat.get('p50', 0):.1f} p99 {lat.get('p99', 0):.1f} max {lat.get('max', 0):.1f} ms; "
-    + ", ".join(f"{k} {v}" for k, v in cam.items() if k not in ("latency_ms", "human_scale_m", "reader_allocations")))
-say("fault ticks: " + (", ".join(f"{k} {v}" for k, v in (s.get("faults") or {}).items() if v) or "none"))
-say()
-
-# --- ticks.csv and the attention stream
-fault = []
-try:
-    with open(os.path.join(tmp, "run", "ticks.csv")) as f:
-        r = csv.reader(f)
-        hdr = next(r)
-        ti, fi = hdr.index("tick"), hdr.index("fault")
-        for row in r:
-            fault.append(int(float(row[fi])))
-except Exception as e:
-    say(f"ticks.csv: unreadable ({e})")
-n = len(fault)
-
-attn_ticks, attn_fault, bad = [], {}, 0
-with open(os.path.join(tmp, "attn.txt")) as f:
-    for line in f:
-        parts = line.split()
-        if not parts or not parts[0].isdigit():
-            continue
-        attn_ticks.append(int(parts[0]))
-        attn_fault[int(parts[0])] = int(parts[1])
-        if "BAD-CHECKSUM" in line:
-            bad += 1
-attn_err = open(os.path.join(tmp, "attn.err")).read()
-skipped = sum(1 for l in attn_err.splitlines() if "skipped" in l)
-closed = "closed the ring" in attn_err
-in_order = attn_ticks == list(range(len(attn_ticks)))
-same_bits = sum(1 for t in range(min(n, len(attn_ticks))) if attn_fault.get(t) != fault[t])
-att = s.get("attention") or {}
-
-# --- faults: injected, counted, recovered
-HUMAN = 1 | 2 | 16384
-BITS = {"drop": 512, "garbage": 1024, "bad_length": 1024, "camera": HUMAN}
-events = [l.rstrip("\n").split("\t") for l in open(os.path.join(tmp, "events.tsv")) if l.strip()]
-injected = [e for e in events if e[1] in BITS]
-
-def episodes(mask):
-    eps, t = [], 0
-    while t < n:
-        if fault[t] & mask:
-            a = t
-            while t < n and fault[t] & mask:
-                t += 1
-            eps.append((a, t))
-        else:
-            t += 1
-    return eps
-
-eps = {m: episodes(m) for m in set(BITS.values())}
-used = {m: set() for m in eps}
-say("## Faults and recovery")
-say("Recovery: ticks from the first tick with the fault's bits to the first tick without them (ticks.csv; the")
-say("attention stream carries the same bits). Injection tick: the newest tick the attention reader had printed.")
-say(f"{'t [s]':>7}  {'fault':<11} {'injection tick':>14} {'bits from':>9} {'recovery [ticks]':>16}  detail")
-recoveries = {k: [] for k in BITS}
-unrecovered = 0
-for e in injected:
-    t_ms, kind, detail, tick = int(e[0]), e[1], e[2], int(e[3])
-    m = BITS[kind]
-    hit = None
-    for i, (a, b) in enumerate(eps[m]):
-        if i not in used[m] and tick - 30 <= a <= tick + 150:
-            hit = i
-            break
-    if hit is None:
-        unrecovered += 1
-        say(f"{t_ms / 1000:7.1f}  {kind:<11} {tick:>14} {'-':>9} {'not seen':>16}  {detail}")
-        continue
-    used[m].add(hit)
-    a, b = eps[m][hit]
-    done = b < n
-    if not done:
-        unrecovered += 1
-    rec_t = b - a
-    recoveries[kind].append(rec_t)
-    other = 0
-    for t in range(a, b):
-        other |= fault[t]
-    say(f"{t_ms / 1000:7.1f}  {kind:<11} {tick:>14} {a:>9} {rec_t if done else 'never':>16}  {detail}"
-        + (f"; bits seen {other}" if other != m else ""))
-# Three malformed packets in a row are also 48 ms without a good packet: a packet gap, part of the fault.
-for e in injected:
-    if e[1] != "bad_length":
-        continue
-    tick = int(e[3])
-    for i, (a, b) in enumerate(eps[512]):
-        if i not in used[512] and tick - 30 <= a <= tick + 150:
-            used[512].add(i)
-            break
-spont = {m: [eps[m][i] for i in range(len(eps[m])) if i not in used[m]] for m in eps}
-# Between two loops each replayer reads its frames before writing again: a short pause of the feed.
-loop_ticks = [int(e[3]) for e in events if e[1] == "loop"]
-at_loop = [ab for ab in spont[HUMAN] if any(t - 3 <= ab[0] <= t + 10 for t in loop_ticks)]
-spont[HUMAN] = [ab for ab in spont[HUMAN] if ab not in at_loop]
-for kind, r in recoveries.items():
-    if r:
-        say(f"  {kind}: recovery {min(r)}-{max(r)} ticks (mean {sum(r) / len(r):.1f}) over {len(r)} faults")
-names = {512: "robot_packet_gap", 1024: "robot_malformed_packet", HUMAN: "no_human/human_timeout/human_bridged"}
-say(f"  episodes of {names[HUMAN]} at a replay loop's start (the replayers reload, the feed pauses): {len(at_loop)} of "
-    f"{len(loop_ticks)} loop starts, {sum(b - a for a, b in at_loop)} ticks in all")
-for m, lst in spont.items():
-    say(f"  episodes of {names[m]} with no fault injected near them: {len(lst)}"
-        + (f" (ticks {', '.join(f'{a}+{b - a}' for a, b in lst[:12])}{' ...' if len(lst) > 12 else ''})" if lst else ""))
-say()
-nk = {k: sum(1 for e in injected if e[1] == k) for k in BITS}
-drop_cycles = sum(int(e[2].split(": ")[1].split()[0]) for e in injected if e[1] == "drop")
-say("## Injected against counted")
-say(f"packet gaps:      {nk['drop']} injected ({drop_cycles} packets not sent; sim dropped {sim.get('dropped')}) + "
-    f"{nk['bad_length']} from the bad-length faults (3 skipped packets: 48 ms without a good one) -> "
-    f"lola.gaps {lola.get('gaps')}, robot_packet_gap on {(s.get('faults') or {}).get('robot_packet_gap')} ticks")
-bad_packets = 3 * nk["bad_length"]
-say(f"malformed:        {nk['garbage']} garbage + {bad_packets} bad-length packets injected (sim: garbage {sim.get('garbage')}, "
-    f"bad_length {sim.get('bad_length')}) -> lola.malformed {lola.get('malformed')}, robot_malformed_packet on "
-    f"{(s.get('faults') or {}).get('robot_malformed_packet')} ticks")
-say(f"camera folder:    {nk['camera']} moves away and back -> folder_gone {cam.get('folder_gone')}, folder_back "
-    f"{cam.get('folder_back')}; the writer restarted {P['replay_restarts']} times")
-say(f"other robot faults: tracking_error {(s.get('faults') or {}).get('tracking_error')}, joint_hot "
-    f"{(s.get('faults') or {}).get('joint_hot')}, robot_link_lost {(s.get('faults') or {}).get('robot_link_lost')}")
-# Counted: the sim did what was asked, nao_rt's counters hold at least the injected faults (more when
-# faults nobody injected came too, listed above) and each injected fault put its bits on a tick.
-counted = (nk["drop"] > 0 and (lola.get("gaps") or 0) >= nk["drop"] + nk["bad_length"] and sim.get("dropped") == drop_cycles
-           and nk["garbage"] + nk["bad_length"] > 0 and (lola.get("malformed") or 0) >= nk["garbage"] + bad_packets
-           and sim.get("garbage") == nk["garbage"] and sim.get("bad_length") == bad_packets
-           and cam.get("folder_gone") == nk["camera"] and cam.get("folder_back") == nk["camera"] and unrecovered == 0)
-extra_gaps = (lola.get("gaps") or 0) - nk["drop"] - nk["bad_length"]
-say()
-
-# --- the attention reader
-say("## Attention reader (nao_attn_tail --from-oldest on the shared-memory ring)")
-say(f"records pushed {att.get('records_written')}, printed {len(attn_ticks)} (ticks 0..{attn_ticks[-1] if attn_ticks else '-'}, "
-    f"consecutive: {in_order}), bad checksums {bad}, skipped-record reports {skipped}, ticks whose fault bits differ from "
-    f"ticks.csv {same_bits}; the reader saw the ring closed: {closed}, exit {P['tail_rc']}; shared memory left: "
-    f"{'yes' if P['shm_left'] == '1' else 'no'}")
-attn_ok = (att.get("records_written") == ticks == len(attn_ticks) == n and in_order and bad == 0 and skipped == 0
-           and same_bits == 0 and closed and P["tail_rc"] == "0" and P["shm_left"] == "0")
-say()
-
-# --- RSS and fds
-samp = [l.split("\t") for l in open(os.path.join(tmp, "samples.tsv")).read().splitlines()[1:] if l]
-samp = [(int(a) / 1000, int(b), int(c), int(d), int(e), float(f)) for a, b, c, d, e, f in samp]
-say("## nao_rt's memory and file descriptors (/proc/PID/status VmRSS, /proc/PID/fd, every 5 s)")
-warm = min(60.0, 0.1 * minutes * 60)
-steady = [x for x in samp if x[0] >= warm]
-rss_ok = fd_ok = False
-if len(steady) >= 4:
-    q = max(1, len(steady) // 4)
-    first_q, last_q = steady[:q], steady[-q:]
-    r0, r1 = max(x[1] for x in first_q), max(x[1] for x in last_q)
-    xs = [x[0] for x in steady]
-    ys = [x[1] for x in steady]
-    mx, my = sum(xs) / len(xs), sum(ys) / len(ys)
-    sxx = sum((x - mx) ** 2 for x in xs)
-    slope = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx * 3600 if sxx else 0.0
-    fds = sorted(set(x[3] for x in steady))
-    thr = sorted(set(x[4] for x in steady))
-    say(f"{len(samp)} samples; from {warm:.0f} s on ({len(steady)}): VmRSS first quarter max {r0} kB, last quarter max "
-        f"{r1} kB, min {min(ys)}, max {max(ys)} kB, least-squares slope {slope:+.0f} kB/h; VmHWM at the end {samp[-1][2]} kB")
-    say(f"open fds: {', '.join(map(str, fds))} (first {steady[0][3]}, last {steady[-1][3]}); threads {', '.join(map(str, thr))}; "
-        f"load1 over the run {min(x[5] for x in samp):.2f}-{max(x[5] for x in samp):.2f}")
-    say("VmRSS by minute [kB]: " + " ".join(str(x[1]) for x in samp if int(x[0]) % 60 < 5))
-    steps = []
-    for prev, cur in zip(samp, samp[1:]):
-        if cur[1] != prev[1]:
-            near = [e for e in events if e[1] not in ("loop", "camera_back", "camera_writer")
-                    and prev[0] - 5 <= int(e[0]) / 1000 <= cur[0]]
-            steps.append(f"{cur[0]:.0f} s {cur[1] - prev[1]:+d} kB" + (f" ({near[0][1]} at {int(near[0][0]) / 1000:.0f} s)" if near else ""))
-    say("VmRSS changes: " + ("; ".join(steps) if steps else "none"))
-    rss_ok = r1 <= r0
-    fd_ok = len(fds) == 1
-else:
-    say(f"too few samples ({len(samp)})")
-say()
-
-# --- run directory
-run_bytes = int(P["run_bytes"])
-say("## Run directory")
-files = sorted(os.listdir(os.path.join(tmp, "run")))
-sizes = ", ".join(f"{f} {os.path.getsize(os.path.join(tmp, 'run', f)) / 1e6:.2f} MB" for f in files)
-grow = os.path.getsize(os.path.join(tmp, "run", "ticks.csv"))
-say(f"{run_bytes / 1e6:.1f} MB after {dur / 60:.1f} min ({sizes}); ticks.csv grows with the run, attention.bin is the "
-    f"last 1,024 records: {((run_bytes - grow) + grow * 3600 / max(dur, 1)) / 1e6:.1f} MB per hour of run")
-cam_b = int(P["cam_bytes"])
-say(f"the camera folders (OpenPose's output, never pruned here): {cam_b / 1e6:.0f} MB, {cam_b / 1e6 * 3600 / max(dur, 1):.0f} MB "
-    "per hour at 2 cameras x 30 fps")
-say()
-
-# --- allocations, overruns, the stop
-say("## Allocations, overruns, the SIGINT stop")
-alloc = s.get("allocations_after_activate")
-say(f"allocations after activate: control thread {alloc}, LoLA I/O thread {lola.get('io_allocations')}; camera reader "
-    f"thread {cam.get('reader_allocations')} (not real-time, allowed to allocate)")
-say(f"overruns {s.get('overruns')} (on LoLA the robot's packets are the clock: nao_rt counts no 100 ms-grid overrun there), "
-    f"lola.overrun_ticks {lola.get('overrun_ticks')} (a tick's command published after its packet's answer was due), "
-    f"slow_ticks {s.get('slow_ticks')}")
-keys = ["ticks", "period_s", "duration_s", "overruns", "faults", "allocations_after_activate", "tick_us", "retarget_us",
-        "policy_us", "sim_us", "slow_ticks", "ee_rmse_m", "network_share", "policy_ticks", "start_q", "model", "reference",
-        "retarget", "movement", "realtime", "realtime_scheduling", "skipped_periods", "zero_timing", "robot", "wall_s",
-        "lola", "camera", "attention"]
-lola_keys = ["socket", "cycles", "late", "late_descheduled", "malformed", "gaps", "hot_cycles", "tracking_cycles",
-             "io_thread", "io_thread_scheduling", "overrun_ticks", "io_allocations", "round_trip_us", "stop"]
-missing = [k for k in keys if k not in s] + ["lola." + k for k in lola_keys if k not in lola]
-run_files = all(os.path.exists(os.path.join(tmp, "run", f)) for f in ("ticks.csv", "attention.bin", "summary.json"))
-say(f"SIGINT after {dur / 60:.1f} min: nao_rt exit {P['rt_rc']} (4 = safe stop on a signal) {int(P['sigint_to_exit_ms']) / 1000:.1f} s "
-    f"later, lola.stop {lola.get('stop')}; summary.json keys missing: {', '.join(missing) or 'none'}; ticks.csv rows {n} "
-    f"(summary ticks {ticks}); ticks.csv, attention.bin, summary.json written: {run_files}")
-stop_ok = (P["rt_rc"] == "4" and lola.get("stop") == "signal" and not missing and n == ticks and run_files
-           and P["rt_ended_early"] == "0")
-say()
-
-# --- hang-up
-s2 = load("run_hangup/summary.json")
-sim2 = load("sim_hangup.json")
-s3 = load("run_restart/summary.json")
-l2 = s2.get("lola") or {}
-say("## Hang-up (nao_rt cannot reconnect: a lost LoLA link ends the run) and restart")
-say("  " + P["cmd_sim_hangup"])
-say("  " + P["cmd_rt_hangup"])
-say("  " + P["cmd_rt_restart"])
-say(f"robot closed the socket at cycle {P['hang_cycle']} (sim closed_by_injection {sim2.get('closed_by_injection')}): nao_rt "
-    f"exit {P['rt2_rc']} (3 = link lost) {int(P['hangup_to_exit_ms']) / 1000:.2f} s later, lola.stop {l2.get('stop')}, "
-    f"robot_link_lost on {(s2.get('faults') or {}).get('robot_link_lost')} tick(s), {s2.get('ticks')} ticks, run directory written: "
-    f"{'_error' not in s2}")
-say(f"restart: a new nao_rt on a new LoLA connection had its first tick {int(P['restart_first_tick_ms']) / 1000:.2f} s after "
-    f"the old one exited; it ran {s3.get('ticks')} ticks, exit {P['rt3_rc']}, stop {(s3.get('lola') or {}).get('stop')}, "
-    f"allocations after activate {s3.get('allocations_after_activate')}; shared memory left: "
-    f"{'yes' if P['shm_left_restart'] == '1' else 'no'}")
-hang_ok = (P["rt2_rc"] == "3" and l2.get("stop") == "link_lost" and (s2.get("faults") or {}).get("robot_link_lost", 0) >= 1
-           and P["rt3_rc"] == "0" and int(P["restart_first_tick_ms"]) >= 0 and P["shm_left_restart"] == "0")
-say()
-
-accept(alloc == 0 and lola.get("io_allocations") == 0, f"0 allocations after activate (control {alloc}, I/O thread {lola.get('io_allocations')})")
-accept(s.get("overruns") == 0 and lola.get("overrun_ticks") == 0,
-       f"0 overruns (overruns {s.get('overruns')}, lola.overrun_ticks {lola.get('overrun_ticks')})")
-accept(rss_ok, "no RSS growth (last quarter's max <= first quarter's max after warm-up)")
-accept(fd_ok, "no fd growth (one open-fd count all run)")
-accept(counted, "every injected fault counted (gaps, malformed packets, folder gone/back)")
-accept(unrecovered == 0 and len(injected) == int(P["n_faults"]),
-       f"every injected fault recovered ({len(injected) - unrecovered} of {len(injected)})")
-accept(attn_ok, "no lost or torn attention record (every tick read once, checksums good, bits as ticks.csv)")
-accept(stop_ok, "clean stop on SIGINT, summary.json complete")
-accept(hang_ok, "hang-up: link lost counted, exit 3; restart runs again")
-extra = extra_gaps + len(spont[1024]) + len(spont[HUMAN])
-say("## Acceptance")
-for ok, what in acc:
-    say(f"{'met    ' if ok else 'NOT MET'}  {what}")
-say(f"(not an acceptance item) faults nobody injected: {extra_gaps} packet gaps, {len(spont[1024])} malformed, "
-    f"{len(spont[HUMAN])} human-lost episodes away from faults and loop starts")
-text = "\n".join(lines) + "\n"
-with open(out, "w") as f:
-    f.write(text)
-sys.stdout.write(text)
-sys.exit(0 if all(ok for ok, _ in acc) else 1)
-EOF
+report "$tmp" "$out" || status=$?
 exit "$status"
