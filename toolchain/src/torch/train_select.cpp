@@ -12,30 +12,28 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
 namespace nao::tools {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
+// The net under training as the runtime runs it: its manifest floats, the weights bound over them
+// (views: the floats live as long as this) and a policy workspace. step() is nao_rt's policy step.
 template <class Dims>
-std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
-                                const PolicyNet& net, const std::vector<ModelRunCodes>* codes) {
-  const std::vector<std::vector<float>> floats = manifestFloats(net);
-  std::vector<const float*> pointers;
-  for (const std::vector<float>& f : floats) pointers.push_back(f.data());
-  const PolicyWeights<Dims> weights =
-      bindPolicyWeights<Dims>(pointers.data(), pointers.size(), net->arch(), net->conditioning());
-  const auto ws = makePolicyWorkspace<Dims>();
-  const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
-                                   const JointVector& r) -> JointVector {
-    if (t == 0) {
-      resetPolicyStream(*ws);
-      // The run's code, as the controller chooses it at activate.
-      setPolicyRunCode(*ws, codes != nullptr ? runCode(*codes, movement, q) : nullptr);
-    }
+struct RuntimeNet {
+  explicit RuntimeNet(const PolicyNet& net)
+      : floats(manifestFloats(net)), weights(bind(floats, net)), ws(makePolicyWorkspace<Dims>()) {}
+  RuntimeNet(const RuntimeNet&) = delete;
+  RuntimeNet& operator=(const RuntimeNet&) = delete;
+
+  /// Starts a run (t = 0) with `code` (nullptr: none), as the controller does at activate.
+  void start(const float* code) {
+    resetPolicyStream(*ws);
+    setPolicyRunCode(*ws, code);
+  }
+  JointVector step(int movement, int t, const JointVector& q, const JointVector& a_prev, const JointVector& r) {
     PolicyInput in;
     in.q = q.cast<float>();
     in.a_prev = a_prev.cast<float>();
@@ -43,11 +41,36 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
     in.movement = movement;
     in.step = t;
     return stepPolicy(weights, *ws, in).template cast<double>();
+  }
+
+  std::vector<std::vector<float>> floats;
+  PolicyWeights<Dims> weights;
+  std::unique_ptr<PolicyWorkspace<Dims>> ws;
+
+ private:
+  static PolicyWeights<Dims> bind(const std::vector<std::vector<float>>& floats, const PolicyNet& net) {
+    std::vector<const float*> pointers;
+    for (const std::vector<float>& f : floats) pointers.push_back(f.data());
+    return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), net->arch(), net->conditioning());
+  }
+};
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+template <class Dims>
+std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
+                                const PolicyNet& net, const std::vector<ModelRunCodes>* codes) {
+  RuntimeNet<Dims> rt(net);
+  const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
+                                   const JointVector& r) -> JointVector {
+    // The run's code, as the controller chooses it at activate.
+    if (t == 0) rt.start(codes != nullptr ? runCode(*codes, movement, q) : nullptr);
+    return rt.step(movement, t, q, a_prev, r);
   };
   // An autonomous model's runs keep to its workspace envelope, as nao_rt's controller does.
   std::vector<JointEnvelope> workspace;
   if (net->conditioning() == Conditioning::kAutonomous && ControllerParams{}.workspace_margin_rad >= 0.0)
-    workspace = workspaceEnvelopes(weights, ControllerParams{}.workspace_margin_rad, demonstratedWorkspace(data));
+    workspace = workspaceEnvelopes(rt.weights, ControllerParams{}.workspace_margin_rad, demonstratedWorkspace(data));
   return rolloutPolicy(data, demos, sim, policy, workspace.empty() ? nullptr : &workspace);
 }
 
@@ -55,15 +78,10 @@ template <class Dims>
 std::vector<PolicySequence> labelledWith(const PolicyData& data, const std::vector<LabelledRun>& runs,
                                          const SimModel& sim, const PolicyNet& net,
                                          const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e) {
-  const std::vector<std::vector<float>> floats = manifestFloats(net);
-  std::vector<const float*> pointers;
-  for (const std::vector<float>& f : floats) pointers.push_back(f.data());
-  const PolicyWeights<Dims> weights =
-      bindPolicyWeights<Dims>(pointers.data(), pointers.size(), net->arch(), net->conditioning());
-  const auto ws = makePolicyWorkspace<Dims>();
+  RuntimeNet<Dims> rt(net);
   std::vector<JointEnvelope> workspace;
   if (ControllerParams{}.workspace_margin_rad >= 0.0)
-    workspace = workspaceEnvelopes(weights, ControllerParams{}.workspace_margin_rad, demonstratedWorkspace(data));
+    workspace = workspaceEnvelopes(rt.weights, ControllerParams{}.workspace_margin_rad, demonstratedWorkspace(data));
   SimData sim_data(sim, JointVector::Zero());
   std::vector<PolicySequence> out;
   for (const LabelledRun& run : runs) {
@@ -73,17 +91,8 @@ std::vector<PolicySequence> labelledWith(const PolicyData& data, const std::vect
     const float* code = c.code.data() + static_cast<std::size_t>(run.code) * static_cast<std::size_t>(c.d);
     const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
                                      const JointVector& r) -> JointVector {
-      if (t == 0) {
-        resetPolicyStream(*ws);
-        setPolicyRunCode(*ws, code);
-      }
-      PolicyInput in;
-      in.q = q.cast<float>();
-      in.a_prev = a_prev.cast<float>();
-      in.r = r.cast<float>();
-      in.movement = movement;
-      in.step = t;
-      return stepPolicy(weights, *ws, in).template cast<double>();
+      if (t == 0) rt.start(code);
+      return rt.step(movement, t, q, a_prev, r);
     };
     PolicySequence s = executeLabelled(sim, sim_data, data.demos.at(static_cast<std::size_t>(run.demo)).f, run.start,
                                        run.ticks, run.movement, policy,
