@@ -1,6 +1,6 @@
 // Policy inference latency on the paper configuration (the committed models/default.bin):
 //   BM_Policy_StaticEigen  the runtime's fixed-size float stepPolicy (nao/policy.hpp) with the
-//                          kernel the runtime picks (NAO_POLICY_KERNEL, CPU; the label names it)
+//                          kernel benchPolicyKernel picks (NAO_POLICY_KERNEL, CPU; the label names it)
 //   BM_Policy_StaticEigen_SSE / _AVX2  the same with the kernel forced (nao/policy_kernels.hpp);
 //                          _AVX2 is skipped with a message on a CPU without AVX2
 //   BM_Policy_Int8 / _SSE / _AVX2  the same with the attention and FFN matrices in int8
@@ -80,20 +80,20 @@ void timeSweeps(benchmark::State& state, Sweep&& sweep) {
   timeSweeps(state, [] {}, sweep);
 }
 
-/// stepPolicy with `kernel` (nullptr: the runtime's choice), one inference per iteration;
+/// stepPolicy with `kernel` (nullptr: benchPolicyKernel's choice), one inference per iteration;
 /// `cold`: the caches evicted before each one (untimed).
 void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, WeightPrecision precision = WeightPrecision::kFp32,
                     bool cold = false) {
   const bool int8 = precision == WeightPrecision::kInt8;
   if (!haveModel(state)) return;
-  const PolicyKernel saved = activePolicyKernel();
-  if (kernel != nullptr && !selectPolicyKernel(*kernel)) {
+  if (kernel != nullptr && !policyKernelSupported(*kernel)) {
     state.SkipWithError((std::string("the ") + policyKernelName(*kernel) + " kernel is not supported here").c_str());
     return;
   }
   const ModelFile& model = paperModel();
   const std::vector<const float*>& p = paperWeights().tensors;  // aligned, as nao_rt --weights
-  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
+  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(
+      p.data(), p.size(), model.header.arch, model.header.conditioning, kernel != nullptr ? *kernel : benchPolicyKernel());
   AlignedBytes blob;
   if (int8) {
     blob = quantizeModelInt8(model);
@@ -117,7 +117,7 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, WeightP
     rec.add(s);
   }
   rec.report(state);
-  state.SetLabel(policyKernelName(activePolicyKernel()));
+  state.SetLabel(policyKernelName(w.kernel));
   if (precision != WeightPrecision::kFp32) {
     // The action difference from fp32 on the same input stream (open loop: both see the same
     // states), rad per step: max and RMS over every joint of every input.
@@ -141,7 +141,6 @@ void runStaticEigen(benchmark::State& state, const PolicyKernel* kernel, WeightP
     state.counters["max_a_mrad"] = 1e3 * max_a;
     if (!int8) state.counters["same_bits"] = max_d == 0.0 ? 1 : 0;  // packed: must be 1
   }
-  selectPolicyKernel(saved);
 }
 
 // Candidate single-core reads of the weight bytes: sums of 16- or 8-lane loads into 8

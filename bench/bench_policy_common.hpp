@@ -12,6 +12,8 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdint>
+#include <cstdlib>
+#include <cstring>
 #include <memory>
 #include <new>
 #include <random>
@@ -19,6 +21,18 @@
 #include <vector>
 
 namespace nao::bench {
+
+/// The kernel the benchmarks bind the weights with when they do not force one: environment
+/// variable NAO_POLICY_KERNEL, the benchmarks' own switch (the runtime reads no environment: the
+/// kernel is the bound weights', passed at bind). Unset, "", "auto", "avx512" or anything else:
+/// the best this CPU runs; "sse": kSse; "avx2": kAvx2 if supported, else kSse.
+inline PolicyKernel benchPolicyKernel() {
+  const char* env = std::getenv("NAO_POLICY_KERNEL");
+  if (env != nullptr && std::strcmp(env, "sse") == 0) return PolicyKernel::kSse;
+  if (env != nullptr && std::strcmp(env, "avx2") == 0)
+    return policyKernelSupported(PolicyKernel::kAvx2) ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
+  return bestPolicyKernel();
+}
 
 /// False (and the benchmark marked skipped with the reason) when models/default.bin is absent.
 inline bool haveModel(benchmark::State& state) {

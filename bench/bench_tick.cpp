@@ -3,8 +3,8 @@
 // synthetic whole-arm demonstration (seed 1,000,001) looped as the human reference, with
 // the committed models/default.bin. One benchmark iteration = the whole hour; per-stage
 // p50/p99/max come from the controller's own stage timings (CLOCK_MONOTONIC), plus peak RSS.
-// The label names the policy kernel in use (nao/policy_kernels.hpp; NAO_POLICY_KERNEL=sse forces
-// the SSE one). BM_Tick_Full_Packed: the same hour with the packed fp32 weights (the native
+// The label names the policy kernel the weights were bound with (benchPolicyKernel:
+// NAO_POLICY_KERNEL=sse forces the SSE one). BM_Tick_Full_Packed: the same hour with the packed fp32 weights (the native
 // build's compiled-in default, docs/policy.md "Packed fp32 weights"; the same bits).
 #include "bench_policy_common.hpp"
 #include "nao/controller.hpp"
@@ -28,7 +28,8 @@ void runTickFull(benchmark::State& state, bool packed) {
   const ArmModel arm = loadArmModel(NAO_DEFAULT_URDF);
   checkJointsMatch(model, arm, NAO_BENCH_MODEL);
   const std::vector<const float*>& p = paperWeights().tensors;  // aligned, as nao_rt --weights
-  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.arch, model.header.conditioning);
+  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.arch,
+                                                                        model.header.conditioning, benchPolicyKernel());
   AlignedBytes blob;
   if (packed) {
     blob = packModelFp32(model);
@@ -71,7 +72,7 @@ void runTickFull(benchmark::State& state, bool packed) {
   getrusage(RUSAGE_SELF, &ru);
   state.counters["rss_MB"] = static_cast<double>(ru.ru_maxrss) / 1024.0;
   state.counters["ticks"] = kTicks;
-  state.SetLabel(std::string("policy kernel ") + policyKernelName(activePolicyKernel()) + (packed ? ", packed" : ""));
+  state.SetLabel(std::string("policy kernel ") + policyKernelName(w.kernel) + (packed ? ", packed" : ""));
 }
 
 void BM_Tick_Full(benchmark::State& state) { runTickFull(state, false); }

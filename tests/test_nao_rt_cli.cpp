@@ -100,7 +100,7 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   CHECK(j["source"] == path);
   CHECK(j["weights"] == "file");
   CHECK(j["precision"] == "fp32");
-  CHECK(j["kernel"] == nao::policyKernelName(nao::defaultPolicyKernel()));
+  CHECK(j["kernel"] == nao::policyKernelName(nao::bestPolicyKernel()));  // the binders' default
   CHECK(j["starts"] == nlohmann::json::parse(R"({"elbow":[],"whole_arm":[],"wrist":[]})"));  // none in this model
   CHECK(j["run_codes"] == nlohmann::json::parse(R"({"elbow":0,"whole_arm":0,"wrist":0})"));
   nao::rt::InfoOptions o8 = withWeights(path);

@@ -117,7 +117,7 @@ TEST_CASE("binding checks the manifest's roles: a matrix role on a view without 
   const TestModel m = randomModel(smallArch(), 7, false);
   const std::vector<const float*> p = m.pointers();
   PolicyWeights<SmallPolicyDims> w;
-  detail::setPolicySizes(w, smallArch(), Conditioning::kReference);
+  detail::setPolicySizes(w, smallArch(), Conditioning::kReference, PolicyKernel::kSse);
   const std::vector<detail::WeightSlot> slots = detail::weightSlots(w);
   std::vector<TensorSpec> manifest = policyManifest(smallArch());
   CHECK_NOTHROW(detail::bindWeightSlots(slots, manifest, p.data(), p.size()));

@@ -16,7 +16,6 @@
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
 #include "nao/arm_model.hpp"
-#include "support/kernel_guard.hpp"
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
@@ -38,7 +37,6 @@ namespace {
 bool haveAvx2() { return policyKernelSupported(PolicyKernel::kAvx2); }
 bool haveAvx512() { return policyKernelSupported(PolicyKernel::kAvx512); }
 
-using test::KernelGuard;
 
 std::vector<float> randomVector(std::mt19937_64& rng, std::size_t n, double lo, double hi) {
   std::vector<float> v(n);
@@ -92,7 +90,6 @@ void checkInt8Shape(std::uint64_t seed, double x_lo = -2.0) {
   CAPTURE(Out);
   CAPTURE(In);
   CAPTURE(x_lo);
-  KernelGuard guard;
   std::mt19937_64 rng(seed);
   const QuantMatrix m = makeQuantMatrix(rng, Out, In);
   const std::vector<float> b = randomVector(rng, Out, -0.5, 0.5);
@@ -101,25 +98,22 @@ void checkInt8Shape(std::uint64_t seed, double x_lo = -2.0) {
     for (std::size_t i = 0; i < X.size(); i += 3) X[i] = 0.0f;
   const std::vector<float> want = int8Reference<Out, In, J, true>(m, b.data(), X.data());
   std::vector<float> sse(want.size()), avx(want.size());
-  REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
-  detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), sse.data());
+  detail::affineTokensInt8<Out, In, J, true>(PolicyKernel::kSse, m.q(), m.scale(Out, In), b.data(), X.data(), sse.data());
   CHECK(std::memcmp(sse.data(), want.data(), want.size() * sizeof(float)) == 0);
   if (haveAvx2()) {
-    REQUIRE(selectPolicyKernel(PolicyKernel::kAvx2));
-    detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), avx.data());
+    detail::affineTokensInt8<Out, In, J, true>(PolicyKernel::kAvx2, m.q(), m.scale(Out, In), b.data(), X.data(), avx.data());
     CHECK(std::memcmp(avx.data(), want.data(), want.size() * sizeof(float)) == 0);
   }
   if (haveAvx512()) {
-    REQUIRE(selectPolicyKernel(PolicyKernel::kAvx512));
     std::fill(avx.begin(), avx.end(), NAN);
-    detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), avx.data());
+    detail::affineTokensInt8<Out, In, J, true>(PolicyKernel::kAvx512, m.q(), m.scale(Out, In), b.data(), X.data(), avx.data());
     CHECK(std::memcmp(avx.data(), want.data(), want.size() * sizeof(float)) == 0);
   }
 
   // Within what quantisation allows of fp32: |ΔW| <= sw/2 per weight and |Δx| <= sx/2 per input,
   // so |Δy| <= Σ_k (sw/2 |x_k| + |W_k| sx/2 + sw sx/4), plus float rounding (1e-5 relative).
   std::vector<float> fp(want.size());
-  detail::affineTokens<Out, In, J, false>(m.w.data(), b.data(), X.data(), fp.data());
+  detail::affineTokens<Out, In, J, false>(PolicyKernel::kSse, m.w.data(), b.data(), X.data(), fp.data());
   const float* sw = m.scale(Out, In);
   for (int t = 0; t < J; ++t) {
     float mx = 0.0f;
@@ -270,7 +264,6 @@ TEST_CASE("int8 kernels: the largest accumulator the layout allows does not over
   // In = 512 with every weight and every input at full scale: Σ = 512 · 127 · 32767 < 2^31 in the
   // signed range, 512 · 127 · 127 in the unsigned one (pmaddubsw; vpdpbusd on AVX-512).
   constexpr int Out = 16, In = detail::kInt8MaxIn, J = 2;
-  KernelGuard guard;
   QuantMatrix m;
   m.w.assign(static_cast<std::size_t>(Out) * In, 1.0f);
   for (int r = 0; r < Out; r += 2)
@@ -283,9 +276,9 @@ TEST_CASE("int8 kernels: the largest accumulator the layout allows does not over
     for (int k = 0; k < In; ++k) X[static_cast<std::size_t>(In + k)] = second;
     const std::vector<float> want = int8Reference<Out, In, J, false>(m, nullptr, X.data());
     for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2, PolicyKernel::kAvx512}) {
-      if (!selectPolicyKernel(k)) continue;
+      if (!policyKernelSupported(k)) continue;
       std::vector<float> y(want.size());
-      detail::affineTokensInt8<Out, In, J, false>(m.q(), m.scale(Out, In), nullptr, X.data(), y.data());
+      detail::affineTokensInt8<Out, In, J, false>(k, m.q(), m.scale(Out, In), nullptr, X.data(), y.data());
       CHECK(std::memcmp(y.data(), want.data(), want.size() * sizeof(float)) == 0);
       // 512 · (±1) · (±3) exactly, up to the scales' float rounding.
       CHECK(y[0] == doctest::Approx(-1536.0).epsilon(1e-6));
@@ -477,7 +470,6 @@ TEST_CASE("int8 kernels: no saturation whatever the weights and 7-bit tokens (ex
 
 TEST_CASE("int8 kernels: NaN stays NaN through the ReLU, and a column too small to scale is zero") {
   constexpr int Out = 36, In = 8, J = 2;  // 36 rows: the SSE2 lanes and the scalar tail
-  KernelGuard guard;
   std::mt19937_64 rng(12);
   const QuantMatrix m = makeQuantMatrix(rng, Out, In);
   const std::vector<float> b = randomVector(rng, Out, -0.5, 0.5);
@@ -485,9 +477,9 @@ TEST_CASE("int8 kernels: NaN stays NaN through the ReLU, and a column too small 
   X[2] = std::numeric_limits<float>::quiet_NaN();             // token 0
   for (int k = 0; k < In; ++k) X[static_cast<std::size_t>(In + k)] = k % 2 == 0 ? 1e-36f : -1e-36f;  // token 1
   for (PolicyKernel k : {PolicyKernel::kSse, PolicyKernel::kAvx2, PolicyKernel::kAvx512}) {
-    if (!selectPolicyKernel(k)) continue;
+    if (!policyKernelSupported(k)) continue;
     std::vector<float> y(static_cast<std::size_t>(Out) * J);
-    detail::affineTokensInt8<Out, In, J, true>(m.q(), m.scale(Out, In), b.data(), X.data(), y.data());
+    detail::affineTokensInt8<Out, In, J, true>(k, m.q(), m.scale(Out, In), b.data(), X.data(), y.data());
     for (int r = 0; r < Out; ++r) {
       CHECK(std::isnan(y[static_cast<std::size_t>(r)]));  // as std::max(NaN, 0) in the fp32 path
       // 32767 / 1e-36 overflows: the column counts as zero, the output is the bias (ReLU'd).
@@ -509,7 +501,7 @@ TEST_CASE("int8 kernels: a non-finite token gives NaN outputs, an all-zero token
   X[3] = std::numeric_limits<float>::infinity();          // token 0
   for (int k = 0; k < In; ++k) X[static_cast<std::size_t>(In + k)] = 0.0f;  // token 1
   std::vector<float> y(static_cast<std::size_t>(Out) * J);
-  detail::affineTokensInt8<Out, In, J, false>(m.q(), m.scale(Out, In), b.data(), X.data(), y.data());
+  detail::affineTokensInt8<Out, In, J, false>(bestPolicyKernel(), m.q(), m.scale(Out, In), b.data(), X.data(), y.data());
   for (int r = 0; r < Out; ++r) {
     CHECK(std::isnan(y[static_cast<std::size_t>(r)]));
     CHECK(y[static_cast<std::size_t>(Out + r)] == b[static_cast<std::size_t>(r)]);
@@ -603,26 +595,25 @@ TEST_CASE("quantizeModelInt8 refuses an odd head size or a matrix with an odd nu
 }
 
 TEST_CASE("stepPolicy with int8 weights: same bits under every kernel, near fp32, fp32 again when unbound") {
-  KernelGuard guard;
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   const test::RandomPolicy p = test::makeRandomPolicy(SmallPolicyDims::arch(), arm, 21);
   PolicyWeights<SmallPolicyDims> w =
       bindPolicyWeights<SmallPolicyDims>(p.pointers.data(), p.pointers.size(), SmallPolicyDims::arch(),
-                                         Conditioning::kReference);
+                                         Conditioning::kReference, PolicyKernel::kSse);
   constexpr int kTicks = 40;  // window 8: the rings wrap
-  REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
   const std::vector<float> fp32 = rollActions(w, 4, kTicks);
   const AlignedBytes blob = quantizePolicyInt8(w);
   bindQuantizedWeights<SmallPolicyDims>(w, blob.data.get());
   const std::vector<float> q_sse = rollActions(w, 4, kTicks);
   CHECK(rollActions(w, 4, kTicks) == q_sse);  // deterministic
   if (haveAvx2()) {
-    REQUIRE(selectPolicyKernel(PolicyKernel::kAvx2));
-    const std::vector<float> q_avx = rollActions(w, 4, kTicks);
+    PolicyWeights<SmallPolicyDims> w_avx = w;  // the same int8 copy, another kernel
+    setPolicyKernel(w_avx, PolicyKernel::kAvx2);
+    const std::vector<float> q_avx = rollActions(w_avx, 4, kTicks);
     CHECK(std::memcmp(q_avx.data(), q_sse.data(), q_sse.size() * sizeof(float)) == 0);
     if (haveAvx512()) {
-      REQUIRE(selectPolicyKernel(PolicyKernel::kAvx512));
-      const std::vector<float> q_512 = rollActions(w, 4, kTicks);
+      setPolicyKernel(w_avx, PolicyKernel::kAvx512);
+      const std::vector<float> q_512 = rollActions(w_avx, 4, kTicks);
       CHECK(std::memcmp(q_512.data(), q_sse.data(), q_sse.size() * sizeof(float)) == 0);
     }
   } else {
@@ -641,7 +632,6 @@ TEST_CASE("stepPolicy with int8 weights: same bits under every kernel, near fp32
   CHECK(max_diff > 0.0);
   CHECK(max_diff <= 0.02 * max_abs);
   unbindQuantizedWeights<SmallPolicyDims>(w);
-  REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
   CHECK(rollActions(w, 4, kTicks) == fp32);
 }
 

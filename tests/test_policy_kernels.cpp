@@ -4,7 +4,6 @@
 // (actions, α, scores, cross_out) are bit-identical under every kernel. On a CPU without AVX2
 // (or AVX-512) the other checks still run and a message says which kernel was not available.
 #include "nao/policy.hpp"
-#include "support/kernel_guard.hpp"
 #include "support/random_policy.hpp"
 
 #include <doctest/doctest.h>
@@ -16,6 +15,7 @@
 #include <cstring>
 #include <memory>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -36,8 +36,6 @@ void noteAvx2Absent() {
   if (!haveAvx512())
     MESSAGE("AVX-512 F/BW/VNNI is not available on this CPU (or build): the avx512 kernel was not checked");
 }
-
-using test::KernelGuard;
 
 bool sameBits(const float* a, const float* b, std::size_t n) { return std::memcmp(a, b, n * sizeof(float)) == 0; }
 
@@ -108,11 +106,10 @@ void checkShape(std::uint64_t seed) {
     }
 #endif
     // Through the dispatcher, every kernel.
-    KernelGuard guard;
     for (PolicyKernel k : kAllKernels) {
-      if (!selectPolicyKernel(k)) continue;
+      if (!policyKernelSupported(k)) continue;
       std::fill(avx.begin(), avx.end(), NAN);
-      detail::affineTokens<Out, In, J, kRelu>(W.data(), bias, X.data(), avx.data());
+      detail::affineTokens<Out, In, J, kRelu>(k, W.data(), bias, X.data(), avx.data());
       CHECK_MESSAGE(sameBits(avx.data(), want.data(), want.size()), "affineTokens with ",
                     std::string(policyKernelName(k)));
     }
@@ -175,18 +172,24 @@ std::vector<float> recordOf(const PolicyWorkspace<Dims>& ws) {
 }
 
 /// For `n_models` random weight sets, both conditioning modes and `n_inputs` random inputs:
-/// the step under kSse, under kAvx2 and under kAvx512 records the same bits. Returns the number
-/// of steps compared with another kernel (0 without AVX2).
+/// the step of the weights bound with kSse, with kAvx2 and with kAvx512 records the same bits,
+/// the three bindings stepping side by side in one process. Returns the number of steps
+/// compared with another kernel (0 without AVX2).
 template <class Dims>
 int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs, const PolicyArch& arch = Dims::arch()) {
-  KernelGuard guard;
   int compared = 0;
   for (int m = 0; m < n_models; ++m) {
     const std::vector<std::vector<float>> tensors = randomTensors(arch, seed + 100 * static_cast<std::uint64_t>(m));
     std::vector<const float*> ptrs;
     for (const std::vector<float>& t : tensors) ptrs.push_back(t.data());
     for (Conditioning c : {Conditioning::kReference, Conditioning::kAutonomous}) {
-      const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c);
+      const PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c, PolicyKernel::kSse);
+      // Another kernel on a copy of the binding, and one bound with it.
+      PolicyWeights<Dims> w_avx = w;
+      if (haveAvx2()) setPolicyKernel(w_avx, PolicyKernel::kAvx2);
+      const PolicyWeights<Dims> w_avx512 =
+          haveAvx512() ? bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c, PolicyKernel::kAvx512) : w;
+      REQUIRE(w.kernel == PolicyKernel::kSse);
       // Three streams fed the same inputs in the same order (the window carries history).
       const auto ws_sse = makePolicyWorkspace<Dims>();
       const auto ws_sse2 = makePolicyWorkspace<Dims>();
@@ -195,7 +198,6 @@ int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs, const 
       std::mt19937_64 rng(seed + 7 + static_cast<std::uint64_t>(m));
       for (int n = 0; n < n_inputs; ++n) {
         const PolicyInput in = randomInput(rng, n % arch.movements, (n * 37) % (arch.max_steps + 10));
-        REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
         stepPolicy(w, *ws_sse, in);
         const std::vector<float> a = recordOf(*ws_sse);
         REQUIRE(ws_sse->action.allFinite());
@@ -203,14 +205,14 @@ int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs, const 
         stepPolicy(w, *ws_sse2, in);
         CHECK(sameBits(recordOf(*ws_sse2).data(), a.data(), a.size()));
         INFO("model ", m, ", ", conditioningName(c), ", input ", n);
-        if (!selectPolicyKernel(PolicyKernel::kAvx2)) continue;
-        stepPolicy(w, *ws_avx, in);
+        if (!haveAvx2()) continue;
+        stepPolicy(w_avx, *ws_avx, in);
         const std::vector<float> b = recordOf(*ws_avx);
         const long d = firstDifference(a.data(), b.data(), a.size());
         CHECK_MESSAGE(d < 0, "SSE and AVX2 records differ at float ", d, " (0-4 actions, then α, score, mass, age profile, cross_out, chunk, bin)");
         ++compared;
-        if (!selectPolicyKernel(PolicyKernel::kAvx512)) continue;
-        stepPolicy(w, *ws_avx512, in);
+        if (!haveAvx512()) continue;
+        stepPolicy(w_avx512, *ws_avx512, in);
         const std::vector<float> e = recordOf(*ws_avx512);
         const long d512 = firstDifference(a.data(), e.data(), a.size());
         CHECK_MESSAGE(d512 < 0, "SSE and AVX-512 records differ at float ", d512, " (0-4 actions, then α, score, mass, age profile, cross_out, chunk, bin)");
@@ -222,47 +224,76 @@ int checkStepBitIdentical(std::uint64_t seed, int n_models, int n_inputs, const 
 
 }  // namespace
 
-TEST_CASE("kernel selection: SSE always available, AVX2 and AVX-512 when the CPU has them; the choice sticks") {
-  KernelGuard guard;
+TEST_CASE("kernels: SSE always available, AVX2 and AVX-512 when the CPU has them; names parse back") {
   CHECK(policyKernelSupported(PolicyKernel::kSse));
   CHECK(std::string(policyKernelName(PolicyKernel::kSse)) == "sse");
   CHECK(std::string(policyKernelName(PolicyKernel::kAvx2)) == "avx2");
   CHECK(std::string(policyKernelName(PolicyKernel::kAvx512)) == "avx512");
-  CHECK(selectPolicyKernel(PolicyKernel::kSse));
-  CHECK(activePolicyKernel() == PolicyKernel::kSse);
-  CHECK(selectPolicyKernel(PolicyKernel::kAvx2) == haveAvx2());
-  CHECK(activePolicyKernel() == (haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse));
-  const PolicyKernel before = activePolicyKernel();
-  CHECK(selectPolicyKernel(PolicyKernel::kAvx512) == haveAvx512());
-  CHECK(activePolicyKernel() == (haveAvx512() ? PolicyKernel::kAvx512 : before));
+  for (PolicyKernel k : kAllKernels) {
+    PolicyKernel parsed = static_cast<PolicyKernel>(-1);
+    CHECK(parsePolicyKernel(policyKernelName(k), parsed));
+    CHECK(parsed == k);
+  }
+  PolicyKernel unchanged = PolicyKernel::kAvx2;
+  for (const char* bad : {"", "auto", "SSE", "avx", "avx5120", "sse "}) {
+    CHECK_FALSE(parsePolicyKernel(bad, unchanged));
+    CHECK(unchanged == PolicyKernel::kAvx2);
+  }
+  // The best is the widest supported, and asking twice gives the same answer (no state).
+  const PolicyKernel best = haveAvx512() ? PolicyKernel::kAvx512 : haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
+  CHECK(bestPolicyKernel() == best);
+  CHECK(bestPolicyKernel() == bestPolicyKernel());
   if (haveAvx512()) CHECK(haveAvx2());  // its window attention is the AVX2 one
 #if !NAO_POLICY_HAVE_AVX2
   CHECK_FALSE(haveAvx2());  // no AVX2 code in a non-x86 build
   CHECK_FALSE(haveAvx512());
 #endif
-  const std::string what = std::string("kernels: sse yes, avx2 ") + (haveAvx2() ? "yes" : "no") +
-                           ", avx512 " + (haveAvx512() ? "yes" : "no") +
-                           "; default (NAO_POLICY_KERNEL, CPU): " + policyKernelName(defaultPolicyKernel());
+  CHECK_NOTHROW(requirePolicyKernel(PolicyKernel::kSse));
+  CHECK_NOTHROW(requirePolicyKernel(best));
+  CHECK_THROWS_AS(requirePolicyKernel(static_cast<PolicyKernel>(7)), std::invalid_argument);
+  if (!haveAvx512())
+    CHECK_THROWS_WITH_AS(requirePolicyKernel(PolicyKernel::kAvx512),
+                         doctest::Contains("policy kernel avx512: not supported by this CPU"), std::invalid_argument);
+  const std::string what = std::string("kernels: sse yes, avx2 ") + (haveAvx2() ? "yes" : "no") + ", avx512 " +
+                           (haveAvx512() ? "yes" : "no") + "; best: " + policyKernelName(bestPolicyKernel());
   MESSAGE(what);
   noteAvx2Absent();
 }
 
-TEST_CASE("NAO_POLICY_KERNEL: 'sse' forces SSE, 'avx2' caps at AVX2, 'avx512' / 'auto' / unset pick the best") {
+TEST_CASE("the kernel is the bound weights': chosen at bind (default the best), checked against the CPU, no environment") {
+  using Dims = SmallPolicyDims;
+  const PolicyArch arch = Dims::arch();
+  const std::vector<std::vector<float>> tensors = randomTensors(arch, 5);
+  std::vector<const float*> ptrs;
+  for (const std::vector<float>& t : tensors) ptrs.push_back(t.data());
+  const Conditioning c = Conditioning::kReference;
+  CHECK(PolicyWeights<Dims>{}.kernel == PolicyKernel::kSse);  // unbound: what every CPU runs
+  CHECK(bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c).kernel == bestPolicyKernel());
+  for (PolicyKernel k : kAllKernels) {
+    INFO(policyKernelName(k));
+    if (policyKernelSupported(k)) {
+      CHECK(bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c, k).kernel == k);
+    } else {
+      const std::string named = std::string("policy kernel ") + policyKernelName(k);
+      CHECK_THROWS_WITH_AS(bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c, k),
+                           doctest::Contains(named.c_str()), std::invalid_argument);
+    }
+  }
+  PolicyWeights<Dims> w = bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c, PolicyKernel::kSse);
+  CHECK_THROWS_AS(setPolicyKernel(w, static_cast<PolicyKernel>(7)), std::invalid_argument);
+  CHECK(w.kernel == PolicyKernel::kSse);  // unchanged by the refused kernel
+  setPolicyKernel(w, bestPolicyKernel());
+  CHECK(w.kernel == bestPolicyKernel());
+  // NAO_POLICY_KERNEL was once read by the core: it no longer changes anything.
   const char* old = std::getenv("NAO_POLICY_KERNEL");
   const std::string saved = old != nullptr ? old : "";
-  const PolicyKernel avx2 = haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
-  const PolicyKernel best = haveAvx512() ? PolicyKernel::kAvx512 : avx2;
   setenv("NAO_POLICY_KERNEL", "sse", 1);
-  CHECK(defaultPolicyKernel() == PolicyKernel::kSse);
-  setenv("NAO_POLICY_KERNEL", "avx2", 1);
-  CHECK(defaultPolicyKernel() == avx2);
-  setenv("NAO_POLICY_KERNEL", "avx512", 1);
-  CHECK(defaultPolicyKernel() == best);
-  setenv("NAO_POLICY_KERNEL", "auto", 1);
-  CHECK(defaultPolicyKernel() == best);
-  unsetenv("NAO_POLICY_KERNEL");
-  CHECK(defaultPolicyKernel() == best);
-  if (old != nullptr) setenv("NAO_POLICY_KERNEL", saved.c_str(), 1);
+  CHECK(bestPolicyKernel() == (haveAvx512() ? PolicyKernel::kAvx512 : haveAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse));
+  CHECK(bindPolicyWeights<Dims>(ptrs.data(), ptrs.size(), arch, c).kernel == bestPolicyKernel());
+  if (old != nullptr)
+    setenv("NAO_POLICY_KERNEL", saved.c_str(), 1);
+  else
+    unsetenv("NAO_POLICY_KERNEL");
 }
 
 TEST_CASE("affineTokens: SSE and AVX2 equal the scalar k-order definition bit for bit, odd shapes included") {
@@ -341,9 +372,8 @@ void checkWindowKernels(std::uint64_t seed) {
   const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
   float alpha[N];
   for (float& a : alpha) a = uniform(rng, 0.0, 1.0);
-  KernelGuard guard;
   for (PolicyKernel k : kAllKernels) {
-    if (!selectPolicyKernel(k)) continue;
+    if (!policyKernelSupported(k)) continue;
     for (int n : {1, W / 2, W})
       for (int slot : {0, n - 1, W - 1}) {
         if (n < W && slot != n - 1) continue;  // before the ring wraps, the newest tick is slot n − 1
@@ -352,7 +382,7 @@ void checkWindowKernels(std::uint64_t seed) {
           for (int i = 0; i < J; ++i) {
             const int c0 = hd * Dh;
             alignas(32) float got[NP];
-            detail::windowScores<Dh, NP>(q.col(i).data() + c0, KT.data() + c0 * NP, rows, scale, got);
+            detail::windowScores<Dh, NP>(k, q.col(i).data() + c0, KT.data() + c0 * NP, rows, scale, got);
             for (int key = 0; key < n * J; ++key) {
               const float want = q.col(i).template segment<Dh>(c0).dot(K.col(key).template segment<Dh>(c0)) * scale;
               REQUIRE_MESSAGE(std::memcmp(&want, &got[key], sizeof(float)) == 0,
@@ -361,7 +391,8 @@ void checkWindowKernels(std::uint64_t seed) {
             // The J queries of a head in one call: each the bits of the per-key dot too.
             if (i == 0) {
               alignas(64) float got_q[J][NP];
-              detail::windowScoresQueries<Dh, NP, J>(q.data() + c0, D, KT.data() + c0 * NP, rows, scale, got_q[0], NP);
+              detail::windowScoresQueries<Dh, NP, J>(k, q.data() + c0, D, KT.data() + c0 * NP, rows, scale, got_q[0],
+                                                     NP);
               for (int iq = 0; iq < J; ++iq)
                 for (int key = 0; key < n * J; ++key) {
                   const float want = q.col(iq).template segment<Dh>(c0).dot(K.col(key).template segment<Dh>(c0)) * scale;
@@ -374,7 +405,7 @@ void checkWindowKernels(std::uint64_t seed) {
               for (int j = 0; j < J; ++j)
                 want_o += alpha[age * J + j] * V.col(((slot - age + W) % W) * J + j).template segment<Dh>(c0);
             float got_o[Dh];
-            detail::windowValues<Dh, J, W>(alpha, V.data() + c0, D, slot, n, got_o);
+            detail::windowValues<Dh, J, W>(k, alpha, V.data() + c0, D, slot, n, got_o);
             REQUIRE_MESSAGE(sameBits(want_o.data(), got_o, Dh), policyKernelName(k) << " values, Dh " << Dh);
           }
       }
@@ -394,7 +425,6 @@ template <int J, int W>
 void checkWindowSoftmax(std::uint64_t seed) {
   constexpr int N = W * J, NP = (N + detail::kKeyRowBlock - 1) / detail::kKeyRowBlock * detail::kKeyRowBlock;
   std::mt19937_64 rng(seed);
-  KernelGuard guard;
   for (int draw = 0; draw < 40; ++draw) {
     alignas(64) float raw[J][NP];
     float bias[W];
@@ -415,15 +445,14 @@ void checkWindowSoftmax(std::uint64_t seed) {
       for (float& x : raw[2]) x = std::numeric_limits<float>::quiet_NaN();
     }
     const int n = 1 + static_cast<int>(rng() % W), slot = n < W ? n - 1 : static_cast<int>(rng() % W);
-    REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
     float want[J][N];
     std::fill(&want[0][0], &want[0][0] + J * N, 1.0f);
-    detail::windowSoftmaxScalar<J, W, NP, N>(raw[0], bias, slot, n, want[0]);
+    detail::windowSoftmaxScalar<J, W, NP, N>(PolicyKernel::kSse, raw[0], bias, slot, n, want[0]);
     for (PolicyKernel k : kAllKernels) {
-      if (!selectPolicyKernel(k)) continue;
+      if (!policyKernelSupported(k)) continue;
       float got[J][N];
       std::fill(&got[0][0], &got[0][0] + J * N, 1.0f);
-      detail::windowSoftmax<J, W, NP, N>(raw[0], bias, slot, n, got[0]);
+      detail::windowSoftmax<J, W, NP, N>(k, raw[0], bias, slot, n, got[0]);
       for (int i = 0; i < J; ++i)
         for (int m = 0; m < N; ++m) {
           INFO(policyKernelName(k), " draw ", draw, " n ", n, " query ", i, " key ", m);
@@ -512,7 +541,6 @@ TEST_CASE("expSoftmax: within 2 ulp of std::exp on [-87, 0], 0 below, NaN kept; 
   CHECK(worst_ulp <= 2.0);
   CHECK(std::isnan(detail::expSoftmax(std::numeric_limits<float>::quiet_NaN())));
   // expShifted under every kernel: the scalar definition's bits in every lane and in the tails.
-  KernelGuard guard;
   std::mt19937_64 rng(77);
   std::vector<float> base(103);
   for (float& v : base) v = uniform(rng, -40.0, 3.0);
@@ -520,10 +548,10 @@ TEST_CASE("expSoftmax: within 2 ulp of std::exp on [-87, 0], 0 below, NaN kept; 
   base[20] = -std::numeric_limits<float>::infinity();
   const float shift = 3.0f;
   for (PolicyKernel k : kAllKernels) {
-    if (!selectPolicyKernel(k)) continue;
+    if (!policyKernelSupported(k)) continue;
     for (int count : {103, 96, 17, 3}) {
       std::vector<float> s = base;
-      detail::expShifted(s.data(), count, shift);
+      detail::expShifted(k, s.data(), count, shift);
       for (int m = 0; m < 103; ++m) {
         const float want = m < count ? detail::expSoftmax(base[static_cast<std::size_t>(m)] - shift) : base[static_cast<std::size_t>(m)];
         INFO(policyKernelName(k), " count ", count, " m ", m);
@@ -539,7 +567,6 @@ TEST_CASE("expSoftmax: within 2 ulp of std::exp on [-87, 0], 0 below, NaN kept; 
 TEST_CASE("headSumNorm: SSE and AVX-512 equal the 16-lane definition bit for bit and Eigen's norm to float rounding") {
   constexpr int D = 128, H = 4;
   std::mt19937_64 rng(91);
-  KernelGuard guard;
   for (int draw = 0; draw < 200; ++draw) {
     std::vector<float> fv(static_cast<std::size_t>(D) * H);
     for (float& v : fv) v = uniform(rng, -2.0, 2.0);
@@ -562,8 +589,8 @@ TEST_CASE("headSumNorm: SSE and AVX-512 equal the 16-lane definition bit for bit
     }
 #endif
     for (PolicyKernel k : kAllKernels) {
-      if (!selectPolicyKernel(k)) continue;
-      const float got = detail::headSumNorm<D, H>(a, f);
+      if (!policyKernelSupported(k)) continue;
+      const float got = detail::headSumNorm<D, H>(k, a, f);
       CHECK(sameBits(&got, &want, 1));
     }
   }
@@ -572,7 +599,6 @@ TEST_CASE("headSumNorm: SSE and AVX-512 equal the 16-lane definition bit for bit
 TEST_CASE("headSumNorms: J coefficient sets over the same vectors, each the bits of its own headSumNorm") {
   constexpr int D = 128, H = 4, Q = 5;
   std::mt19937_64 rng(92);
-  KernelGuard guard;
   for (int draw = 0; draw < 50; ++draw) {
     std::vector<float> fv(static_cast<std::size_t>(D) * H);
     for (float& v : fv) v = uniform(rng, -2.0, 2.0);
@@ -584,10 +610,10 @@ TEST_CASE("headSumNorms: J coefficient sets over the same vectors, each the bits
     for (int i = 0; i < Q; ++i) want[i] = detail::headSumNormScalar<D, H>(a + i * H, f);
     CHECK(want[0] != want[1]);  // the sets differ, so a mixed-up index would show
     for (PolicyKernel k : kAllKernels) {
-      if (!selectPolicyKernel(k)) continue;
+      if (!policyKernelSupported(k)) continue;
       float got[Q];
       std::fill(got, got + Q, NAN);
-      detail::headSumNorms<D, H, Q>(a, f, got);
+      detail::headSumNorms<D, H, Q>(k, a, f, got);
       CHECK(sameBits(got, want, Q));
     }
   }

@@ -12,7 +12,6 @@
 #include "nao/model_file.hpp"
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
-#include "support/kernel_guard.hpp"
 #include "support/random_policy.hpp"
 #include "support/test_util.hpp"
 
@@ -29,8 +28,6 @@
 using namespace nao;
 
 namespace {
-
-using test::KernelGuard;
 
 /// The kernels this CPU and build can run.
 std::vector<PolicyKernel> supportedKernels() {
@@ -54,7 +51,6 @@ template <int Out, int In, int J>
 void checkPackedShape(std::uint64_t seed) {
   CAPTURE(Out);
   CAPTURE(In);
-  KernelGuard guard;
   std::mt19937_64 rng(seed);
   const std::vector<float> W = randomVector(rng, static_cast<std::size_t>(Out) * In, -0.3, 0.3);
   const std::vector<float> b = randomVector(rng, Out, -0.5, 0.5);
@@ -63,20 +59,19 @@ void checkPackedShape(std::uint64_t seed) {
   packMatrixFp32(W.data(), Out, In, P.data());
   for (PolicyKernel k : supportedKernels()) {
     CAPTURE(policyKernelName(k));
-    REQUIRE(selectPolicyKernel(k));
     std::vector<float> want(static_cast<std::size_t>(Out) * J), got(want.size(), NAN);
-    detail::affineTokens<Out, In, J, true>(W.data(), b.data(), X.data(), want.data());
-    detail::affineTokensPacked<Out, In, J, true>(P.data(), b.data(), X.data(), got.data());
+    detail::affineTokens<Out, In, J, true>(k, W.data(), b.data(), X.data(), want.data());
+    detail::affineTokensPacked<Out, In, J, true>(k, P.data(), b.data(), X.data(), got.data());
     CHECK(sameBits(got, want));
     // No bias, no ReLU.
-    detail::affineTokens<Out, In, J, false>(W.data(), nullptr, X.data(), want.data());
+    detail::affineTokens<Out, In, J, false>(k, W.data(), nullptr, X.data(), want.data());
     std::fill(got.begin(), got.end(), NAN);
-    detail::affineTokensPacked<Out, In, J, false>(P.data(), nullptr, X.data(), got.data());
+    detail::affineTokensPacked<Out, In, J, false>(k, P.data(), nullptr, X.data(), got.data());
     CHECK(sameBits(got, want));
     // Copied wrong: two columns of the first block swapped. The comparison can fail.
     std::vector<float> bad = P;
     for (int i = 0; i < detail::kPackBlock; ++i) std::swap(bad[static_cast<std::size_t>(i)], bad[static_cast<std::size_t>(detail::kPackBlock + i)]);
-    detail::affineTokensPacked<Out, In, J, false>(bad.data(), nullptr, X.data(), got.data());
+    detail::affineTokensPacked<Out, In, J, false>(k, bad.data(), nullptr, X.data(), got.data());
     CHECK_FALSE(sameBits(got, want));
   }
 }
@@ -151,12 +146,11 @@ Rollout roll(const PolicyWeights<Dims>& w, std::uint64_t seed, int ticks) {
 
 template <class Dims>
 void checkPackedStep(std::uint64_t seed, int ticks) {
-  KernelGuard guard;
   const ArmModel arm = loadArmModel(test::kUrdfPath);
   const test::RandomPolicy p = test::makeRandomPolicy(Dims::arch(), arm, seed);
   PolicyWeights<Dims> w =
-      bindPolicyWeights<Dims>(p.pointers.data(), p.pointers.size(), Dims::arch(), Conditioning::kReference);
-  REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
+      bindPolicyWeights<Dims>(p.pointers.data(), p.pointers.size(), Dims::arch(), Conditioning::kReference,
+                              PolicyKernel::kSse);
   const Rollout fp32 = roll(w, seed, ticks);
   // The blob from the file (manifest order) is the views' matrices packed in view order.
   ModelHeader h;
@@ -176,7 +170,7 @@ void checkPackedStep(std::uint64_t seed, int ticks) {
   CHECK_FALSE(usesInt8(w));
   for (PolicyKernel k : supportedKernels()) {
     CAPTURE(policyKernelName(k));
-    REQUIRE(selectPolicyKernel(k));
+    setPolicyKernel(w, k);
     const Rollout packed = roll(w, seed, ticks);
     CHECK(sameBits(packed.actions, fp32.actions));
     CHECK(sameBits(packed.cross, fp32.cross));
@@ -188,7 +182,7 @@ void checkPackedStep(std::uint64_t seed, int ticks) {
   AlignedBytes zeros = packModelFp32(file);
   std::memset(zeros.data.get(), 0, zeros.size);
   bindPackedWeights<Dims>(w, zeros.data.get());
-  REQUIRE(selectPolicyKernel(PolicyKernel::kSse));
+  setPolicyKernel(w, PolicyKernel::kSse);
   CHECK_FALSE(sameBits(roll(w, seed, 4).actions, std::vector<float>(fp32.actions.begin(), fp32.actions.begin() + 20)));
   // int8 replaces them; unbinding leaves the fp32 views.
   const AlignedBytes q = quantizePolicyInt8(w);

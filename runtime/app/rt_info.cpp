@@ -23,7 +23,8 @@ std::string oneLine(std::string s) {
 
 }  // namespace
 
-std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision) {
+std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision,
+                          PolicyKernel kernel) {
   using nlohmann::ordered_json;
   const ModelHeader& h = model.header;
   const PolicyArch& a = h.arch;
@@ -51,8 +52,8 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source, con
   // The contract: where the weights come from and their precision.
   j["weights"] = source == "compiled-in" ? "compiled" : "file";
   j["precision"] = precision;
-  // The kernel stepPolicy would run here (CPU, NAO_POLICY_KERNEL): every kernel gives the same bits.
-  j["kernel"] = policyKernelName(defaultPolicyKernel());
+  // The kernel a run binds the weights with: every kernel gives the same bits.
+  j["kernel"] = policyKernelName(kernel);
   ordered_json joints = ordered_json::array();
   for (const TrainedJoint& t : h.joints)
     joints.push_back({{"name", t.name}, {"lower", t.lower}, {"upper", t.upper}, {"velocity", t.velocity}});
@@ -101,7 +102,8 @@ int runInfo(const InfoOptions& options, std::ostream& out, std::ostream& err) {
       throw ModelFileError(std::string(e.what()) + " (" + options.urdf_path + ")");
     }
     const WeightPrecision precision = runPrecision(options.precision, source == "compiled-in", options.compiled);
-    out << modelInfoJson(model, source, weightPrecisionName(precision)) << "\n";
+    requirePolicyKernel(options.kernel);  // what a run's binding would refuse
+    out << modelInfoJson(model, source, weightPrecisionName(precision), options.kernel) << "\n";
     return 0;
   } catch (const std::exception& e) {
     err << "nao_rt: " << oneLine(e.what()) << "\n";

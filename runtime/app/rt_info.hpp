@@ -4,6 +4,7 @@
 #pragma once
 
 #include "nao/model_file.hpp"
+#include "nao/policy_kernels.hpp"
 
 #include <cstddef>
 #include <cstdint>
@@ -17,15 +18,19 @@ struct InfoOptions {
   std::string urdf_path;                    ///< the URDF the joints must match
   ModelImage compiled;                      ///< the compiled-in model (bytes nullptr if the build has none)
   std::string precision;                    ///< --precision; empty: what a run would default to
+  /// The kernel a run with the same options binds its weights with (summary.json model.kernel).
+  PolicyKernel kernel = bestPolicyKernel();
 };
 
 /// The JSON description of a checked model (pretty-printed, no trailing newline): format_version,
 /// dimensions, conditioning, movements, parameters, checksum ("0x%016x"), weights ("compiled" or
-/// "file"), precision ("fp32", "fp32-packed" or "int8": what a run with the same options uses), tensors,
+/// "file"), precision ("fp32", "fp32-packed" or "int8": what a run with the same options uses),
+/// kernel (the one a run with the same options binds the weights with), tensors,
 /// joints, starts (per movement, the autonomous starts' name and ticks; empty lists without
 /// any), metadata (parsed JSON if it parses, else the string), source. Throws ModelFileError for
 /// unusable starts.
-std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision = "fp32");
+std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision = "fp32",
+                          PolicyKernel kernel = bestPolicyKernel());
 
 /// Checks the model and prints modelInfoJson + newline on `out`: returns 0. On any problem
 /// (no model, a bad file, joints that differ from the URDF, an unusable URDF) prints exactly

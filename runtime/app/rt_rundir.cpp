@@ -237,7 +237,7 @@ ordered_json summaryJson(const RunOptions& o, const PreparedRun& p, const LoopTo
                 {"conditioning", conditioningName(p.model.header.conditioning)},
                 {"chunk", p.model.header.arch.chunk},
                 {"precision", weightPrecisionName(p.precision)},
-                {"kernel", policyKernelName(activePolicyKernel())}};
+                {"kernel", policyKernelName(totals.kernel)}};
   j["reference"] = p.description;
   j["retarget"] = {{"priority", retargetPriorityName(p.model_spec.retarget.priority)},
                    {"lambda_q", p.model_spec.retarget.lambda_q},

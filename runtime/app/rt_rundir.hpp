@@ -9,6 +9,7 @@
 #include "nao/attention_ring.hpp"
 #include "nao/controller.hpp"
 #include "nao/lola_backend.hpp"
+#include "nao/policy_kernels.hpp"
 
 #include <array>
 #include <cstdint>
@@ -56,6 +57,9 @@ struct LoopTotals {
   std::string run_code;
   /// The ActionLaw that acted in place of the policy (summary.json "action_law"); empty: the policy.
   std::string action_law;
+  /// The kernel the run's weights were bound with (PolicyWeights::kernel; summary.json
+  /// model.kernel). The default is the binders' own default.
+  PolicyKernel kernel = bestPolicyKernel();
 };
 
 /// ticks.csv's header line (no newline): the contract's columns in order.

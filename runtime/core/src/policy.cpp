@@ -30,8 +30,6 @@ std::string computeText(const PolicyArch& a) {
 
 void bindWeightSlots(const std::vector<WeightSlot>& slots, const std::vector<TensorSpec>& manifest,
                      const float* const* tensors, std::size_t count) {
-  // Configure time: decide the kernel of affineTokens now (environment, CPU), not in the loop.
-  (void)activePolicyKernel();
   if (count != manifest.size())
     throw std::invalid_argument("policy weights: " + std::to_string(count) + " tensors given, the manifest has " +
                                 std::to_string(manifest.size()));

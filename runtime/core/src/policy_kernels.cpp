@@ -1,14 +1,16 @@
-// Run-time choice of the policy kernel (nao/policy_kernels.hpp): environment variable
-// NAO_POLICY_KERNEL and the CPU's features, decided once and cached.
+// The policy kernels' names and the CPU's support for them (nao/policy_kernels.hpp): pure
+// functions of the machine, no environment and no state.
 #include "nao/policy_kernels.hpp"
 
-#include <cstdlib>
-#include <cstring>
+#include <stdexcept>
+#include <string>
 
 namespace nao {
 
 namespace {
 
+// __builtin_cpu_init is idempotent and cheap; calling it makes the answer right even before the
+// compiler runtime's own constructor ran (a caller's static initialiser).
 bool cpuHasAvx2() noexcept {
 #if NAO_POLICY_HAVE_AVX2
   // Also checks that the OS saves the ymm state (GCC's and Clang's cpu model do).
@@ -43,46 +45,34 @@ const char* policyKernelName(PolicyKernel k) noexcept {
   return "sse";
 }
 
+bool parsePolicyKernel(std::string_view name, PolicyKernel& k) noexcept {
+  for (PolicyKernel c : {PolicyKernel::kSse, PolicyKernel::kAvx2, PolicyKernel::kAvx512})
+    if (name == policyKernelName(c)) {
+      k = c;
+      return true;
+    }
+  return false;
+}
+
 bool policyKernelSupported(PolicyKernel k) noexcept {
-  if (k == PolicyKernel::kSse) return true;
-  if (k == PolicyKernel::kAvx2) {
-    static const bool avx2 = cpuHasAvx2();
-    return avx2;
-  }
-  if (k == PolicyKernel::kAvx512) {
-    static const bool avx512 = cpuHasAvx512();
-    return avx512;
+  switch (k) {
+    case PolicyKernel::kSse: return true;
+    case PolicyKernel::kAvx2: return cpuHasAvx2();
+    case PolicyKernel::kAvx512: return cpuHasAvx512();
   }
   return false;
 }
 
-PolicyKernel defaultPolicyKernel() noexcept {
-  const char* env = std::getenv("NAO_POLICY_KERNEL");
-  if (env != nullptr && std::strcmp(env, "sse") == 0) return PolicyKernel::kSse;
-  const bool avx2 = policyKernelSupported(PolicyKernel::kAvx2);
-  if (env != nullptr && std::strcmp(env, "avx2") == 0) return avx2 ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
-  // "avx512", "auto", "", unset, anything else: the best supported.
-  if (policyKernelSupported(PolicyKernel::kAvx512)) return PolicyKernel::kAvx512;
-  return avx2 ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
+PolicyKernel bestPolicyKernel() noexcept {
+  if (cpuHasAvx512()) return PolicyKernel::kAvx512;
+  return cpuHasAvx2() ? PolicyKernel::kAvx2 : PolicyKernel::kSse;
 }
 
-bool selectPolicyKernel(PolicyKernel k) noexcept {
-  if (!policyKernelSupported(k)) return false;
-  detail::g_policy_kernel.store(static_cast<int>(k), std::memory_order_relaxed);
-  return true;
+void requirePolicyKernel(PolicyKernel k) {
+  if (policyKernelSupported(k)) return;
+  throw std::invalid_argument(std::string("policy kernel ") + policyKernelName(k) +
+                              ": not supported by this CPU or build (the best here is " +
+                              policyKernelName(bestPolicyKernel()) + ")");
 }
 
-namespace detail {
-
-std::atomic<int> g_policy_kernel{-1};
-
-int resolvePolicyKernel() noexcept {
-  int expected = -1;
-  // A selectPolicyKernel that got there first wins.
-  g_policy_kernel.compare_exchange_strong(expected, static_cast<int>(defaultPolicyKernel()),
-                                          std::memory_order_relaxed);
-  return g_policy_kernel.load(std::memory_order_relaxed);
-}
-
-}  // namespace detail
 }  // namespace nao

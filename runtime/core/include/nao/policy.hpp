@@ -148,21 +148,21 @@ namespace detail {
 /// Y = W X + b (ReLU if kRelu) with the matrix's int8 copy if it has one, else in fp32 from
 /// its packed copy if it has one (the same bits), else from the view.
 template <bool kRelu, int Out, int In, int J>
-inline void affine(const WeightView<Out, In>& W, const QuantView<Out, In>& Wq, const WeightView<Out, 1>& b,
-                   const Eigen::Matrix<float, In, J>& X, Eigen::Matrix<float, Out, J>& Y) {
+inline void affine(PolicyKernel kernel, const WeightView<Out, In>& W, const QuantView<Out, In>& Wq,
+                   const WeightView<Out, 1>& b, const Eigen::Matrix<float, In, J>& X, Eigen::Matrix<float, Out, J>& Y) {
   if constexpr (In % 2 == 0 && In <= kInt8MaxIn) {  // else no int8 copy can exist (bindQuantizedWeights)
     if (Wq.w != nullptr) {
-      affineTokensInt8<Out, In, J, kRelu>(Wq.w, Wq.scale, b.data(), X.data(), Y.data());
+      affineTokensInt8<Out, In, J, kRelu>(kernel, Wq.w, Wq.scale, b.data(), X.data(), Y.data());
       return;
     }
   }
   if constexpr (packedShape(Out, In)) {  // else no packed copy can exist (bindPackedWeights)
     if (Wq.packed != nullptr) {
-      affineTokensPacked<Out, In, J, kRelu>(Wq.packed, b.data(), X.data(), Y.data());
+      affineTokensPacked<Out, In, J, kRelu>(kernel, Wq.packed, b.data(), X.data(), Y.data());
       return;
     }
   }
-  affineTokens<Out, In, J, kRelu>(W.data(), b.data(), X.data(), Y.data());
+  affineTokens<Out, In, J, kRelu>(kernel, W.data(), b.data(), X.data(), Y.data());
 }
 
 /// out(:, j) = LN(x(:, j)): biased variance over d, eps 1e-5.
@@ -181,11 +181,11 @@ inline void layerNorm(const typename PolicyWorkspace<Dims>::Tokens& x, const Lay
 /// ws.out = causal self-attention of the J new action tokens (query i sees tokens 0..i), from
 /// ws.h; ws.q, ws.k, ws.v, ws.o hold the intermediates afterwards.
 template <class Dims>
-inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<Dims>& ws) {
+inline void jointSelfAttention(PolicyKernel kernel, const AttentionWeights<Dims>& A, PolicyWorkspace<Dims>& ws) {
   constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim;
-  affine<false>(A.wq, A.wq8, A.bq, ws.h, ws.q);
-  affine<false>(A.wk, A.wk8, A.bk, ws.h, ws.k);
-  affine<false>(A.wv, A.wv8, A.bv, ws.h, ws.v);
+  affine<false>(kernel, A.wq, A.wq8, A.bq, ws.h, ws.q);
+  affine<false>(kernel, A.wk, A.wk8, A.bk, ws.h, ws.k);
+  affine<false>(kernel, A.wv, A.wv8, A.bv, ws.h, ws.v);
   const float scale = 1.0f / std::sqrt(static_cast<float>(Dh));
   for (int hd = 0; hd < Dims::kHeads; ++hd) {
     const int c0 = hd * Dh;
@@ -206,7 +206,7 @@ inline void jointSelfAttention(const AttentionWeights<Dims>& A, PolicyWorkspace<
       for (int j = 0; j <= i; ++j) ws.o.col(i).template segment<Dh>(c0) += (s[j] / sum) * ws.v.col(j).template segment<Dh>(c0);
     }
   }
-  affine<false>(A.wo, A.wo8, A.bo, ws.o, ws.out);
+  affine<false>(kernel, A.wo, A.wo8, A.bo, ws.o, ws.out);
 }
 
 /// α of J queries over the last n ticks (alpha[i][age·J + j]) as if the keys of the body parts
@@ -240,7 +240,8 @@ inline void maskBodyParts(float (*alpha)[N], int n, unsigned masked) {
 /// `masked`: bit j set, the keys of body part j are left out (their logits −∞), every tick of
 /// the window - the attention ablation's probe (maskBodyParts); 0 in a normal step.
 template <class Dims>
-inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typename PolicyWorkspace<Dims>::KeyRing& K,
+inline void windowAttention(PolicyKernel kernel, const TemporalAttentionWeights<Dims>& A,
+                            const typename PolicyWorkspace<Dims>::KeyRing& K,
                             const typename PolicyWorkspace<Dims>::Ring& V, int slot, int n, PolicyWorkspace<Dims>& ws,
                             unsigned masked = 0) {
   constexpr int J = Dims::kTokens, Dh = Dims::kHeadDim, W = Dims::kWindow, N = Dims::kMemory, D = Dims::kDModel;
@@ -253,8 +254,8 @@ inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typen
   for (int hd = 0; hd < Dims::kHeads; ++hd) {
     const int c0 = hd * Dh;
     if constexpr (kWindowKernelExact<Dh>) {
-      windowScoresQueries<Dh, NP, J>(ws.q.data() + c0, D, K.data() + static_cast<std::ptrdiff_t>(c0) * NP, rows, scale,
-                                     raw[0], NP);
+      windowScoresQueries<Dh, NP, J>(kernel, ws.q.data() + c0, D, K.data() + static_cast<std::ptrdiff_t>(c0) * NP,
+                                     rows, scale, raw[0], NP);
     } else {
       for (int i = 0; i < J; ++i) {
         const float* q = ws.q.col(i).data() + c0;
@@ -266,16 +267,16 @@ inline void windowAttention(const TemporalAttentionWeights<Dims>& A, const typen
       }
     }
     float (*s)[N] = ws.alpha[hd];
-    windowSoftmax<J, W, NP, N>(raw[0], A.age_bias.col(hd).data(), slot, n, s[0]);
+    windowSoftmax<J, W, NP, N>(kernel, raw[0], A.age_bias.col(hd).data(), slot, n, s[0]);
     if (masked != 0) maskBodyParts<J, N>(s, n, masked);
-    windowValuesQueries<Dh, J, W, J>(s[0], N, V.data() + c0, D, slot, n, ws.o.data() + c0, D);
+    windowValuesQueries<Dh, J, W, J>(kernel, s[0], N, V.data() + c0, D, slot, n, ws.o.data() + c0, D);
   }
 }
 
 /// The record of the last decoder layer's cross-attention (α in ws.alpha over the last n
 /// ticks): ws.mass, ws.age_profile, ws.score (norm-based, from ws.f_ring).
 template <class Dims>
-inline void crossAttentionRecord(int slot, int n, PolicyWorkspace<Dims>& ws) {
+inline void crossAttentionRecord(PolicyKernel kernel, int slot, int n, PolicyWorkspace<Dims>& ws) {
   constexpr int J = Dims::kTokens, H = Dims::kHeads, W = Dims::kWindow;
   constexpr float kInv = 1.0f / static_cast<float>(H * J);
   // Summed in locals (in the same order): through ws the compiler kept every partial sum in
@@ -303,7 +304,7 @@ inline void crossAttentionRecord(int slot, int n, PolicyWorkspace<Dims>& ws) {
         f[hd] = ws.f_ring[static_cast<std::size_t>(hd)].col(base + j).data();
         for (int i = 0; i < J; ++i) a[i * H + hd] = ws.alpha[hd][i][age * J + j];
       }
-      headSumNorms<Dims::kDModel, H, J>(a, f, norm[age][j]);
+      headSumNorms<Dims::kDModel, H, J>(kernel, a, f, norm[age][j]);
     }
   }
   float score[J] = {};
@@ -314,11 +315,11 @@ inline void crossAttentionRecord(int slot, int n, PolicyWorkspace<Dims>& ws) {
 }
 
 template <class Dims>
-inline void feedForward(const FfnWeights<Dims>& F, PolicyWorkspace<Dims>& ws) {
-  affine<true>(F.w0, F.w0q, F.b0, ws.h, ws.f0);
-  affine<true>(F.w1, F.w1q, F.b1, ws.f0, ws.f1);
-  affine<true>(F.w2, F.w2q, F.b2, ws.f1, ws.f2);
-  affine<false>(F.w3, F.w3q, F.b3, ws.f2, ws.out);
+inline void feedForward(PolicyKernel kernel, const FfnWeights<Dims>& F, PolicyWorkspace<Dims>& ws) {
+  affine<true>(kernel, F.w0, F.w0q, F.b0, ws.h, ws.f0);
+  affine<true>(kernel, F.w1, F.w1q, F.b1, ws.f0, ws.f1);
+  affine<true>(kernel, F.w2, F.w2q, F.b2, ws.f1, ws.f2);
+  affine<false>(kernel, F.w3, F.w3q, F.b3, ws.f2, ws.out);
 }
 
 }  // namespace detail
@@ -327,12 +328,13 @@ namespace detail {
 
 /// The table and head sizes of `arch` into `w`, so the visitors walk its views.
 template <class Dims>
-void setPolicySizes(PolicyWeights<Dims>& w, const PolicyArch& arch, Conditioning c) noexcept {
+void setPolicySizes(PolicyWeights<Dims>& w, const PolicyArch& arch, Conditioning c, PolicyKernel kernel) noexcept {
   w.movements = arch.movements;
   w.clusters = arch.clusters;
   w.max_steps = arch.max_steps;
   w.chunk = arch.chunk;
   w.conditioning = c;
+  w.kernel = kernel;
 }
 
 /// The normalised temporal-ensemble weights from head.ensemble_decay (equal weights for C = 1).
@@ -356,15 +358,18 @@ void setEnsembleWeights(PolicyWeights<Dims>& w) noexcept {
 /// @param count   number of pointers; must equal the manifest size
 /// @param arch    the model's architecture (checkPolicyArch<Dims>)
 /// @param c       the conditioning mode of the model
-/// @throws std::invalid_argument on another architecture, a wrong count or a null pointer; a
-///         manifest entry without a view of the same name and shape (a programming error) is
-///         reported the same way.
+/// @param kernel  the kernels stepPolicy runs these weights with (PolicyWeights::kernel; every
+///                kernel gives the same bits): by default the best this CPU runs
+/// @throws std::invalid_argument on another architecture, a wrong count, a null pointer or a
+///         kernel this CPU does not run (requirePolicyKernel); a manifest entry without a view of
+///         the same name and shape (a programming error) is reported the same way.
 template <class Dims>
 PolicyWeights<Dims> bindPolicyWeights(const float* const* tensors, std::size_t count, const PolicyArch& arch,
-                                      Conditioning c) {
+                                      Conditioning c, PolicyKernel kernel = bestPolicyKernel()) {
+  requirePolicyKernel(kernel);
   checkPolicyArch<Dims>(arch);
   PolicyWeights<Dims> w;
-  detail::setPolicySizes(w, arch, c);
+  detail::setPolicySizes(w, arch, c, kernel);
   // By name against the manifest itself, so its order can change without a silent mismatch.
   detail::bindWeightSlots(detail::weightSlots(w), policyManifest(arch), tensors, count);
   detail::setEnsembleWeights(w);
@@ -376,13 +381,16 @@ PolicyWeights<Dims> bindPolicyWeights(const float* const* tensors, std::size_t c
 /// extents[i] (codegen's constexpr kTensorOffsets and kTensorExtents, made from the manifest
 /// when the code was generated; mappedModelFile checks them against it once). No name lookup,
 /// no copy, no allocation; the image must outlive the weights. `arch` must pass
-/// checkPolicyArch<Dims> (codegen's does).
+/// checkPolicyArch<Dims> (codegen's does). `kernel` as for bindPolicyWeights.
+/// @throws std::invalid_argument for a kernel this CPU does not run (requirePolicyKernel); with
+///         the default kernel, never.
 template <class Dims>
 PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::uint64_t* offsets,
-                                        const TensorExtent* extents, const PolicyArch& arch, Conditioning c) noexcept {
-  (void)activePolicyKernel();  // configure time: decide the kernel now, not in the loop
+                                        const TensorExtent* extents, const PolicyArch& arch, Conditioning c,
+                                        PolicyKernel kernel = bestPolicyKernel()) {
+  requirePolicyKernel(kernel);
   PolicyWeights<Dims> w;
-  detail::setPolicySizes(w, arch, c);
+  detail::setPolicySizes(w, arch, c, kernel);
   std::size_t i = 0;
   detail::visitWeightViews(w, [&](const detail::ViewName&, auto& view, auto&...) {
     using View = std::remove_reference_t<decltype(view)>;
@@ -398,6 +406,15 @@ PolicyWeights<Dims> bindPolicyWeightsAt(const std::uint8_t* base, const std::uin
   });
   detail::setEnsembleWeights(w);
   return w;
+}
+
+/// Runs `w` with `kernel` from now on (the same bits, another speed): tests and benchmarks that
+/// compare the kernels on one binding. Configure time.
+/// @throws std::invalid_argument, w unchanged, for a kernel this CPU does not run
+template <class Dims>
+void setPolicyKernel(PolicyWeights<Dims>& w, PolicyKernel kernel) {
+  requirePolicyKernel(kernel);
+  w.kernel = kernel;
 }
 
 /// True if every int8 matrix of a Dims model has an even input size of at most kInt8MaxIn
@@ -588,25 +605,25 @@ void encodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, c
   for (int l = 0; l < Dims::kEncoderLayers; ++l) {
     const EncoderLayerWeights<Dims>& L = w.enc[static_cast<std::size_t>(l)];
     detail::layerNorm<Dims>(ws.x, L.ln1, ws.h);
-    detail::affine<false>(L.attn.wq, L.attn.wq8, L.attn.bq, ws.h, ws.q);
-    detail::affine<false>(L.attn.wk, L.attn.wk8, L.attn.bk, ws.h, ws.k);
-    detail::affine<false>(L.attn.wv, L.attn.wv8, L.attn.bv, ws.h, ws.v);
+    detail::affine<false>(w.kernel, L.attn.wq, L.attn.wq8, L.attn.bq, ws.h, ws.q);
+    detail::affine<false>(w.kernel, L.attn.wk, L.attn.wk8, L.attn.bk, ws.h, ws.k);
+    detail::affine<false>(w.kernel, L.attn.wv, L.attn.wv8, L.attn.bv, ws.h, ws.v);
     ws.enc_k[static_cast<std::size_t>(l)].template middleRows<J>(slot * J) = ws.k.transpose();
     ws.enc_v[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.v;
-    detail::windowAttention<Dims>(L.attn, ws.enc_k[static_cast<std::size_t>(l)], ws.enc_v[static_cast<std::size_t>(l)],
-                                  slot, n, ws);
-    detail::affine<false>(L.attn.wo, L.attn.wo8, L.attn.bo, ws.o, ws.out);
+    detail::windowAttention<Dims>(w.kernel, L.attn, ws.enc_k[static_cast<std::size_t>(l)],
+                                  ws.enc_v[static_cast<std::size_t>(l)], slot, n, ws);
+    detail::affine<false>(w.kernel, L.attn.wo, L.attn.wo8, L.attn.bo, ws.o, ws.out);
     ws.x += ws.out;
     detail::layerNorm<Dims>(ws.x, L.ln2, ws.h);
-    detail::feedForward<Dims>(L.ffn, ws);
+    detail::feedForward<Dims>(w.kernel, L.ffn, ws);
     ws.x += ws.out;
   }
   detail::layerNorm<Dims>(ws.x, w.enc_norm, ws.memory);
   // The new tick's memory tokens enter every decoder layer's cross-attention ring.
   for (int l = 0; l < Dims::kDecoderLayers; ++l) {
     const TemporalAttentionWeights<Dims>& C = w.dec[static_cast<std::size_t>(l)].cross;
-    detail::affine<false>(C.wk, C.wk8, C.bk, ws.memory, ws.k);
-    detail::affine<false>(C.wv, C.wv8, C.bv, ws.memory, ws.v);
+    detail::affine<false>(w.kernel, C.wk, C.wk8, C.bk, ws.memory, ws.k);
+    detail::affine<false>(w.kernel, C.wv, C.wv8, C.bv, ws.memory, ws.v);
     ws.cross_k[static_cast<std::size_t>(l)].template middleRows<J>(slot * J) = ws.k.transpose();
     ws.cross_v[static_cast<std::size_t>(l)].template middleCols<J>(slot * J) = ws.v;
   }
@@ -620,8 +637,8 @@ void encodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, c
       bool done = false;
       if constexpr (int8Supported<Dims>()) {
         if (C.wo8.w != nullptr) {
-          detail::affineTokensInt8<D, Dh, J, false>(C.wo8.w + static_cast<std::ptrdiff_t>(hd) * Dh * D, C.wo8.scale,
-                                                    nullptr, ws.v_head.data(), f.data());
+          detail::affineTokensInt8<D, Dh, J, false>(w.kernel, C.wo8.w + static_cast<std::ptrdiff_t>(hd) * Dh * D,
+                                                    C.wo8.scale, nullptr, ws.v_head.data(), f.data());
           done = true;
         }
       }
@@ -629,14 +646,14 @@ void encodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, c
       // slice: it reads the fp32 view (warmPolicy does not load that one).
       if constexpr (detail::packedShape(D, Dh)) {
         if (!done && C.wo8.packed != nullptr) {
-          detail::affineTokensPacked<D, Dh, J, false>(C.wo8.packed + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr,
-                                                      ws.v_head.data(), f.data());
+          detail::affineTokensPacked<D, Dh, J, false>(w.kernel, C.wo8.packed + static_cast<std::ptrdiff_t>(hd) * Dh * D,
+                                                      nullptr, ws.v_head.data(), f.data());
           done = true;
         }
       }
       if (!done)
-        detail::affineTokens<D, Dh, J, false>(C.wo.data() + static_cast<std::ptrdiff_t>(hd) * Dh * D, nullptr,
-                                              ws.v_head.data(), f.data());
+        detail::affineTokens<D, Dh, J, false>(w.kernel, C.wo.data() + static_cast<std::ptrdiff_t>(hd) * Dh * D,
+                                              nullptr, ws.v_head.data(), f.data());
       ws.f_ring[static_cast<std::size_t>(hd)].template middleCols<J>(slot * J) = f;
     }
   }
@@ -671,13 +688,13 @@ void decodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, u
   for (int l = 0; l < Dims::kDecoderLayers; ++l) {
     const DecoderLayerWeights<Dims>& L = w.dec[static_cast<std::size_t>(l)];
     detail::layerNorm<Dims>(ws.y, L.ln1, ws.h);
-    detail::jointSelfAttention<Dims>(L.self, ws);
+    detail::jointSelfAttention<Dims>(w.kernel, L.self, ws);
     ws.y += ws.out;
     detail::layerNorm<Dims>(ws.y, L.ln2, ws.h);
-    detail::affine<false>(L.cross.wq, L.cross.wq8, L.cross.bq, ws.h, ws.q);
-    detail::windowAttention<Dims>(L.cross, ws.cross_k[static_cast<std::size_t>(l)],
+    detail::affine<false>(w.kernel, L.cross.wq, L.cross.wq8, L.cross.bq, ws.h, ws.q);
+    detail::windowAttention<Dims>(w.kernel, L.cross, ws.cross_k[static_cast<std::size_t>(l)],
                                   ws.cross_v[static_cast<std::size_t>(l)], slot, n, ws, masked);
-    detail::affine<false>(L.cross.wo, L.cross.wo8, L.cross.bo, ws.o, ws.out);
+    detail::affine<false>(w.kernel, L.cross.wo, L.cross.wo8, L.cross.bo, ws.o, ws.out);
     // Per body part: α summed over the window's ticks, a query's J sums side by side (each over
     // the ages in order, the same bits; one chain of n dependent adds after the other took ~5 µs
     // a step).
@@ -690,11 +707,11 @@ void decodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, u
       }
     if (l == Dims::kDecoderLayers - 1) {
       ws.cross_out = ws.out;
-      detail::crossAttentionRecord<Dims>(slot, n, ws);
+      detail::crossAttentionRecord<Dims>(w.kernel, slot, n, ws);
     }
     ws.y += ws.out;
     detail::layerNorm<Dims>(ws.y, L.ln3, ws.h);
-    detail::feedForward<Dims>(L.ffn, ws);
+    detail::feedForward<Dims>(w.kernel, L.ffn, ws);
     ws.y += ws.out;
   }
   detail::layerNorm<Dims>(ws.y, w.dec_norm, ws.h);

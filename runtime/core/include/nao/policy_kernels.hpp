@@ -1,8 +1,8 @@
 // The policy's kernels, one header per family under nao/policy_kernels/ (each family's kernels
 // give the same bits whichever of kSse, kAvx2 and kAvx512 runs them):
 //
-//   dispatch.hpp  PolicyKernel and its run-time choice (NAO_POLICY_KERNEL, the CPU's features):
-//                 activePolicyKernel, selectPolicyKernel
+//   dispatch.hpp  PolicyKernel, what this CPU runs (policyKernelSupported, bestPolicyKernel); the
+//                 kernel is the bound weights' (PolicyWeights::kernel), passed to every call
 //   lanes.hpp     the vector registers the families share (Eigen's packet, AVX-512 lane helpers)
 //   affine.hpp    affineTokens: Y = W X + b over J token columns, W column-major (fp32)
 //   packed.hpp    "Packed fp32": affineTokensPacked over W in the kernels' block order

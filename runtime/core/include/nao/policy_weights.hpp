@@ -201,6 +201,11 @@ struct PolicyWeights {
   /// model's action (the first-order servo inversion, docs/policy.md); all 0 in autonomous models.
   WeightView<J, 1> law_gain{nullptr};
   Conditioning conditioning = Conditioning::kReference;
+  /// The kernels stepPolicy runs these weights with (nao/policy_kernels/dispatch.hpp), chosen by
+  /// the binder (bestPolicyKernel() unless told otherwise) and checked against the CPU there;
+  /// every kernel gives the same bits. kSse, which every CPU runs, until bound. Change it only
+  /// to a kernel policyKernelSupported accepts (setPolicyKernel checks).
+  PolicyKernel kernel = PolicyKernel::kSse;
   /// w_k / Σ w of the temporal ensemble, for the chunk made k ticks ago, once k + 1 chunks
   /// exist (row k of the triangle: ensemble_weight[n − 1][k] with n = min(ticks, C) chunks);
   /// made at bind time from head.ensemble_decay.

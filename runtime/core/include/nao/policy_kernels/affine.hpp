@@ -256,9 +256,8 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void affineTokensAvx512(const float
 /// no temporaries, no Eigen GEMM (whose fixed-size blocking buffers land on the stack and whose
 /// dynamic ones may allocate).
 template <int Out, int In, int J, bool kRelu>
-inline void affineTokens(const float* W, const float* b, const float* X, float* Y) {
+inline void affineTokens(PolicyKernel kernel, const float* W, const float* b, const float* X, float* Y) {
 #if NAO_POLICY_HAVE_AVX2
-  const PolicyKernel kernel = activePolicyKernel();
   if (kernel == PolicyKernel::kAvx512) {
     affineTokensAvx512<Out, In, J, kRelu>(W, b, X, Y);
     return;
@@ -268,6 +267,7 @@ inline void affineTokens(const float* W, const float* b, const float* X, float* 
     return;
   }
 #endif
+  (void)kernel;
   affineTokensSse<Out, In, J, kRelu>(W, b, X, Y);
 }
 

@@ -1,6 +1,6 @@
 // The choice of the policy kernel: the implementations of the policy's one hot loop,
 // Y = W X + b over J token columns (affineTokens, nao/policy_kernels/affine.hpp), and of the
-// other kernel families (nao/policy_kernels.hpp lists them), chosen once at run time
+// other kernel families (nao/policy_kernels.hpp lists them), chosen when the weights are bound
 // (docs/policy.md, "Kernel dispatch").
 //
 //   kSse   Eigen's packet at the build's baseline width: Packet4f (SSE2) on x86-64 without
@@ -15,15 +15,14 @@
 // Every family's kernels give the same bits (each family's header says how), so the choice
 // changes only the speed.
 //
-// Selection: the first use (normally bindPolicyWeights, i.e. configure time) reads the
-// environment variable NAO_POLICY_KERNEL (unset, "" or "auto": the best the CPU supports;
-// "sse": force kSse; "avx2": kAvx2 if supported, else kSse; "avx512": kAvx512 if supported, else
-// the best below it; anything else: auto) and caches the
-// result. selectPolicyKernel overrides it (tests, benchmarks). The real-time cost is one relaxed
-// atomic load per affineTokens call.
+// Selection: the kernel is a property of the bound weights (PolicyWeights::kernel), chosen when
+// they are bound (bindPolicyWeights, bindPolicyWeightsAt: configure time; by default
+// bestPolicyKernel(), the best this CPU runs) and handed to every kernel by stepPolicy. Nothing
+// here reads the environment or keeps state: two weights bound with different kernels step side
+// by side in one process, each with its own. The real-time cost is one compare per call.
 #pragma once
 
-#include <atomic>
+#include <string_view>
 
 // The AVX2 kernel exists in x86-64 GCC/Clang builds (target attribute, __builtin_cpu_supports).
 // -DNAO_POLICY_HAVE_AVX2=0 (the whole build) leaves it out, as on any other platform.
@@ -55,34 +54,26 @@ enum class PolicyKernel : int { kSse = 0, kAvx2 = 1, kAvx512 = 2 };
 /// "sse", "avx2" or "avx512".
 const char* policyKernelName(PolicyKernel k) noexcept;
 
-/// True if this build has the kernel and this CPU can run it (kSse: always).
+/// The kernel named `name` ("sse", "avx2", "avx512"; policyKernelName's names) into k; false,
+/// k unchanged, for any other name. Whether this CPU runs it is policyKernelSupported's question.
+bool parsePolicyKernel(std::string_view name, PolicyKernel& k) noexcept;
+
+/// True if this build has the kernel and this CPU can run it (kSse: always). Asks the CPU each
+/// time (cpuid as the compiler's runtime caches it): a pure function of the machine.
 bool policyKernelSupported(PolicyKernel k) noexcept;
 
-/// Uses kernel k from now on (every thread). Returns false, changing nothing, if k is not
-/// supported. Not meant to be called while another thread is inside stepPolicy (harmless, but
-/// that step may mix kernels; the results are the same bits either way).
-bool selectPolicyKernel(PolicyKernel k) noexcept;
+/// The fastest kernel this build has and this CPU runs: kAvx512, else kAvx2, else kSse. What
+/// the binders pick when not told otherwise. Pure (no environment, no state).
+PolicyKernel bestPolicyKernel() noexcept;
 
-/// The kernel NAO_POLICY_KERNEL and the CPU ask for (what the first use picks), ignoring any
-/// selectPolicyKernel call.
-PolicyKernel defaultPolicyKernel() noexcept;
+/// Throws std::invalid_argument naming the kernel and what this CPU runs when k is not
+/// supported (policyKernelSupported): the binders' check, configure time.
+void requirePolicyKernel(PolicyKernel k);
 
-namespace detail {
-
-/// The kernel in use as an int; -1 until the first use decides (runtime/core/src/policy_kernels.cpp).
-extern std::atomic<int> g_policy_kernel;
-/// Decides (environment, CPU) if nobody has yet and returns the kernel in use. No allocation,
-/// no I/O.
-int resolvePolicyKernel() noexcept;
-
-}  // namespace detail
-
-/// The kernel affineTokens uses. Real-time safe (after the first call: one relaxed load).
-inline PolicyKernel activePolicyKernel() noexcept {
-  int k = detail::g_policy_kernel.load(std::memory_order_relaxed);
-  if (k < 0) k = detail::resolvePolicyKernel();
-  return static_cast<PolicyKernel>(k);
-}
+/// Former name of bestPolicyKernel, for callers not yet moved to the bound weights' kernel
+/// (PolicyWeights::kernel); there is no process-wide kernel any more.
+[[deprecated("the kernel is the bound weights' (PolicyWeights::kernel); bestPolicyKernel() is the default")]]
+inline PolicyKernel activePolicyKernel() noexcept { return bestPolicyKernel(); }
 
 /// True for the kernels that may run AVX2 code (kAvx512 implies AVX2: its window attention is
 /// the AVX2 one).

@@ -1,5 +1,5 @@
 // affineTokensInt8: the policy's matrix products with int8 weights (docs/policy.md "int8
-// weights"), with the kernel in use (nao/policy_kernels/dispatch.hpp).
+// weights"), with the kernel the caller passes (nao/policy_kernels/dispatch.hpp).
 #pragma once
 
 #include <algorithm>
@@ -401,17 +401,15 @@ inline void accumulateInt8Sse(const std::int8_t* Wq, const std::int32_t* xp, std
 
 #if defined(__SSE2__) && defined(__GNUC__)
 // The 7-bit kernels' instruction set: SSSE3 (pmaddubsw). The robot build's -march=silvermont has
-// it; an x86-64 build without -march tags the kernels and asks the CPU once (every x86-64 CPU
-// since 2006 has it; one without runs the pmaddwd kernel instead, the same bits).
+// it; an x86-64 build without -march tags the kernels and asks the CPU at each call: one load
+// and bit test of the compiler runtime's cpu model, which the binders initialise
+// (bestPolicyKernel), so nothing of ours keeps state. Every x86-64 CPU since 2006 has it; one
+// without runs the pmaddwd kernel instead, the same bits.
 #define NAO_INT8_SSSE3_TARGET target("ssse3")
 #if defined(__SSSE3__)
 inline bool int8HaveSsse3() noexcept { return true; }
 #else
-inline const bool g_int8_ssse3 = [] {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("ssse3") != 0;
-}();
-inline bool int8HaveSsse3() noexcept { return g_int8_ssse3; }
+inline bool int8HaveSsse3() noexcept { return __builtin_cpu_supports("ssse3") != 0; }
 #endif
 
 /// xs[k][t] = the token quad q0 + k of column t in every lane (q0 = p0 / 2, k < pc / 2).
@@ -756,14 +754,14 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void accumulateInt8QuadsAvx512(cons
 #endif  // NAO_POLICY_HAVE_AVX2
 
 /// Y = dequant(Wq) X + b (b may be null), then ReLU if kRelu, with int8 weights (see above).
-/// The kernel is the one affineTokens uses; all give the same bits. Real-time safe: the
+/// `kernel` as for affineTokens; all give the same bits. Real-time safe: the
 /// quantised tokens and accumulators live on the stack (at most 8 KB + 10 KB).
 template <int Out, int In, int J, bool kRelu>
-inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float* b, const float* X, float* Y) {
+inline void affineTokensInt8(PolicyKernel kernel, const std::int8_t* Wq, const float* sw, const float* b,
+                             const float* X, float* Y) {
   QuantTokens<In, J> x;
   alignas(64) std::int32_t acc[J * Out];
 #if NAO_POLICY_HAVE_AVX2
-  const PolicyKernel kernel = activePolicyKernel();
   if (kernel == PolicyKernel::kAvx512) {
     quantizeTokensInt8Avx512<In, J>(X, x);
     if constexpr (QuantTokens<In, J>::kQuads > 0) {
@@ -789,6 +787,7 @@ inline void affineTokensInt8(const std::int8_t* Wq, const float* sw, const float
   } else
 #endif
   {
+    (void)kernel;
     quantizeTokensInt8<In, J>(X, x);
 #if defined(__SSE2__) && defined(__GNUC__)
     if constexpr (QuantTokens<In, J>::kQuads > 0) {

@@ -1,4 +1,4 @@
-// headSumNorm: the norm-based attention score's vector norm, with the kernel in use
+// headSumNorm: the norm-based attention score's vector norm, with the kernel the caller passes
 // (nao/policy_kernels/dispatch.hpp).
 #pragma once
 
@@ -99,12 +99,13 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void headSumNormsAvx512(const float
 }
 #endif
 
-/// ‖Σ_h a[h] f_h‖ in the order above, with the active kernel's widest lanes.
+/// ‖Σ_h a[h] f_h‖ in the order above, with the widest lanes of `kernel`.
 template <int D, int H>
-inline float headSumNorm(const float* a, const float* const* f) noexcept {
+inline float headSumNorm(PolicyKernel kernel, const float* a, const float* const* f) noexcept {
+  (void)kernel;
   if constexpr (D % 16 == 0) {
 #if NAO_POLICY_HAVE_AVX2
-    if (activePolicyKernel() == PolicyKernel::kAvx512) return headSumNormAvx512<D, H>(a, f);
+    if (kernel == PolicyKernel::kAvx512) return headSumNormAvx512<D, H>(a, f);
 #endif
 #if defined(__SSE2__)
     return headSumNormSse<D, H>(a, f);
@@ -115,16 +116,16 @@ inline float headSumNorm(const float* a, const float* const* f) noexcept {
 
 /// headSumNorm for Q coefficient sets (out[i] = ‖Σ_h a[i·H + h] f_h‖): the same bits as Q calls.
 template <int D, int H, int Q>
-inline void headSumNorms(const float* a, const float* const* f, float* out) noexcept {
+inline void headSumNorms(PolicyKernel kernel, const float* a, const float* const* f, float* out) noexcept {
 #if NAO_POLICY_HAVE_AVX2
   if constexpr (D % 16 == 0) {
-    if (activePolicyKernel() == PolicyKernel::kAvx512) {
+    if (kernel == PolicyKernel::kAvx512) {
       headSumNormsAvx512<D, H, Q>(a, f, out);
       return;
     }
   }
 #endif
-  for (int i = 0; i < Q; ++i) out[i] = headSumNorm<D, H>(a + i * H, f);
+  for (int i = 0; i < Q; ++i) out[i] = headSumNorm<D, H>(kernel, a + i * H, f);
 }
 
 }  // namespace detail

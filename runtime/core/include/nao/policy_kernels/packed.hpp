@@ -1,5 +1,5 @@
 // affineTokensPacked: affineTokens over the packed fp32 copy of W (docs/policy.md "Packed fp32
-// weights"), with the kernel in use (nao/policy_kernels/dispatch.hpp).
+// weights"), with the kernel the caller passes (nao/policy_kernels/dispatch.hpp).
 #pragma once
 
 #include "nao/policy_kernels/affine.hpp"
@@ -168,12 +168,11 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void affineTokensPackedAvx512(const
 }
 #endif  // NAO_POLICY_HAVE_AVX2
 
-/// affineTokens over the packed copy P of W (packedShape(Out, In)), with the kernel in use:
+/// affineTokens over the packed copy P of W (packedShape(Out, In)), with `kernel`:
 /// the same bits as affineTokens over W. Real-time safe.
 template <int Out, int In, int J, bool kRelu>
-inline void affineTokensPacked(const float* P, const float* b, const float* X, float* Y) {
+inline void affineTokensPacked(PolicyKernel kernel, const float* P, const float* b, const float* X, float* Y) {
 #if NAO_POLICY_HAVE_AVX2
-  const PolicyKernel kernel = activePolicyKernel();
   if (kernel == PolicyKernel::kAvx512) {
     affineTokensPackedAvx512<Out, In, J, kRelu>(P, b, X, Y);
     return;
@@ -183,6 +182,7 @@ inline void affineTokensPacked(const float* P, const float* b, const float* X, f
     return;
   }
 #endif
+  (void)kernel;
   affineTokensPackedSse<Out, In, J, kRelu>(P, b, X, Y);
 }
 

@@ -1,5 +1,5 @@
 // The window attention's softmax: its exponential (expSoftmax, expShifted) and the softmax
-// over a window's keys with the age bias (windowSoftmax), with the kernel in use
+// over a window's keys with the age bias (windowSoftmax), with the kernel the caller passes
 // (nao/policy_kernels/dispatch.hpp).
 #pragma once
 
@@ -137,15 +137,16 @@ __attribute__((NAO_AVX512_TARGET, noinline)) inline void expShiftedAvx512(float*
 }
 #endif
 
-/// s[m] = expSoftmax(s[m] − shift) for m < count, in the widest lanes the active kernel has
+/// s[m] = expSoftmax(s[m] − shift) for m < count, in the widest lanes `kernel` has
 /// (the same bits at any width).
-inline void expShifted(float* s, int count, float shift) noexcept {
+inline void expShifted(PolicyKernel kernel, float* s, int count, float shift) noexcept {
 #if NAO_POLICY_HAVE_AVX2
-  if (activePolicyKernel() == PolicyKernel::kAvx512) {
+  if (kernel == PolicyKernel::kAvx512) {
     expShiftedAvx512(s, count, shift);
     return;
   }
 #endif
+  (void)kernel;
   int m = 0;
 #if defined(__SSE2__)
   const __m128 sh = _mm_set1_ps(shift);
@@ -163,7 +164,8 @@ inline void expShifted(float* s, int count, float shift) noexcept {
 
 /// windowSoftmax in scalar code and expShifted's lanes (SSE2, AVX2).
 template <int J, int W, int NP, int N>
-inline void windowSoftmaxScalar(const float* raw, const float* bias, int slot, int n, float* s) noexcept {
+inline void windowSoftmaxScalar(PolicyKernel kernel, const float* raw, const float* bias, int slot, int n,
+                                float* s) noexcept {
   const int keys = n * J;
   float s_max[J], sum[J];
   for (int i = 0; i < J; ++i) {
@@ -179,7 +181,7 @@ inline void windowSoftmaxScalar(const float* raw, const float* bias, int slot, i
         s_max[i] = std::max(s_max[i], v);
       }
   }
-  for (int i = 0; i < J; ++i) expShifted(s + i * N, keys, s_max[i]);
+  for (int i = 0; i < J; ++i) expShifted(kernel, s + i * N, keys, s_max[i]);
   for (int m = 0; m < keys; ++m)
     for (int i = 0; i < J; ++i) sum[i] += s[i * N + m];
   for (int i = 0; i < J; ++i) {
@@ -258,18 +260,19 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void windowSoftmaxAvx512(const floa
 }
 #endif
 
-/// windowSoftmax with the active kernel (the same bits with every kernel).
+/// windowSoftmax with `kernel` (the same bits with every kernel).
 template <int J, int W, int NP, int N>
-inline void windowSoftmax(const float* raw, const float* bias, int slot, int n, float* s) noexcept {
+inline void windowSoftmax(PolicyKernel kernel, const float* raw, const float* bias, int slot, int n,
+                          float* s) noexcept {
 #if NAO_POLICY_HAVE_AVX2
   if constexpr (J <= 16) {
-    if (activePolicyKernel() == PolicyKernel::kAvx512) {
+    if (kernel == PolicyKernel::kAvx512) {
       windowSoftmaxAvx512<J, W, NP, N>(raw, bias, slot, n, s);
       return;
     }
   }
 #endif
-  windowSoftmaxScalar<J, W, NP, N>(raw, bias, slot, n, s);
+  windowSoftmaxScalar<J, W, NP, N>(kernel, raw, bias, slot, n, s);
 }
 
 }  // namespace detail

@@ -1,5 +1,5 @@
 // The window attention's kernels: one query's scores against every key of a ring
-// (windowScores) and the α-weighted sum of the values (windowValues), with the kernel in use
+// (windowScores) and the α-weighted sum of the values (windowValues), with the kernel the caller passes
 // (nao/policy_kernels/dispatch.hpp).
 #pragma once
 
@@ -243,11 +243,10 @@ __attribute__((NAO_AVX512_TARGET, noinline)) void windowValuesAvx512(const float
 }
 #endif  // NAO_POLICY_HAVE_AVX2
 
-/// The scores of windowScoresSse with the active kernel (the same bits with every kernel).
+/// The scores of windowScoresSse with `kernel` (the same bits with every kernel).
 template <int Dh, int NP>
-inline void windowScores(const float* q, const float* KT, int rows, float scale, float* s) {
+inline void windowScores(PolicyKernel kernel, const float* q, const float* KT, int rows, float scale, float* s) {
 #if NAO_POLICY_HAVE_AVX2
-  const PolicyKernel kernel = activePolicyKernel();
   if constexpr (NP % 16 == 0) {
     if (kernel == PolicyKernel::kAvx512) {
       windowScoresAvx512<Dh, NP>(q, KT, rows, scale, s);
@@ -259,17 +258,18 @@ inline void windowScores(const float* q, const float* KT, int rows, float scale,
     return;
   }
 #endif
+  (void)kernel;
   windowScoresSse<Dh, NP>(q, KT, rows, scale, s);
 }
 
 /// windowScores for Q queries: query i at q + i·q_stride, its scores at s + i·s_stride (the same
 /// bits as Q calls of windowScores). AVX-512 takes them two at a time (each key load serves both).
 template <int Dh, int NP, int Q>
-inline void windowScoresQueries(const float* q, int q_stride, const float* KT, int rows, float scale, float* s,
-                                int s_stride) {
+inline void windowScoresQueries(PolicyKernel kernel, const float* q, int q_stride, const float* KT, int rows,
+                                float scale, float* s, int s_stride) {
 #if NAO_POLICY_HAVE_AVX2
   if constexpr (NP % 16 == 0) {
-    if (activePolicyKernel() == PolicyKernel::kAvx512) {
+    if (kernel == PolicyKernel::kAvx512) {
       int i = 0;
       for (; i + 2 <= Q; i += 2)
         windowScoresGroupAvx512<Dh, NP, 2>(q + i * q_stride, q_stride, KT, rows, scale, s + i * s_stride, s_stride);
@@ -278,15 +278,16 @@ inline void windowScoresQueries(const float* q, int q_stride, const float* KT, i
     }
   }
 #endif
-  for (int i = 0; i < Q; ++i) windowScores<Dh, NP>(q + i * q_stride, KT, rows, scale, s + i * s_stride);
+  for (int i = 0; i < Q; ++i) windowScores<Dh, NP>(kernel, q + i * q_stride, KT, rows, scale, s + i * s_stride);
 }
 
-/// The value sum of windowValuesSse with the active kernel (the same bits with every kernel).
+/// The value sum of windowValuesSse with `kernel` (the same bits with every kernel).
 template <int Dh, int J, int W>
-inline void windowValues(const float* a, const float* V, int ld, int slot, int n, float* o) {
+inline void windowValues(PolicyKernel kernel, const float* a, const float* V, int ld, int slot, int n, float* o) {
+  (void)kernel;
 #if NAO_POLICY_HAVE_AVX2
   if constexpr (Dh % 8 == 0) {
-    if (policyKernelHasAvx2(activePolicyKernel())) {
+    if (policyKernelHasAvx2(kernel)) {
       windowValuesAvx2<Dh, J, W>(a, V, ld, slot, n, o);
       return;
     }
@@ -298,17 +299,17 @@ inline void windowValues(const float* a, const float* V, int ld, int slot, int n
 /// windowValues for Q queries: query i's weights at a + i·a_stride, its output at
 /// o + i·o_stride (the same bits as Q calls of windowValues).
 template <int Dh, int J, int W, int Q>
-inline void windowValuesQueries(const float* a, int a_stride, const float* V, int ld, int slot, int n, float* o,
-                                int o_stride) {
+inline void windowValuesQueries(PolicyKernel kernel, const float* a, int a_stride, const float* V, int ld, int slot,
+                                int n, float* o, int o_stride) {
 #if NAO_POLICY_HAVE_AVX2
   if constexpr (Dh % 16 == 0) {
-    if (activePolicyKernel() == PolicyKernel::kAvx512) {
+    if (kernel == PolicyKernel::kAvx512) {
       windowValuesAvx512<Dh, J, W, Q>(a, a_stride, V, ld, slot, n, o, o_stride);
       return;
     }
   }
 #endif
-  for (int i = 0; i < Q; ++i) windowValues<Dh, J, W>(a + i * a_stride, V, ld, slot, n, o + i * o_stride);
+  for (int i = 0; i < Q; ++i) windowValues<Dh, J, W>(kernel, a + i * a_stride, V, ld, slot, n, o + i * o_stride);
 }
 
 }  // namespace detail
