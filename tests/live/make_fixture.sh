@@ -11,7 +11,8 @@
 #                                 trained one epoch on 2 demonstrations per movement (seed 1):
 #                                 k-means key poses of real data and the servo inversion its actions
 #                                 are the residual of; its network is barely trained, which does not
-#                                 matter here (both runs use the same model).
+#                                 matter here (both runs use the same model); its recipe
+#                                 OUT/recipe.json (no noisy rollouts).
 # usage: make_fixture.sh NAO_TOOLCHAIN OUT MODEL   (MODEL: train or none)
 set -eu
 tc="$1"
@@ -33,7 +34,9 @@ if [ "$model" = train ]; then
     run "$tc" retarget --skeleton "$demo/skeleton.csv" --out "$demo/retarget.csv"
   done
   run "$tc" cluster --data "$out/data"
-  run "$tc" train --config paper --conditioning reference --seed 1 --epochs 1 --noisy-rollouts 0 \
+  # No noisy rollouts (a training method's option: recipe-only).
+  printf '{"train": {"noisy-rollouts": 0}}\n' >"$out/recipe.json"
+  run "$tc" train --recipe "$out/recipe.json" --config paper --conditioning reference --seed 1 --epochs 1 \
     --data "$out/data" --out "$out/model.bin"
 fi
 echo "made $out ($(date -u +%FT%TZ))" >>"$log"

@@ -27,7 +27,20 @@ import unittest
 
 ROOT, BUILD = (sys.argv[1:3] if len(sys.argv) >= 3 else (None, None))
 NAME = "nao_test_same_name_rec"  # both sets' folder name, hence one default work directory
-TRAIN = ["--config", "small", "--epochs", "2", "--procs", "1", "--closed-loop-epochs", "0"]
+# models/autonomous.bin's recipe without its closed loop (written by setUpClass; the training
+# method's options are recipe-only).
+RECIPE = None
+TRAIN = ["--config", "small", "--epochs", "2", "--procs", "1"]
+
+
+def write_recipe(path, **changes):
+    """models/recipes/autonomous.json with `changes` (option name with _ for -) to its training options."""
+    with open(os.path.join(ROOT, "models", "recipes", "autonomous.json")) as f:
+        recipe = json.load(f)
+    recipe["train"].update({k.replace("_", "-"): v for k, v in changes.items()})
+    with open(path, "w") as f:
+        json.dump(recipe, f, indent=2)
+    return path
 
 
 def run(args, timeout=1800):
@@ -39,13 +52,15 @@ def run(args, timeout=1800):
 
 
 def train(rec, model):
-    return run([os.path.join(ROOT, "toolchain", "nao"), "train", "--recordings", rec, "--out", model] + TRAIN)
+    return run([os.path.join(ROOT, "toolchain", "nao"), "train", "--recordings", rec, "--out", model, "--recipe", RECIPE] +
+               TRAIN)
 
 
 def train_until_first_prepared(rec, model):
     """Starts a training of rec and stops it (SIGTERM to its process group) once the first
     recording is prepared: an interruption in the middle of the preparation. Returns its output."""
-    p = subprocess.Popen([os.path.join(ROOT, "toolchain", "nao"), "train", "--recordings", rec, "--out", model] + TRAIN,
+    p = subprocess.Popen([os.path.join(ROOT, "toolchain", "nao"), "train", "--recordings", rec, "--out", model,
+                          "--recipe", RECIPE] + TRAIN,
                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors="replace",
                          start_new_session=True)
     out = []
@@ -81,7 +96,9 @@ def recordings_of(rec):
 class SameNameRecordings(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
+        global RECIPE
         cls.tmp = tempfile.mkdtemp(prefix="nao_same_name_")
+        RECIPE = write_recipe(os.path.join(cls.tmp, "recipe.json"), closed_loop_epochs=0)
         cls.work = os.path.join(ROOT, "out", "train", "recordings", NAME)
         shutil.rmtree(cls.work, ignore_errors=True)
         cls.a = os.path.join(cls.tmp, "a", NAME)
