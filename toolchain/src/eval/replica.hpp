@@ -7,6 +7,7 @@
 #include "nao/arm_model.hpp"
 #include "nao/model_file.hpp"
 #include "nao/sim_arm.hpp"
+#include "nao/tools/attention_ablation.hpp"  // ablatedAction, for the replay (replica.cpp)
 
 #include <array>
 #include <vector>

@@ -238,7 +238,7 @@ inline void maskBodyParts(float (*alpha)[N], int n, unsigned masked) {
 /// run over its keys in order (the same bits as one query at a time), but the J chains of
 /// dependent operations overlap instead of waiting on each other.
 /// `masked`: bit j set, the keys of body part j are left out (their logits −∞), every tick of
-/// the window - the attention ablation's probe (maskBodyParts); 0 in a normal step.
+/// the window (maskBodyParts); 0 in a normal step.
 template <class Dims>
 inline void windowAttention(PolicyKernel kernel, const TemporalAttentionWeights<Dims>& A,
                             const typename PolicyWorkspace<Dims>::KeyRing& K,
@@ -676,8 +676,12 @@ inline float dotInOrder(const A& a, const B& b, int size) {
 /// made, and the head, into ws.chunk (rad; column c is a(t + c)). The
 /// attention record (ws.cross, ws.mass, ws.score, ws.age_profile, ws.cross_out) is this
 /// decoding's. `masked` (bit j: body part j) leaves those parts' keys out of every decoder
-/// layer's cross-attention over the whole window: the attention ablation (0 in a normal step).
-/// May run several times per tick (each overwrites what the last wrote). Real-time safe.
+/// layer's cross-attention over the whole window (0 in a normal step: no extra work). It is a
+/// general cross-attention mask of the step, not an evaluation hook: it acts inside the window
+/// softmax, between the scores and the value sum, where no caller can reach, so a decoding
+/// without some body parts (the attention ablation, nao/tools/attention_ablation.hpp; a part
+/// known to be unseen) needs it here. May run several times per tick (each overwrites what the
+/// last wrote). Real-time safe.
 template <class Dims>
 void decodePolicyTick(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, unsigned masked = 0) {
   constexpr int J = Dims::kTokens, W = Dims::kWindow, H = Dims::kHeads, D = Dims::kDModel;
@@ -766,24 +770,6 @@ const Eigen::Matrix<float, 5, 1>& stepPolicy(const PolicyWeights<Dims>& w, Polic
   encodePolicyTick(w, ws, in);
   decodePolicyTick(w, ws);
   return commitPolicyTick(w, ws, in);
-}
-
-/// The attention ablation's probe (docs/analysis.md): after stepPolicy(w, ws, in) for a tick, the
-/// action that tick would have executed with the body parts in `masked` (bit j: part j) left out
-/// of every decoder layer's cross-attention over the whole window. The tick is decoded again with
-/// the mask, its action taken as commitPolicyTick would take it, and the tick decoded once more
-/// without the mask, so ws is left as stepPolicy left it (the chunk ring untouched). Real-time
-/// safe; it costs two decoder passes.
-template <class Dims>
-Eigen::Matrix<float, 5, 1> ablatedAction(const PolicyWeights<Dims>& w, PolicyWorkspace<Dims>& ws, const PolicyInput& in,
-                                         unsigned masked) {
-  --ws.ticks;  // back to the tick stepPolicy just made (its encoder state is still in the rings)
-  decodePolicyTick(w, ws, masked);
-  Eigen::Matrix<float, 5, 1> a = ensembledAction(w, ws);
-  if (w.conditioning == Conditioning::kReference) a += (w.law_gain.array() * in.r.array()).matrix();
-  decodePolicyTick(w, ws, 0);
-  ++ws.ticks;
-  return a;
 }
 
 /// Index of the key pose of `movement` nearest to q (Euclidean, rad; ties to the lower index,
