@@ -101,7 +101,7 @@ TEST_CASE("the arm copy ends every tick within 1 mrad (p99) of the ODE arm on ev
       OdeArmBackend robot(sim(), ode);
       robot.activate(start);
       std::vector<JointVector> commands;
-      RolloutStep step;
+      CommandStep step;
       for (std::size_t t = 0; t + 1 < f.size(); ++t) {
         rolloutStep(arm(), kPeriod, robot, JointVector(gain * (f[t + 1] - robot.measured())), step);
         commands.push_back(step.q_cmd);

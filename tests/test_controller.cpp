@@ -2,6 +2,7 @@
 // would drive the robot. Behaviour around the policy (faults, limits, determinism) is tested
 // here with a random small policy; imitation quality with trained models elsewhere.
 #include "nao/controller.hpp"
+#include "nao/robot_loop.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "nao/tools/kmeans.hpp"
@@ -68,9 +69,9 @@ Run run(const ControllerParams& params, FakeClock& clock, Drop drop, Corrupt cor
   Fixture& f = fixture();
   const ControllerModel<Dims> model = configureController(f.arm, f.weights, params);
   OdeArmBackend robot(model.arm, SimParams{}, f.ref.target.front());
-  ControllerData<Dims> data(robot);
+  ControllerData<Dims> data;
   test::PolicyWithNan<Dims> nan_policy(model, data, nan_ticks[0], nan_ticks[1]);
-  activateController(model, data, f.ref.target.front(), 0, clock);
+  activateOnRobot(model, data, robot, f.ref.target.front(), 0, clock);
   Run r;
   const int n = n_ticks > 0 ? n_ticks : static_cast<int>(f.ref.frames.size());
   SkeletonFrame frame;
@@ -80,10 +81,10 @@ Run run(const ControllerParams& params, FakeClock& clock, Drop drop, Corrupt cor
     if (corrupt(t)) frame.p_W[kRShoulder].x() = std::nan("");
     const bool present = f.ref.present[i] && !drop(t);
     const SkeletonFrame* seen = present ? &frame : nullptr;
-    r.records.push_back(nan_ticks[0] >= 0 ? updateController(model, data, seen, nan_policy)
-                                          : updateController(model, data, seen));
+    r.records.push_back(nan_ticks[0] >= 0 ? runControllerTick(model, data, robot, seen, nan_policy)
+                                          : runControllerTick(model, data, robot, seen));
   }
-  deactivateController(model, data);
+  deactivateOnRobot(model, data, robot);
   r.faults = data.fault_counts;
   return r;
 }
@@ -218,14 +219,44 @@ TEST_CASE("a non-finite policy output holds the position and is counted") {
 
 TEST_CASE("an overrun forced through the injected clock is counted once and the loop continues") {
   FakeClock clock;
-  // Four readings per tick: a 150 ms jump inside tick 7's policy stage.
-  clock.jump_at_reading = 7 * 4 + 2;
+  // Five readings per tick on a robot (four in updateController, one in finishTick): a 150 ms
+  // jump inside tick 7's policy stage.
+  clock.jump_at_reading = 7 * 5 + 2;
   clock.jump_ns = 150'000'000;
   const Run r = run(ControllerParams{}, clock, never, never);
   CHECK(r.faults[5] == 1);
   CHECK((r.records[7].fault & kFaultOverrun) != 0);
   CHECK(r.records[7].policy_us > 1e5);
   CHECK(r.records.size() == fixture().ref.frames.size());
+}
+
+TEST_CASE("updateController needs no robot: read, update, write and finishTick by hand are runControllerTick bit for bit") {
+  Fixture& f = fixture();
+  const ControllerModel<Dims> model = configureController(f.arm, f.weights, ControllerParams{});
+  OdeArmBackend a(model.arm, SimParams{}, f.ref.target.front()), b(model.arm, SimParams{}, f.ref.target.front());
+  ControllerData<Dims> da, db;
+  FakeClock ca, cb;
+  activateOnRobot(model, da, a, f.ref.target.front(), 0, ca);
+  activateController(model, db, b.activate(clampToLimits(model.arm, f.ref.target.front())), 0, cb);
+  for (std::size_t i = 0; i < f.ref.frames.size(); ++i) {
+    const SkeletonFrame* frame = f.ref.present[i] ? &f.ref.frames[i] : nullptr;
+    const TickRecord& ra = runControllerTick(model, da, a, frame);
+    const JointVector q_start = b.measured();
+    const TickRecord& rb = updateController(model, db, q_start, frame);
+    // The pure update: the command, the record's q still the start, no hand point yet.
+    CHECK(rb.q == q_start);
+    CHECK(std::isnan(rb.ee.x()));
+    CHECK(rb.q_cmd == ra.q_cmd);
+    const JointVector& q_end = b.command(rb.q_cmd);
+    finishTick(model, db, q_end, b.faults(), b.waitNs());
+    CHECK(std::memcmp(ra.q.data(), rb.q.data(), sizeof(double) * kNumJoints) == 0);
+    CHECK(std::memcmp(ra.ee.data(), rb.ee.data(), sizeof(double) * 3) == 0);
+    CHECK(std::memcmp(ra.att.data(), rb.att.data(), sizeof(float) * kNumJoints) == 0);
+    CHECK(ra.fault == rb.fault);
+    CHECK(ra.tick_us == rb.tick_us);
+    CHECK(ra.sim_us == rb.sim_us);
+  }
+  CHECK(da.fault_counts == db.fault_counts);
 }
 
 TEST_CASE("the synthetic reference is not a training demonstration and has a target for every tick") {
@@ -282,17 +313,17 @@ TEST_CASE("the reference-mode policy is fed the feature-extracted target f(t+1) 
   FakeClock clock;
   const ControllerModel<Dims> model = configureController(f.arm, f.weights, ControllerParams{});
   OdeArmBackend robot(model.arm, SimParams{}, f.ref.target.front());
-  ControllerData<Dims> data(robot);
-  activateController(model, data, f.ref.target.front(), 0, clock);
+  ControllerData<Dims> data;
+  activateOnRobot(model, data, robot, f.ref.target.front(), 0, clock);
   std::vector<JointVector> online, keys;
   std::vector<double> t_s;
   for (std::size_t i = 0; i < f.ref.frames.size(); ++i) {
-    const TickRecord& rec = updateController(model, data, f.ref.present[i] ? &f.ref.frames[i] : nullptr);
+    const TickRecord& rec = runControllerTick(model, data, robot, f.ref.present[i] ? &f.ref.frames[i] : nullptr);
     online.push_back(data.feature_f);
     keys.push_back(rec.r);
     t_s.push_back(0.1 * static_cast<double>(i));
   }
-  deactivateController(model, data);
+  deactivateOnRobot(model, data, robot);
   keys.push_back(keys.back());
   t_s.push_back(0.1 * static_cast<double>(keys.size() - 1));
   std::vector<JointVector> centroids;

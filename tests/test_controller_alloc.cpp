@@ -1,6 +1,7 @@
 // Real-time property of the whole tick: from activate through 6,000 ticks (10 simulated
 // minutes: retargeting, policy, ODE, faults included) nothing is allocated.
 #include "nao/controller.hpp"
+#include "nao/robot_loop.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/tools/reference_source.hpp"
 #include "support/alloc_counter.hpp"
@@ -31,7 +32,7 @@ void checkNoAllocation(std::uint64_t seed, const PolicyArch& arch = Dims::arch()
   const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, tools::Movement::kWholeArm, 2, 0, centroids);
   const ControllerModel<Dims> model = configureController(arm, weights, ControllerParams{});
   OdeArmBackend robot(model.arm, SimParams{}, ref.target.front());
-  ControllerData<Dims> data(robot);
+  ControllerData<Dims> data;
   test::PolicyWithNan<Dims> policy(model, data, 100, 102);  // the non-finite action's path too
   SteadyClock clock;
   // Frames prepared before counting: dropouts of 5 s every 60 s (home-return path), NaN
@@ -50,12 +51,12 @@ void checkNoAllocation(std::uint64_t seed, const PolicyArch& arch = Dims::arch()
   std::uint32_t faults_seen = 0;
   {
     nao::test::CountAllocations count;
-    activateController(model, data, ref.target.front(), 1, clock);
+    activateOnRobot(model, data, robot, ref.target.front(), 1, clock);
     for (int t = 0; t < kTicks; ++t) {
       const std::size_t i = static_cast<std::size_t>(t);
-      faults_seen |= updateController(model, data, present[i] ? &frames[i] : nullptr, policy).fault;
+      faults_seen |= runControllerTick(model, data, robot, present[i] ? &frames[i] : nullptr, policy).fault;
     }
-    deactivateController(model, data);
+    deactivateOnRobot(model, data, robot);
     allocations = count.count();
   }
   CHECK(allocations == 0);
@@ -109,16 +110,16 @@ TEST_CASE("an autonomous run that chooses its run code at activate allocates not
   std::vector<JointVector> q_with, q_without;
   for (const ControllerModel<Dims>* model : {&with, &without}) {
     OdeArmBackend robot(model->arm, SimParams{}, start);
-    ControllerData<Dims> data(robot);
+    ControllerData<Dims> data;
     SteadyClock clock;
     std::vector<JointVector>& q = model == &with ? q_with : q_without;
     q.resize(kTicks);
     std::int64_t allocations = 0;
     {
       nao::test::CountAllocations count;
-      activateController(*model, data, start, 1, clock);
-      for (int t = 0; t < kTicks; ++t) q[static_cast<std::size_t>(t)] = updateController(*model, data, nullptr).q;
-      deactivateController(*model, data);
+      activateOnRobot(*model, data, robot, start, 1, clock);
+      for (int t = 0; t < kTicks; ++t) q[static_cast<std::size_t>(t)] = runControllerTick(*model, data, robot, nullptr).q;
+      deactivateOnRobot(*model, data, robot);
       allocations = count.count();
     }
     CHECK(allocations == 0);

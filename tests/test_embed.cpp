@@ -1,6 +1,7 @@
-// The embedding example (examples/embed) against nao_rt: the example's controller, driven by
-// nao_backends' ODE arm instead of its own kinematic arm, gives nao_rt's first 100 ticks bit for
-// bit for the same model and start (models/autonomous.bin, whole_arm, start 0).
+// The embedding example (examples/embed) against nao_rt: the example's controller and cycle
+// (read -> update -> write), with nao_backends' ODE arm as the joint interface instead of the
+// example's kinematic one, give nao_rt's first 100 ticks bit for bit for the same model and start
+// (models/autonomous.bin, whole_arm, start 0).
 #include "embed.hpp"
 
 #include "rt_run.hpp"
@@ -43,6 +44,13 @@ std::vector<std::vector<std::string>> readTicks(const fs::path& path, std::vecto
   return rows;
 }
 
+// The ODE arm as a framework's joint interface (read, write), as embed::cycle drives one.
+struct OdeJoints {
+  OdeArmBackend& ode;
+  const JointVector& read() const { return ode.measured(); }
+  void write(const JointVector& q_cmd) { ode.command(q_cmd); }
+};
+
 // A cell as the number it was written from: ticks.csv holds the shortest text that reads back
 // as the exact double (q) or float (attention).
 template <class T>
@@ -81,19 +89,21 @@ TEST_CASE("the embedding example on the ODE arm gives nao_rt's first 100 ticks b
   REQUIRE(file.header.movement_names[1] == "whole_arm");
   const std::vector<ModelStart> starts = readModelSpec(file.header, RetargetParams{}, kModel).starts[1];
   OdeArmBackend ode(arm, SimParams{}, clampToLimits(arm, starts[0].q));
-  const auto c = embed::configure(kModel, arm, ode);
-  activateController(*c->model, *c->data, starts[0].q, 1, c->clock);
+  OdeJoints joints{ode};
+  const auto c = embed::configure(kModel, arm);
+  activateController(*c->model, *c->data, ode.activate(clampToLimits(arm, starts[0].q)), 1, c->clock);
   int differing = 0;
   for (int t = 0; t < kTicks; ++t) {
-    const TickRecord& rec = updateController(*c->model, *c->data, nullptr);
+    const TickRecord& rec = embed::cycle(*c, joints, nullptr);
+    const JointVector& q = joints.read();  // the arm at the end of the period, as ticks.csv's q
     const std::vector<std::string>& row = ticks[static_cast<std::size_t>(t)];
     for (int j = 0; j < kNumJoints; ++j) {
       const double q_rt = number<double>(row[column("q_" + std::to_string(j))]);
       const float att_rt = number<float>(row[column("att_" + std::to_string(j))]);
-      if (rec.q[j] != q_rt || rec.att[static_cast<std::size_t>(j)] != att_rt) {
+      if (q[j] != q_rt || rec.att[static_cast<std::size_t>(j)] != att_rt) {
         if (++differing <= 5)
           MESSAGE("tick " << t << " joint " << j << ": nao_rt q " << q_rt << " att " << att_rt << ", example q "
-                          << rec.q[j] << " att " << rec.att[static_cast<std::size_t>(j)]);
+                          << q[j] << " att " << rec.att[static_cast<std::size_t>(j)]);
       }
     }
     CHECK_MESSAGE(rec.fault == number<std::uint32_t>(row[column("fault")]),

@@ -1,5 +1,6 @@
-// The command limiter and the rollout step (nao/rollout.hpp): the one place where an action
-// becomes a command and a period of the arm. Checked against what each limit means on its own,
+// The command limiter, a tick's command (nao/rollout.hpp) and the rollout step on a robot
+// (nao/robot_backend.hpp): the one place where an action becomes a command and a period of
+// the arm. Checked against what each limit means on its own,
 // and the step against stepSim of the same command.
 #include "nao/rollout.hpp"
 
@@ -9,6 +10,8 @@
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>
+
+#include <initializer_list>
 
 #include <cmath>
 #include <limits>
@@ -78,7 +81,7 @@ TEST_CASE("rolloutStep sends the limited command for one period: the same arm st
   resetSim(model, twin, q0);
   std::mt19937_64 rng(3);
   std::normal_distribution<double> n(0.0, 0.3);
-  RolloutStep step;
+  CommandStep step;
   for (int t = 0; t < 30; ++t) {
     JointVector a;
     for (int j = 0; j < kNumJoints; ++j) a[j] = n(rng);
@@ -95,5 +98,28 @@ TEST_CASE("rolloutStep sends the limited command for one period: the same arm st
     CHECK(q == twin.q);  // bit for bit
     CHECK(&q == &robot.measured());
     if (t == 7) CHECK((step.limit & kCommandNonFinite) != 0);
+  }
+}
+
+TEST_CASE("commandFor is the limited command and the action as taken and as applied, with no robot") {
+  const ArmModel arm = loadArmModel(test::kUrdfPath);
+  const double T = 0.1;
+  const JointVector q = (JointVector() << 1.2, -0.3, 1.0, 0.6, 0.1).finished();
+  JointEnvelope env;
+  env.lo = q.array() - 0.02;
+  env.hi = q.array() + 0.02;
+  for (const JointEnvelope* e : std::initializer_list<const JointEnvelope*>{nullptr, &env}) {
+    for (const JointVector& a : {JointVector(JointVector::Constant(0.01)), JointVector(JointVector::Constant(5.0)),
+                                 JointVector((JointVector() << std::nan(""), 0.0, 0.0, 0.0, 0.0).finished())}) {
+      JointVector expected;
+      const std::uint32_t flags = limitCommand(arm, T, q, a, expected, e);
+      const CommandStep step = commandFor(arm, T, q, a, e);
+      CHECK(step.q == q);
+      CHECK(step.q_cmd == expected);
+      CHECK(step.limit == flags);
+      CHECK(step.a_applied == expected - q);
+      // The action as taken: a non-finite one is held (0), as the tick records it.
+      CHECK(step.a == (a.allFinite() ? a : JointVector(JointVector::Zero())));
+    }
   }
 }

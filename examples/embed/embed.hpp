@@ -1,5 +1,6 @@
 // The controller as a robot framework embeds it: nao_core runs the ticks, nao_io reads model.bin
-// once at configure time. docs/embedding.md walks through it.
+// once at configure time. The framework reads the joints, the controller turns the angles into
+// a command, the framework writes it (docs/embedding.md walks through it).
 #pragma once
 
 #include "nao/controller.hpp"
@@ -10,8 +11,8 @@
 #include <vector>
 namespace embed {
 
-// The architecture compiled in: this example runs the small configuration (models/autonomous.bin);
-// nao_codegen writes a model's own dims (nao_model_dims.hpp) for any other.
+// The architecture compiled in: the small one (models/autonomous.bin); nao_codegen writes a
+// model's own (nao_model_dims.hpp).
 using Dims = nao::SmallPolicyDims;
 
 // Built at configure time: everything that reads a file, allocates or may throw.
@@ -23,8 +24,7 @@ struct Controller {
   nao::SteadyClock clock;
 };
 
-inline std::unique_ptr<Controller> configure(const std::string& model_path, const nao::ArmModel& arm,
-                                             nao::RobotBackend& robot) {
+inline std::unique_ptr<Controller> configure(const std::string& model_path, const nao::ArmModel& arm) {
   auto c = std::make_unique<Controller>();
   c->file = nao::readModelFile(model_path);
   nao::checkJointsMatch(c->file, arm, model_path);
@@ -37,8 +37,17 @@ inline std::unique_ptr<Controller> configure(const std::string& model_path, cons
   params.retarget = c->spec.retarget;
   c->model = std::make_unique<nao::ControllerModel<Dims>>(
       nao::configureController(arm, weights, params, c->spec.workspace, c->spec.run_codes));
-  c->data = std::make_unique<nao::ControllerData<Dims>>(robot);
+  c->data = std::make_unique<nao::ControllerData<Dims>>();
   return c;
+}
+
+// One cycle on the framework's joint interface (read() -> angles, write(q_cmd)): read, update
+// (no I/O inside), write the command for the next period.
+template <class Joints>
+const nao::TickRecord& cycle(Controller& c, Joints& joints, const nao::SkeletonFrame* human) {
+  const nao::TickRecord& rec = nao::updateController(*c.model, *c.data, joints.read(), human);
+  joints.write(rec.q_cmd);
+  return rec;
 }
 
 }  // namespace embed

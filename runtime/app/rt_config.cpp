@@ -191,22 +191,6 @@ ReferenceSpec parseReferenceSpec(const std::string& reference, const std::string
   return s;
 }
 
-RobotSpec parseRobotSpec(const std::string& robot, const std::string& default_socket) {
-  RobotSpec r;
-  if (robot == "ode") return r;
-  if (robot == "lola") {
-    r.lola = true;
-    r.socket_path = default_socket;
-    return r;
-  }
-  if (robot.rfind("lola:", 0) == 0 && robot.size() > 5) {
-    r.lola = true;
-    r.socket_path = robot.substr(5);
-    return r;
-  }
-  throw UsageError("--robot '" + robot + "': expected ode, lola or lola:SOCKET");
-}
-
 PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {
   PreparedRun p;
   if (o.ticks < 0) throw UsageError("--ticks must be positive");

@@ -1,6 +1,6 @@
 // What a nao_rt run is told and everything configured before its loop (docs/nao_rt.md):
 // the options (rt_cli.hpp fills them), the model (compiled-in or --weights, checked; its weights
-// bound), the robot spec, and the human reference the ticks see.
+// bound), and the human reference the ticks see.
 //
 // References (--reference): where a run's human frames come from, one per tick.
 //   file:PATH  a recorded 10 Hz skeleton CSV (nao_toolchain triangulate writes it), prepared at
@@ -27,6 +27,8 @@
 #include "nao/quantize.hpp"
 #include "nao/reference_stream.hpp"
 #include "nao/sim_arm.hpp"
+
+#include "allocation_probe.hpp"  // runtime/support
 
 #include <algorithm>
 #include <cstdint>
@@ -71,7 +73,8 @@ struct RunOptions {
   bool zero_timing = false;    ///< write the *_us columns of ticks.csv as 0 (byte-comparable files)
   ControllerParams controller; ///< fault timeouts, home pose, retargeting
   SimParams sim;               ///< the in-process ODE arm (--robot ode)
-  /// ode (the in-process arm, default) or lola[:SOCKET] (LoLA, default socket /tmp/robocup).
+  /// The robot (makeRobotBackend, nao/robot_factory.hpp): ode (the in-process arm, default) or
+  /// lola[:SOCKET] (LoLA, default socket /tmp/robocup).
   std::string robot = "ode";
   LolaParams lola;             ///< LoLA safety parameters (socket_path from `robot`)
   /// LoLA on one thread: load the policy's weights and workspace into the cache in the cycle
@@ -110,7 +113,7 @@ inline constexpr std::int64_t kMaxRunTicks = kMaxStartTicks;
 std::string oneLine(std::string s);
 
 // ---------------------------------------------------------------------------------------------
-// References and robots.
+// References.
 
 enum class ReferenceKind {
   kFile,      ///< file:PATH, a recorded skeleton CSV
@@ -150,15 +153,6 @@ class HumanSource {
 };
 
 class LiveSource;
-
-/// The robot backend a run drives (--robot).
-struct RobotSpec {
-  bool lola = false;
-  std::string socket_path;  ///< lola only
-};
-
-/// Parses --robot: ode, lola, lola:PATH. Throws UsageError otherwise.
-RobotSpec parseRobotSpec(const std::string& robot, const std::string& default_socket);
 
 // ---------------------------------------------------------------------------------------------
 // The prepared run.

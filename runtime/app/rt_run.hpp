@@ -6,9 +6,9 @@
 // (PaperPolicyDims when the build has no model), tests with SmallPolicyDims.
 //
 // Threads and time: configure and the file output run before and after the loop; between
-// activate and deactivate the control thread only calls the human source, updateController,
-// forward kinematics, and pushFromRT into preallocated memory — no allocation (counted through
-// AllocationProbe), no file I/O, no lock. With --robot lola the robot backend's socket I/O is on
+// activate and deactivate the control thread only calls the human source, the read -> update
+// -> write cycle on the robot (runControllerTick), and pushFromRT into preallocated memory — no
+// allocation (counted through AllocationProbe), no file I/O, no lock. With --robot lola the robot backend's socket I/O is on
 // this thread (the robot's packets are the clock), or with --lola-io-thread on the backend's own
 // thread (lola_backend.hpp says why and when). With --reference openpose the live camera's reader
 // thread parses and triangulates beside the loop (rt_live.hpp). Each helper thread's allocations
@@ -28,7 +28,8 @@
 #include "nao/lola_backend.hpp"
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
-#include "nao/robot_backend.hpp"
+#include "nao/robot_factory.hpp"
+#include "nao/robot_loop.hpp"
 
 #include <Eigen/Core>
 
@@ -174,17 +175,14 @@ struct WarmContext {
   std::uint64_t sink;
 };
 
-/// The robot a run drives (the backend owns its hardware): LoLA through its socket,
-/// opened here, with the I/O thread's probe and the warming before each tick's packet; or the
-/// in-process ODE arm at the run's start. Configure time: allocates, throws.
+/// The robot a run drives (the backend owns its hardware), from --robot (makeRobotBackend):
+/// the in-process ODE arm at the run's start, or LoLA through its socket, opened here, with the
+/// I/O thread's probe and the warming before each tick's packet. Configure time: allocates,
+/// throws.
 template <class Dims>
-std::unique_ptr<RobotBackend> makeRunRobot(const RunOptions& options, const RobotSpec& robot, const PreparedRun& p,
-                                           AllocationProbe* probe, WarmContext<Dims>& warm, LoopTotals& totals,
-                                           LolaBackend*& lola) {
-  lola = nullptr;
-  if (!robot.lola) return std::make_unique<OdeArmBackend>(p.arm, options.sim, clampToLimits(p.arm, p.q_start));
+std::unique_ptr<RobotBackend> makeRunRobot(const RunOptions& options, const PreparedRun& p, AllocationProbe* probe,
+                                           WarmContext<Dims>& warm) {
   LolaParams lola_params = options.lola;
-  lola_params.socket_path = robot.socket_path;
   // The I/O thread's own count (summary.json lola.io_allocations), not the control thread's.
   lola_params.io_probe = probe != nullptr ? probe->companion() : nullptr;
   if (options.lola_warm && !lola_params.io_thread) {
@@ -194,11 +192,7 @@ std::unique_ptr<RobotBackend> makeRunRobot(const RunOptions& options, const Robo
     };
     lola_params.before_tick_context = &warm;
   }
-  installLolaStopSignals();
-  auto backend = std::make_unique<LolaBackend>(p.arm, lola_params);
-  lola = backend.get();
-  totals.lola_io_scheduling = backend->ioThreadScheduling();
-  return backend;
+  return makeRobotBackend(options.robot, p.arm, p.q_start, options.sim, lola_params);
 }
 
 /// The run's attention records and the buffers the loop fills, all allocated before activate.
@@ -215,8 +209,8 @@ struct RunBuffers {
 /// Returns the ticks done (fewer than p.ticks when the robot stops the run).
 template <class Dims>
 std::int64_t runTicks(const RunOptions& options, PreparedRun& p, ControllerModel<Dims>& model,
-                      ControllerData<Dims>& data, ActionLaw* law, bool paced, RunBuffers<Dims>& buffers,
-                      LoopTotals& totals) {
+                      ControllerData<Dims>& data, RobotBackend& robot, ActionLaw* law, bool paced,
+                      RunBuffers<Dims>& buffers, LoopTotals& totals) {
   // The evaluation target of a recorded reference (its feature-extracted trajectory).
   const std::vector<JointVector>* target = p.has_targets ? &p.reference->target : nullptr;
   const std::size_t n_targets = target != nullptr ? target->size() : 0;
@@ -225,13 +219,13 @@ std::int64_t runTicks(const RunOptions& options, PreparedRun& p, ControllerModel
   RunRing<Dims>& ring = buffers.rings.ring();
   std::int64_t next_ns = monotonicNs();
   std::int64_t ticks_done = 0;
-  for (std::int64_t t = 0; t < p.ticks && data.robot->stopReason() == RobotStop::kNone; ++t) {
+  for (std::int64_t t = 0; t < p.ticks && robot.stopReason() == RobotStop::kNone; ++t) {
     if (paced) sleepUntilNs(next_ns);
     const std::size_t i = static_cast<std::size_t>(t);
     const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
     if (frame != nullptr) applyLiveHumanScale(p.human->scaleOfLastFrame(), model.params.human);
     TickRecord& rec = buffers.records[i];
-    rec = law != nullptr ? updateController(model, data, frame, *law) : updateController(model, data, frame);
+    rec = law != nullptr ? runControllerTick(model, data, robot, frame, *law) : runControllerTick(model, data, robot, frame);
     // Where the arm should be at the end of the tick: the reference's feature-extracted pose
     // of the next sample (the last one held at the end).
     if (i < n_targets)
@@ -278,10 +272,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
   RunReport report;
   try {
     // Configure: everything that can fail or allocate.
-    const RobotSpec robot = parseRobotSpec(options.robot, options.lola.socket_path);
-    // --realtime paces the in-process arm on 100 ms deadlines; on LoLA the robot's packets are
-    // the clock, and --realtime only asks for SCHED_FIFO + mlockall.
-    const bool paced = options.realtime && !robot.lola;
+    if (!isRobotBackendName(options.robot))
+      throw UsageError("--robot '" + options.robot + "': expected " + kRobotBackendNames);
     PreparedRun p = prepareRun(options, Dims::arch());
     WeightStorage weight_storage;
     AlignedBytes copy_storage;  // the int8 or packed copy made at start-up (none compiled in)
@@ -312,15 +304,19 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // the control thread's SCHED_FIFO; mlockall covers the whole process either way.
     if (options.realtime) {
       rt = enterRealtime();
-      if (!rt.warning.empty())
-        err << "nao_rt: warning: " << rt.warning << "; running on " << (paced ? "absolute deadlines" : "LoLA's clock")
-            << " without it\n";
       totals.realtime_scheduling = rt.warning.empty() ? "SCHED_FIFO + mlockall" : rt.warning;
     }
-    LolaBackend* lola = nullptr;
-    const std::unique_ptr<RobotBackend> robot_backend =
-        detail::makeRunRobot<Dims>(options, robot, p, probe, warm, totals, lola);
-    auto data = std::make_unique<ControllerData<Dims>>(*robot_backend);
+    const std::unique_ptr<RobotBackend> robot = detail::makeRunRobot<Dims>(options, p, probe, warm);
+    // LoLA's counters and latencies go into summary.json.
+    LolaBackend* const lola = dynamic_cast<LolaBackend*>(robot.get());
+    if (lola != nullptr) totals.lola_io_scheduling = lola->ioThreadScheduling();
+    // --realtime paces the in-process arm on 100 ms deadlines; a robot whose packets are the
+    // clock (LoLA) paces itself, and --realtime only asks for SCHED_FIFO + mlockall.
+    const bool paced = options.realtime && !robot->pacesTicks();
+    if (options.realtime && !rt.warning.empty())
+      err << "nao_rt: warning: " << rt.warning << "; running on " << (paced ? "absolute deadlines" : "the robot's clock")
+          << " without it\n";
+    auto data = std::make_unique<ControllerData<Dims>>();
     warm.workspace = data->policy.get();
     detail::RunBuffers<Dims> buffers;
     const AttentionDescriptor descriptor = attentionPayloadDescriptor<RunPayload<Dims>>();
@@ -334,8 +330,8 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
 
     out << "nao_rt: " << p.description << " -> movement " << p.spec.movement << ", model " << p.model_source << ", " << p.ticks << " ticks ("
         << static_cast<double>(p.ticks) * options.controller.period_s << " s), "
-        << (robot.lola ? "on LoLA " + robot.socket_path : paced ? "real time" : "back to back")
-        << (robot.lola && options.realtime ? " (" + totals.realtime_scheduling + ")" : "") << "\n";
+        << (lola != nullptr ? "on LoLA " + lola->socketPath() : paced ? "real time" : "back to back")
+        << (lola != nullptr && options.realtime ? " (" + totals.realtime_scheduling + ")" : "") << "\n";
     out.flush();
 
     // Every page the step reads resident before the loop (a released image's, a --weights
@@ -351,10 +347,10 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     // The loop: no allocation, no I/O, no exception from here to deactivate.
     if (probe != nullptr) probe->start();
     const std::int64_t wall0 = monotonicNs();
-    activateController(model, *data, p.q_start, p.movement_index, clock);
-    const std::int64_t ticks_done = detail::runTicks(options, p, model, *data, law, paced, buffers, totals);
-    const RobotStop stop = data->robot->stopReason();
-    deactivateController(model, *data);
+    activateOnRobot(model, *data, *robot, p.q_start, p.movement_index, clock);
+    const std::int64_t ticks_done = detail::runTicks(options, p, model, *data, *robot, law, paced, buffers, totals);
+    const RobotStop stop = robot->stopReason();
+    deactivateOnRobot(model, *data, *robot);
     closeFromRT(buffers.rings.ring());
     totals.wall_s = static_cast<double>(monotonicNs() - wall0) * 1e-9;
     if (probe != nullptr) totals.allocations = probe->stop();
@@ -365,9 +361,9 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     if (data->run_code >= 0)
       totals.run_code = p.model_spec.run_codes[static_cast<std::size_t>(p.movement_index)].names[static_cast<std::size_t>(data->run_code)];
     if (law != nullptr) totals.action_law = law->name();
-    if (lola) {
+    if (lola != nullptr) {
       totals.lola = true;
-      totals.lola_socket = robot.socket_path;
+      totals.lola_socket = lola->socketPath();
       totals.lola_counters = lola->counters();
       totals.lola_latency_ns = lola->latenciesNs();
     }

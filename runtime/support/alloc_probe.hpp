@@ -1,11 +1,11 @@
-// An AllocationProbe (nao/robot_backend.hpp) backed by the counting allocator (alloc_counter.hpp):
+// An AllocationProbe (allocation_probe.hpp) backed by the counting allocator (alloc_counter.hpp):
 // the count of the thread that calls start() until stop(). nao_rt's main (rt_main.hpp) and the
-// allocation tests of a whole run count with it.
+// allocation tests of a whole run count with it; only programs that link alloc_counter.cpp
+// include this header.
 #pragma once
 
 #include "alloc_counter.hpp"
-
-#include "nao/robot_backend.hpp"
+#include "allocation_probe.hpp"
 
 #include <cstdint>
 #include <optional>

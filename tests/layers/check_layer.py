@@ -5,12 +5,17 @@ usage: check_layer.py LAYER CLOSURE_FILE LINK_PROGRAM STATIC_LIBRARY
 
 Checks that the layer's link closure holds only what the layer may use, that a program linking the
 layer alone needs no other shared library, and for core, that no symbol of the archive (nm) names
-a parser, a simulator, a thread, a socket or a file. Exit 0 when all holds, 1 with one line per
+a parser, a simulator, a thread, a socket or a file, and that no source of runtime/core names a
+robot backend (the controller's tick takes the measured angles and returns the command; the
+caller talks to the robot). Exit 0 when all holds, 1 with one line per
 problem (what was allowed, what was found).
 """
+import pathlib
 import re
 import subprocess
 import sys
+
+CORE_SOURCES = pathlib.Path(__file__).resolve().parents[2] / "runtime" / "core"
 
 CORE = {"nao_core", "Eigen3::Eigen", "nao_flags"}
 # The URDF reader: urdfdom (and its console_bridge) or TinyXML, as libraries or their targets.
@@ -45,7 +50,7 @@ CORE_UNDEFINED_OK = re.compile(
     r"floor|ceil|round|lround|trunc|fmin|fmax|cbrt|remainder)f?)$)")
 CORE_FORBIDDEN = re.compile(
     r"nlohmann|msgpack|urdf|TiXml|tinyxml|console_bridge|\bd(World|Body|Joint|Init|Close|Space)[A-Z]|"
-    r"pthread_|std::thread|std::(__cxx11::)?basic_(i|o)?fstream|std::filesystem|\b(f?open|fopen64|mmap|munmap|"
+    r"RobotBackend|pthread_|std::thread|std::(__cxx11::)?basic_(i|o)?fstream|std::filesystem|\b(f?open|fopen64|mmap|munmap|"
     r"shm_open|shm_unlink|inotify_\w+|socket|connect|poll|read|write|fread|fwrite|fclose)$")
 
 
@@ -85,6 +90,9 @@ def main():
         for s in external:
             if not CORE_UNDEFINED_OK.match(s) or CORE_FORBIDDEN.search(s):
                 problems.append(f"libnao_core.a uses '{s}' from outside; expected only the C++ runtime and libm")
+        for path in sorted(CORE_SOURCES.rglob("*.[ch]pp")):
+            if re.search(r"\bRobotBackend\b", path.read_text(errors="replace")):
+                problems.append(f"{path} names RobotBackend; expected the robot only outside nao_core")
     for p in problems:
         print("FAIL: " + p)
     if not problems:

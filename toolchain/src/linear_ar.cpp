@@ -135,7 +135,7 @@ Rollout rolloutOn(const ArmModel& arm, RobotBackend& robot, double period_s, con
   robot.activate(start);
   r.hand.push_back(forwardKinematics(arm, kin, start));
   std::vector<JointVector> a_past;  // newest first
-  RolloutStep step;
+  CommandStep step;
   for (int t = 0; t < ticks; ++t) {
     const JointVector a = law(robot.measured(), a_past);
     r.q.push_back(rolloutStep(arm, period_s, robot, a, step));

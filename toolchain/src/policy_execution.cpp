@@ -4,6 +4,7 @@
 #include "nao/tools/policy_execution.hpp"
 
 #include "nao/tools/command.hpp"
+#include "nao/robot_backend.hpp"
 #include "nao/rollout.hpp"
 #include "nao/tools/policy_dataset.hpp"
 #include "nao/tools/splitmix.hpp"
@@ -19,16 +20,13 @@
 namespace nao::tools {
 namespace {
 
-// The controller's per-tick command bounds at q: the position limits and one period's reach.
+// The control period of the simulated arm: SimParams::substeps_per_tick physics steps.
+double tickPeriod(const SimModel& sim_model) { return sim_model.params.dt_s * sim_model.params.substeps_per_tick; }
+
+// The controller's per-tick command bounds at q (rollout.hpp): the position limits and one
+// period's reach.
 void commandBounds(const SimModel& sim_model, const JointVector& q, JointVector& lo, JointVector& hi) {
-  const ArmModel& arm = sim_model.arm;
-  const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
-  for (int j = 0; j < kNumJoints; ++j) {
-    const double step = arm.v_max[j] * period;
-    lo[j] = std::max(arm.q_min[j], q[j] - step);
-    hi[j] = std::min(arm.q_max[j], q[j] + step);
-    if (lo[j] > hi[j]) std::swap(lo[j], hi[j]);
-  }
+  nao::commandBounds(sim_model.arm, tickPeriod(sim_model), q, lo, hi);
 }
 
 // The expert of ExecutionOptions: the command in [lo, hi] for which the arm, from the state in
@@ -202,11 +200,13 @@ PolicySequence executeLabelled(const SimModel& sim_model, SimData& sim, const st
   if (f.empty()) throw UserError("execution: an empty demonstration to label toward");
   if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
   const ArmModel& arm = sim_model.arm;
-  const double period = sim_model.params.dt_s * sim_model.params.substeps_per_tick;
+  const double period = tickPeriod(sim_model);
   PolicySequence s;
   s.movement = movement;
+  OdeArmBackend robot(sim_model, sim);
   resetSim(sim_model, sim, start);
   SimSnapshot snap;
+  CommandStep step;
   JointVector q = sim.q, a_prev = JointVector::Zero();
   for (int t = 0; t < ticks; ++t) {
     const JointVector target = clampToLimits(arm, f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, f.size() - 1)]);
@@ -221,13 +221,10 @@ PolicySequence executeLabelled(const SimModel& sim_model, SimData& sim, const st
     s.a_prev.push_back(a_prev);
     s.r.push_back(target - q);
     s.a.push_back(c_expert - q);
-    // The policy's own action moves the arm, as the controller applies it.
-    JointVector a = policy(movement, t, q, a_prev, target - q);
-    if (!a.allFinite()) a.setZero();
-    JointVector c;
-    limitCommand(arm, period, q, a, c, workspace);
-    a_prev = c - q;
-    q = stepSim(sim_model, sim, c);
+    // The policy's own action moves the arm, as the controller's tick applies it (expertCommand
+    // left the arm where it was).
+    q = rolloutStep(arm, period, robot, policy(movement, t, q, a_prev, target - q), step, workspace);
+    a_prev = step.a_applied;
   }
   return s;
 }
@@ -240,6 +237,8 @@ std::vector<PolicyRun> rolloutPolicy(const PolicyData& data, const std::vector<i
   std::vector<PolicyRun> out;
   out.reserve(demos.size());
   SimData sim(sim_model, JointVector::Zero());
+  OdeArmBackend robot(sim_model, sim);
+  CommandStep step;
   for (int d : demos) {
     const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
     PolicyRun run;
@@ -250,15 +249,12 @@ std::vector<PolicyRun> rolloutPolicy(const PolicyData& data, const std::vector<i
     run.q.push_back(q);
     for (std::size_t t = 0; t + 1 < demo.f.size(); ++t) {
       const JointVector r = clampToLimits(arm, demo.f[t + 1]) - q;
-      JointVector a = policy(demo.movement, static_cast<int>(t), q, a_prev, r);
-      if (!a.allFinite()) a.setZero();  // as the controller does (kFaultPolicyNonFinite)
-      run.a.push_back(a);
-      // The controller's limiter, with the autonomous workspace envelope where given.
-      JointVector c;
-      limitCommand(arm, sim_model.params.dt_s * sim_model.params.substeps_per_tick, q, a, c,
-                   workspace == nullptr ? nullptr : &(*workspace)[static_cast<std::size_t>(demo.movement)]);
-      a_prev = c - q;
-      q = stepSim(sim_model, sim, c);
+      // The controller's command, with the autonomous workspace envelope where given; a
+      // non-finite action holds and is recorded as 0 (kFaultPolicyNonFinite).
+      q = rolloutStep(arm, tickPeriod(sim_model), robot, policy(demo.movement, static_cast<int>(t), q, a_prev, r),
+                      step, workspace == nullptr ? nullptr : &(*workspace)[static_cast<std::size_t>(demo.movement)]);
+      run.a.push_back(step.a);
+      a_prev = step.a_applied;
       run.q.push_back(q);
     }
     out.push_back(std::move(run));

@@ -1,4 +1,4 @@
-// The command limiter and the rollout step (nao/rollout.hpp).
+// The command limiter and a tick's command (nao/rollout.hpp).
 #include "nao/rollout.hpp"
 
 #include <algorithm>
@@ -48,12 +48,18 @@ JointVector limitCommand(const ArmModel& arm, double period_s, const JointVector
   return q_cmd;
 }
 
-const JointVector& rolloutStep(const ArmModel& arm, double period_s, RobotBackend& robot, const JointVector& a,
-                               RolloutStep& step, const JointEnvelope* envelope) {
-  step.q = robot.measured();
-  step.limit = limitCommand(arm, period_s, step.q, a, step.q_cmd, envelope);
+CommandStep commandFor(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
+                       const JointEnvelope* envelope) {
+  CommandStep step;
+  step.q = q;
+  step.limit = limitCommand(arm, period_s, q, a, step.q_cmd, envelope);
+  // A non-finite action was held (a = 0): that is the action the tick took.
+  if (step.limit & kCommandNonFinite)
+    step.a.setZero();
+  else
+    step.a = a;
   step.a_applied = step.q_cmd - step.q;
-  return robot.command(step.q_cmd);
+  return step;
 }
 
 }  // namespace nao

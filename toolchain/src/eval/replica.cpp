@@ -1,6 +1,7 @@
 #include "replica.hpp"
 
 #include "nao/controller.hpp"
+#include "nao/robot_loop.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
@@ -29,18 +30,18 @@ std::vector<ReplicaTick> replay(const ModelFile& model, const ArmModel& arm, con
   const ModelSpec spec = readModelSpec(h, RetargetParams{}, "model");
   const ControllerModel<Dims> cm = configureController(arm, weights, ControllerParams{}, spec.workspace, spec.run_codes);
   OdeArmBackend robot(arm, sim_params, clampToLimits(arm, start));
-  ControllerData<Dims> data(robot);
+  ControllerData<Dims> data;
   ZeroClock clock;
-  activateController(cm, data, start, movement, clock);
+  activateOnRobot(cm, data, robot, start, movement, clock);
   std::vector<ReplicaTick> out;
   for (int t = 0; t < ticks; ++t) {
     // The step's inputs as the controller forms them (autonomous mode: r unused).
     PolicyInput in;
-    in.q = data.robot->measured().template cast<float>();
+    in.q = robot.measured().template cast<float>();
     in.a_prev = data.a_prev.template cast<float>();
     in.movement = movement;
     in.step = static_cast<int>(std::min<std::int64_t>(data.tick, weights.max_steps - 1));
-    const TickRecord& rec = updateController(cm, data, nullptr);
+    const TickRecord& rec = runControllerTick(cm, data, robot, nullptr);
     ReplicaTick tick;
     tick.q = rec.q;
     tick.a = rec.a;

@@ -35,6 +35,8 @@
 #include "nao/lola.hpp"
 #include "nao/robot_backend.hpp"
 
+#include "allocation_probe.hpp"  // runtime/support
+
 #include <array>
 #include <atomic>
 #include <cstdint>
@@ -124,7 +126,10 @@ class LolaBackend final : public RobotBackend {
   std::int64_t waitNs() const override { return threaded_ ? ctl_.wait_ns : wait_ns_; }
   RobotStop stopReason() const override { return threaded_ ? ctl_.stop : stop_; }
   void deactivate() override;
+  bool pacesTicks() const override { return true; }
 
+  /// The LoLA socket connected to.
+  const std::string& socketPath() const { return params_.socket_path; }
   const LolaCounters& counters() const { return counters_; }
   /// Round-trip time of each answered cycle (sensor packet complete -> actuator packet sent), ns.
   const std::vector<std::int64_t>& latenciesNs() const { return latency_ns_; }

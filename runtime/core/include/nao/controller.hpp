@@ -1,14 +1,18 @@
 // The 10 Hz imitation controller: human frame -> human kinematics + scaling ->
 // fixed-size LM retargeting (Algorithm 1) -> snap to the model's key pose -> policy ->
-// rolloutStep (rollout.hpp: command q_t + a_t within the position and velocity limits -> robot
-// backend -> measured q) -> record. The robot backend (robot_backend.hpp: the ODE arm or LoLA)
-// is built by the caller and owns its hardware; the controller only drives it.
+// commandFor (rollout.hpp: q_t + a_t within the position and velocity limits) -> record.
+//
+// The controller never talks to a robot. Its caller reads the arm, hands the measured angles
+// to updateController, and writes the returned command (TickRecord::q_cmd) to the arm, as a
+// robot framework calls a controller's update between its own read and write
+// (docs/embedding.md). nao_backends' runControllerTick (nao/robot_loop.hpp) is that cycle
+// for its robots (the ODE arm, LoLA), with finishTick recording what the robot did.
 //
 // Lifecycle: configureController builds everything that allocates (ControllerModel,
-// ControllerData); activateController puts the arm at its start pose; updateController runs one
-// tick; deactivateController ends the run. Between activate and deactivate nothing allocates,
-// blocks, throws or does I/O: in-loop anomalies are fault bits in the tick record, counted, each
-// with the fallback documented at ControllerFault.
+// ControllerData); activateController starts a run from the pose the arm is at;
+// updateController runs one tick; deactivateController ends the run. Between activate and
+// deactivate nothing allocates, blocks, throws or does I/O: in-loop anomalies are fault bits in
+// the tick record, counted, each with the fallback documented at ControllerFault.
 #pragma once
 
 #include "nao/arm_model.hpp"
@@ -19,7 +23,6 @@
 #include "nao/model_spec.hpp"
 #include "nao/policy.hpp"
 #include "nao/retarget.hpp"
-#include "nao/robot_backend.hpp"
 #include "nao/rollout.hpp"
 
 #include <Eigen/Core>
@@ -34,8 +37,9 @@
 
 namespace nao {
 
-/// Fault bits of a tick (ticks.csv column `fault`). Bits 0-7 and 14 come from the tick itself and
-/// never stop the loop; bits 8-13 come from the robot backend (LoLA; the ODE arm raises none).
+/// Fault bits of a tick (ticks.csv column `fault`). Bits 0-7, 14 and 15 come from the tick itself
+/// and never stop the loop; bits 8-13 come from the robot (finishTick: LoLA's; the ODE arm
+/// raises none).
 enum ControllerFault : std::uint32_t {
   /// No usable human arm this tick (no frame, torso/arm keypoints missing) for longer than the
   /// bridge (kFaultHumanBridged): the last reference is held.
@@ -137,15 +141,18 @@ struct TickRecord {
   /// NaN on ticks the policy did not run (return home, evaluation laws)
   JointVector a_net = JointVector::Constant(std::numeric_limits<double>::quiet_NaN());
   JointVector q_cmd = JointVector::Zero();   ///< command sent to the servos
-  JointVector q = JointVector::Zero();       ///< measured joint angles at the end of the tick (LoLA: as measured)
-  Eigen::Vector3d ee = Eigen::Vector3d::Zero();  ///< hand point of q
+  /// Measured joint angles at the end of the tick (LoLA: as measured), from finishTick; until
+  /// then (updateController alone) the angles the tick started from.
+  JointVector q = JointVector::Zero();
+  /// Hand point of q (finishTick; NaN until then).
+  Eigen::Vector3d ee = Eigen::Vector3d::Zero();
   Eigen::Vector3d ee_ref = Eigen::Vector3d::Constant(std::nan(""));  ///< evaluation target (driver fills)
   std::array<float, kNumJoints> att{};   ///< per-body-part norm-based attention score, summed over the window
   std::array<float, kNumJoints> attm{};  ///< per-body-part raw cross-attention mass (sums to 1)
   std::uint32_t fault = 0;             ///< ControllerFault bits
   int key_pose = 0;                    ///< index of r among the movement's key poses
-  /// Stage timings; sim_us is the robot backend's work, tick_us the whole tick, both without
-  /// the time spent waiting for the robot (RobotBackend::waitNs, LoLA's packet clock).
+  /// Stage timings; sim_us is the robot's work (finishTick; 0 until then), tick_us the whole
+  /// tick, both without the time spent waiting for the robot (LoLA's packet clock).
   double tick_us = 0.0, retarget_us = 0.0, policy_us = 0.0, sim_us = 0.0;
 };
 
@@ -164,14 +171,10 @@ struct ControllerModel {
   std::vector<ModelRunCodes> run_codes;
 };
 
-/// Everything a tick writes. Built at configure time, beside the robot backend it drives.
+/// Everything a tick writes. Built at configure time.
 template <class Dims>
 struct ControllerData {
-  /// `robot` (not owned) must outlive the data.
-  explicit ControllerData(RobotBackend& robot_backend) : robot(&robot_backend) {}
-
-  RobotBackend* robot;            ///< the robot the ticks drive (the ODE arm or LoLA; not owned)
-  RolloutStep step;               ///< what the last tick's rolloutStep applied
+  CommandStep step;               ///< the last tick's command (commandFor)
   ArmData kin;
   HumanArmData human;
   RetargetData retarget;
@@ -191,6 +194,9 @@ struct ControllerData {
   bool feature_started = false;
   std::array<std::int64_t, kNumControllerFaults> fault_counts{};
   TickRecord record;                     ///< the last tick
+  /// The last tick's clock readings at its start and at the end of updateController (finishTick
+  /// adds the robot's time to them).
+  std::int64_t tick_start_ns = 0, update_end_ns = 0;
 };
 
 /// Per movement, the demonstrated joint range widened by `margin_rad`: the workspace an
@@ -257,14 +263,14 @@ inline double microseconds(std::int64_t from_ns, std::int64_t to_ns) {
 }
 }  // namespace detail
 
-/// Puts the arm at rest at q0 (clamped), resets the retargeting warm start to it, clears the
-/// counters and the previous action, and selects `movement` (index into the model's movement
-/// names), the clock and, for a model with run codes, the code of the run from that start
-/// (runCodeIndex). Real-time safe (no allocation): may be called again to restart.
+/// Starts a run from q, the pose the arm is at (rad: the caller brought its robot to the start
+/// pose, clamped to the limits, and passes what the robot reports): resets the retargeting warm
+/// start to it, clears the counters and the previous action, and selects `movement` (index into
+/// the model's movement names), the clock and, for a model with run codes, the code of the run
+/// from that start (runCodeIndex). Real-time safe (no allocation): may be called again to restart.
 template <class Dims>
-void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q0,
+void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q,
                         int movement, ControllerClock& clock) {
-  const JointVector q = data.robot->activate(clampToLimits(model.arm, q0));
   resetHumanArm(data.human);
   resetRetarget(model.arm, data.retarget, q);
   data.clock = &clock;
@@ -295,7 +301,7 @@ struct ActionInput {
 /// What acts in a tick in place of the policy (updateController's second form): the
 /// evaluation's baselines (nao_toolchain evaluate) and the tests' fault injection. The deployed
 /// controller's action is the policy's (policyAction). The tick's other stages - reference,
-/// command limits, robot, record - stay the controller's own.
+/// command limits, record - stay the controller's own.
 struct ActionLaw {
   virtual ~ActionLaw() = default;
   /// A short name for the run's summary, e.g. "blend law".
@@ -370,9 +376,9 @@ void referenceStage(const ControllerModel<Dims>& model, ControllerData<Dims>& da
 }
 
 /// Stage 2: snap q_ref to the model's key pose (rec.key_pose, rec.r) and advance the online
-/// feature-extracted trajectory toward it; returns what an action law reads.
+/// feature-extracted trajectory toward it; returns what an action law reads at the measured q.
 template <class Dims>
-ActionInput actionInput(const ControllerModel<Dims>& model, ControllerData<Dims>& data) {
+ActionInput actionInput(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q) {
   TickRecord& rec = data.record;
   rec.key_pose = snapToCentroid(model.policy, data.movement, data.q_ref);
   rec.r = centroid(model.policy, data.movement, rec.key_pose).template cast<double>();
@@ -387,7 +393,7 @@ ActionInput actionInput(const ControllerModel<Dims>& model, ControllerData<Dims>
   data.feature_v = pole * pole * data.feature_v + (1.0 - pole) * (1.0 - pole) * (rec.r - data.feature_f);
   data.feature_f += data.feature_v;
   ActionInput in;
-  in.q = data.robot->measured();
+  in.q = q;
   in.a_prev = data.a_prev;
   in.key_pose = rec.r;
   in.target = clampToLimits(model.arm, data.feature_f);
@@ -407,34 +413,39 @@ JointVector homeAction(const ControllerModel<Dims>& model, const JointVector& q)
   return a;
 }
 
-/// Stages 4-5: command q + a inside the position limits and what the servos can do in one
-/// period (a non-finite action holds), the arm advances one period; the record's command,
-/// measurement and hand point.
+/// Stage 4: command q + a inside the position limits and what the servos can do in one period
+/// (a non-finite action holds): the record's command and action.
 template <class Dims>
-void commandStage(const ControllerModel<Dims>& model, ControllerData<Dims>& data, JointVector a) {
+void commandStage(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q,
+                  const JointVector& a) {
   TickRecord& rec = data.record;
   const JointEnvelope* envelope =
       model.workspace.empty() ? nullptr : &model.workspace[static_cast<std::size_t>(data.movement)];
-  rec.q = rolloutStep(model.arm, model.params.period_s, *data.robot, a, data.step, envelope);
-  const RolloutStep& step = data.step;
-  if (step.limit & kCommandNonFinite) {
-    rec.fault |= kFaultPolicyNonFinite;
-    a.setZero();
-  }
+  data.step = commandFor(model.arm, model.params.period_s, q, a, envelope);
+  const CommandStep& step = data.step;
+  if (step.limit & kCommandNonFinite) rec.fault |= kFaultPolicyNonFinite;
   if (step.limit & kCommandClamped) rec.fault |= kFaultCommandLimited;
   if (step.limit & kCommandEnveloped) rec.fault |= kFaultOutsideWorkspace;
-  rec.a = a;
+  rec.a = step.a;
   rec.q_cmd = step.q_cmd;
   rec.q_ref = data.q_ref;
   data.a_prev = step.a_applied;  // the action as applied is the next tick's a(t-1)
-  rec.fault |= data.robot->faults();
-  rec.ee = forwardKinematics(model.arm, data.kin, rec.q);
+  rec.q = q;
+  rec.ee.setConstant(std::numeric_limits<double>::quiet_NaN());
 }
 
-/// One tick with `act(const ActionInput&)` as its action law, timed on the data's clock.
+/// Counts the fault bits of `bits` (ControllerFault) once each.
+template <class Dims>
+void countFaults(ControllerData<Dims>& data, std::uint32_t bits) {
+  for (int b = 0; b < kNumControllerFaults; ++b)
+    if (bits & (1u << b)) ++data.fault_counts[static_cast<std::size_t>(b)];
+}
+
+/// One tick at the measured q with `act(const ActionInput&)` as its action law, timed on the
+/// data's clock.
 template <class Dims, class Act>
-const TickRecord& tick(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const SkeletonFrame* frame,
-                       Act&& act) {
+const TickRecord& tick(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q,
+                       const SkeletonFrame* frame, Act&& act) {
   TickRecord& rec = data.record;
   const ControllerParams& p = model.params;
   const std::int64_t t0 = data.clock->nowNs();
@@ -446,20 +457,20 @@ const TickRecord& tick(const ControllerModel<Dims>& model, ControllerData<Dims>&
   if (model.policy.conditioning != Conditioning::kAutonomous) referenceStage(model, data, frame);
   const std::int64_t t1 = data.clock->nowNs();
 
-  const ActionInput in = actionInput(model, data);
+  const ActionInput in = actionInput(model, data, q);
   const JointVector a = (rec.fault & kFaultHumanTimeout) ? homeAction(model, in.q) : act(in);
   const std::int64_t t2 = data.clock->nowNs();
 
-  commandStage(model, data, a);
+  commandStage(model, data, q, a);
   const std::int64_t t3 = data.clock->nowNs();
-  const std::int64_t wait_ns = data.robot->waitNs();
+  data.tick_start_ns = t0;
+  data.update_end_ns = t3;
   rec.retarget_us = microseconds(t0, t1);
   rec.policy_us = microseconds(t1, t2);
-  rec.sim_us = microseconds(t2, t3 - wait_ns);
-  rec.tick_us = microseconds(t0, t3 - wait_ns);
+  rec.sim_us = 0.0;
+  rec.tick_us = microseconds(t0, t3);
   if (rec.tick_us > p.period_s * 1e6) rec.fault |= kFaultOverrun;
-  for (int b = 0; b < kNumControllerFaults; ++b)
-    if (rec.fault & (1u << b)) ++data.fault_counts[static_cast<std::size_t>(b)];
+  countFaults(data, rec.fault);
   ++data.tick;
   return rec;
 }
@@ -468,14 +479,16 @@ const TickRecord& tick(const ControllerModel<Dims>& model, ControllerData<Dims>&
 
 /// One 100 ms tick: (1) reference: human frame -> retarget (reference mode), (2) snap to the
 /// key pose, feature-extracted target, (3) the policy's action (toward home once the human is
-/// gone past the timeout), (4) command within the limits, (5) the robot advances a period.
-/// `frame` is the human skeleton of this tick in the world frame (nullptr: no human detected);
-/// autonomous-mode models ignore it. Returns data.record.
-/// Real-time safe: no allocation, no exception, no I/O.
+/// gone past the timeout), (4) the command within the limits. `q` is the arm's measured joint
+/// angles now (rad); `frame` is the human skeleton of this tick in the world frame (nullptr: no
+/// human detected); autonomous-mode models ignore it. Returns data.record: the command to write
+/// to the arm for the next period is its q_cmd, the attention its att/attm.
+/// No robot, no I/O: real-time safe (no allocation, no exception).
 template <class Dims>
 const TickRecord& updateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data,
-                                   const SkeletonFrame* frame) {
-  return detail::tick(model, data, frame, [&](const ActionInput& in) { return policyAction(model, data, in); });
+                                   const JointVector& q, const SkeletonFrame* frame) {
+  return detail::tick(model, data, q, frame,
+                      [&](const ActionInput& in) { return policyAction(model, data, in); });
 }
 
 /// The same tick with `law`'s action in place of the policy's (an evaluation's baseline, a
@@ -483,16 +496,36 @@ const TickRecord& updateController(const ControllerModel<Dims>& model, Controlle
 /// the policy itself (policyAction). Real-time safe if `law` is.
 template <class Dims>
 const TickRecord& updateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data,
-                                   const SkeletonFrame* frame, ActionLaw& law) {
-  return detail::tick(model, data, frame, [&](const ActionInput& in) { return law.action(in); });
+                                   const JointVector& q, const SkeletonFrame* frame, ActionLaw& law) {
+  return detail::tick(model, data, q, frame, [&](const ActionInput& in) { return law.action(in); });
 }
 
-/// Ends the run: the arm is commanded to hold where it is (the LoLA backend then ramps the
-/// stiffness to 0). Real-time safe.
+/// After the arm ran the last tick's command for one period: its measured angles at the end
+/// (rad), the fault bits it raised (ControllerFault, bits 8-13) and the part of its time spent
+/// waiting for the robot (ns, LoLA's packet clock; left out of the timings), into the tick's
+/// record (q, ee, fault, sim_us, tick_us; the overrun check on the whole tick) and the fault
+/// counts. Optional for a caller that keeps its own record. Real-time safe.
+template <class Dims>
+const TickRecord& finishTick(const ControllerModel<Dims>& model, ControllerData<Dims>& data, const JointVector& q_end,
+                             std::uint32_t robot_faults, std::int64_t robot_wait_ns) {
+  TickRecord& rec = data.record;
+  const std::uint32_t before = rec.fault;
+  rec.q = q_end;
+  rec.fault |= robot_faults;
+  rec.ee = forwardKinematics(model.arm, data.kin, rec.q);
+  const std::int64_t t_end = data.clock->nowNs() - robot_wait_ns;
+  rec.sim_us = detail::microseconds(data.update_end_ns, t_end);
+  rec.tick_us = detail::microseconds(data.tick_start_ns, t_end);
+  if (rec.tick_us > model.params.period_s * 1e6) rec.fault |= kFaultOverrun;
+  detail::countFaults(data, rec.fault & ~before);
+  return rec;
+}
+
+/// Ends the run (the caller then has its arm hold where it is: a real robot ramps its stiffness
+/// to 0). Real-time safe.
 template <class Dims>
 void deactivateController(const ControllerModel<Dims>& model, ControllerData<Dims>& data) {
   (void)model;
-  data.robot->deactivate();
   data.active = false;
 }
 

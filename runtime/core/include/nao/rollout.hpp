@@ -1,18 +1,18 @@
-// The command limiter and the rollout step: what every tick of every rollout does between an
-// action and the arm's next measured pose, written once. The controller calls them once
-// per tick; the toolchain's rollouts (training data execution, evaluation baselines) call the
-// same functions with their own action laws, so a baseline never re-spells the controller.
+// The command path of a tick: what every tick of every rollout does between an action and the
+// command sent to the arm, written once. The controller's tick calls commandFor once per tick;
+// the toolchain's rollouts (training data execution, DAgger labelling, evaluation baselines)
+// call the same function with their own action laws, through nao_backends' rolloutStep, so a
+// baseline never re-spells the controller.
 //
 //   q_cmd = limitCommand(q, a):   q + a inside the position limits and inside what the servos
 //                                 can reach in one period (v_max · T); a non-finite action holds
-//   rolloutStep(robot, a):        limitCommand at the robot's measured q, then one period of the
-//                                 robot backend; returns the measured q at its end
+//   commandFor(q, a):             limitCommand, and what it applied: the action as taken (0 when
+//                                 non-finite) and q_cmd − q, the next tick's a(t−1)
 //
-// All real-time safe: no allocation, no exception, no I/O.
+// All real-time safe: no allocation, no exception, no I/O, no robot.
 #pragma once
 
 #include "nao/arm_model.hpp"
-#include "nao/robot_backend.hpp"
 
 #include <cstdint>
 #include <limits>
@@ -59,18 +59,19 @@ std::uint32_t limitCommand(const ArmModel& arm, double period_s, const JointVect
 JointVector limitCommand(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
                          bool& limited);
 
-/// What one rollout step applied.
-struct RolloutStep {
-  JointVector q = JointVector::Zero();          ///< measured angles the step started from, rad
-  JointVector q_cmd = JointVector::Zero();      ///< the command sent (limitCommand), rad
+/// What one tick's command is: the limited command and the action as applied.
+struct CommandStep {
+  JointVector q = JointVector::Zero();          ///< measured angles the command starts from, rad
+  JointVector a = JointVector::Zero();          ///< the action as taken: the law's, 0 where it had a NaN/Inf
+  JointVector q_cmd = JointVector::Zero();      ///< the command to send (limitCommand), rad
   JointVector a_applied = JointVector::Zero();  ///< q_cmd − q: the action as applied (the next a(t−1))
   std::uint32_t limit = 0;                      ///< CommandLimitFlags
 };
 
-/// One control period of a rollout: from the robot's measured q, limitCommand(q, a), then
-/// robot.command(q_cmd) for one period. Fills `step` and returns the measured angles at the end
-/// of the period (the robot's, valid until its next command).
-const JointVector& rolloutStep(const ArmModel& arm, double period_s, RobotBackend& robot, const JointVector& a,
-                               RolloutStep& step, const JointEnvelope* envelope = nullptr);
+/// The command of a tick at the measured angles q for the action a: limitCommand(q, a) within
+/// the envelope (if any), the action as taken and as applied. Used by the controller's tick and
+/// by every rollout of the toolchain.
+CommandStep commandFor(const ArmModel& arm, double period_s, const JointVector& q, const JointVector& a,
+                       const JointEnvelope* envelope = nullptr);
 
 }  // namespace nao

@@ -43,8 +43,8 @@ struct ArmCopyJacobian {
 /// the derivatives of the result; where the limits cut the command, ∂/∂c is 0.
 void stepArmCopy(const SimModel& sim, ArmCopyState& s, const JointVector& q_cmd, ArmCopyJacobian* jac = nullptr);
 
-/// Per joint, ∂q_cmd/∂q and ∂q_cmd/∂a of the command limiter's result q_cmd = limitCommand(q, a)
-/// (rollout.hpp): (1, 1) where the command is q + a, (1, 0) where it is cut to one period's reach
+/// Per joint, ∂q_cmd/∂q and ∂q_cmd/∂a of the command limiter's result q_cmd (commandFor(q, a),
+/// rollout.hpp): (1, 1) where the command is q + a, (1, 0) where it is cut to one period's reach
 /// from q or the action was not finite (the arm holds: q_cmd = q), (0, 0) where it is cut to a
 /// position limit or the envelope.
 struct CommandDerivative {

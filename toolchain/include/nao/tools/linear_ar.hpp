@@ -15,7 +15,7 @@
 #pragma once
 
 #include "nao/arm_model.hpp"
-#include "nao/rollout.hpp"  // limitCommand, rolloutStep: the rule every rollout here follows
+#include "nao/robot_backend.hpp"  // rolloutStep: the command rule every rollout here follows
 #include "nao/sim_arm.hpp"
 
 #include <Eigen/Core>
@@ -74,8 +74,8 @@ struct Rollout {
 using ActionLaw = std::function<JointVector(const JointVector&, const std::vector<JointVector>&)>;
 
 /// Rolls `law` out for `ticks` ticks on the simulated arm from rest at q0 (clamped to the
-/// limits) with the runtime's own rollout step (nao/rollout.hpp: measured q -> action ->
-/// limitCommand -> one period of the arm, a non-finite action held); the applied action
+/// limits) with the runtime's own rollout step (rolloutStep: measured q -> action -> the
+/// controller's command, commandFor -> one period of the arm, a non-finite action held); the applied action
 /// (command − q) is the next tick's a(t−1). `data` is reused (reset to q0).
 Rollout rolloutOnSim(const SimModel& sim, SimData& data, double period_s, const JointVector& q0, int ticks,
                      const ActionLaw& law);

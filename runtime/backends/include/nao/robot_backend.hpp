@@ -1,10 +1,11 @@
-// The robot behind the controller: one small interface in the style of
-// ros2_control's SystemInterface. The controller never knows which robot it drives:
-//  - OdeArmBackend (sim_arm.hpp, nao_backends): the in-process ODE arm (default; deterministic,
-//    bit for bit);
-//  - LolaBackend (lola_backend.hpp, nao_backends): a NAO V6 through LoLA, its low-level socket
-//    protocol;
-//  - a robot framework's own arm (examples/embed: a kinematic arm of a few lines).
+// The robot behind a run: one small interface in the style of ros2_control's SystemInterface.
+// The controller (nao_core) never sees a robot: the loop of robot_loop.hpp reads the arm, calls
+// updateController with the measured angles and writes the command back, as a robot framework
+// drives its controllers (docs/embedding.md); the toolchain's rollouts step it with rolloutStep.
+//  - OdeArmBackend (sim_arm.hpp): the in-process ODE arm (default; deterministic, bit for bit);
+//  - LolaBackend (lola_backend.hpp): a NAO V6 through LoLA, its low-level socket protocol;
+//  - ArmCopyBackend (the toolchain's differentiable arm copy).
+// makeRobotBackend (robot_factory.hpp) builds one from nao_rt's --robot.
 //
 // Lifecycle: a backend is built at configure time (everything that allocates or opens a
 // socket); activate -> command x N -> deactivate, all real-time safe (no allocation, no
@@ -12,22 +13,11 @@
 #pragma once
 
 #include "nao/arm_model.hpp"
+#include "nao/rollout.hpp"
 
 #include <cstdint>
 
 namespace nao {
-
-/// Counts the heap allocations of the thread that calls start() until stop() (nao_rt backs it
-/// with its counting allocator; the allocation tests with theirs). A backend with a thread of
-/// its own is given one for that thread.
-struct AllocationProbe {
-  virtual ~AllocationProbe() = default;
-  virtual void start() = 0;
-  virtual std::int64_t stop() = 0;
-  /// A probe for one more thread (a backend's own), or nullptr if allocations are counted on
-  /// the calling thread only.
-  virtual AllocationProbe* companion() { return nullptr; }
-};
 
 /// Why a backend stopped the run early (RobotBackend::stopReason).
 enum class RobotStop : int {
@@ -55,6 +45,17 @@ struct RobotBackend {
   virtual RobotStop stopReason() const = 0;
   /// Ends the run: hold where the arm is (a real robot: then ramp the stiffness to 0).
   virtual void deactivate() = 0;
+  /// True when the robot's own clock paces the ticks (command waits for its packets, LoLA): a
+  /// run then does not sleep to deadlines of its own.
+  virtual bool pacesTicks() const { return false; }
 };
+
+/// One control period of a rollout with the caller's own action a (the toolchain's rollouts:
+/// training data execution, DAgger, evaluation baselines): read the robot's measured q, the
+/// tick's command (commandFor, as the controller's tick makes it), write it for one period.
+/// Fills `step` and returns the measured angles at the end of the period (the robot's, valid
+/// until its next command). Real-time safe.
+const JointVector& rolloutStep(const ArmModel& arm, double period_s, RobotBackend& robot, const JointVector& a,
+                               CommandStep& step, const JointEnvelope* envelope = nullptr);
 
 }  // namespace nao
