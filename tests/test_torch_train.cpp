@@ -23,8 +23,10 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <random>
 #include <set>
@@ -46,6 +48,43 @@ PolicyArch withChunk(PolicyArch a, int chunk) {
 }
 
 std::vector<TrainedJoint> urdfJoints() { return trainedJoints(loadArmModel(nao::test::kUrdfPath)); }
+
+// `nao_toolchain train` as the toolchain registers it, in an app of its own.
+CLI::App* trainCommand(CLI::App& app) {
+  for (const CommandEntry& e : commandRegistry())
+    if (std::string(e.name) == "train") e.setup(app);
+  return app.get_subcommand("train");
+}
+
+// smallData() on disk as `nao_toolchain cluster` leaves a data set: centroids.json and
+// <demo>/features.csv (every sample measured), all numbers to the last bit.
+std::string writeSmallData(const std::string& name) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "nao_rt_tests" / name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const PolicyData& data = smallData();
+  nlohmann::json centroids;
+  for (std::size_t m = 0; m < data.movement_names.size(); ++m)
+    for (const JointVector& c : data.centroids[m])
+      centroids["movements"][data.movement_names[m]]["centroids"].push_back(std::vector<double>(c.data(), c.data() + kNumJoints));
+  std::ofstream(dir / "centroids.json") << centroids.dump(2) << '\n';
+  for (const PolicyDemo& d : data.demos) {
+    std::filesystem::create_directories(dir / d.name);
+    std::ofstream csv(dir / d.name / "features.csv");
+    csv << "t_s,label,measured,f_0,f_1,f_2,f_3,f_4\n";
+    char buf[40];
+    for (std::size_t t = 0; t < d.f.size(); ++t) {
+      std::snprintf(buf, sizeof buf, "%.17g", d.t_s[t]);
+      csv << buf << ',' << d.label[t] << ",1";
+      for (int j = 0; j < kNumJoints; ++j) {
+        std::snprintf(buf, sizeof buf, "%.17g", d.f[t][j]);
+        csv << ',' << buf;
+      }
+      csv << '\n';
+    }
+  }
+  return dir.string();
+}
 
 }  // namespace
 
@@ -301,6 +340,58 @@ TEST_CASE("the written model.bin reads back: header, metadata and every tensor e
   CHECK(meta["config"]["head"] == "regression");
   CHECK(meta["config"]["chunk"] == 1);
   CHECK(meta["config"]["bins"] == 0);
+}
+
+TEST_CASE("train --help lists at most 25 options: the training method's options are recipe-only, refused on the command line, and a recipe's are honoured") {
+  const char* recipe_only[] = {"--noisy-rollouts", "--noisy-starts", "--chunk", "--no-previous-action", "--run-latent",
+                               "--latent-kl", "--ema", "--closed-loop-epochs", "--closed-loop-lr", "--closed-loop-horizon",
+                               "--closed-loop-horizon-growth", "--closed-loop-starts", "--closed-loop-action-weight"};
+  const std::string data = writeSmallData("recipe_only_data");
+  const std::string out = (std::filesystem::path(data) / "model.bin").string();
+  {
+    CLI::App app;
+    CLI::App* train = trainCommand(app);
+    REQUIRE(train != nullptr);
+    CHECK(train->get_options().size() <= 25);  // --help included
+    const std::string help = train->help();
+    CHECK(help.find("docs/training.md") != std::string::npos);
+    for (const char* flag : recipe_only) {
+      CAPTURE(flag);
+      CHECK_THROWS_AS(train->get_option(flag), CLI::OptionNotFound);
+    }
+  }
+  for (const char* flag : recipe_only) {
+    CAPTURE(flag);
+    CLI::App app;
+    trainCommand(app);
+    const std::string value = std::string(flag) == "--no-previous-action" ? "" : " 1";
+    CHECK_THROWS_AS(app.parse("train --config small --epochs 1 --max-batches 1 --data " + data + " --out " + out + " " +
+                                  flag + value,
+                              false),
+                    CLI::ParseError);
+    CHECK_FALSE(std::filesystem::exists(out));
+  }
+
+  // A recipe sets them: an integer, a choice, a flag and a number, each in the model's header and metadata.
+  const std::string recipe = nao::test::writeTempFile(
+      "recipe_only.json",
+      R"({"train": {"config": "small", "seed": 3, "lr": 0.001, "epochs": 1, "max-batches": 1, "val-fraction": 0.25,
+                    "chunk": 4, "noisy-rollouts": 0, "noisy-starts": "others", "no-previous-action": true, "ema": 0.5}})");
+  {
+    CLI::App app;
+    trainCommand(app);
+    app.parse("train --recipe " + recipe + " --data " + data + " --out " + out, false);
+  }
+  const ModelFile file = readModelFile(out);
+  CHECK(file.header.arch.chunk == 4);
+  const nlohmann::json meta = nlohmann::json::parse(file.header.metadata_json);
+  CHECK(meta["config"]["chunk"] == 4);
+  CHECK(meta["training"]["seed"] == 3);
+  CHECK(meta["training"]["execution"]["noisy_rollouts"] == 0);
+  CHECK(meta["training"]["execution"]["noisy_starts"] == "others");
+  CHECK(meta["training"]["previous_action_input"] == false);
+  CHECK(meta["training"]["ema_decay"].get<double>() == 0.5);
+  std::filesystem::remove_all(data);
 }
 
 TEST_CASE("early stopping exports the best epoch's weights") {

@@ -238,7 +238,30 @@ class Hostile(unittest.TestCase):
         self.recipe_refused('{"train": {"lr": -1}}', ["--lr"])
 
     def test_train_recipe_flag_not_boolean(self):
-        self.recipe_refused('{"train": {"no-previous-action": 1}}', ["--no-previous-action", "true or false"])
+        # A recipe-only on/off option (the training method's: no command-line flag).
+        self.recipe_refused('{"train": {"no-previous-action": 1}}', ["no-previous-action", "'1' is not true or false"])
+
+    def test_train_recipe_only_option_out_of_range(self):
+        # The training method's options keep the ranges their flags had.
+        self.recipe_refused('{"train": {"chunk": 40}}', ["chunk", "1..32"])
+        self.recipe_refused('{"train": {"chunk": 2.5}}', ["chunk", "1..32"])
+        self.recipe_refused('{"train": {"noisy-starts": "elsewhere"}}', ["noisy-starts", "own or others"])
+        self.recipe_refused('{"train": {"ema": 1}}', ["ema", "0..0.99999"])
+        self.recipe_refused('{"train": {"closed-loop-lr": 0}}', ["closed-loop-lr", "positive"])
+
+    def test_train_help_lists_at_most_25_options(self):
+        # The run's options on the command line; the training method's in a recipe, and the help
+        # says where they are documented.
+        code, out, err = run([NAO_TOOLCHAIN, "train", "--help"], timeout=60)
+        self.assertEqual(code, 0, err)
+        options = [l.split()[0] for l in out.splitlines() if l.startswith("  -")]
+        self.assertLessEqual(len(options), 25, "train --help lists %d options: %s" % (len(options), " ".join(options)))
+        self.assertIn("--recipe", " ".join(options))
+        self.assertIn("docs/training.md", out)
+        for flag in ("--noisy-rollouts", "--noisy-starts", "--chunk", "--no-previous-action", "--run-latent",
+                     "--latent-kl", "--ema", "--closed-loop-epochs", "--closed-loop-lr", "--closed-loop-horizon",
+                     "--closed-loop-horizon-growth", "--closed-loop-starts", "--closed-loop-action-weight"):
+            self.assertNotIn(flag, options)
 
     def test_train_recipe_not_an_object(self):
         self.recipe_refused('[{"train": {}}]', ["\"train\""])

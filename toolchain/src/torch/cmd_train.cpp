@@ -29,17 +29,19 @@ struct TrainArgs {
   std::string rendezvous, interface, checkpoint, resume, execution_cache;
   std::uint64_t seed = 1;
   int epochs = 200, patience = 10, world_size = 1, rank = 0, max_batches = 0, window = 0;
+  double val_fraction = 0.2, lr = 6e-5, timeout = 300;
+  std::string select = "val-loss";
+  // The training method's options: recipe-only (recipeOnlyOptions).
   int chunk = 0;
   int noisy_rollouts = ExecutionOptions{}.noisy_rollouts;
+  std::string noisy_starts = "own";
   bool no_previous_action = false;
   int latent_dims = 0;
   double latent_kl = 1e-2;
   double ema = 0.0;
   ClosedLoopOptions closed_loop;
-  std::string select = "val-loss", noisy_starts = "own";
-  bool select_speed_vs_replay = false;  // recipe-only options (recipeOnlyOptions)
   DaggerOptions dagger;
-  double val_fraction = 0.2, lr = 6e-5, timeout = 300;
+  bool select_speed_vs_replay = false;
 };
 
 // The process's own argv (Linux), shell-quoted where needed; empty if unavailable.
@@ -214,25 +216,70 @@ RecipeSetter recipePositive(double& field) {
   };
 }
 
-// The training options a recipe file may set that have no command-line flag (the experiments'
-// options: a recipe names them, `train --help` does not grow with them). docs/autonomous.md.
+// A number option of a recipe in [lo, hi] (`range`: the bounds as the message names them).
+RecipeSetter recipeNumber(double& field, double lo, double hi, const std::string& range) {
+  return [&field, lo, hi, range](const std::string& v) {
+    std::size_t used = 0;
+    double x = 0.0;
+    try {
+      x = std::stod(v, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != v.size() || used == 0 || !(x >= lo && x <= hi)) throw UserError("'" + v + "' is not a number in " + range);
+    field = x;
+  };
+}
+
+// An on/off option of a recipe: true or false.
+RecipeSetter recipeFlag(bool& field) {
+  return [&field](const std::string& v) {
+    if (v != "true" && v != "false") throw UserError("'" + v + "' is not true or false");
+    field = v == "true";
+  };
+}
+
+// The training options a recipe file may set that have no command-line flag: the training
+// method's (execution, head, latent, averaging, closed loop, DAgger, selection's speed bar). A
+// recipe names them and `train --help` does not grow with them; docs/training.md lists them all,
+// docs/autonomous.md says what the on-policy ones do.
 std::map<std::string, RecipeSetter> recipeOnlyOptions(TrainArgs& a) {
   std::map<std::string, RecipeSetter> o;
-  // "replay": the rollout selection's speed bar on each run's speed over its medoid replay's.
-  o["select-speed"] = [&a](const std::string& v) {
-    if (v != "replay" && v != "demonstrations") throw UserError("'" + v + "' is not replay or demonstrations");
-    a.select_speed_vs_replay = v == "replay";
+  // Rollouts per training demonstration with AR(1) command noise besides the clean one (DART).
+  o["noisy-rollouts"] = recipeInt(a.noisy_rollouts, 0, 16);
+  // Where they start: own (the demonstration's start) or others (another's of the same movement).
+  o["noisy-starts"] = [&a](const std::string& v) {
+    if (v != "own" && v != "others") throw UserError("'" + v + "' is not own or others");
+    a.noisy_starts = v;
   };
+  // Actions each action token predicts per tick (an action chunk; default: the config's, 1).
+  o["chunk"] = recipeInt(a.chunk, 1, 32);
+  // The net does not see a(t-1) (its input weights held at zero).
+  o["no-previous-action"] = recipeFlag(a.no_previous_action);
+  // A per-run latent of K dimensions (autonomous; 0: none) and its KL weight per tick.
+  o["run-latent"] = recipeInt(a.latent_dims, 0, 256);
+  o["latent-kl"] = recipeNumber(a.latent_kl, 0.0, 1e6, "0..1e6");
+  // Decay of the moving average of the weights that is scored and written (0: none).
+  o["ema"] = recipeNumber(a.ema, 0.0, 0.99999, "0..0.99999");
+  // The closed-loop phase after the teacher-forced epochs (closed_loop.hpp ClosedLoopOptions).
+  o["closed-loop-epochs"] = recipeInt(a.closed_loop.epochs, 0, 100000);
+  o["closed-loop-lr"] = recipePositive(a.closed_loop.lr);
+  o["closed-loop-horizon"] = recipeInt(a.closed_loop.horizon, 1, 100000);
+  o["closed-loop-horizon-growth"] = recipeInt(a.closed_loop.horizon_growth, 0, 100000);
+  o["closed-loop-starts"] = recipeInt(a.closed_loop.starts, 1, 1000);
+  o["closed-loop-action-weight"] = recipeNumber(a.closed_loop.action_weight, 0.0, 1e6, "0..1e6");
   // Whole runs: each closed-loop run's segment from a tick of its own, up to its end.
-  o["closed-loop-whole-runs"] = [&a](const std::string& v) {
-    if (v != "true" && v != "false") throw UserError("'" + v + "' is not true or false");
-    a.closed_loop.whole_runs = v == "true";
-  };
+  o["closed-loop-whole-runs"] = recipeFlag(a.closed_loop.whole_runs);
   // DAgger (closed_loop.hpp DaggerOptions).
   o["dagger-iterations"] = recipeInt(a.dagger.iterations, 0, 1000);
   o["dagger-epochs"] = recipeInt(a.dagger.epochs, 1, 100000);
   o["dagger-starts"] = recipeInt(a.dagger.starts, 1, 1000);
   o["dagger-lr"] = recipePositive(a.dagger.lr);
+  // "replay": the rollout selection's speed bar on each run's speed over its medoid replay's.
+  o["select-speed"] = [&a](const std::string& v) {
+    if (v != "replay" && v != "demonstrations") throw UserError("'" + v + "' is not replay or demonstrations");
+    a.select_speed_vs_replay = v == "replay";
+  };
   return o;
 }
 
@@ -277,7 +324,8 @@ void applyRecipe(CLI::App& cmd, const std::string& path, const std::map<std::str
     try {
       opt = cmd.get_option("--" + key);
     } catch (const CLI::OptionNotFound&) {
-      throw UserError(path + ": no training option --" + key + " (nao_toolchain train --help)");
+      throw UserError(path + ": no training option --" + key +
+                      " (nao_toolchain train --help; the recipe-only ones: docs/training.md)");
     }
     if (opt->count() > 0) continue;  // the command line's own value
     std::vector<std::string> values;
@@ -333,70 +381,6 @@ void setup(CLI::App& app) {
       ->check(CLI::Range(0.01, 0.99))
       ->capture_default_str();
   cmd->add_option("--lr", args->lr, "Adam learning rate")->check(CLI::PositiveNumber)->capture_default_str();
-  cmd->add_option("--noisy-rollouts", args->noisy_rollouts,
-                  "Per training demonstration, rollouts executed with AR(1) command noise besides the clean one, "
-                  "labelled by the expert from the states they reach (DART; 0: on-trajectory states only)")
-      ->check(CLI::Range(0, 16))
-      ->capture_default_str();
-  cmd->add_option("--noisy-starts", args->noisy_starts,
-                  "Where the noisy rollouts start: own (the demonstration's start) or others (from rest at another "
-                  "training demonstration's start of the same movement, a seeded choice: the way onto the "
-                  "demonstration from starts it does not begin at)")
-      ->check(CLI::IsMember({"own", "others"}))
-      ->capture_default_str();
-  cmd->add_option("--chunk", args->chunk,
-                  "Actions each action token predicts per tick, a(t) .. a(t+C-1) (an action chunk); the executed "
-                  "action averages the last C chunks' entries for the tick (default: 1)")
-      ->check(CLI::Range(1, 32));
-  cmd->add_flag("--no-previous-action", args->no_previous_action,
-               "The net does not see its previous action a(t-1), only the joint angles over the window (their "
-               "input weights are held at zero, so nao_rt runs the model unchanged)");
-  cmd->add_option("--run-latent", args->latent_dims,
-                  "Autonomous: K > 0 trains with a per-run latent of K dimensions (a conditional VAE's encoder "
-                  "reads the whole run and tells the net which demonstrated variant it follows); model.bin "
-                  "carries each training demonstration's code, and a run takes the code of the medoid of the 5 "
-                  "demonstrations whose starts are nearest its own (default: 0, none)")
-      ->check(CLI::Range(0, 256));
-  cmd->add_option("--latent-kl", args->latent_kl, "Weight of the latent's KL divergence per tick in the loss")
-      ->check(CLI::Range(0.0, 1e6))
-      ->capture_default_str();
-  cmd->add_option("--ema", args->ema,
-                  "Decay D of an exponential moving average of the weights (updated after every optimiser "
-                  "step): the average is what is scored each epoch, kept and written; it smooths the "
-                  "epoch-to-epoch swings of the rollouts. 0: the trained weights themselves")
-      ->check(CLI::Range(0.0, 0.99999))
-      ->capture_default_str();
-  cmd->add_option("--closed-loop-epochs", args->closed_loop.epochs,
-                  "Autonomous: after the --epochs teacher-forced epochs, this many epochs in closed loop: the "
-                  "net rolled out tick by tick through the command limiter and an exact differentiable copy of "
-                  "the arm's servo, from the training starts, perturbed starts and starts between two "
-                  "demonstrations, each with the run code nao_rt would give it there, and trained on the "
-                  "trajectory it makes against the medoid replay from that start (docs/autonomous.md). "
-                  "--patience then counts in this phase. 0: none")
-      ->check(CLI::Range(0, 100000))
-      ->capture_default_str();
-  cmd->add_option("--closed-loop-lr", args->closed_loop.lr, "Adam learning rate of the closed-loop phase")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  cmd->add_option("--closed-loop-horizon", args->closed_loop.horizon,
-                  "Ticks each rollout runs in the first closed-loop epoch (a run shorter than that runs whole)")
-      ->check(CLI::Range(1, 100000))
-      ->capture_default_str();
-  cmd->add_option("--closed-loop-horizon-growth", args->closed_loop.horizon_growth,
-                  "Ticks added to the closed-loop horizon every epoch (a curriculum up to the whole run)")
-      ->check(CLI::Range(0, 100000))
-      ->capture_default_str();
-  cmd->add_option("--closed-loop-starts", args->closed_loop.starts,
-                  "Closed-loop rollouts per training demonstration and epoch: its own start, then perturbed "
-                  "starts and starts between it and another demonstration's, in turn")
-      ->check(CLI::Range(1, 1000))
-      ->capture_default_str();
-  cmd->add_option("--closed-loop-action-weight", args->closed_loop.action_weight,
-                  "Weight of the on-policy action term of the closed-loop loss: the net's action against the "
-                  "gain law's toward the code's demonstration from the state the rollout reached (0: the "
-                  "trajectory terms alone)")
-      ->check(CLI::Range(0.0, 1e6))
-      ->capture_default_str();
   cmd->add_option("--window", args->window,
                   "Ticks of history the policy sees (W; default: the config's, 20 for paper, 8 for small). "
                   "Another W needs a nao_rt built for it (toolchain/nao build --model FILE) and, for --select "
@@ -451,7 +435,9 @@ void setup(CLI::App& app) {
   cmd->add_option("--recipe", *recipe,
                   "A recipe file (models/recipes/<name>.json): every training option of a committed model, as "
                   "{\"train\": {\"<option>\": value, ...}}; an option also given here on the command line takes "
-                  "the command line's value")
+                  "the command line's value. The training method's options (noisy rollouts, chunk, run latent, "
+                  "weight average, closed loop, DAgger) are set only in a recipe: docs/training.md, "
+                  "docs/autonomous.md")
       ->check(CLI::ExistingFile);
   cmd->callback([cmd, args, recipe] {
     if (!recipe->empty()) applyRecipe(*cmd, *recipe, recipeOnlyOptions(*args));
