@@ -137,7 +137,7 @@ struct TrainResult {
   /// other one (what a rollout is compared with), m; empty without rollout selection.
   std::vector<double> val_nn_dtw_m;
   /// A run latent's codes of the kept weights, per movement (model.bin's "run_codes"); empty
-  /// without --run-latent.
+  /// without a run latent (a recipe's "run-latent").
   std::vector<ModelRunCodes> run_codes;
 };
 

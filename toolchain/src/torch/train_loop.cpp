@@ -70,12 +70,13 @@ void check(const PolicyData& data, const TrainOptions& o) {
   // Reference mode's action follows the human, so a run latent would change nothing but the
   // model's key: refused.
   if (o.conditioning != Conditioning::kAutonomous && o.latent_dims > 0)
-    throw UserError("a run latent (--run-latent) is for autonomous mode: in reference mode the human gives the variant");
+    throw UserError("a run latent (a recipe's \"run-latent\") is for autonomous mode: in reference mode the human "
+                    "gives the variant");
   if (o.select_by_rollout && o.conditioning != Conditioning::kAutonomous)
     throw UserError("model selection on rollouts is for autonomous mode (a reference-mode run needs a human)");
   if (o.select_speed_vs_replay && !(o.select_by_rollout && o.latent_dims > 0))
     throw UserError("the speed against the replay is a bar of rollout selection with run codes (--select rollouts, "
-                    "--run-latent)");
+                    "a recipe's \"run-latent\")");
   const ClosedLoopOptions& c = o.closed_loop;
   if (c.epochs < 0) throw UserError("closed-loop epochs must not be negative (0: none)");
   if (c.enabled()) {
@@ -214,7 +215,7 @@ void holdInputConstraints(PolicyNet& net, const TrainOptions& o) {
 struct TrainState {
   std::vector<torch::Tensor> params;
   std::unique_ptr<torch::optim::Adam> optimiser;
-  // The moving average of the weights (--ema): scored, kept and written in place of the trained
+  // The moving average of the weights (a recipe's "ema"): scored, kept and written in place of the trained
   // weights, which the optimiser goes on training. The input constraints are linear, so the
   // average of constrained weights meets them too.
   std::vector<torch::Tensor> ema;
