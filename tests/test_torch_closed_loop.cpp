@@ -9,6 +9,7 @@
 #include "closed_loop.hpp"
 #include "nao/controller.hpp"
 #include "nao/policy.hpp"
+#include "nao/robot_loop.hpp"
 #include "nao/tools/arm_copy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
@@ -281,9 +282,9 @@ TEST_CASE("an unroll through the torch stream and the arm copy follows nao_rt's 
   }
   const ControllerModel<SmallPolicyDims> cm = configureController(arm(), weights, ControllerParams{}, workspace, codes);
   OdeArmBackend robot(arm(), SimParams{}, clampToLimits(arm(), start));
-  ControllerData<SmallPolicyDims> data(robot);
+  ControllerData<SmallPolicyDims> data;
   ZeroClock clock;
-  activateController(cm, data, start, movement, clock);
+  activateOnRobot(cm, data, robot, start, movement, clock);
   const int code = runCodeIndex(codes[1], clampToLimits(arm(), start));
   REQUIRE(code == data.run_code);
   // The torch unroll from the same start with the same code and envelope.
@@ -311,7 +312,7 @@ TEST_CASE("an unroll through the torch stream and the arm copy follows nao_rt's 
     in.step = torch::tensor({t}, torch::kInt64);
     in.z = z;
     const ArmTick k = armCopyTick(sim(), kPeriod, q, v, streamStep(*net, stream, in), lo, hi);
-    const TickRecord& rec = updateController(cm, data, nullptr);
+    const TickRecord& rec = runControllerTick(cm, data, robot, nullptr);
     enveloped += (rec.fault & kFaultOutsideWorkspace) != 0;
     for (int j = 0; j < kNumJoints; ++j) {
       worst = std::max(worst, std::abs(rec.q[j] - k.q[0][j].item<double>()));
