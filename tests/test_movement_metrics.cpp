@@ -4,7 +4,7 @@
 #include "nao/tools/command.hpp"
 #include "nao/model_file.hpp"
 #include "nao/tools/movement_metrics.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 #include <Eigen/Geometry>
 
 #include <doctest/doctest.h>

@@ -1,5 +1,5 @@
 // Run-level metrics of nao_rt (rt_metrics): the DTW hand-path distance and latency percentiles.
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 
 #include <doctest/doctest.h>
 

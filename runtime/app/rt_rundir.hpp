@@ -4,7 +4,7 @@
 #pragma once
 
 #include "rt_config.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 
 #include "nao/attention_ring.hpp"
 #include "nao/controller.hpp"

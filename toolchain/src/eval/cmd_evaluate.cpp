@@ -20,7 +20,7 @@
 #include "nao/tools/reference_source.hpp"
 #include "nao/tools/synth.hpp"
 #include "nao/tools/toolchain_dims.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 #include "rt_run.hpp"
 
 #include <nlohmann/json.hpp>

@@ -1,7 +1,7 @@
 #include "nao/tools/movement_metrics.hpp"
 
 #include "nao/tools/command.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 
 #include <Eigen/Eigenvalues>
 

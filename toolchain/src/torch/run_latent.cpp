@@ -1,7 +1,7 @@
 #include "run_latent.hpp"
 
 #include "nao/tools/evaluate.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 
 #include <stdexcept>
 #include <string>

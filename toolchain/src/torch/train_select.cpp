@@ -7,7 +7,7 @@
 #include "nao/tools/policy_execution.hpp"
 #include "nao/tools/toolchain_dims.hpp"
 #include "policy_train.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 
 #include <algorithm>
 #include <cmath>
