@@ -12,7 +12,8 @@
 # and the nao_rt of its dimensions: models/autonomous.bin is of the small configuration, so
 # NAO_RT=$(toolchain/nao build --model models/autonomous.bin | tail -n 1); the committed results
 # ran the paper configuration's autonomous model of their date.
-# Environment: PRECISION=fp32|int8 (nao_rt --precision, default fp32); MODES="default no-warm
+# Environment: PRECISION=fp32|int8 (nao_rt --precision, default fp32); NAO_POLICY_KERNEL=sse|avx2|avx512
+# (nao_rt --policy-kernel, default the best this CPU runs); MODES="default no-warm
 # answer-first io-thread" (any subset, in that order; default: default and answer-first).
 # no-warm: the default without warming the cache before the tick's packet (--lola-no-warm).
 set -euo pipefail
@@ -26,6 +27,7 @@ trap 'rm -rf "$tmp"' EXIT
 echo "date: $(date -u '+%Y-%m-%d %H:%M UTC'); host: $(nproc) cores; precision $precision"
 for mode in $modes; do
   flags=(--precision "$precision")
+  [[ -n "${NAO_POLICY_KERNEL:-}" ]] && flags+=(--policy-kernel "$NAO_POLICY_KERNEL")
   case "$mode" in
     default) ;;
     no-warm) flags+=(--lola-no-warm) ;;

@@ -170,6 +170,32 @@ TEST_CASE("two runs with the same arguments give byte-identical ticks.csv (--zer
   for (std::size_t k = cells.size() - 9; k < cells.size() - 5; ++k) CHECK(cells[k] == "0");
 }
 
+TEST_CASE("--policy-kernel binds the weights with the kernel named, records it, and every kernel gives the same bits") {
+  std::string ticks, attention;
+  for (const char* kernel : {"sse", "avx2", "avx512"}) {
+    PolicyKernel k{};
+    REQUIRE(parsePolicyKernel(kernel, k));
+    if (!policyKernelSupported(k)) continue;  // this CPU lacks it: refused (below for avx512)
+    const fs::path dir = tempDir(std::string("kernel_") + kernel);
+    rt::RunOptions o = recorded(referenceModel(), "elbow", dir);
+    o.policy_kernel = kernel;
+    o.zero_timing = true;
+    const Outcome r = run(o);
+    REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
+    CHECK(nlohmann::json::parse(bytes(dir / "summary.json"))["model"]["kernel"] == kernel);
+    if (ticks.empty()) {
+      ticks = bytes(dir / "ticks.csv");
+      attention = bytes(dir / "attention.bin");
+    } else {
+      CHECK(bytes(dir / "ticks.csv") == ticks);
+      CHECK(bytes(dir / "attention.bin") == attention);
+    }
+  }
+  CHECK(!ticks.empty());
+  CHECK_THROWS_AS(rt::runPolicyKernel("neon"), std::invalid_argument);
+  if (!policyKernelSupported(PolicyKernel::kAvx512)) CHECK_THROWS(rt::runPolicyKernel("avx512"));
+}
+
 TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 and is deterministic; fp32-packed is fp32") {
   // (Dims: the small test model; the committed paper model's closed-loop figures are in
   // bench/results/int8.txt.)
@@ -185,7 +211,7 @@ TEST_CASE("--precision int8 runs the int8 kernels, records it, stays near fp32 a
     REQUIRE_MESSAGE(r.report.status == 0, r.report.error);
     const nlohmann::json s = nlohmann::json::parse(bytes(dir / "summary.json"));
     CHECK(s["model"]["precision"] == precision);
-    CHECK(s["model"]["kernel"] == policyKernelName(activePolicyKernel()));
+    CHECK(s["model"]["kernel"] == policyKernelName(bestPolicyKernel()));
     ticks[i] = bytes(dir / "ticks.csv");
     rmse[i] = r.report.ee_rmse_m;
     ++i;

@@ -31,6 +31,11 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
                  "the kernels' block order (+24 MB): the same bits as fp32, read in address order")
       ->check(CLI::IsMember({"fp32", "fp32-packed", "int8"}))
       ->type_name("P");
+  app.add_option("--policy-kernel", o.policy_kernel,
+                 "The policy step's SIMD kernels: sse, avx2 or avx512 (default: the best this CPU runs).\n"
+                 "Every kernel gives the same bits; a kernel the CPU lacks is refused")
+      ->check(CLI::IsMember({"sse", "avx2", "avx512"}))
+      ->type_name("K");
   app.add_option("--urdf", o.urdf_path, "Robot description (torso + right arm); the model's joints must match it")
       ->type_name("FILE")
       ->capture_default_str();

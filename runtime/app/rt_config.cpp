@@ -68,6 +68,7 @@ void loadModel(const RunOptions& o, const PolicyArch& compiled_arch, PreparedRun
   }
   // Precision: asked for, or what the compiled-in model was generated with (fp32 for --weights).
   p.precision = runPrecision(o.precision, p.model_bytes != nullptr, o.compiled);
+  p.kernel = runPolicyKernel(o.policy_kernel);
   // A compiled-in int8 or packed copy replaces the image's matrices: now that the checksum has
   // been verified over the image, its pages leave the resident set before the copy's own check
   // (checked once, like the model's bytes) brings that in; the run faults back the few it still
@@ -189,6 +190,14 @@ ReferenceSpec parseReferenceSpec(const std::string& reference, const std::string
     throw UsageError("--reference " + reference + " needs --movement M (the movement as named in model.bin)");
   s.movement = movement;
   return s;
+}
+
+PolicyKernel runPolicyKernel(const std::string& name) {
+  if (name.empty()) return bestPolicyKernel();
+  PolicyKernel k{};
+  if (!parsePolicyKernel(name, k)) throw std::invalid_argument("--policy-kernel " + name + ": not sse, avx2 or avx512");
+  requirePolicyKernel(k);
+  return k;
 }
 
 PreparedRun prepareRun(const RunOptions& o, const PolicyArch& compiled_arch) {

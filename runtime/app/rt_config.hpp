@@ -57,6 +57,9 @@ struct RunOptions {
   /// fp32, fp32-packed or int8 (nao/quantize.hpp); empty: what the compiled-in model was
   /// generated with when no --weights is given, else fp32.
   std::string precision;
+  /// The policy kernel (sse, avx2, avx512); empty: the best this CPU runs. Every kernel gives
+  /// the same bits: the choice is speed only.
+  std::string policy_kernel;
   std::string urdf_path = NAO_DEFAULT_URDF;
   std::string reference;       ///< file:PATH, none or openpose:DIR0,DIR1[,...]
   std::string movement;        ///< the movement, as named in model.bin (required)
@@ -166,6 +169,7 @@ struct PreparedRun {
   const std::uint64_t* model_offsets = nullptr;  ///< compiled-in: the generated tensor offsets
   const TensorExtent* model_extents = nullptr;   ///< compiled-in: the generated view extents
   WeightPrecision precision = WeightPrecision::kFp32;
+  PolicyKernel kernel = bestPolicyKernel();  ///< what the weights are bound with (--policy-kernel)
   /// int8: the compiled-in blob (checked) to bind to; nullptr: quantise the model at start-up.
   const std::uint8_t* int8_bytes = nullptr;
   /// fp32-packed: the compiled-in packed blob (checked); nullptr: pack the model at start-up.
@@ -197,6 +201,10 @@ struct PreparedRun {
 /// tick count and the run directory; last, openpose: starts the live source (its reader thread).
 /// Throws UsageError or another std::exception with a one-line message.
 PreparedRun prepareRun(const RunOptions& options, const PolicyArch& compiled_arch);
+
+/// The kernel --policy-kernel names (empty: bestPolicyKernel()); throws on a name that is no
+/// kernel or a kernel this CPU or build does not run.
+PolicyKernel runPolicyKernel(const std::string& name);
 
 // ---------------------------------------------------------------------------------------------
 // Weights of a --weights file: copied at configure time into 64-byte aligned storage
@@ -242,7 +250,8 @@ inline std::vector<const float*> copyWeightFile(const ModelFile& model, WeightSt
 template <class Dims>
 PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
   const std::vector<const float*> pointers = copyWeightFile(p.model, storage);
-  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.arch, p.model.header.conditioning);
+  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.arch, p.model.header.conditioning,
+                                 p.kernel);
 }
 
 }  // namespace nao::rt

@@ -56,6 +56,7 @@ int naoRtMain(int argc, const char* const* argv, const ModelImage& compiled, Con
       info.urdf_path = cl.run.urdf_path;
       info.compiled = cl.run.compiled;
       info.precision = cl.run.precision;
+      info.kernel = runPolicyKernel(cl.run.policy_kernel);
       return runInfo(info, std::cout, std::cerr);
     }
 

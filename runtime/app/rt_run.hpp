@@ -126,7 +126,7 @@ PolicyWeights<Dims> bindRunWeights(PreparedRun& p, WeightStorage& storage, Align
   PolicyWeights<Dims> weights =
       p.model_bytes != nullptr
           ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model_extents, p.model.header.arch,
-                                      p.model.header.conditioning)
+                                      p.model.header.conditioning, p.kernel)
           : bindWeightFile<Dims>(p, storage);
   // The views point into the compiled-in bytes or `storage`: the decoded file copy is no longer
   // read, so its memory goes back now, before an int8 or packed copy is made from the views
@@ -294,6 +294,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
                                                       p.model_spec.run_codes);
     detail::WarmContext<Dims> warm{&model.policy, nullptr, 0};
     LoopTotals totals;
+    totals.kernel = weights.kernel;
     RealtimeScheduling rt;
     // Left on every way out, an exception included (runController also runs inside tests).
     struct LeaveRealtime {

@@ -70,11 +70,6 @@ PolicyKernel bestPolicyKernel() noexcept;
 /// supported (policyKernelSupported): the binders' check, configure time.
 void requirePolicyKernel(PolicyKernel k);
 
-/// Former name of bestPolicyKernel, for callers not yet moved to the bound weights' kernel
-/// (PolicyWeights::kernel); there is no process-wide kernel any more.
-[[deprecated("the kernel is the bound weights' (PolicyWeights::kernel); bestPolicyKernel() is the default")]]
-inline PolicyKernel activePolicyKernel() noexcept { return bestPolicyKernel(); }
-
 /// True for the kernels that may run AVX2 code (kAvx512 implies AVX2: its window attention is
 /// the AVX2 one).
 inline bool policyKernelHasAvx2(PolicyKernel k) noexcept { return k != PolicyKernel::kSse; }
