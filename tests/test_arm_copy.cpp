@@ -9,7 +9,7 @@
 #include "nao/tools/arm_copy.hpp"
 #include "nao/tools/evaluate.hpp"
 #include "nao/tools/synth.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>

@@ -4,7 +4,7 @@
 #include "nao/sim_arm.hpp"
 #include "nao/tools/evaluate.hpp"
 #include "nao/tools/linear_ar.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>

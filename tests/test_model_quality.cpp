@@ -16,7 +16,7 @@
 #include "nao/tools/synth.hpp"
 #include "nao/tools/toolchain_dims.hpp"
 #include "replica.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 #include "support/test_util.hpp"
 
 #include <doctest/doctest.h>

@@ -9,7 +9,7 @@
 // offline (nao_toolchain triangulate) runs through --reference file:. Then a hostile replay
 // (NAO_REPLAY_FAULTS). In process: the command-line errors of the live reference, and a live run
 // that never sees a frame.
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 #include "rt_run.hpp"
 
 #include "nao/calibration_json.hpp"

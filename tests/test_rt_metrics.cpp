@@ -1,4 +1,4 @@
-// Run-level metrics of nao_rt (rt_metrics): the DTW hand-path distance and latency percentiles.
+// Run-level metrics of nao_rt (nao_metrics): the DTW hand-path distance and latency percentiles.
 #include "nao/metrics.hpp"
 
 #include <doctest/doctest.h>

@@ -1,5 +1,5 @@
 """toolchain/analysis/autonomous_ceiling.py: its batched DTW against a plain transcription of the
-runtime's rt::dtwMeanDistance (runtime/app/rt_metrics.cpp), pair by pair, ties included; the
+runtime's rt::dtwMeanDistance (runtime/metrics/src/metrics.cpp), pair by pair, ties included; the
 time warp and the hold it builds its fixed trajectories with."""
 
 import math

@@ -6,7 +6,7 @@
 #include "nao/tools/linear_ar.hpp"
 #include "nao/tools/retarget_pipeline.hpp"
 #include "nao/tools/triangulate.hpp"
-#include "rt_metrics.hpp"
+#include "nao/metrics.hpp"
 
 #include <algorithm>
 #include <cmath>

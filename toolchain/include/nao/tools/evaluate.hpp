@@ -2,7 +2,7 @@
 // out by nao_rt from every held-out demonstration's start - scored by whether it makes the
 // movement, against the baselines the data give (the medoid replay, the linear AR model), and the
 // reference-mode bar. The pieces here are the ones the tests check on their own. Offline code
-// (nao_eval_lib, links nao_rt_metrics): allocates, may throw.
+// (nao_eval_lib, links nao_metrics): allocates, may throw.
 #pragma once
 
 #include "nao/arm_model.hpp"
