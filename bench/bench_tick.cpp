@@ -11,6 +11,7 @@
 #include "nao/arm_model_io.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/quantize.hpp"
+#include "nao/robot_loop.hpp"
 #include "nao/tools/reference_source.hpp"
 
 #include <sys/resource.h>
@@ -41,21 +42,21 @@ void runTickFull(benchmark::State& state, bool packed) {
   const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, tools::Movement::kWholeArm, 1, 0, centroids);
   const ControllerModel<PaperPolicyDims> cm = configureController(arm, w, ControllerParams{});
   OdeArmBackend robot(cm.arm, SimParams{}, ref.target.front());
-  ControllerData<PaperPolicyDims> data(robot);
+  ControllerData<PaperPolicyDims> data;
   SteadyClock clock;
   constexpr int kTicks = 36000;
   std::vector<double> tick_us(kTicks), retarget_us(kTicks), policy_us(kTicks), sim_us(kTicks);
   for (auto _ : state) {
-    activateController(cm, data, ref.target.front(), movement, clock);
+    activateOnRobot(cm, data, robot, ref.target.front(), movement, clock);
     for (int t = 0; t < kTicks; ++t) {
       const std::size_t i = static_cast<std::size_t>(t) % ref.frames.size();
-      const TickRecord& r = updateController(cm, data, ref.present[i] ? &ref.frames[i] : nullptr);
+      const TickRecord& r = runControllerTick(cm, data, robot, ref.present[i] ? &ref.frames[i] : nullptr);
       tick_us[static_cast<std::size_t>(t)] = r.tick_us;
       retarget_us[static_cast<std::size_t>(t)] = r.retarget_us;
       policy_us[static_cast<std::size_t>(t)] = r.policy_us;
       sim_us[static_cast<std::size_t>(t)] = r.sim_us;
     }
-    deactivateController(cm, data);
+    deactivateOnRobot(cm, data, robot);
   }
   auto stats = [&state](const char* name, std::vector<double> v) {
     std::sort(v.begin(), v.end());

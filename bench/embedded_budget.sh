@@ -11,7 +11,7 @@
 #      and --weights models/default.bin;
 # every run on the same recorded reference: demonstration 0 of whole_arm, run seed 1000001 (the
 # demo's), synthesised and triangulated into a skeleton CSV by DIR/bin/nao_toolchain;
-#   3. per tick of the robot build (valgrind callgrind, collecting inside updateController only,
+#   3. per tick of the robot build (valgrind callgrind, collecting inside runControllerTick only,
 #      caches simulated with the Atom E3845's geometry): instructions, data reads/writes, L1
 #      and last-level (the Atom's L2) misses, and the executed instruction mix; once with the
 #      fp32 weights and once with --precision int8 (docs/policy.md "int8 weights"), each with the
@@ -54,15 +54,15 @@ SKELETON="$work/references/whole_arm_000/skeleton.csv"
 REFERENCE=(--reference "file:$SKELETON" --movement whole_arm)
 
 load_before="$(cut -d' ' -f1-3 /proc/loadavg)"
-# One tick under callgrind: only updateController (the whole tick: retarget, snap, policy,
-# command, 100 physics steps) is collected. Atom E3845 caches (docs/embedded.md): L1i 32 KiB
+# One tick under callgrind: only runControllerTick (the whole cycle: read, updateController's
+# retarget, snap, policy and command, the robot's 100 physics steps, finishTick) is collected. Atom E3845 caches (docs/embedded.md): L1i 32 KiB
 # 8-way, L1d 24 KiB 6-way, L2 1 MiB 16-way per two-core module; 64-byte lines.
 # Each precision twice: the whole tick here (the in-process ODE arm included), and the tick as
 # the robot runs it, where LoLA replaces the simulated arm: stepSim toggles collection off
-# while it runs (nested toggles: on entering updateController, off inside stepSim).
+# while it runs (nested toggles: on entering runControllerTick, off inside stepSim).
 for precision in fp32 int8; do
   for variant in sim robot; do
-    toggles=('--toggle-collect=*updateController*')
+    toggles=('--toggle-collect=*runControllerTick*')
     [[ "$variant" == robot ]] && toggles+=('--toggle-collect=*stepSim*')
     nice -n 19 valgrind --tool=callgrind --callgrind-out-file="$work/callgrind_${precision}_$variant.out" --dump-instr=yes \
       --compress-pos=no --compress-strings=no --cache-sim=yes \
@@ -188,7 +188,7 @@ def tick_budget(precision, variant, tag):
             else:
                 skip_next = False
     if not summary or sum(summary) == 0:
-        raise SystemExit("embedded_budget.sh: callgrind collected nothing (did updateController get inlined?)")
+        raise SystemExit("embedded_budget.sh: callgrind collected nothing (did runControllerTick get inlined?)")
     per = {e: v / ticks for e, v in zip(events, summary)}
     what = ("the whole tick, the in-process ODE arm (100 physics steps) included" if variant == "sim" else
             "the tick as on the robot: without the simulated arm (stepSim not collected), which LoLA replaces")
