@@ -19,6 +19,7 @@ own lines: the expert's rollouts before training, the epoch (batches, validation
 validation rollouts of --select rollouts, whose share is printed too) and the whole run.
 """
 import argparse
+import json
 import os
 import re
 import resource
@@ -67,11 +68,23 @@ def run(tc, data, world, batches, out_dir):
 # Recipes of the paper configuration, less the epoch count: models/default.bin's (toolchain/nao
 # train default) and the autonomous one of the paper configuration (models/autonomous.bin is of
 # the small one, trained on one rank: docs/autonomous.md).
+# Each: the command-line flags, and the options only a recipe file sets (written beside the run).
 RECIPES = {
-    "autonomous": ["--conditioning", "autonomous", "--lr", "1e-4", "--noisy-rollouts", "0", "--chunk", "10",
-                   "--select", "rollouts"],
-    "default": ["--conditioning", "reference", "--lr", "3e-4"],
+    "autonomous": (["--conditioning", "autonomous", "--lr", "1e-4", "--select", "rollouts"],
+                   {"noisy-rollouts": 0, "chunk": 10}),
+    "default": (["--conditioning", "reference", "--lr", "3e-4"], {}),
 }
+
+
+def recipe_args(out_dir, recipe):
+    """The flags of a recipe, plus --recipe FILE for its recipe-only options."""
+    flags, only = RECIPES[recipe]
+    if not only:
+        return list(flags)
+    path = os.path.join(out_dir, f"recipe_{recipe}.json")
+    with open(path, "w") as fh:
+        json.dump({"train": only}, fh)
+    return list(flags) + ["--recipe", path]
 
 
 def run_epoch(tc, data, world, out_dir, recipe):
@@ -79,7 +92,7 @@ def run_epoch(tc, data, world, out_dir, recipe):
     (rollouts: the validation rollouts of --select rollouts, 0 without them)."""
     store = os.path.join(out_dir, f"store_epoch_{world}")
     base = [tc, "train", "--config", "paper", "--data", data, "--epochs", "1", "--seed", "1",
-            "--out", os.path.join(out_dir, f"e_{world}.bin")] + RECIPES[recipe]
+            "--out", os.path.join(out_dir, f"e_{world}.bin")] + recipe_args(out_dir, recipe)
     procs = start_ranks(base, world, store)
     outs = [p.communicate()[0].decode() for p in procs]
     for r, p in enumerate(procs):
