@@ -109,7 +109,9 @@ def run_epoch(tc, data, world, out_dir, recipe):
 def main_epoch(a):
     print(f"# {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, {os.cpu_count()} cores")
     print(f"# command: bench/train_scaling.py {a.data} --epoch --recipe {a.recipe} --worlds {' '.join(map(str, a.worlds))}")
-    print(f"# each rank: nao_toolchain train --config paper --epochs 1 --seed 1 {' '.join(RECIPES[a.recipe])}")
+    flags, only = RECIPES[a.recipe]
+    print(f"# each rank: nao_toolchain train --config paper --epochs 1 --seed 1 {' '.join(flags)}"
+          + (f" --recipe R (R: {json.dumps({'train': only})})" if only else ""))
     print(f"# load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print("world  expert rollouts (s)  epoch (s)  of which rollouts (s)  run (s)  speed-up epoch  speed-up run")
     ref = None
