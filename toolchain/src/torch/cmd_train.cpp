@@ -201,17 +201,22 @@ RecipeSetter recipeInt(int& field, int lo, int hi) {
   };
 }
 
+// A recipe value read whole as a number into x; false if it is not one.
+bool parseRecipeNumber(const std::string& v, double& x) {
+  std::size_t used = 0;
+  try {
+    x = std::stod(v, &used);
+  } catch (const std::exception&) {
+    return false;
+  }
+  return used != 0 && used == v.size();
+}
+
 // A positive number option of a recipe.
 RecipeSetter recipePositive(double& field) {
   return [&field](const std::string& v) {
-    std::size_t used = 0;
     double x = 0.0;
-    try {
-      x = std::stod(v, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != v.size() || used == 0 || !(x > 0.0) || !std::isfinite(x)) throw UserError("'" + v + "' is not a positive number");
+    if (!parseRecipeNumber(v, x) || !(x > 0.0) || !std::isfinite(x)) throw UserError("'" + v + "' is not a positive number");
     field = x;
   };
 }
@@ -219,14 +224,8 @@ RecipeSetter recipePositive(double& field) {
 // A number option of a recipe in [lo, hi] (`range`: the bounds as the message names them).
 RecipeSetter recipeNumber(double& field, double lo, double hi, const std::string& range) {
   return [&field, lo, hi, range](const std::string& v) {
-    std::size_t used = 0;
     double x = 0.0;
-    try {
-      x = std::stod(v, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != v.size() || used == 0 || !(x >= lo && x <= hi)) throw UserError("'" + v + "' is not a number in " + range);
+    if (!parseRecipeNumber(v, x) || !(x >= lo && x <= hi)) throw UserError("'" + v + "' is not a number in " + range);
     field = x;
   };
 }
