@@ -1,4 +1,5 @@
 #include "nao/policy_config.hpp"
+#include "nao/policy_manifest.hpp"
 
 #include <string>
 
@@ -59,77 +60,11 @@ std::size_t TensorSpec::count() const {
   return n;
 }
 
-namespace {
-
-// age_bias [H, W] (attention over time only): b_h(age) added to head h's score of a key
-// `age` ticks older than its query; it depends on the age alone, so cached keys stay valid.
-void addAttention(std::vector<TensorSpec>& m, const std::string& p, int d, int heads = 0, int window = 0) {
-  for (const char* w : {"q", "k", "v", "o"}) {
-    m.push_back({p + ".w" + w, {d, d}, TensorRole::kMatrix});
-    m.push_back({p + ".b" + w, {d}});
-  }
-  if (heads > 0) m.push_back({p + ".age_bias", {heads, window}});
-}
-
-void addNorm(std::vector<TensorSpec>& m, const std::string& p, int d) {
-  m.push_back({p + ".gain", {d}});
-  m.push_back({p + ".bias", {d}});
-}
-
-void addFfn(std::vector<TensorSpec>& m, const std::string& p, const PolicyArch& a) {
-  int in = a.d_model;
-  for (std::size_t k = 0; k <= a.ffn_hidden.size(); ++k) {
-    const int out = k < a.ffn_hidden.size() ? a.ffn_hidden[k] : a.d_model;
-    m.push_back({p + "." + std::to_string(k) + ".weight", {in, out}, TensorRole::kMatrix});
-    m.push_back({p + "." + std::to_string(k) + ".bias", {out}});
-    in = out;
-  }
-}
-
-}  // namespace
-
 std::vector<TensorSpec> policyManifest(const PolicyArch& a) {
-  const int d = a.d_model, J = a.tokens;
   std::vector<TensorSpec> m;
-  m.push_back({"embed.in.weight", {a.features, d}});
-  m.push_back({"embed.in.bias", {d}});
-  m.push_back({"embed.joint_enc", {J, d}});
-  m.push_back({"embed.movement", {a.movements, d}});
-  m.push_back({"embed.step", {a.max_steps, d}});
-  m.push_back({"embed.act.weight", {1, d}});
-  m.push_back({"embed.act.bias", {d}});
-  m.push_back({"embed.joint_dec", {J, d}});
-  for (int l = 0; l < a.encoder_layers; ++l) {
-    const std::string p = "enc." + std::to_string(l);
-    addNorm(m, p + ".ln1", d);
-    addAttention(m, p + ".attn", d, a.heads, a.window);
-    addNorm(m, p + ".ln2", d);
-    addFfn(m, p + ".ffn", a);
-  }
-  addNorm(m, "enc.norm", d);
-  for (int l = 0; l < a.decoder_layers; ++l) {
-    const std::string p = "dec." + std::to_string(l);
-    addNorm(m, p + ".ln1", d);
-    addAttention(m, p + ".self", d);
-    addNorm(m, p + ".ln2", d);
-    addAttention(m, p + ".cross", d, a.heads, a.window);
-    addNorm(m, p + ".ln3", d);
-    addFfn(m, p + ".ffn", a);
-  }
-  addNorm(m, "dec.norm", d);
-  const int C = a.chunk;
-  // Token j's row of the chunk: a_j(t) .. a_j(t+C-1), normalised.
-  m.push_back({"head.weight", {d, C}});
-  m.push_back({"head.bias", {C}});
-  // w_k = exp(-decay k): the weight of the chunk made k ticks ago in the executed action.
-  if (C > 1) m.push_back({"head.ensemble_decay", {1}, TensorRole::kFixed});
-  // Laws the runtime adds to the network's action: gain_j r_j (reference mode; 0 autonomous).
-  m.push_back({"law.gain", {J}, TensorRole::kFixed});
-  for (const char* s : {"q", "a", "r"}) {
-    m.push_back({std::string("norm.") + s + "_mean", {J}, TensorRole::kFixed});
-    m.push_back({std::string("norm.") + s + "_std", {J}, TensorRole::kFixed});
-  }
-  m.push_back({"centroids", {a.movements, a.clusters, J}, TensorRole::kFixed});
+  walkPolicyManifest(a, [&m](const detail::ViewName& name, const ManifestShape& shape, TensorRole role, const auto&) {
+    m.push_back({name.str(), std::vector<int>(shape.dim.begin(), shape.dim.begin() + shape.rank), role});
+  });
   return m;
 }
 

@@ -11,6 +11,7 @@
 
 #include "nao/policy_config.hpp"
 #include "nao/policy_kernels.hpp"
+#include "nao/policy_manifest.hpp"
 
 #include <Eigen/Core>
 
@@ -22,9 +23,11 @@
 #include <limits>
 #include <memory>
 #include <new>
+#include <stdexcept>
 #include <string>
 #include <string_view>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace nao {
@@ -82,6 +85,31 @@ struct PolicyDims {
 /// paperArch() (paper §4.1) and smallArch() (tests) as compiled dimensions.
 using PaperPolicyDims = PolicyDims<128, 4, 4, 4, 512, 512, 512, 20>;
 using SmallPolicyDims = PolicyDims<32, 4, 2, 2, 64, 64, 64, 8>;
+
+/// True if the compiled Dims compute `arch`'s step (d_model, heads, layers, FFN, tokens,
+/// features, window; the table sizes and the chunk are the bound model's).
+template <class Dims>
+bool computesPolicyArch(const PolicyArch& arch) {
+  const PolicyArch c = Dims::arch();
+  return arch.d_model == c.d_model && arch.heads == c.heads && arch.encoder_layers == c.encoder_layers &&
+         arch.decoder_layers == c.decoder_layers && arch.ffn_hidden == c.ffn_hidden && arch.tokens == c.tokens &&
+         arch.features == c.features && arch.window == c.window;
+}
+
+/// f(D{}) with the first D of the compiled dimensions `D, Ds...` that computes `arch`'s step: a
+/// program built for several architectures runs the one a model.bin needs (configure time).
+/// Throws std::invalid_argument when none does.
+template <class D, class... Ds, class F>
+decltype(auto) withPolicyDims(const PolicyArch& arch, F&& f) {
+  if (computesPolicyArch<D>(arch)) return std::forward<F>(f)(D{});
+  if constexpr (sizeof...(Ds) > 0) {
+    return withPolicyDims<Ds...>(arch, std::forward<F>(f));
+  } else {
+    throw std::invalid_argument("no compiled policy dimensions compute this model's step (d_model " +
+                                std::to_string(arch.d_model) + ", window " + std::to_string(arch.window) +
+                                "): nao_codegen MODEL --out DIR writes its own");
+  }
+}
 
 /// Largest action chunk C a runtime holds (the workspace's chunk ring); archProblem's cap is
 /// above, bindPolicyWeights refuses a model beyond it.
@@ -163,9 +191,11 @@ struct DecoderLayerWeights {
   FfnWeights<Dims> ffn;
 };
 
-/// The immutable model: views of every manifest tensor (the bytes stay where they were bound),
-/// the table and head sizes of the bound model, and the conditioning mode. Built by
-/// bindPolicyWeights.
+/// The immutable model: views of every manifest tensor, the table and head sizes of the bound
+/// model, and the conditioning mode. Built by bindPolicyWeights. Bound from a ModelFile
+/// (nao/model_weights.hpp) the weights share ownership of the floats their views read
+/// (`storage`), so they and every copy of them stay valid whatever happens to the file; bound
+/// from pointers or an image the bytes stay the caller's.
 template <class Dims>
 struct PolicyWeights {
   static constexpr int D = Dims::kDModel, J = Dims::kTokens;
@@ -210,6 +240,9 @@ struct PolicyWeights {
   /// exist (row k of the triangle: ensemble_weight[n − 1][k] with n = min(ticks, C) chunks);
   /// made at bind time from head.ensemble_decay.
   std::array<std::array<float, kPolicyMaxChunk>, kPolicyMaxChunk> ensemble_weight{};
+  /// The bytes the views read, kept alive by every copy of these weights; null: the caller's
+  /// (pointers it passed, the compiled-in image in .rodata).
+  std::shared_ptr<const void> storage;
 };
 
 namespace detail {
@@ -236,111 +269,52 @@ void rebindView(void* view, const float* data, long rows, long cols) {
   (void)cols;
 }
 
-/// The manifest name of one view, kept in parts so that walking the views costs no string:
-/// head[.layer][.mid][.tail], e.g. {"enc", 0, "attn", "wq"} is "enc.0.attn.wq".
-struct ViewName {
-  const char* head;
-  int layer = -1;           ///< -1: none
-  const char* mid = nullptr;
-  const char* tail = nullptr;
-  std::string str() const {
-    std::string s = head;
-    if (layer >= 0) s += "." + std::to_string(layer);
-    if (mid != nullptr) (s += ".") += mid;
-    if (tail != nullptr) (s += ".") += tail;
-    return s;
-  }
-};
-
-template <class Dims, class F>
-void visitNormViews(F& f, const char* head, int layer, const char* mid, LayerNormWeights<Dims>& n) {
-  f(ViewName{head, layer, mid, "gain"}, n.gain);
-  f(ViewName{head, layer, mid, "bias"}, n.bias);
-}
-
-template <class Dims, class F>
-void visitAttentionViews(F& f, const char* head, int layer, const char* mid, AttentionWeights<Dims>& a) {
-  f(ViewName{head, layer, mid, "wq"}, a.wq, a.wq8);
-  f(ViewName{head, layer, mid, "bq"}, a.bq);
-  f(ViewName{head, layer, mid, "wk"}, a.wk, a.wk8);
-  f(ViewName{head, layer, mid, "bk"}, a.bk);
-  f(ViewName{head, layer, mid, "wv"}, a.wv, a.wv8);
-  f(ViewName{head, layer, mid, "bv"}, a.bv);
-  f(ViewName{head, layer, mid, "wo"}, a.wo, a.wo8);
-  f(ViewName{head, layer, mid, "bo"}, a.bo);
-}
-
-template <class Dims, class F>
-void visitAttentionViews(F& f, const char* head, int layer, const char* mid, TemporalAttentionWeights<Dims>& a) {
-  visitAttentionViews(f, head, layer, mid, static_cast<AttentionWeights<Dims>&>(a));
-  f(ViewName{head, layer, mid, "age_bias"}, a.age_bias);
-}
-
-template <class Dims, class F>
-void visitFfnViews(F& f, const char* head, int layer, FfnWeights<Dims>& n) {
-  f(ViewName{head, layer, "ffn", "0.weight"}, n.w0, n.w0q);
-  f(ViewName{head, layer, "ffn", "0.bias"}, n.b0);
-  f(ViewName{head, layer, "ffn", "1.weight"}, n.w1, n.w1q);
-  f(ViewName{head, layer, "ffn", "1.bias"}, n.b1);
-  f(ViewName{head, layer, "ffn", "2.weight"}, n.w2, n.w2q);
-  f(ViewName{head, layer, "ffn", "2.bias"}, n.b2);
-  f(ViewName{head, layer, "ffn", "3.weight"}, n.w3, n.w3q);
-  f(ViewName{head, layer, "ffn", "3.bias"}, n.b3);
+/// The table's sizes for the views of `w` (its compiled dimensions, its bound table sizes).
+template <class Dims>
+constexpr PolicySizes policySizes(int movements, int clusters, int max_steps, int chunk) {
+  PolicySizes a;
+  a.d_model = Dims::kDModel;
+  a.heads = Dims::kHeads;
+  a.encoder_layers = Dims::kEncoderLayers;
+  a.decoder_layers = Dims::kDecoderLayers;
+  a.tokens = Dims::kTokens;
+  a.features = Dims::kFeatures;
+  a.window = Dims::kWindow;
+  a.ffn_hidden = {Dims::kFfn0, Dims::kFfn1, Dims::kFfn2};
+  a.movements = movements;
+  a.clusters = clusters;
+  a.max_steps = max_steps;
+  a.chunk = chunk;
+  return a;
 }
 
 /// Calls f(ViewName, WeightView<R, C>&) for every view of `w`, in the order of policyManifest
-/// (bindWeightSlots checks name, shape and role entry by entry), and for a matrix of role
-/// TensorRole::kMatrix f(ViewName, WeightView<Out, In>&, QuantView<Out, In>&) with its int8 and
-/// packed companion: the one place that order is written for the runtime. No allocation unless
-/// f allocates.
+/// (the one table, walkPolicyManifest), and for a matrix of role TensorRole::kMatrix
+/// f(ViewName, WeightView<Out, In>&, QuantView<Out, In>&) with its int8 and packed companion.
+/// No allocation unless f allocates.
 template <class Dims, class F>
 void visitWeightViews(PolicyWeights<Dims>& w, F&& f) {
-  f(ViewName{"embed.in.weight"}, w.embed_in_weight);
-  f(ViewName{"embed.in.bias"}, w.embed_in_bias);
-  f(ViewName{"embed.joint_enc"}, w.embed_joint_enc);
-  f(ViewName{"embed.movement"}, w.embed_movement);
-  f(ViewName{"embed.step"}, w.embed_step);
-  f(ViewName{"embed.act.weight"}, w.embed_act_weight);
-  f(ViewName{"embed.act.bias"}, w.embed_act_bias);
-  f(ViewName{"embed.joint_dec"}, w.embed_joint_dec);
-  for (int l = 0; l < Dims::kEncoderLayers; ++l) {
-    EncoderLayerWeights<Dims>& e = w.enc[static_cast<std::size_t>(l)];
-    visitNormViews(f, "enc", l, "ln1", e.ln1);
-    visitAttentionViews(f, "enc", l, "attn", e.attn);
-    visitNormViews(f, "enc", l, "ln2", e.ln2);
-    visitFfnViews(f, "enc", l, e.ffn);
-  }
-  visitNormViews(f, "enc.norm", -1, nullptr, w.enc_norm);
-  for (int l = 0; l < Dims::kDecoderLayers; ++l) {
-    DecoderLayerWeights<Dims>& d = w.dec[static_cast<std::size_t>(l)];
-    visitNormViews(f, "dec", l, "ln1", d.ln1);
-    visitAttentionViews(f, "dec", l, "self", d.self);
-    visitNormViews(f, "dec", l, "ln2", d.ln2);
-    visitAttentionViews(f, "dec", l, "cross", d.cross);
-    visitNormViews(f, "dec", l, "ln3", d.ln3);
-    visitFfnViews(f, "dec", l, d.ffn);
-  }
-  visitNormViews(f, "dec.norm", -1, nullptr, w.dec_norm);
-  f(ViewName{"head.weight"}, w.head_weight);
-  f(ViewName{"head.bias"}, w.head_bias);
-  if (w.chunk > 1) f(ViewName{"head.ensemble_decay"}, w.head_ensemble_decay);
-  f(ViewName{"law.gain"}, w.law_gain);
-  f(ViewName{"norm.q_mean"}, w.q_mean);
-  f(ViewName{"norm.q_std"}, w.q_std);
-  f(ViewName{"norm.a_mean"}, w.a_mean);
-  f(ViewName{"norm.a_std"}, w.a_std);
-  f(ViewName{"norm.r_mean"}, w.r_mean);
-  f(ViewName{"norm.r_std"}, w.r_std);
-  f(ViewName{"centroids"}, w.centroids);
+  walkPolicyManifest(policySizes<Dims>(w.movements, w.clusters, w.max_steps, w.chunk),
+                     [&](const ViewName& name, const ManifestShape&, TensorRole, auto at) {
+                       at(w, [&](auto& view, auto&... quant) { f(name, view, quant...); });
+                     });
 }
+
+/// Counts the table's entries (a constexpr sink).
+struct ViewCounter {
+  std::size_t n = 0;
+  template <class At>
+  constexpr void operator()(const ViewName&, const ManifestShape&, TensorRole, const At&) {
+    ++n;
+  }
+};
 
 /// Number of views of a PolicyWeights<Dims> with chunk `chunk` (= entries of its policyManifest).
 template <class Dims>
 constexpr std::size_t policyViewCount(int chunk) {
-  constexpr std::size_t norm = 2, attention = 8, temporal = 9, ffn = 8;
-  const std::size_t head = 2 + (chunk > 1 ? 1 : 0) + 1;
-  return 8 + Dims::kEncoderLayers * (norm + temporal + norm + ffn) + norm +
-         Dims::kDecoderLayers * (norm + attention + norm + temporal + norm + ffn) + norm + head + 6 + 1;
+  ViewCounter c;
+  walkPolicyManifest(policySizes<Dims>(1, 1, 1, chunk), c);
+  return c.n;
 }
 
 /// Every view of `w` with its manifest name (binding matches by name).
