@@ -39,13 +39,39 @@ RetargetParams detail::retargetFromMetadata(const MetadataJson& j, const Retarge
   return r;
 }
 
+namespace {
+
+// "split": {"train": [names], "val": [names]}; what is not a list of strings reads as none.
+std::vector<std::string> splitNames(const detail::MetadataJson& j, const char* which) {
+  std::vector<std::string> names;
+  if (!j.is_object() || !j.contains("split") || !j["split"].is_object() || !j["split"].contains(which) ||
+      !j["split"][which].is_array())
+    return names;
+  for (const detail::MetadataJson& n : j["split"][which])
+    if (n.is_string()) names.push_back(n.get<std::string>());
+  return names;
+}
+
+std::string dataFingerprint(const detail::MetadataJson& j) {
+  if (j.is_object() && j.contains("data") && j["data"].is_object() && j["data"].contains("fingerprint") &&
+      j["data"]["fingerprint"].is_string())
+    return j["data"]["fingerprint"].get<std::string>();
+  return {};
+}
+
+}  // namespace
+
 ModelSpec readModelSpec(const ModelHeader& header, const RetargetParams& defaults, const std::string& origin) {
   const detail::MetadataJson j = detail::parseModelMetadata(header.metadata_json);
   ModelSpec spec;
+  spec.movement_names = header.movement_names;
   spec.starts = detail::startsFromMetadata(j, header.movement_names, origin);
   spec.workspace = detail::workspaceFromMetadata(j, header.movement_names, origin);
   spec.run_codes = detail::runCodesFromMetadata(j, header.movement_names, static_cast<int>(header.arch.d_model), origin);
   spec.retarget = detail::retargetFromMetadata(j, defaults, origin);
+  spec.split.train = splitNames(j, "train");
+  spec.split.val = splitNames(j, "val");
+  spec.data_fingerprint = dataFingerprint(j);
   return spec;
 }
 

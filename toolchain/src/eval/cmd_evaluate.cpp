@@ -73,13 +73,12 @@ std::string millimetres(double m) {
   return buf;
 }
 
-std::vector<std::string> splitNames(const json& meta, const char* which, const std::string& movement) {
+// The names of `movement`'s demonstrations ("<movement>_<digits>") among a split's.
+std::vector<std::string> splitNames(const std::vector<std::string>& split, const std::string& movement) {
   std::vector<std::string> names;
-  if (meta.is_object() && meta.contains("split") && meta["split"].contains(which) && meta["split"][which].is_array())
-    for (const json& n : meta["split"][which])
-      if (n.is_string() && n.get<std::string>().rfind(movement + "_", 0) == 0 &&
-          n.get<std::string>().find_first_not_of("0123456789", movement.size() + 1) == std::string::npos)
-        names.push_back(n.get<std::string>());
+  for (const std::string& n : split)
+    if (n.rfind(movement + "_", 0) == 0 && n.find_first_not_of("0123456789", movement.size() + 1) == std::string::npos)
+      names.push_back(n);
   return names;
 }
 
@@ -153,8 +152,7 @@ DemoSet syntheticTestSet(const ArmModel& arm, const std::string& movement, std::
 struct Setup {
   ArmModel arm;
   ModelFile model;
-  ModelSpec spec;       ///< the model's starts and retargeting setting
-  json meta;            ///< the model's metadata (split, data fingerprint)
+  ModelSpec spec;       ///< the model's starts, retargeting setting, split and data fingerprint
   fs::path nao_rt, reference_nao_rt, out;
   bool recordings = false, test = false, reference = false;
   int min_demos = 0;
@@ -166,16 +164,14 @@ struct Setup {
 };
 
 // The data set of the model's synthetic demonstrations, checked against its fingerprint.
-std::unique_ptr<PolicyData> readDataSet(const Args& a, const json& meta) {
+std::unique_ptr<PolicyData> readDataSet(const Args& a, const ModelSpec& spec) {
   std::error_code ec;
   if (!fs::is_directory(a.data, ec))
     throw UserError(a.data + ": no data set (toolchain/nao train data makes it; the baselines are fitted on the model's training demonstrations)");
   std::fprintf(stderr, "evaluate: reading the data set %s\n", a.data.c_str());
   auto data = std::make_unique<PolicyData>(loadPolicyData(a.data));
   const std::string have = hex64(dataFingerprint(*data));
-  const std::string want = meta.contains("data") && meta["data"].contains("fingerprint") && meta["data"]["fingerprint"].is_string()
-                               ? meta["data"]["fingerprint"].get<std::string>()
-                               : std::string("an unrecorded one");
+  const std::string want = !spec.data_fingerprint.empty() ? spec.data_fingerprint : std::string("an unrecorded one");
   if (have != want)
     throw UserError(a.data + " has data fingerprint " + have + ", " + a.model + " was trained on " + want +
                     " (toolchain/nao train data rebuilds the data set)");
@@ -194,7 +190,6 @@ Setup setUp(const Args& a) {
   checkJointsMatch(s.model, s.arm, a.model);
   if (s.model.header.conditioning != Conditioning::kAutonomous)
     throw UserError(a.model + " is not an autonomous-mode model (--model)");
-  s.meta = json::parse(s.model.header.metadata_json, nullptr, /*allow_exceptions=*/false);
   s.spec = readModelSpec(s.model.header, RetargetParams{}, a.model);
   s.recordings = !a.recordings.empty();
   s.test = a.test_seed >= 0;
@@ -209,7 +204,7 @@ Setup setUp(const Args& a) {
                       " PATH");
   if (s.reference) s.reference_arch = readModelFile(a.reference_model).header.arch;
   s.min_demos = a.min_demos > 0 ? a.min_demos : (!s.recordings && !s.test ? 16 : 4);
-  if (!s.recordings) s.data = readDataSet(a, s.meta);
+  if (!s.recordings) s.data = readDataSet(a, s.spec);
   s.out = a.out;
   std::error_code ec;
   fs::create_directories(s.out, ec);
@@ -226,7 +221,8 @@ MovementWork planMovement(const Args& a, const Setup& s, std::size_t mi, std::ve
   w.name = name;
   w.index = static_cast<int>(mi);
   const std::vector<JointVector> key_poses = modelKeyPoses(s.model, w.index);
-  const std::vector<std::string> val_names = splitNames(s.meta, "val", name), train_names = splitNames(s.meta, "train", name);
+  const std::vector<std::string> val_names = splitNames(s.spec.split.val, name),
+                                 train_names = splitNames(s.spec.split.train, name);
   if (s.recordings) {
     w.set_kind = "recordings";
     w.held = demoSetFromRecordings(s.arm, a.recordings, val_names, a.input, s.spec.retarget, key_poses, name + " held out");

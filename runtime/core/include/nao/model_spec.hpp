@@ -1,6 +1,7 @@
 // What a model.bin carries for a run beyond its tensors (a run needs
-// nothing else), as types: the autonomous starts, the demonstrated workspace, the run codes
-// and the retargeting setting. nao_io decodes the file's metadata into a ModelSpec once, at
+// nothing else), as types: the movement names, the autonomous starts, the demonstrated workspace,
+// the run codes, the retargeting setting, and the training split and data fingerprint the
+// evaluation checks against. nao_io decodes the file's metadata into a ModelSpec once, at
 // configure time (readModelSpec, nao/model_file.hpp); the controller only reads it.
 #pragma once
 
@@ -59,12 +60,23 @@ int runCodeIndex(const ModelRunCodes& codes, const JointVector& q0, int exclude 
 /// Real-time safe.
 const float* runCode(const std::vector<ModelRunCodes>& codes, int movement, const JointVector& q0, int* index = nullptr);
 
-/// Everything model.bin's metadata tells a run, one entry per movement where per movement.
+/// The demonstrations a model was trained on and held out from training, by name (e.g.
+/// "elbow_003"), as its metadata records them; empty lists: none recorded.
+struct ModelSplit {
+  std::vector<std::string> train;
+  std::vector<std::string> val;
+};
+
+/// Everything model.bin's header and metadata tell a run, one entry per movement where per
+/// movement.
 struct ModelSpec {
+  std::vector<std::string> movement_names;  ///< index order (ModelHeader::movement_names)
   ModelStarts starts;                     ///< the autonomous starts (empty lists: none recorded)
   std::vector<ModelWorkspace> workspace;  ///< the demonstrated joint ranges (empty: none recorded)
   std::vector<ModelRunCodes> run_codes;   ///< the run codes (empty: a model without a run latent)
   RetargetParams retarget;                ///< the retargeting setting the training data were made with
+  ModelSplit split;                       ///< the training / held-out demonstrations
+  std::string data_fingerprint;           ///< the training data set's fingerprint (empty: none recorded)
 };
 
 }  // namespace nao

@@ -145,8 +145,9 @@ std::vector<JointVector> modelKeyPoses(const ModelFile& model, int m);
 /// The joints of `arm` as model.bin stores them.
 std::vector<TrainedJoint> trainedJoints(const ArmModel& arm);
 
-/// The model's metadata decoded once into its typed form (nao/model_spec.hpp): the starts, the
-/// workspace, the run codes and the retargeting setting (`defaults` where the model records none).
+/// The model's header and metadata decoded once into their typed form (nao/model_spec.hpp): the
+/// movement names, the starts, the workspace, the run codes, the retargeting setting (`defaults`
+/// where the model records none), the split and the data fingerprint.
 /// The one reader of model.bin's metadata. Throws ModelFileError, or std::runtime_error for an
 /// unusable retargeting setting, naming `origin`. The sections:
 ///  - "starts" (the start states an autonomous run begins from, so that the
@@ -173,6 +174,10 @@ std::vector<TrainedJoint> trainedJoints(const ArmModel& arm);
 ///    non-negative and symmetric. Code: model_run_codes.cpp.
 ///  - "data.retarget": {"priority": "hand"|"joints", "lambda_q": x, "posture_weights": [5]}, the
 ///    retargeting setting the training data were made with; `defaults` when absent.
+///  - "split": {"train": [names], "val": [names]}, the demonstrations trained on and held out
+///    (ModelSplit; entries that are not strings are left out, empty when absent), and
+///    "data.fingerprint", the training data set's (empty when absent or not a string): what an
+///    evaluation checks its data set and held-out demonstrations against.
 ModelSpec readModelSpec(const ModelHeader& header, const RetargetParams& defaults, const std::string& origin);
 
 /// `metadata_json` with "workspace" set (one entry per movement, in that order). Throws
