@@ -8,6 +8,7 @@
 // build's compiled-in default, docs/policy.md "Packed fp32 weights"; the same bits).
 #include "bench_policy_common.hpp"
 #include "nao/controller.hpp"
+#include "nao/model_weights.hpp"
 #include "nao/arm_model_io.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/quantize.hpp"
@@ -17,6 +18,7 @@
 #include <sys/resource.h>
 
 #include <string>
+#include <utility>
 
 namespace {
 
@@ -28,9 +30,8 @@ void runTickFull(benchmark::State& state, bool packed) {
   const ModelFile& model = paperModel();
   const ArmModel arm = loadArmModel(NAO_DEFAULT_URDF);
   checkJointsMatch(model, arm, NAO_BENCH_MODEL);
-  const std::vector<const float*>& p = paperWeights().tensors;  // aligned, as nao_rt --weights
-  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(p.data(), p.size(), model.header.arch,
-                                                                        model.header.conditioning, benchPolicyKernel());
+  // Copied into aligned storage the weights own, as nao_rt --weights binds them.
+  PolicyWeights<PaperPolicyDims> w = bindPolicyWeights<PaperPolicyDims>(model, benchPolicyKernel());
   AlignedBytes blob;
   if (packed) {
     blob = packModelFp32(model);
@@ -40,7 +41,8 @@ void runTickFull(benchmark::State& state, bool packed) {
   std::vector<JointVector> centroids;
   for (int k = 0; k < w.clusters; ++k) centroids.push_back(centroid(w, movement, k).cast<double>());
   const tools::ReferenceStream ref = tools::makeSyntheticReference(arm, tools::Movement::kWholeArm, 1, 0, centroids);
-  const ControllerModel<PaperPolicyDims> cm = configureController(arm, w, ControllerParams{});
+  const ControllerModel<PaperPolicyDims> cm =
+      configureController(arm, readModelSpec(model.header, RetargetParams{}, NAO_BENCH_MODEL), std::move(w));
   OdeArmBackend robot(cm.arm, SimParams{}, ref.target.front());
   ControllerData<PaperPolicyDims> data;
   SteadyClock clock;
@@ -73,7 +75,7 @@ void runTickFull(benchmark::State& state, bool packed) {
   getrusage(RUSAGE_SELF, &ru);
   state.counters["rss_MB"] = static_cast<double>(ru.ru_maxrss) / 1024.0;
   state.counters["ticks"] = kTicks;
-  state.SetLabel(std::string("policy kernel ") + policyKernelName(w.kernel) + (packed ? ", packed" : ""));
+  state.SetLabel(std::string("policy kernel ") + policyKernelName(cm.policy.kernel) + (packed ? ", packed" : ""));
 }
 
 void BM_Tick_Full(benchmark::State& state) { runTickFull(state, false); }

@@ -23,6 +23,7 @@
 #include "nao/controller.hpp"
 #include "nao/lola_backend.hpp"
 #include "nao/model_file.hpp"
+#include "nao/model_weights.hpp"
 #include "nao/policy.hpp"
 #include "nao/quantize.hpp"
 #include "nao/reference_stream.hpp"
@@ -207,51 +208,11 @@ PreparedRun prepareRun(const RunOptions& options, const PolicyArch& compiled_arc
 PolicyKernel runPolicyKernel(const std::string& name);
 
 // ---------------------------------------------------------------------------------------------
-// Weights of a --weights file: copied at configure time into 64-byte aligned storage
-// that exists only when a file is loaded. The compiled-in model is bound in place and costs
-// nothing here.
-
-/// The aligned floats a --weights model's tensors are copied into; empty (no memory) for the
-/// compiled-in model. Owned by the run, alive until the loop has ended.
-struct WeightStorage {
-  struct Free {
-    void operator()(float* f) const noexcept { ::operator delete[](f, std::align_val_t{kModelAlignment}); }
-  };
-  std::unique_ptr<float[], Free> floats;
-  std::size_t n_floats = 0;
-};
-
-/// Copies the tensors of `model` into `storage` (allocated here: every tensor of its table, each
-/// padded to 64 bytes, 64-byte aligned, zero-filled, so the padding between tensors reads as
-/// zeros) and returns where each one starts, in manifest order. Configure time: allocates; throws
-/// std::bad_alloc. nao_bench reads its weights from here too, so it times what nao_rt reads.
-inline std::vector<const float*> copyWeightFile(const ModelFile& model, WeightStorage& storage) {
-  std::vector<const float*> pointers;
-  pointers.reserve(model.tensors.size());
-  storage.n_floats = 0;
-  for (const TensorEntry& t : model.tensors) storage.n_floats += (t.spec.count() + 15) / 16 * 16;
-  storage.floats.reset(static_cast<float*>(
-      ::operator new[](storage.n_floats * sizeof(float), std::align_val_t{kModelAlignment})));
-  float* floats = storage.floats.get();
-  std::fill(floats, floats + storage.n_floats, 0.0f);
-  std::size_t used = 0;
-  for (std::size_t i = 0; i < model.tensors.size(); ++i) {
-    const std::size_t n = model.tensors[i].spec.count();
-    if (used + n > storage.n_floats)
-      throw std::logic_error("nao_rt: the weight storage is smaller than the model's manifest");
-    std::memcpy(floats + used, model.data(i), n * sizeof(float));
-    pointers.push_back(floats + used);
-    used += (n + 15) / 16 * 16;
-  }
-  return pointers;
-}
-
-/// The weights of a --weights model: copyWeightFile, the views bound by name.
-template <class Dims>
-PolicyWeights<Dims> bindWeightFile(const PreparedRun& p, WeightStorage& storage) {
-  const std::vector<const float*> pointers = copyWeightFile(p.model, storage);
-  return bindPolicyWeights<Dims>(pointers.data(), pointers.size(), p.model.header.arch, p.model.header.conditioning,
-                                 p.kernel);
-}
+// Weights of a --weights file: copied at configure time into 64-byte aligned storage that the
+// bound weights own (bindPolicyWeights, nao/model_weights.hpp). The compiled-in model is bound
+// in place and costs nothing here. nao_bench reads its weights through copyWeightFile too, so
+// it times what nao_rt reads.
+using nao::copyWeightFile;
+using nao::WeightStorage;
 
 }  // namespace nao::rt

@@ -60,15 +60,13 @@ void leaveRealtime(RealtimeScheduling& s);
 /// after signals). Real-time safe.
 void sleepUntilNs(std::int64_t t_ns);
 
-/// Puts a live source's human scale (HumanSource::scaleOfLastFrame) into the controller's human
-/// kinematics for the update of that frame; scale_m 0 leaves the configured one. The only part
-/// of the controller model a run changes after activate: a live d_h is not known at configure
-/// time (rt_live.hpp). Real-time safe.
-inline void applyLiveHumanScale(const LiveHumanScale& scale, HumanKinematicsConfig& human) {
-  if (scale.scale_m > 0.0) {
-    human.scale_m = scale.scale_m;
-    human.hand_length_m = scale.hand_m;
-  }
+/// Puts a live source's human scale (HumanSource::scaleOfLastFrame) into the run's human
+/// kinematics for the update of that frame (setHumanScale: ControllerData, the model stays as
+/// configured); scale_m 0 leaves the one in force. A live d_h is not known at configure time
+/// (rt_live.hpp). Real-time safe.
+template <class Dims>
+void applyLiveHumanScale(const LiveHumanScale& scale, ControllerData<Dims>& data) {
+  setHumanScale(data, scale.scale_m, scale.hand_m);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -117,18 +115,18 @@ void fillPayload(const TickRecord& rec, const PolicyWorkspace<Dims>& ws, RunPayl
 namespace detail {
 
 /// The run's policy weights: the compiled-in model's views at the generated offsets into
-/// .rodata (no lookup, no copy), or a --weights file's tensors copied into `storage` and bound by
-/// name; then the int8 or packed fp32 copy the run's precision asks for, compiled in or made
-/// into `copy`. Releases the decoded file copy first (one fp32 copy resident at a time).
-/// Configure time: allocates, throws.
+/// .rodata (no lookup, no copy), or a --weights file's tensors copied into storage the weights
+/// own and bound by name; then the int8 or packed fp32 copy the run's precision asks for,
+/// compiled in or made into `copy`. Releases the decoded file copy first (one fp32 copy resident
+/// at a time). Configure time: allocates, throws.
 template <class Dims>
-PolicyWeights<Dims> bindRunWeights(PreparedRun& p, WeightStorage& storage, AlignedBytes& copy) {
+PolicyWeights<Dims> bindRunWeights(PreparedRun& p, AlignedBytes& copy) {
   PolicyWeights<Dims> weights =
       p.model_bytes != nullptr
           ? bindPolicyWeightsAt<Dims>(p.model_bytes, p.model_offsets, p.model_extents, p.model.header.arch,
                                       p.model.header.conditioning, p.kernel)
-          : bindWeightFile<Dims>(p, storage);
-  // The views point into the compiled-in bytes or `storage`: the decoded file copy is no longer
+          : bindPolicyWeights<Dims>(p.model, p.kernel);
+  // The views point into the compiled-in bytes or the weights' storage: the decoded file copy is no longer
   // read, so its memory goes back now, before an int8 or packed copy is made from the views
   // (docs/embedded.md, RSS).
   std::vector<std::uint8_t>().swap(p.model.bytes);
@@ -208,7 +206,7 @@ struct RunBuffers {
 /// target's hand point, the overrun bookkeeping when paced, the attention record into the ring.
 /// Returns the ticks done (fewer than p.ticks when the robot stops the run).
 template <class Dims>
-std::int64_t runTicks(const RunOptions& options, PreparedRun& p, ControllerModel<Dims>& model,
+std::int64_t runTicks(const RunOptions& options, PreparedRun& p, const ControllerModel<Dims>& model,
                       ControllerData<Dims>& data, RobotBackend& robot, ActionLaw* law, bool paced,
                       RunBuffers<Dims>& buffers, LoopTotals& totals) {
   // The evaluation target of a recorded reference (its feature-extracted trajectory).
@@ -223,7 +221,7 @@ std::int64_t runTicks(const RunOptions& options, PreparedRun& p, ControllerModel
     if (paced) sleepUntilNs(next_ns);
     const std::size_t i = static_cast<std::size_t>(t);
     const SkeletonFrame* frame = p.human != nullptr ? p.human->frameAt(t) : nullptr;
-    if (frame != nullptr) applyLiveHumanScale(p.human->scaleOfLastFrame(), model.params.human);
+    if (frame != nullptr) applyLiveHumanScale(p.human->scaleOfLastFrame(), data);
     TickRecord& rec = buffers.records[i];
     rec = law != nullptr ? runControllerTick(model, data, robot, frame, *law) : runControllerTick(model, data, robot, frame);
     // Where the arm should be at the end of the tick: the reference's feature-extracted pose
@@ -275,11 +273,10 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     if (!isRobotBackendName(options.robot))
       throw UsageError("--robot '" + options.robot + "': expected " + kRobotBackendNames);
     PreparedRun p = prepareRun(options, Dims::arch());
-    WeightStorage weight_storage;
     AlignedBytes copy_storage;  // the int8 or packed copy made at start-up (none compiled in)
-    const PolicyWeights<Dims> weights = detail::bindRunWeights<Dims>(p, weight_storage, copy_storage);
+    PolicyWeights<Dims> weights = detail::bindRunWeights<Dims>(p, copy_storage);
+    const PolicyKernel kernel = weights.kernel;
     ControllerParams controller_params = options.controller;
-    controller_params.retarget = p.model_spec.retarget;
     // The human's scale d_h is calibrated once per reference, as the training data and the
     // evaluation target were retargeted (one scale per demonstration from all its frames:
     // retargetTargets), not re-estimated per frame: per-frame link lengths jitter with
@@ -289,12 +286,12 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
       controller_params.human = p.reference->human;
     // A live reference: --human-scale, or each frame's scale from the source (applyLiveHumanScale).
     if (p.live != nullptr && options.human_scale_m > 0.0) controller_params.human.scale_m = options.human_scale_m;
-    // Not const: a live source's d_h goes into model.params.human tick by tick.
-    ControllerModel<Dims> model = configureController(p.arm, weights, controller_params, p.model_spec.workspace,
-                                                      p.model_spec.run_codes);
+    // The retargeting setting is the model's (spec.retarget, read over options.controller.retarget).
+    const ControllerModel<Dims> model =
+        configureController(p.arm, p.model_spec, std::move(weights), controller_params);
     detail::WarmContext<Dims> warm{&model.policy, nullptr, 0};
     LoopTotals totals;
-    totals.kernel = weights.kernel;
+    totals.kernel = kernel;
     RealtimeScheduling rt;
     // Left on every way out, an exception included (runController also runs inside tests).
     struct LeaveRealtime {

@@ -1,6 +1,7 @@
 #include "replica.hpp"
 
 #include "nao/controller.hpp"
+#include "nao/model_weights.hpp"
 #include "nao/robot_loop.hpp"
 #include "nao/sim_arm.hpp"
 #include "nao/policy.hpp"
@@ -22,13 +23,9 @@ struct ZeroClock final : ControllerClock {
 template <class Dims>
 std::vector<ReplicaTick> replay(const ModelFile& model, const ArmModel& arm, const SimParams& sim_params, int movement,
                                 const JointVector& start, int ticks) {
-  std::vector<const float*> tensors;
-  for (std::size_t i = 0; i < model.tensors.size(); ++i) tensors.push_back(model.data(i));
-  const PolicyWeights<Dims> weights =
-      bindPolicyWeights<Dims>(tensors.data(), tensors.size(), model.header.arch, model.header.conditioning);
-  const ModelHeader& h = model.header;
-  const ModelSpec spec = readModelSpec(h, RetargetParams{}, "model");
-  const ControllerModel<Dims> cm = configureController(arm, weights, ControllerParams{}, spec.workspace, spec.run_codes);
+  const ControllerModel<Dims> cm =
+      configureController(arm, readModelSpec(model.header, RetargetParams{}, "model"), bindPolicyWeights<Dims>(model));
+  const PolicyWeights<Dims>& weights = cm.policy;
   OdeArmBackend robot(arm, sim_params, clampToLimits(arm, start));
   ControllerData<Dims> data;
   ZeroClock clock;

@@ -8,6 +8,11 @@
 // (docs/embedding.md). nao_backends' runControllerTick (nao/robot_loop.hpp) is that cycle
 // for its robots (the ODE arm, LoLA), with finishTick recording what the robot did.
 //
+// The model contract: configureController(arm, spec, weights) takes what a model.bin tells a run
+// (ModelSpec: readModelSpec) and its bound weights (bindPolicyWeights<Dims>(file): they own
+// their floats) and builds a ControllerModel that nothing writes afterwards and that depends on
+// no file object; everything a run changes is in ControllerData.
+//
 // Lifecycle: configureController builds everything that allocates (ControllerModel,
 // ControllerData); activateController starts a run from the pose the arm is at;
 // updateController runs one tick; deactivateController ends the run. Between activate and
@@ -33,6 +38,8 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <stdexcept>
+#include <utility>
 #include <vector>
 
 namespace nao {
@@ -156,7 +163,10 @@ struct TickRecord {
   double tick_us = 0.0, retarget_us = 0.0, policy_us = 0.0, sim_us = 0.0;
 };
 
-/// The immutable part: arm, policy views, parameters.
+/// The immutable part: arm, policy weights, parameters, what the model.bin tells a run. Built by
+/// configureController and never written afterwards (only read through const references); it
+/// shares ownership of the floats its weights view (PolicyWeights::storage) when they were
+/// bound from a ModelFile, so it outlives the file it was read from.
 template <class Dims>
 struct ControllerModel {
   ArmModel arm;
@@ -167,8 +177,10 @@ struct ControllerModel {
   /// Per movement, the autonomous workspace envelope (empty: none, reference mode or a
   /// negative margin).
   std::vector<JointEnvelope> workspace;
-  /// Per movement, the run codes a run chooses from at activate (empty: the zero code).
-  std::vector<ModelRunCodes> run_codes;
+  /// The model's movement names, starts, demonstrated workspace, run codes (per movement, the
+  /// codes a run chooses from at activate; empty: the zero code), retargeting setting (the one
+  /// params.retarget holds), split and data fingerprint.
+  ModelSpec spec;
 };
 
 /// Everything a tick writes. Built at configure time.
@@ -181,8 +193,11 @@ struct ControllerData {
   std::unique_ptr<PolicyWorkspace<Dims>> policy = makePolicyWorkspace<Dims>();
   ControllerClock* clock = nullptr;
   int movement = 0;
-  /// The run code in use: index into model.run_codes[movement] (-1: the zero code).
+  /// The run code in use: index into model.spec.run_codes[movement] (-1: the zero code).
   int run_code = -1;
+  /// The run's human kinematics: model.params.human from activate on, a live source's human
+  /// scale on top (setHumanScale).
+  HumanKinematicsConfig human_config;
   bool active = false;
   std::int64_t tick = 0;
   std::int64_t last_human_tick = -1;     ///< last tick with a usable human (-1: none yet)
@@ -229,21 +244,22 @@ std::vector<JointEnvelope> workspaceEnvelopes(const PolicyWeights<Dims>& policy,
 }
 
 /// Builds the model (configure time, allocates; throws std::invalid_argument for bad
-/// parameters). `policy` must already be bound; the arm is the one the policy was checked
-/// against. `demonstrated`: the model's "workspace" metadata (modelWorkspace), the range an
-/// autonomous model's envelope widens (empty: its key poses'). `run_codes`: the model's
-/// "run_codes" metadata (modelRunCodes; empty: none), one entry per movement of d_model floats.
+/// parameters) from what a model.bin tells a run and its bound weights:
+///   const ModelFile file = readModelFile(path);  // checkJointsMatch(file, arm, path) too
+///   const auto model = configureController(arm, readModelSpec(file.header, {}, path),
+///                                          bindPolicyWeights<Dims>(file));
+/// `spec` (readModelSpec) gives the retargeting setting (params.retarget is replaced by
+/// spec.retarget), the demonstrated workspace an autonomous model's envelope widens (empty: its
+/// key poses') and the run codes (empty: none; else one entry per movement of d_model floats).
+/// `policy` must be bound; the arm is the one the policy was checked against.
 template <class Dims>
-ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeights<Dims>& policy,
-                                          const ControllerParams& params,
-                                          const std::vector<ModelWorkspace>& demonstrated = {},
-                                          const std::vector<ModelRunCodes>& run_codes = {}) {
+ControllerModel<Dims> configureController(const ArmModel& arm, ModelSpec spec, PolicyWeights<Dims> policy,
+                                          ControllerParams params = {}) {
   if (!(params.period_s > 0.0)) throw std::invalid_argument("controller: period must be positive");
   if (!(params.no_human_timeout_s >= 0.0)) throw std::invalid_argument("controller: negative no-human timeout");
   if (params.human_bridge_ticks < 0) throw std::invalid_argument("controller: negative human bridge");
-  ControllerModel<Dims> m{arm, policy, params, robotScale(arm), clampToLimits(arm, params.home), {}, {}};
-  if (policy.conditioning == Conditioning::kAutonomous && params.workspace_margin_rad >= 0.0)
-    m.workspace = workspaceEnvelopes(policy, params.workspace_margin_rad, demonstrated);
+  params.retarget = spec.retarget;
+  const std::vector<ModelRunCodes>& run_codes = spec.run_codes;
   if (!run_codes.empty()) {
     if (policy.conditioning != Conditioning::kAutonomous)
       throw std::invalid_argument("controller: run codes are for autonomous-mode models");
@@ -252,9 +268,26 @@ ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeigh
     for (const ModelRunCodes& c : run_codes)
       if (c.d != Dims::kDModel || c.code.size() != c.size() * static_cast<std::size_t>(c.d))
         throw std::invalid_argument("controller: run codes of another width than the model's d_model");
-    m.run_codes = run_codes;
   }
+  ControllerModel<Dims> m{arm, std::move(policy), params, robotScale(arm), clampToLimits(arm, params.home), {}, {}};
+  if (m.policy.conditioning == Conditioning::kAutonomous && params.workspace_margin_rad >= 0.0)
+    m.workspace = workspaceEnvelopes(m.policy, params.workspace_margin_rad, spec.workspace);
+  m.spec = std::move(spec);
   return m;
+}
+
+/// The same for weights that come without a model.bin (tests, generated weights): the pieces of
+/// a ModelSpec given one by one, the retargeting setting params.retarget's.
+template <class Dims>
+ControllerModel<Dims> configureController(const ArmModel& arm, const PolicyWeights<Dims>& policy,
+                                          const ControllerParams& params,
+                                          const std::vector<ModelWorkspace>& demonstrated = {},
+                                          const std::vector<ModelRunCodes>& run_codes = {}) {
+  ModelSpec spec;
+  spec.workspace = demonstrated;
+  spec.run_codes = run_codes;
+  spec.retarget = params.retarget;
+  return configureController(arm, std::move(spec), policy, params);
 }
 
 namespace detail {
@@ -283,7 +316,8 @@ void activateController(const ControllerModel<Dims>& model, ControllerData<Dims>
   data.feature_v.setZero();
   data.feature_started = false;
   resetPolicyStream(*data.policy);  // a new rollout: the policy's window starts empty
-  setPolicyRunCode(*data.policy, runCode(model.run_codes, movement, q, &data.run_code));
+  setPolicyRunCode(*data.policy, runCode(model.spec.run_codes, movement, q, &data.run_code));
+  data.human_config = model.params.human;
   data.fault_counts.fill(0);
   data.record = TickRecord{};
   data.active = true;
@@ -341,7 +375,7 @@ void referenceStage(const ControllerModel<Dims>& model, ControllerData<Dims>& da
   const ControllerParams& p = model.params;
   bool have_human = false;
   if (frame != nullptr) {
-    humanArmKinematics(p.human, data.human, *frame);
+    humanArmKinematics(data.human_config, data.human, *frame);
     if (data.human.flags & kHumanNotFinite) rec.fault |= kFaultNonFiniteKeypoints;
     have_human = data.human.valid;
   }
@@ -519,6 +553,18 @@ const TickRecord& finishTick(const ControllerModel<Dims>& model, ControllerData<
   if (rec.tick_us > model.params.period_s * 1e6) rec.fault |= kFaultOverrun;
   detail::countFaults(data, rec.fault & ~before);
   return rec;
+}
+
+/// A human scale measured live (a camera source's estimate, not known at configure time) for
+/// the updates from now on: d_h `scale_m` and the hand segment `hand_m` (m; 0: the per-frame
+/// rule); scale_m <= 0 leaves the one in force. Per run: activateController starts from the
+/// model's. Real-time safe.
+template <class Dims>
+void setHumanScale(ControllerData<Dims>& data, double scale_m, double hand_m) {
+  if (scale_m > 0.0) {
+    data.human_config.scale_m = scale_m;
+    data.human_config.hand_length_m = hand_m;
+  }
 }
 
 /// Ends the run (the caller then has its arm hold where it is: a real robot ramps its stiffness
