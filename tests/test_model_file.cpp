@@ -668,3 +668,19 @@ TEST_CASE("run codes round-trip through the metadata bit for bit; malformed ones
   CHECK_THROWS_AS(nao::withModelRunCodes("{}", movements, bad), ModelFileError);
   CHECK_THROWS_AS(nao::withModelRunCodes("{}", movements, {codes[0]}), ModelFileError);
 }
+
+TEST_CASE("readModelSpec: the movement names, the split and the data fingerprint, each as recorded or empty") {
+  const std::vector<std::string> movements{"elbow", "wave"};
+  const nao::ModelSpec spec = nao::test::specOf(
+      R"({"split": {"train": ["elbow_000", "wave_001", 7], "val": ["elbow_002"]}, "data": {"fingerprint": "871bd180d467f00e"}})",
+      movements, 4, "m.bin");
+  CHECK(spec.movement_names == movements);
+  CHECK(spec.split.train == std::vector<std::string>{"elbow_000", "wave_001"});  // what is not a name is left out
+  CHECK(spec.split.val == std::vector<std::string>{"elbow_002"});
+  CHECK(spec.data_fingerprint == "871bd180d467f00e");
+  const nao::ModelSpec none = nao::test::specOf(R"({"split": [1], "data": {"fingerprint": 3}})", movements, 4, "m.bin");
+  CHECK(none.split.train.empty());
+  CHECK(none.split.val.empty());
+  CHECK(none.data_fingerprint.empty());
+  CHECK(nao::test::specOf("", movements, 4, "m.bin").split.train.empty());
+}
