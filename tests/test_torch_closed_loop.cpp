@@ -656,6 +656,32 @@ TEST_CASE("DAgger's labels are the executed demonstrations' expert from the stat
   }
   CHECK(apart > 0.01);  // not vacuous: the lagging policy went elsewhere
   CHECK(relabelled > static_cast<int>(behind.ticks()) / 2);
+  // From the run's own phase: the expert playing itself keeps its phase on the tick (the same
+  // labels), and a policy that holds its start is asked, once the demonstration's own rest at
+  // the start has passed, for the first sample that leaves it, tick after tick, where the
+  // same-tick labels chase f(t+1).
+  const PolicySequence phased = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, expert, nullptr, e, 4);
+  REQUIRE(phased.ticks() == clean.ticks());
+  for (std::size_t t = 0; t < phased.ticks(); ++t) CHECK(phased.r[t] == same.r[t]);
+  const JointVector hold = clampToLimits(arm(), demo.f.front());
+  const RolloutPolicy still = [&](int, int, const JointVector& q, const JointVector&, const JointVector&) {
+    return JointVector(hold - q);
+  };
+  std::size_t rest = 0;  // the last sample of the demonstration's rest at its start
+  while (rest + 1 < demo.f.size() && (clampToLimits(arm(), demo.f[rest + 1]) - hold).norm() <= 1e-4) ++rest;
+  REQUIRE(rest + 10 < static_cast<std::size_t>(ticks));
+  const PolicySequence held = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, still, nullptr, e, 4);
+  const PolicySequence chased = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, still, nullptr, e);
+  const JointVector first_move = clampToLimits(arm(), demo.f[rest + 1]);
+  int toward_first_move = 0;
+  for (std::size_t t = 0; t < held.ticks(); ++t) {
+    CHECK((held.q[t] - hold).cwiseAbs().maxCoeff() < 1e-3);  // it did stay
+    if (t >= rest) toward_first_move += (held.q[t] + held.r[t] - first_move).cwiseAbs().maxCoeff() < 1e-12;
+    CHECK(chased.r[t] == clampToLimits(arm(), demo.f[t + 1]) - chased.q[t]);
+  }
+  CHECK(toward_first_move == static_cast<int>(held.ticks() - rest));
+  CHECK_THROWS_AS(executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, still, nullptr, e, -1), UserError);
+  CHECK_THROWS_AS(executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, still, nullptr, e, 64), UserError);
 }
 
 TEST_CASE("DAgger training: deterministic, aggregates the net's labelled runs round by round, another result than teacher forcing") {

@@ -10,9 +10,11 @@
 #include "nao/tools/splitmix.hpp"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <exception>
+#include <limits>
 #include <mutex>
 #include <ostream>
 #include <thread>
@@ -193,12 +195,23 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
   return out;
 }
 
+namespace {
+
+// Joint-space distances this close count as equal when the phase is tracked: below the joint
+// encoders' resolution (12 bits a turn, 1.5 mrad).
+constexpr double kPhaseTieRad = 1e-3;
+
+std::size_t absDiff(std::size_t a, std::size_t b) { return a > b ? a - b : b - a; }
+
+}  // namespace
+
 PolicySequence executeLabelled(const SimModel& sim_model, SimData& sim, const std::vector<JointVector>& f,
                                const JointVector& start, int ticks, int movement, const RolloutPolicy& policy,
-                               const JointEnvelope* workspace, const ExecutionOptions& o) {
+                               const JointEnvelope* workspace, const ExecutionOptions& o, int phase_window) {
   if (!policy) throw UserError("execution: no policy to roll out");
   if (f.empty()) throw UserError("execution: an empty demonstration to label toward");
   if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
+  if (phase_window < 0 || phase_window > 63) throw UserError("execution: the phase window must be 0 .. 63");
   const ArmModel& arm = sim_model.arm;
   const double period = tickPeriod(sim_model);
   PolicySequence s;
@@ -208,8 +221,33 @@ PolicySequence executeLabelled(const SimModel& sim_model, SimData& sim, const st
   SimSnapshot snap;
   CommandStep step;
   JointVector q = sim.q, a_prev = JointVector::Zero();
+  const std::size_t last = f.size() - 1;
+  std::size_t phase = 0;  // the demonstration's sample the run is at (phase_window > 0)
   for (int t = 0; t < ticks; ++t) {
-    const JointVector target = clampToLimits(arm, f[std::min<std::size_t>(static_cast<std::size_t>(t) + 1, f.size() - 1)]);
+    std::size_t next = std::min<std::size_t>(static_cast<std::size_t>(t) + 1, last);
+    if (phase_window > 0) {
+      // The nearest sample (joint space) of the next phase_window + 1 from where the run was: the
+      // label continues the demonstration from there instead of catching up with tick t's.
+      // Samples within kPhaseTieRad of the nearest distance are tied (a rest, or a path that
+      // turns back on itself), and the tie goes to the one the demonstration's own pace reaches
+      // next, so a run that plays its demonstration keeps the same-tick labels.
+      const std::size_t end = std::min(last, phase + static_cast<std::size_t>(phase_window));
+      std::array<double, 64> dist{};
+      double nearest = std::numeric_limits<double>::infinity();
+      for (std::size_t k = phase; k <= end; ++k) {
+        dist[k - phase] = (q - clampToLimits(arm, f[k])).norm();
+        nearest = std::min(nearest, dist[k - phase]);
+      }
+      const std::size_t paced = t == 0 ? phase : std::min(phase + 1, end);  // at tick t the pace is at sample t
+      std::size_t pick = end + 1;
+      for (std::size_t k = phase; k <= end; ++k)
+        if (dist[k - phase] <= nearest + kPhaseTieRad &&
+            (pick > end || absDiff(k, paced) < absDiff(pick, paced)))
+          pick = k;
+      phase = pick;
+      next = std::min(phase + 1, last);
+    }
+    const JointVector target = clampToLimits(arm, f[next]);
     // The expert's label from the state the policy reached (the arm left as it was).
     JointVector lo, hi;
     double miss = 0.0;

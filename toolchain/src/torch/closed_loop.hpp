@@ -54,13 +54,17 @@ struct ClosedLoopOptions {
 /// that code's demonstration; every state it reaches labelled by the executed demonstrations'
 /// expert toward that demonstration; the labelled runs added to the training sequences (their run
 /// latent read from the code's demonstration); then `epochs` teacher-forced epochs over them all.
-/// Recipe-only options ("dagger-iterations", "dagger-epochs", "dagger-starts", "dagger-lr").
+/// Recipe-only options ("dagger-iterations", "dagger-epochs", "dagger-starts", "dagger-lr",
+/// "dagger-phase-window").
 struct DaggerOptions {
   int iterations = 0;        ///< rounds of rolling out, labelling and training (0: none)
   int epochs = 2;            ///< teacher-forced epochs per round
   int starts = 3;            ///< runs per training demonstration and round
   double lr = 0.0;           ///< Adam, a fresh optimiser from the kept teacher-forced weights (0: the teacher-forced lr)
   double perturb_rad = 0.05; ///< σ of a perturbed start, per joint
+  /// Labels toward the demonstration from the run's own phase (executeLabelled's phase_window;
+  /// 0: toward its sample of the same tick).
+  int phase_window = 0;
   bool enabled() const { return iterations > 0; }
 };
 

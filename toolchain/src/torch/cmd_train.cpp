@@ -274,6 +274,7 @@ std::map<std::string, RecipeSetter> recipeOnlyOptions(TrainArgs& a) {
   o["dagger-epochs"] = recipeInt(a.dagger.epochs, 1, 100000);
   o["dagger-starts"] = recipeInt(a.dagger.starts, 1, 1000);
   o["dagger-lr"] = recipePositive(a.dagger.lr);
+  o["dagger-phase-window"] = recipeInt(a.dagger.phase_window, 0, 63);
   // "replay": the rollout selection's speed bar on each run's speed over its medoid replay's.
   o["select-speed"] = [&a](const std::string& v) {
     if (v != "replay" && v != "demonstrations") throw UserError("'" + v + "' is not replay or demonstrations");

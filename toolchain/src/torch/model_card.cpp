@@ -88,6 +88,7 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
     const DaggerOptions& d = o.dagger;
     t["dagger"] = {{"iterations", d.iterations}, {"epochs", d.epochs}, {"starts", d.starts},
                    {"lr", d.lr > 0.0 ? d.lr : o.lr},  {"perturb_rad", d.perturb_rad}};
+    if (d.phase_window > 0) t["dagger"]["phase_window"] = d.phase_window;
   }
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"
@@ -278,7 +279,8 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
     s << "| DAgger | after the " << o.max_epochs << " teacher-forced epochs, " << d.iterations << " rounds of: the net "
       << "run on the simulated arm (the runtime's step) from " << d.starts << " starts per training demonstration (its "
       << "own, perturbed by " << d.perturb_rad << " rad, between it and another's), each with the run code nao_rt "
-      << "gives it there and as long as that code's demonstration, every state labelled by the expert toward it, "
+      << "gives it there and as long as that code's demonstration, every state labelled by the expert toward it"
+      << (d.phase_window > 0 ? " from the run's own phase (the nearest of the next " + std::to_string(d.phase_window + 1) + " samples), " : ", ")
       << "added to the training sequences; then " << d.epochs << " teacher-forced epochs over them all (Adam lr "
       << (d.lr > 0.0 ? d.lr : o.lr) << ") (docs/autonomous.md) |\n";
   }

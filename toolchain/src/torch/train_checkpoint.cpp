@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <sstream>
+#include <string>
 
 namespace nao::tools {
 
@@ -40,7 +41,7 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint, bool
   const DaggerOptions& d = o.dagger;
   if (d.enabled() && !teacher_forced_only)
     k << "; dagger after " << o.max_epochs << ": " << d.iterations << " x " << d.epochs << " starts " << d.starts << " lr "
-      << d.lr << " perturb " << d.perturb_rad;
+      << d.lr << " perturb " << d.perturb_rad << (d.phase_window > 0 ? " phase " + std::to_string(d.phase_window) : "");
   return k.str();
 }
 

@@ -334,7 +334,8 @@ void aggregateDagger(const Loop& L, TrainState& s, SequenceTensors& train, std::
   s.swapAverage();
   if (L.latent) updateRunCodes(codes, train, *L.latent);
   const std::vector<LabelledRun> runs = daggerRuns(L.data, L.cl, L.sim, L.o.dagger, L.o.seed, round);
-  std::vector<PolicySequence> seqs = labelledNetRuns(L.data, runs, L.sim, L.net, codes.codes, L.o.execution);
+  std::vector<PolicySequence> seqs = labelledNetRuns(L.data, runs, L.sim, L.net, codes.codes, L.o.execution,
+                                                        L.o.dagger.phase_window);
   s.swapAverage();
   L.net->train();
   for (std::size_t i = 0; i < seqs.size(); ++i) {

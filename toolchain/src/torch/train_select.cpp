@@ -77,7 +77,8 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
 template <class Dims>
 std::vector<PolicySequence> labelledWith(const PolicyData& data, const std::vector<LabelledRun>& runs,
                                          const SimModel& sim, const PolicyNet& net,
-                                         const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e) {
+                                         const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e,
+                                         int phase_window) {
   RuntimeNet<Dims> rt(net);
   std::vector<JointEnvelope> workspace;
   if (ControllerParams{}.workspace_margin_rad >= 0.0)
@@ -96,7 +97,8 @@ std::vector<PolicySequence> labelledWith(const PolicyData& data, const std::vect
     };
     PolicySequence s = executeLabelled(sim, sim_data, data.demos.at(static_cast<std::size_t>(run.demo)).f, run.start,
                                        run.ticks, run.movement, policy,
-                                       workspace.empty() ? nullptr : &workspace[static_cast<std::size_t>(run.movement)], e);
+                                       workspace.empty() ? nullptr : &workspace[static_cast<std::size_t>(run.movement)], e,
+                                       phase_window);
     s.demo = run.demo;
     out.push_back(std::move(s));
   }
@@ -107,12 +109,13 @@ std::vector<PolicySequence> labelledWith(const PolicyData& data, const std::vect
 
 std::vector<PolicySequence> labelledNetRuns(const PolicyData& data, const std::vector<LabelledRun>& runs,
                                             const SimModel& sim, const PolicyNet& net,
-                                            const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e) {
+                                            const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e,
+                                            int phase_window) {
   if (net->conditioning() != Conditioning::kAutonomous) throw UserError("labelled runs are for an autonomous model");
   if (net->arch().chunk > kPolicyMaxChunk)
     throw UserError("rollouts through the runtime's step: the chunk exceeds what the runtime holds");
   return withToolchainDims(net->arch(), "rollouts through the runtime's step", [&](auto dims) {
-    return labelledWith<typename decltype(dims)::type>(data, runs, sim, net, codes, e);
+    return labelledWith<typename decltype(dims)::type>(data, runs, sim, net, codes, e, phase_window);
   });
 }
 

@@ -48,7 +48,8 @@ struct LabelledRun {
 /// for the caller. Throws UserError unless hasRuntimeStep(net->arch()) and autonomous.
 std::vector<PolicySequence> labelledNetRuns(const PolicyData& data, const std::vector<LabelledRun>& runs,
                                             const SimModel& sim, const PolicyNet& net,
-                                            const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e);
+                                            const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e,
+                                            int phase_window = 0);
 
 /// What runs of each movement are measured against: its validation demonstrations' hand paths,
 /// the plane loops are counted in, their middle-phase speeds and loops, and the joint range of
