@@ -89,5 +89,21 @@ class CommittedPage(unittest.TestCase):
         self.assertGreater(checked, 0, "no committed file holds the groupings")
 
 
+class Configuration(unittest.TestCase):
+    def test_each_seed_names_its_models_configuration_from_its_card(self):
+        # Every committed seed's card gives the rows; the page says the paper's configuration beside them.
+        for seed in (1, 2, 3):
+            c = reproduction.model_configuration(seed)
+            self.assertIsNotNone(c, "seed %d has no card" % seed)
+            with open(reproduction.card_path(seed)) as f:
+                card = f.read()
+            params = re.search(r"\| parameters \(manifest floats\) \| (\d+) \|", card).group(1)
+            self.assertIn("parameters %s" % params, c)
+            self.assertIn("config ", c)
+        lines = "\n".join(reproduction.configuration_lines([1, 99]))
+        self.assertIn("seed 99: no card: not recorded", lines)
+        self.assertIn(reproduction.PAPER_CONFIGURATION, lines)
+
+
 if __name__ == "__main__":
     unittest.main()

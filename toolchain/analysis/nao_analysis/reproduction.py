@@ -447,6 +447,46 @@ def not_reproduced_section(found, found_mi):
     return L + [""]
 
 
+# The paper's Transformer (its section 3): what a table of another configuration is not.
+PAPER_CONFIGURATION = "d_model 128, 4 heads, 4 + 4 layers, FFN 512 × 3"
+CARD_ROWS = (("config", "config"), ("d_model / heads", "d_model / heads"), ("encoder / decoder layers", "layers"),
+             ("window", "window"), ("parameters (manifest floats)", "parameters"))
+
+
+def card_path(seed):
+    """The model card of training seed `seed`, as the page's convention names it."""
+    name = "autonomous.md" if seed == 1 else os.path.join("seeds", "seed_%d.md" % seed)
+    return os.path.join(REPO, "models", name)
+
+
+def model_configuration(seed):
+    """The configuration rows of seed `seed`'s model card ("config small; d_model / heads 32 / 4; ..."),
+    or None without a card. The Table 2 files do not carry the architecture; the card does."""
+    try:
+        with open(card_path(seed)) as f:
+            rows = {}
+            for line in f:
+                cells = [c.strip() for c in line.strip().strip("|").split("|")]
+                if len(cells) == 2:
+                    rows.setdefault(cells[0], cells[1])
+    except OSError:
+        return None
+    got = ["%s %s" % (label, rows[key].split(":")[0].split(" (")[0]) for key, label in CARD_ROWS if key in rows]
+    return "; ".join(got) if got else None
+
+
+def configuration_lines(seeds):
+    L = ["Configuration of each seed's model (from its card, %s):" % ", ".join(
+        os.path.relpath(card_path(s), REPO) for s in seeds), ""]
+    for s in seeds:
+        c = model_configuration(s)
+        L.append("- seed %d: %s" % (s, c if c else "no card: not recorded"))
+    L += ["", "The paper's model is %s. Tables from another configuration measure the paper's "
+          "analysis on a different net: a finding not reproduced there may be the net's size, not the "
+          "finding." % PAPER_CONFIGURATION, ""]
+    return L
+
+
 def reproduction_markdown(docs, command):
     seeds = sorted(docs)
     found = verdict.judge({s: seed_rows(docs[s]) for s in seeds})
@@ -463,6 +503,7 @@ def reproduction_markdown(docs, command):
           "docs/reproduction.md\" (seed 1 is models/autonomous.bin, its card models/autonomous.md; seed N's card is "
           "models/seeds/seed_N.md)." % " · ".join(models), "",
           "Paper: %s, sections 4.1–4.2, Table 2." % CITATION, ""]
+    L += configuration_lines(seeds)
     L += verdict_section(found, seeds)
     L += mi_section(found_mi, seeds)
     L += robustness_section(docs)
