@@ -139,12 +139,26 @@ void FolderWatch::readEvents(std::vector<FolderEvent>& out) {
   if (structural) resolveAll(&out);
 }
 
-std::vector<std::string> FolderWatch::listFiles(int i) const {
-  std::vector<std::string> names;
-  std::error_code ec;
-  for (fs::directory_iterator it(folders_[static_cast<std::size_t>(i)].path, ec), end; !ec && it != end; it.increment(ec))
-    if (it->is_regular_file(ec)) names.push_back(it->path().filename().string());
-  return names;
+FolderScan::FolderScan(const std::string& path) : dir_(opendir(path.c_str())) {}
+
+FolderScan::~FolderScan() {
+  if (dir_ != nullptr) closedir(dir_);
+}
+
+bool FolderScan::next(std::string_view& name) {
+  if (dir_ == nullptr) return false;
+  while (const dirent* e = readdir(dir_)) {  // nullptr: the end, or a read error (treated alike)
+    bool regular = e->d_type == DT_REG;
+    if (e->d_type == DT_UNKNOWN || e->d_type == DT_LNK) {
+      // The file system does not say, or a link: what it names (a link to a file counts).
+      struct stat st {};
+      regular = fstatat(dirfd(dir_), e->d_name, &st, 0) == 0 && S_ISREG(st.st_mode);
+    }
+    if (!regular) continue;
+    name = e->d_name;
+    return true;
+  }
+  return false;
 }
 
 }  // namespace nao

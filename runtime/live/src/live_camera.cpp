@@ -176,7 +176,7 @@ struct LiveCamera::Reader {
         if (ever_present[static_cast<std::size_t>(ev.folder)]) bump(counts.folder_back);
         ever_present[static_cast<std::size_t>(ev.folder)] = 1;
         // Files written before the watch was in place (the folder was made with them in it).
-        for (const std::string& name : watch.listFiles(ev.folder)) onFile(ev.folder, name, true, true, now);
+        scanFolder(ev.folder, now);
         break;
       case FolderEvent::Kind::kGone:
         bump(counts.folder_gone);
@@ -187,11 +187,17 @@ struct LiveCamera::Reader {
       case FolderEvent::Kind::kOverflow:
         bump(counts.watch_overflows);
         for (std::size_t c = 0; c < n_cam; ++c)
-          if (watch.present(static_cast<int>(c)))
-            for (const std::string& name : watch.listFiles(static_cast<int>(c)))
-              onFile(static_cast<int>(c), name, true, true, now);
+          if (watch.present(static_cast<int>(c))) scanFolder(static_cast<int>(c), now);
         break;
     }
+  }
+
+  // Every file in folder `c` now, as if just closed. One name at a time, kept by nobody: a folder
+  // that comes back holding an hour's frames (all older than the last processed frame, so each
+  // is looked at and let go) costs what one holding a second's does.
+  void scanFolder(int c, std::int64_t now) {
+    std::string_view name;
+    for (FolderScan scan = watch.scanFiles(c); scan.next(name);) onFile(c, name, true, true, now);
   }
 
   void restart() {
@@ -205,7 +211,7 @@ struct LiveCamera::Reader {
   }
 
   // A frame file was created or written (or found by a scan).
-  void onFile(int c, const std::string& name, bool complete, bool from_scan, std::int64_t now) {
+  void onFile(int c, std::string_view name, bool complete, bool from_scan, std::int64_t now) {
     const std::optional<long long> index = openPoseFrameIndex(name);
     if (!index) return;
     const auto cam = static_cast<std::size_t>(c);
@@ -220,7 +226,9 @@ struct LiveCamera::Reader {
     auto [it, inserted] = pending.try_emplace({c, *index});
     PendingFile& file = it->second;
     if (inserted) {
-      file.path = watch.path(c) + "/" + name;
+      file.path = watch.path(c);
+      file.path += '/';
+      file.path += name;
       file.first_seen_ns = now;
       file.next_try_ns = now + nanoseconds(cfg.retry_s);
     }

@@ -5,8 +5,11 @@
 // thread only): it allocates and makes system calls.
 #pragma once
 
+#include <dirent.h>
+
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <unordered_map>
 #include <vector>
 
@@ -26,6 +29,22 @@ struct FolderEvent {
   bool complete = false;  ///< kFile: the writer closed the file (or it was renamed into place)
 };
 
+/// The regular files of a folder, read one name at a time (readdir): nothing is kept but the
+/// current name, so scanning a folder of an hour's frames (~106,000 files at 30 fps) costs the
+/// memory a folder of one frame does. Empty when the folder cannot be opened.
+class FolderScan {
+ public:
+  explicit FolderScan(const std::string& path);
+  FolderScan(const FolderScan&) = delete;
+  FolderScan& operator=(const FolderScan&) = delete;
+  ~FolderScan();
+  /// The next regular file's name (valid until the next call or the scan's end); false at the end.
+  bool next(std::string_view& name);
+
+ private:
+  DIR* dir_ = nullptr;
+};
+
 class FolderWatch {
  public:
   /// Starts watching `folders` (made absolute and lexically normal). Throws std::runtime_error
@@ -43,8 +62,9 @@ class FolderWatch {
   bool present(int i) const { return folders_[static_cast<std::size_t>(i)].wd >= 0; }
   /// The folder's path as watched.
   const std::string& path(int i) const { return folders_[static_cast<std::size_t>(i)].path; }
-  /// Names of the regular files in folder `i` now (empty when it does not exist).
-  std::vector<std::string> listFiles(int i) const;
+  /// The regular files in folder `i` now, one at a time (none when it does not exist). A scan
+  /// holds no list of names: what it costs does not grow with the number of files.
+  FolderScan scanFiles(int i) const { return FolderScan(path(i)); }
 
  private:
   struct Folder {
