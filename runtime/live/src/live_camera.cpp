@@ -110,6 +110,7 @@ struct LiveCamera::Reader {
   const std::vector<Person2d> nobody;
   std::string text;
   std::vector<FolderEvent> events;
+  std::vector<long long> scan_newest;  // scanFolder: the newest indices of the folder (a min-heap)
   SkeletonFrame frame;
   LiveSkeleton record;
   std::thread thread;
@@ -118,6 +119,7 @@ struct LiveCamera::Reader {
       : owner(camera), cfg(camera.config_), counts(c), n_cam(cfg.dirs.size()), watch(cfg.dirs), parsed(n_cam),
         state(n_cam, CameraState::kWaiting), ever_present(n_cam, 0), last_parse_ns(n_cam, 0) {
     for (std::size_t i = 0; i < n_cam; ++i) ever_present[i] = watch.present(static_cast<int>(i)) ? 1 : 0;
+    scan_newest.reserve(maxFrames());
     resetLiveSkeleton(cfg.skeleton, cfg.fps, skeleton);
     stop_fd = eventfd(0, EFD_CLOEXEC | EFD_NONBLOCK);
     if (stop_fd < 0) throw std::runtime_error(std::string("live camera: eventfd: ") + std::strerror(errno));
@@ -192,12 +194,39 @@ struct LiveCamera::Reader {
     }
   }
 
-  // Every file in folder `c` now, as if just closed. One name at a time, kept by nobody: a folder
-  // that comes back holding an hour's frames (all older than the last processed frame, so each
-  // is looked at and let go) costs what one holding a second's does.
+  // Frames kept waiting at most: beyond them the oldest are skipped (processComplete).
+  std::size_t maxFrames() const { return static_cast<std::size_t>(std::ceil(4.0 * cfg.fps)) + 64; }
+
+  // Every file in folder `c` now that onFile would take, as if just closed; of them only the
+  // newest maxFrames() indices, as the older ones would be skipped unprocessed anyway (frames
+  // are kept to maxFrames(), oldest dropped first). Two passes of one name at a time, nothing
+  // kept but those indices: a folder that comes back holding an hour's frames costs what one
+  // holding a second's does, whether its frames are older than the last processed one (each is
+  // looked at and let go) or not (only the newest are read).
   void scanFolder(int c, std::int64_t now) {
+    const auto cam = static_cast<std::size_t>(c);
+    const std::size_t keep = maxFrames();
+    const auto newer = std::greater<long long>();  // a min-heap: front() is the oldest kept
     std::string_view name;
-    for (FolderScan scan = watch.scanFiles(c); scan.next(name);) onFile(c, name, true, true, now);
+    scan_newest.clear();
+    for (FolderScan scan = watch.scanFiles(c); scan.next(name);) {
+      const std::optional<long long> index = openPoseFrameIndex(name);
+      if (!index || parsed[cam].count(*index) || (any_processed && *index <= last_processed)) continue;
+      if (scan_newest.size() == keep && *index <= scan_newest.front()) continue;
+      if (std::find(scan_newest.begin(), scan_newest.end(), *index) != scan_newest.end()) continue;
+      if (scan_newest.size() == keep) {
+        std::pop_heap(scan_newest.begin(), scan_newest.end(), newer);
+        scan_newest.pop_back();
+      }
+      scan_newest.push_back(*index);
+      std::push_heap(scan_newest.begin(), scan_newest.end(), newer);
+    }
+    if (scan_newest.empty()) return;
+    const long long oldest = scan_newest.size() == keep ? scan_newest.front() : LLONG_MIN;
+    for (FolderScan scan = watch.scanFiles(c); scan.next(name);) {
+      const std::optional<long long> index = openPoseFrameIndex(name);
+      if (index && *index >= oldest) onFile(c, name, true, true, now);
+    }
   }
 
   void restart() {
@@ -309,7 +338,7 @@ struct LiveCamera::Reader {
 
   void processComplete(std::int64_t now) {
     // Frames no live camera completes (every camera waiting or gone) are not kept without bound.
-    const auto max_frames = static_cast<std::size_t>(std::ceil(4.0 * cfg.fps)) + 64;
+    const std::size_t max_frames = maxFrames();
     while (frames.size() > max_frames) {
       bump(counts.frames_skipped);
       frames.erase(frames.begin());
