@@ -19,6 +19,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <map>
 #include <set>
@@ -344,6 +345,51 @@ TEST_CASE("frame files already in a folder at start are ignored; a folder moved 
   }
   CHECK(c.files_parsed == 12);  // cam1's twelve, none of cam0's
   CHECK(c.folder_back == 0);    // a first appearance, not a return
+}
+
+TEST_CASE("a folder moved into place holding many frames has only its newest 4 s + 64 frames read, the ones that would be processed") {
+  const fs::path base = freshTestDir("many_moved_in");
+  const fs::path rec = shortRecording("many_moved_in_rec", Movement::kElbow, 0, 10);
+  const std::vector<std::string> cams = tools::demoCameraDirs(rec.string());
+  const std::vector<std::string> targets = rigFolders(base, 2);
+  // cam1's folder, made elsewhere: 1,990 files that never parse (an earlier session's, cut
+  // short), then the recording's 10 frames as indices 1990..1999.
+  const int n_old = 1990;
+  fs::create_directories(base / "staging");
+  const auto frameName = [](long long index) {
+    char name[64];
+    std::snprintf(name, sizeof name, "cam_%012lld_keypoints.json", index);
+    return std::string(name);
+  };
+  for (int k = 0; k < n_old; ++k) std::ofstream(base / "staging" / frameName(k));
+  std::vector<fs::path> frames;
+  for (const fs::directory_entry& e : fs::directory_iterator(cams[1])) frames.push_back(e.path());
+  std::sort(frames.begin(), frames.end());
+  REQUIRE(frames.size() == 10);
+  for (int k = 0; k < 10; ++k) fs::copy_file(frames[static_cast<std::size_t>(k)], base / "staging" / frameName(n_old + k));
+  fs::create_directories(targets[0]);
+  LiveCameraConfig cfg = liveConfigFor(rec, targets);
+  Collector collected;
+  collected.attach(cfg);
+  LiveCameraCounters c;
+  {
+    LiveCamera live(cfg);
+    sleepFor(0.1);
+    fs::rename(base / "staging", targets[1]);
+    CHECK(collected.waitFor(n_old + 9));
+    sleepFor(cfg.file_wait_s + 0.3);  // the unparsable ones given up
+    c = live.counters();
+  }
+  const auto kept = static_cast<std::uint64_t>(std::ceil(4.0 * cfg.fps)) + 64;  // frames kept waiting at most
+  MESSAGE("parsed " << c.files_parsed << ", malformed " << c.files_malformed << ", skipped " << c.frames_skipped);
+  CHECK(c.files_parsed == 10);
+  CHECK(c.files_malformed == kept - 10);  // of the 1,990 only the newest were tried
+  // The frames processed are those of reading every file: the newest max_catch_up_frames.
+  std::vector<long long> processed;
+  for (const LiveSkeleton& r : collected.records) processed.push_back(r.frame_index);
+  std::vector<long long> expected;
+  for (long long k = n_old + 10 - cfg.max_catch_up_frames; k < n_old + 10; ++k) expected.push_back(k);
+  CHECK(processed == expected);
 }
 
 TEST_CASE("the folder watch follows a folder whose parents do not exist yet, and reports it gone and back") {
