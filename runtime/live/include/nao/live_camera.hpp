@@ -7,7 +7,8 @@
 //  - watches the folders with inotify (nao/folder_watch.hpp): a folder and its parents need not
 //    exist at start and may appear later; a folder may disappear and come back. Files already
 //    in a folder when the source starts are an earlier session's and are ignored; files in a
-//    folder that appears later are read;
+//    folder that appears later are read (of many, the newest 4 s + 64 frames': older ones would
+//    be skipped anyway), by a scan that keeps no list of the folder's names;
 //  - parses each new frame file (nao/openpose_json.hpp) when its writer closes it, and retries
 //    a file that does not parse yet (half written: seen created or modified, not closed) every
 //    retry_s until file_wait_s after it appeared; then it is dropped and counted malformed;
