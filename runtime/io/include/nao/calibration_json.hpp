@@ -1,6 +1,6 @@
 // Camera calibration in our JSON (docs/formats.md "Calibration, our JSON"), read by nao_rt
 // (--calibration) and the toolchain alike. The toolchain also reads OpenCV/Anipose-style TOML
-// (toolchain/src/calibration.cpp, toml++): it converts each TOML camera table to JSON and
+// (toolchain/src/data/calibration.cpp, toml++): it converts each TOML camera table to JSON and
 // checks it with cameraFromJson, so both formats obey the same rules.
 //
 // Per camera: `size` [w, h] (px), `matrix` K (3x3, px), `distortions` (OpenCV k1 k2 p1 p2 [k3]),
