@@ -4,7 +4,7 @@
 // gradient against central differences; a whole unroll (stream + limiter + arm copy) against
 // nao_rt's controller driving the ODE arm; and the closed-loop loss's gradient reaching the net.
 // Also the trainer's on-policy options: each start's code as the runtime picks it, whole-run
-// segments, DAgger's expert labels and rounds, and selection's speed against the replay.
+// segments, and selection's speed against the replay.
 #include "arm_copy_torch.hpp"
 #include "closed_loop.hpp"
 #include "nao/controller.hpp"
@@ -13,7 +13,6 @@
 #include "nao/tools/arm_copy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
-#include "nao/tools/policy_execution.hpp"
 #include "policy_stream.hpp"
 #include "policy_train.hpp"
 #include "train_select.hpp"
@@ -524,7 +523,7 @@ TEST_CASE("the trainer pairs every start with the runtime's code: runCodeIndex w
   const ClosedLoopFixture f = closedLoopFixture();
   const std::vector<ModelRunCodes>& codes = f.source.codes;
   int differs_from_own_rule = 0;
-  // Every training start (its own demonstration's), then the closed loop's and DAgger's other starts.
+  // Every training start (its own demonstration's), then the closed loop's other starts.
   REQUIRE(f.cl.own.size() == data.demos.size());
   for (const ClosedLoopRun& own : f.cl.own) {
     const ModelRunCodes& c = codes[static_cast<std::size_t>(own.movement)];
@@ -540,21 +539,6 @@ TEST_CASE("the trainer pairs every start with the runtime's code: runCodeIndex w
   o.starts = 4;
   for (const ClosedLoopRun& r : closedLoopEpochRuns(data, f.cl, sim(), kPeriod, o, 1, 3))
     CHECK(r.code == runCodeIndex(codes[static_cast<std::size_t>(r.movement)], r.start, r.source_code));
-  DaggerOptions d;
-  d.starts = 4;
-  const std::vector<LabelledRun> runs = daggerRuns(data, f.cl, sim(), d, 1, 2);
-  REQUIRE(runs.size() == 4 * data.demos.size());
-  for (std::size_t i = 0; i < runs.size(); ++i) {
-    const LabelledRun& r = runs[i];
-    const auto m = static_cast<std::size_t>(r.movement);
-    CHECK(r.code == runCodeIndex(codes[m], r.start, r.source_code));
-    // It is labelled toward its code's demonstration, for as long as that one lasts.
-    CHECK(data.demos[static_cast<std::size_t>(r.demo)].name == codes[m].names[static_cast<std::size_t>(r.code)]);
-    CHECK(r.ticks == static_cast<int>(data.demos[static_cast<std::size_t>(r.demo)].f.size()) - 1);
-    if (i < f.cl.own.size()) CHECK(r.start == f.cl.own[i].start);  // first the training starts themselves
-  }
-  // Another round draws other starts.
-  CHECK((daggerRuns(data, f.cl, sim(), d, 1, 3).back().start - runs.back().start).norm() > 0.0);
 }
 
 TEST_CASE("whole runs: every run's segment lies in its own length and reaches its end; per-run starts give each run its loss alone") {
@@ -611,108 +595,6 @@ TEST_CASE("whole runs: every run's segment lies in its own length and reaches it
   const ClosedLoopLoss single = closedLoopLoss(*f.net, latent.get(), f.train, f.cl, sim(), kPeriod, both, 3, horizon, o);
   CHECK(same.loss.item<double>() == single.loss.item<double>());
   CHECK(same.ticks == single.ticks);
-}
-
-TEST_CASE("DAgger's labels are the executed demonstrations' expert from the states the policy reached") {
-  const PolicyData& data = test::smallData();
-  ExecutionOptions e;
-  e.noisy_rollouts = 0;
-  const int d = 5;
-  const PolicyDemo& demo = data.demos[static_cast<std::size_t>(d)];
-  const PolicySequence clean = executeDemos(data, {d}, sim(), e, 1).front();
-  const int ticks = static_cast<int>(demo.f.size()) - 1;
-  SimData sim_data(sim(), JointVector::Zero());
-  // A policy that plays the expert's own labels reaches the clean execution's states, and is
-  // labelled as it was.
-  const RolloutPolicy expert = [&](int, int t, const JointVector&, const JointVector&, const JointVector&) {
-    return JointVector(clean.a[static_cast<std::size_t>(t)]);
-  };
-  const PolicySequence same = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, expert, nullptr, e);
-  REQUIRE(same.ticks() == clean.ticks());
-  double worst_q = 0.0, worst_a = 0.0;
-  for (std::size_t t = 0; t < same.ticks(); ++t) {
-    worst_q = std::max(worst_q, (same.q[t] - clean.q[t]).cwiseAbs().maxCoeff());
-    worst_a = std::max(worst_a, (same.a[t] - clean.a[t]).cwiseAbs().maxCoeff());
-  }
-  CHECK(worst_q < 1e-9);
-  CHECK(worst_a < 1e-9);
-  CHECK(same.movement == demo.movement);
-  // A policy that moves half as far: the states fall behind, and the labels are the expert's from
-  // there, toward the same next poses.
-  const RolloutPolicy lagging = [&](int, int t, const JointVector&, const JointVector&, const JointVector&) {
-    return JointVector(0.5 * clean.a[static_cast<std::size_t>(t)]);
-  };
-  const PolicySequence behind = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, lagging, nullptr, e);
-  REQUIRE(behind.ticks() == clean.ticks());
-  CHECK(behind.a.front() == clean.a.front());  // the same state at the start
-  double apart = 0.0;
-  int relabelled = 0;
-  for (std::size_t t = 0; t < behind.ticks(); ++t) {
-    apart = std::max(apart, (behind.q[t] - clean.q[t]).cwiseAbs().maxCoeff());
-    CHECK(behind.r[t] == clampToLimits(arm(), demo.f[t + 1]) - behind.q[t]);
-    relabelled += (behind.a[t] - clean.a[t]).cwiseAbs().maxCoeff() > 1e-6;
-    // The policy's action was applied, not the label.
-    if (t > 0) CHECK((behind.a_prev[t] - 0.5 * clean.a[t - 1]).cwiseAbs().maxCoeff() < 1e-9);
-  }
-  CHECK(apart > 0.01);  // not vacuous: the lagging policy went elsewhere
-  CHECK(relabelled > static_cast<int>(behind.ticks()) / 2);
-  // From the run's own phase: the expert playing itself keeps its phase on the tick (the same
-  // labels), and a policy that holds its start is asked, once the demonstration's own rest at
-  // the start has passed, for the first sample that leaves it, tick after tick, where the
-  // same-tick labels chase f(t+1).
-  const PolicySequence phased = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, expert, nullptr, e, 4);
-  REQUIRE(phased.ticks() == clean.ticks());
-  for (std::size_t t = 0; t < phased.ticks(); ++t) CHECK(phased.r[t] == same.r[t]);
-  const JointVector hold = clampToLimits(arm(), demo.f.front());
-  const RolloutPolicy still = [&](int, int, const JointVector& q, const JointVector&, const JointVector&) {
-    return JointVector(hold - q);
-  };
-  std::size_t rest = 0;  // the last sample of the demonstration's rest at its start
-  while (rest + 1 < demo.f.size() && (clampToLimits(arm(), demo.f[rest + 1]) - hold).norm() <= 1e-4) ++rest;
-  REQUIRE(rest + 10 < static_cast<std::size_t>(ticks));
-  const PolicySequence held = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, still, nullptr, e, 4);
-  const PolicySequence chased = executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, still, nullptr, e);
-  const JointVector first_move = clampToLimits(arm(), demo.f[rest + 1]);
-  int toward_first_move = 0;
-  for (std::size_t t = 0; t < held.ticks(); ++t) {
-    CHECK((held.q[t] - hold).cwiseAbs().maxCoeff() < 1e-3);  // it did stay
-    if (t >= rest) toward_first_move += (held.q[t] + held.r[t] - first_move).cwiseAbs().maxCoeff() < 1e-12;
-    CHECK(chased.r[t] == clampToLimits(arm(), demo.f[t + 1]) - chased.q[t]);
-  }
-  CHECK(toward_first_move == static_cast<int>(held.ticks() - rest));
-  CHECK_THROWS_AS(executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, still, nullptr, e, -1), UserError);
-  CHECK_THROWS_AS(executeLabelled(sim(), sim_data, demo.f, demo.f.front(), ticks, demo.movement, still, nullptr, e, 64), UserError);
-}
-
-TEST_CASE("DAgger training: deterministic, aggregates the net's labelled runs round by round, another result than teacher forcing") {
-  torch::set_num_threads(1);
-  TrainOptions tf = test::smallOptions(91, 2);
-  tf.conditioning = Conditioning::kAutonomous;
-  tf.latent_dims = 4;
-  tf.arch.chunk = 3;
-  tf.select_by_rollout = true;
-  TrainOptions o = tf;
-  o.dagger.iterations = 2;
-  o.dagger.epochs = 1;
-  o.dagger.starts = 2;
-  TrainResult r;
-  const std::vector<std::uint8_t> a = test::trainBytes(o, &r), teacher = test::trainBytes(tf);
-  CHECK_MESSAGE(a == test::trainBytes(o), "two DAgger runs with one seed gave different bytes");
-  CHECK_MESSAGE(a != teacher, "the DAgger epochs changed nothing");
-  REQUIRE(r.history.size() == 4);
-  // Each round adds the net's runs: 2 per training demonstration, each as long as its code's demonstration.
-  CHECK(r.history[2].samples > r.history[1].samples);
-  CHECK(r.history[3].samples > r.history[2].samples);
-  CHECK(r.best_epoch > 2);  // a DAgger epoch is kept
-  const nlohmann::json meta = nlohmann::json::parse(decodeModel(a, "dagger.bin").header.metadata_json)["training"];
-  CHECK(meta["dagger"]["iterations"] == 2);
-  CHECK_FALSE(nlohmann::json::parse(decodeModel(teacher, "tf.bin").header.metadata_json)["training"].contains("dagger"));
-  TrainOptions reference = o;
-  reference.conditioning = Conditioning::kReference;
-  reference.latent_dims = 0;
-  reference.select_by_rollout = false;
-  CHECK_THROWS_WITH_AS(trainPolicy(test::smallData(), test::smallSim(), reference, nullptr), doctest::Contains("autonomous"),
-                       UserError);
 }
 
 TEST_CASE("selection's speed against the replay: a run that is its medoid replay moves at exactly 1") {

@@ -1,8 +1,6 @@
 // Executing demonstrations on the simulated arm (docs/policy.md "Data"): the expert that labels
 // every tick with the command ending it on f(t+1), the clean and noisy executions of the training
 // data, and a policy's runs from the demonstrations' starts.
-#include "nao/tools/policy_execution.hpp"
-
 #include "nao/tools/command.hpp"
 #include "nao/robot_backend.hpp"
 #include "nao/rollout.hpp"
@@ -10,11 +8,9 @@
 #include "nao/tools/splitmix.hpp"
 
 #include <algorithm>
-#include <array>
 #include <atomic>
 #include <cmath>
 #include <exception>
-#include <limits>
 #include <mutex>
 #include <ostream>
 #include <thread>
@@ -193,78 +189,6 @@ std::vector<PolicySequence> executeDemos(const PolicyData& data, const std::vect
   for (std::thread& t : pool) t.join();
   if (failure) std::rethrow_exception(failure);
   return out;
-}
-
-namespace {
-
-// Joint-space distances this close count as equal when the phase is tracked: below the joint
-// encoders' resolution (12 bits a turn, 1.5 mrad).
-constexpr double kPhaseTieRad = 1e-3;
-
-std::size_t absDiff(std::size_t a, std::size_t b) { return a > b ? a - b : b - a; }
-
-}  // namespace
-
-PolicySequence executeLabelled(const SimModel& sim_model, SimData& sim, const std::vector<JointVector>& f,
-                               const JointVector& start, int ticks, int movement, const RolloutPolicy& policy,
-                               const JointEnvelope* workspace, const ExecutionOptions& o, int phase_window) {
-  if (!policy) throw UserError("execution: no policy to roll out");
-  if (f.empty()) throw UserError("execution: an empty demonstration to label toward");
-  if (o.expert_iterations < 1) throw UserError("execution: expert_iterations must be at least 1");
-  if (phase_window < 0 || phase_window > 63) throw UserError("execution: the phase window must be 0 .. 63");
-  const ArmModel& arm = sim_model.arm;
-  const double period = tickPeriod(sim_model);
-  PolicySequence s;
-  s.movement = movement;
-  OdeArmBackend robot(sim_model, sim);
-  resetSim(sim_model, sim, start);
-  SimSnapshot snap;
-  CommandStep step;
-  JointVector q = sim.q, a_prev = JointVector::Zero();
-  const std::size_t last = f.size() - 1;
-  std::size_t phase = 0;  // the demonstration's sample the run is at (phase_window > 0)
-  for (int t = 0; t < ticks; ++t) {
-    std::size_t next = std::min<std::size_t>(static_cast<std::size_t>(t) + 1, last);
-    if (phase_window > 0) {
-      // The nearest sample (joint space) of the next phase_window + 1 from where the run was: the
-      // label continues the demonstration from there instead of catching up with tick t's.
-      // Samples within kPhaseTieRad of the nearest distance are tied (a rest, or a path that
-      // turns back on itself), and the tie goes to the one the demonstration's own pace reaches
-      // next, so a run that plays its demonstration keeps the same-tick labels.
-      const std::size_t end = std::min(last, phase + static_cast<std::size_t>(phase_window));
-      std::array<double, 64> dist{};
-      double nearest = std::numeric_limits<double>::infinity();
-      for (std::size_t k = phase; k <= end; ++k) {
-        dist[k - phase] = (q - clampToLimits(arm, f[k])).norm();
-        nearest = std::min(nearest, dist[k - phase]);
-      }
-      const std::size_t paced = t == 0 ? phase : std::min(phase + 1, end);  // at tick t the pace is at sample t
-      std::size_t pick = end + 1;
-      for (std::size_t k = phase; k <= end; ++k)
-        if (dist[k - phase] <= nearest + kPhaseTieRad &&
-            (pick > end || absDiff(k, paced) < absDiff(pick, paced)))
-          pick = k;
-      phase = pick;
-      next = std::min(phase + 1, last);
-    }
-    const JointVector target = clampToLimits(arm, f[next]);
-    // The expert's label from the state the policy reached (the arm left as it was).
-    JointVector lo, hi;
-    double miss = 0.0;
-    commandBounds(sim_model, q, lo, hi);
-    captureSim(sim, snap);
-    const JointVector c_expert = expertCommand(sim_model, sim, snap, target, lo, hi, o, miss);
-    s.worst_miss_rad = std::max(s.worst_miss_rad, miss);
-    s.q.push_back(q);
-    s.a_prev.push_back(a_prev);
-    s.r.push_back(target - q);
-    s.a.push_back(c_expert - q);
-    // The policy's own action moves the arm, as the controller's tick applies it (expertCommand
-    // left the arm where it was).
-    q = rolloutStep(arm, period, robot, policy(movement, t, q, a_prev, target - q), step, workspace);
-    a_prev = step.a_applied;
-  }
-  return s;
 }
 
 std::vector<PolicyRun> rolloutPolicy(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim_model,

@@ -112,23 +112,6 @@ std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const Clo
   return runs;
 }
 
-std::vector<LabelledRun> daggerRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
-                                    const DaggerOptions& o, std::uint64_t seed, int round) {
-  std::vector<LabelledRun> runs;
-  // Seeded apart from the closed loop's epochs (closedLoopStarts keys by epoch).
-  for (const ClosedLoopStart& st : closedLoopStarts(cl, o.starts, o.perturb_rad, splitMix64(seed ^ 0xda66e5ull), round)) {
-    LabelledRun r;
-    r.movement = st.movement;
-    r.start = clampToLimits(sim.arm, st.start);
-    r.source_code = st.source_code;
-    r.code = closedLoopCode(cl, st.movement, r.start, st.source_code);
-    r.demo = cl.code_demo[static_cast<std::size_t>(st.movement)][static_cast<std::size_t>(r.code)];
-    r.ticks = static_cast<int>(data.demos[static_cast<std::size_t>(r.demo)].f.size()) - 1;
-    runs.push_back(r);
-  }
-  return runs;
-}
-
 int closedLoopHorizon(const ClosedLoopOptions& o, int k) { return o.horizon + (k - 1) * o.horizon_growth; }
 
 int closedLoopSegmentStart(const std::vector<const ClosedLoopRun*>& runs, int horizon, std::uint64_t key) {

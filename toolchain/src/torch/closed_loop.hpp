@@ -47,27 +47,6 @@ struct ClosedLoopOptions {
   bool enabled() const { return epochs > 0; }
 };
 
-/// DAgger (TrainOptions::dagger, docs/autonomous.md): after the teacher-forced epochs, `iterations`
-/// rounds of: the net (the kept weights, the runtime's own step, no gradient) run on the simulated
-/// arm from `starts` starts per training demonstration (its own, perturbed, between two: as the
-/// closed loop draws them), each with the run code the runtime gives it there and for as long as
-/// that code's demonstration; every state it reaches labelled by the executed demonstrations'
-/// expert toward that demonstration; the labelled runs added to the training sequences (their run
-/// latent read from the code's demonstration); then `epochs` teacher-forced epochs over them all.
-/// Recipe-only options ("dagger-iterations", "dagger-epochs", "dagger-starts", "dagger-lr",
-/// "dagger-phase-window").
-struct DaggerOptions {
-  int iterations = 0;        ///< rounds of rolling out, labelling and training (0: none)
-  int epochs = 2;            ///< teacher-forced epochs per round
-  int starts = 3;            ///< runs per training demonstration and round
-  double lr = 0.0;           ///< Adam, a fresh optimiser from the kept teacher-forced weights (0: the teacher-forced lr)
-  double perturb_rad = 0.05; ///< σ of a perturbed start, per joint
-  /// Labels toward the demonstration from the run's own phase (executeLabelled's phase_window;
-  /// 0: toward its sample of the same tick).
-  int phase_window = 0;
-  bool enabled() const { return iterations > 0; }
-};
-
 /// One closed-loop rollout and its target.
 struct ClosedLoopRun {
   int movement = 0;
@@ -135,12 +114,6 @@ std::vector<ClosedLoopStart> closedLoopStarts(const ClosedLoopData& cl, int star
 std::vector<ClosedLoopRun> closedLoopEpochRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
                                                double period_s, const ClosedLoopOptions& o, std::uint64_t seed,
                                                int epoch);
-
-/// DAgger round `round`'s runs (1-based): the starts of closedLoopStarts (seeded by (seed, round)
-/// apart from the closed loop's), each with the code closedLoopCode gives it and for as many ticks
-/// as that code's demonstration has successors, labelled toward it (LabelledRun::demo).
-std::vector<LabelledRun> daggerRuns(const PolicyData& data, const ClosedLoopData& cl, const SimModel& sim,
-                                    const DaggerOptions& o, std::uint64_t seed, int round);
 
 /// The horizon of closed-loop epoch k (1-based): horizon + (k − 1) · horizon_growth ticks.
 int closedLoopHorizon(const ClosedLoopOptions& o, int k);

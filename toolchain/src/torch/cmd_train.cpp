@@ -40,7 +40,6 @@ struct TrainArgs {
   double latent_kl = 1e-2;
   double ema = 0.0;
   ClosedLoopOptions closed_loop;
-  DaggerOptions dagger;
   bool select_speed_vs_replay = false;
 };
 
@@ -96,7 +95,6 @@ void run(const TrainArgs& a) {
   o.latent_kl = a.latent_kl;
   o.ema_decay = a.ema;
   o.closed_loop = a.closed_loop;
-  o.dagger = a.dagger;
   if (a.window > 0) o.arch.window = a.window;
   if (a.chunk > 0) o.arch.chunk = a.chunk;
   o.dist.world_size = a.world_size;
@@ -239,7 +237,7 @@ RecipeSetter recipeFlag(bool& field) {
 }
 
 // The training options a recipe file may set that have no command-line flag: the training
-// method's (execution, head, latent, averaging, closed loop, DAgger, selection's speed bar). A
+// method's (execution, head, latent, averaging, closed loop, selection's speed bar). A
 // recipe names them and `train --help` does not grow with them; docs/training.md lists them all,
 // docs/autonomous.md says what the on-policy ones do.
 std::map<std::string, RecipeSetter> recipeOnlyOptions(TrainArgs& a) {
@@ -269,12 +267,6 @@ std::map<std::string, RecipeSetter> recipeOnlyOptions(TrainArgs& a) {
   o["closed-loop-action-weight"] = recipeNumber(a.closed_loop.action_weight, 0.0, 1e6, "0..1e6");
   // Whole runs: each closed-loop run's segment from a tick of its own, up to its end.
   o["closed-loop-whole-runs"] = recipeFlag(a.closed_loop.whole_runs);
-  // DAgger (closed_loop.hpp DaggerOptions).
-  o["dagger-iterations"] = recipeInt(a.dagger.iterations, 0, 1000);
-  o["dagger-epochs"] = recipeInt(a.dagger.epochs, 1, 100000);
-  o["dagger-starts"] = recipeInt(a.dagger.starts, 1, 1000);
-  o["dagger-lr"] = recipePositive(a.dagger.lr);
-  o["dagger-phase-window"] = recipeInt(a.dagger.phase_window, 0, 63);
   // "replay": the rollout selection's speed bar on each run's speed over its medoid replay's.
   o["select-speed"] = [&a](const std::string& v) {
     if (v != "replay" && v != "demonstrations") throw UserError("'" + v + "' is not replay or demonstrations");
@@ -436,7 +428,7 @@ void setup(CLI::App& app) {
                   "A recipe file (models/recipes/<name>.json): every training option of a committed model, as "
                   "{\"train\": {\"<option>\": value, ...}}; an option also given here on the command line takes "
                   "the command line's value. The training method's options (noisy rollouts, chunk, run latent, "
-                  "weight average, closed loop, DAgger) are set only in a recipe: docs/training.md, "
+                  "weight average, closed loop) are set only in a recipe: docs/training.md, "
                   "docs/autonomous.md")
       ->check(CLI::ExistingFile);
   cmd->callback([cmd, args, recipe] {

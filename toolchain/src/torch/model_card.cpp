@@ -84,12 +84,6 @@ std::string modelMetadata(const PolicyData& data, const TrainOptions& o, const T
                         {"action_weight", cl.action_weight}};
     if (cl.whole_runs) t["closed_loop"]["whole_runs"] = true;
   }
-  if (o.dagger.enabled()) {
-    const DaggerOptions& d = o.dagger;
-    t["dagger"] = {{"iterations", d.iterations}, {"epochs", d.epochs}, {"starts", d.starts},
-                   {"lr", d.lr > 0.0 ? d.lr : o.lr},  {"perturb_rad", d.perturb_rad}};
-    if (d.phase_window > 0) t["dagger"]["phase_window"] = d.phase_window;
-  }
   t["law_gain"] = r.law_gain;
   t["starts"] = o.conditioning == Conditioning::kAutonomous ? "each demonstration's retargeted first pose"
                                                             : "the first key pose";
@@ -274,21 +268,11 @@ std::string modelCard(const PolicyData& data, const TrainOptions& o, const Train
       << c.horizon_growth << " per epoch, each batch's from a seeded tick after the target's own history "
       << "(docs/autonomous.md) |\n";
   }
-  if (o.dagger.enabled()) {
-    const DaggerOptions& d = o.dagger;
-    s << "| DAgger | after the " << o.max_epochs << " teacher-forced epochs, " << d.iterations << " rounds of: the net "
-      << "run on the simulated arm (the runtime's step) from " << d.starts << " starts per training demonstration (its "
-      << "own, perturbed by " << d.perturb_rad << " rad, between it and another's), each with the run code nao_rt "
-      << "gives it there and as long as that code's demonstration, every state labelled by the expert toward it"
-      << (d.phase_window > 0 ? " from the run's own phase (the nearest of the next " + std::to_string(d.phase_window + 1) + " samples), " : ", ")
-      << "added to the training sequences; then " << d.epochs << " teacher-forced epochs over them all (Adam lr "
-      << (d.lr > 0.0 ? d.lr : o.lr) << ") (docs/autonomous.md) |\n";
-  }
   if (o.closed_loop.enabled() && o.closed_loop.whole_runs)
     s << "| closed-loop segments | whole runs: each run's segment from a seeded tick of its own, up to its end |\n";
   s << "| seed | " << o.seed << " |\n";
   s << "| epochs | " << r.history.size() << " run (cap "
-    << o.max_epochs + o.closed_loop.epochs + (o.dagger.enabled() ? o.dagger.iterations * o.dagger.epochs : 0) << ", patience "
+    << o.max_epochs + o.closed_loop.epochs << ", patience "
     << o.patience << "), best " << r.best_epoch << " (exported) |\n";
   if (o.select_by_rollout && o.closed_loop.enabled() && o.latent_dims > 0) {
     s << "| model selection | after every epoch the net (the runtime's streaming inference) is rolled out on the "

@@ -68,10 +68,6 @@ struct TrainOptions {
   /// Autonomous: after the max_epochs teacher-forced epochs (all of them: patience then counts
   /// in this phase only), closed-loop epochs from the kept weights (closed_loop.hpp).
   ClosedLoopOptions closed_loop;
-  /// Autonomous: DAgger rounds after the teacher-forced epochs, before any closed-loop epochs
-  /// (closed_loop.hpp); patience then counts from the first of them. One rank, not resumed past
-  /// the teacher-forced epochs.
-  DaggerOptions dagger;
 };
 
 /// How the rollouts of one movement went (train_select.hpp): medians over its validation

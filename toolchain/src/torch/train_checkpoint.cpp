@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cstdio>
 #include <sstream>
-#include <string>
 
 namespace nao::tools {
 
@@ -38,10 +37,6 @@ std::string checkpointKey(const TrainOptions& o, std::uint64_t fingerprint, bool
       << " horizon " << c.horizon << " + " << c.horizon_growth << " starts " << c.starts << " perturb " << c.perturb_rad << " clip "
       << c.grad_clip << " hand " << c.hand_weight << " limit " << c.limit_weight << " action " << c.action_weight
       << (c.whole_runs ? " whole runs" : "");
-  const DaggerOptions& d = o.dagger;
-  if (d.enabled() && !teacher_forced_only)
-    k << "; dagger after " << o.max_epochs << ": " << d.iterations << " x " << d.epochs << " starts " << d.starts << " lr "
-      << d.lr << " perturb " << d.perturb_rad << (d.phase_window > 0 ? " phase " + std::to_string(d.phase_window) : "");
   return k.str();
 }
 

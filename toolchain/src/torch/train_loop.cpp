@@ -90,18 +90,6 @@ void check(const PolicyData& data, const TrainOptions& o) {
         !(c.action_weight >= 0.0))
       throw UserError("closed-loop perturbation, clip and loss weights must not be negative");
   }
-  const DaggerOptions& d = o.dagger;
-  if (d.iterations < 0) throw UserError("DAgger iterations must not be negative (0: none)");
-  if (d.enabled()) {
-    if (o.conditioning != Conditioning::kAutonomous)
-      throw UserError("DAgger is for autonomous mode (a reference-mode run follows a human)");
-    if (d.epochs < 1 || d.starts < 1) throw UserError("DAgger needs at least 1 epoch and 1 start per round");
-    if (!(d.lr >= 0.0) || !(d.perturb_rad >= 0.0)) throw UserError("DAgger's learning rate and perturbation must not be negative");
-    if (o.dist.world_size > 1) throw UserError("DAgger trains on one rank");
-    if (!hasRuntimeStep(o.arch))
-      throw UserError("DAgger rolls the net out through the runtime's step, compiled here for the paper and small "
-                      "dimensions only");
-  }
   if (o.select_by_rollout && !hasRuntimeStep(o.arch))
     throw UserError("model selection on rollouts needs the runtime's step, compiled here for the paper and small "
                     "dimensions only (d_model, heads, layers, FFN, window; toolchain_dims.hpp): select by validation "
@@ -256,9 +244,6 @@ void resumeFrom(const TrainOptions& o, const std::string& key, TrainState& s, Tr
   }
   s.first_epoch = static_cast<int>(res.history.size()) + 1;
   res.resumed_after = s.first_epoch - 1;
-  // DAgger's aggregated runs are not in a checkpoint: it resumes after the teacher-forced epochs only.
-  if (o.dagger.enabled() && s.first_epoch > o.max_epochs + 1)
-    throw UserError("checkpoint " + o.resume + " is past the teacher-forced epochs: a DAgger run resumes from those only");
   if (s.first_epoch > o.max_epochs + 1)  // the checkpoint's optimiser is the closed-loop one
     static_cast<torch::optim::AdamOptions&>(s.optimiser->param_groups()[0].options()).lr(o.closed_loop.lr);
 }
@@ -274,10 +259,6 @@ struct Loop {
   const SequenceTensors& train;
   const ClosedLoopData& cl;
   double period_s;
-  /// Per training sequence, the sequence whose run the latent reads (empty: each its own; DAgger's
-  /// runs read their code's demonstration).
-  const std::vector<std::size_t>& latent_source;
-  int closed_loop_after;  ///< epochs before the first closed-loop one (teacher-forced and DAgger)
 };
 
 // One optimiser step on the gradient of the global batch's summed loss / global_ticks (each rank
@@ -312,54 +293,12 @@ double samplesPerSecond(const std::vector<EpochStats>& history) {
 
 // The closed-loop phase starts from the kept teacher-forced weights with a fresh optimiser and a
 // fresh moving average.
-void startPhase(double lr, TrainState& s) {
+void startClosedLoop(const TrainOptions& o, TrainState& s) {
   keepBest(s);
   torch::NoGradGuard no_grad;
-  s.optimiser = std::make_unique<torch::optim::Adam>(s.params, torch::optim::AdamOptions(lr));
+  s.optimiser = std::make_unique<torch::optim::Adam>(s.params, torch::optim::AdamOptions(o.closed_loop.lr));
   for (std::size_t i = 0; i < s.ema.size(); ++i) s.ema[i] = s.params[i].detach().clone();
   s.ema_steps = 0;
-}
-
-void startClosedLoop(const TrainOptions& o, TrainState& s) { startPhase(o.closed_loop.lr, s); }
-
-// DAgger round `round`: the net's runs (its scored weights: the moving average where there is
-// one) from the round's starts with the codes the runtime gives them, labelled by the expert,
-// added to the training sequences; their latent reads their code's demonstration.
-void aggregateDagger(const Loop& L, TrainState& s, SequenceTensors& train, std::vector<std::size_t>& latent_source,
-                     RunCodeSource& codes, int round, std::ostream* progress) {
-  const Clock::time_point t0 = Clock::now();
-  if (latent_source.empty())
-    for (std::size_t i = 0; i < train.size(); ++i) latent_source.push_back(i);
-  L.net->eval();
-  s.swapAverage();
-  if (L.latent) updateRunCodes(codes, train, *L.latent);
-  const std::vector<LabelledRun> runs = daggerRuns(L.data, L.cl, L.sim, L.o.dagger, L.o.seed, round);
-  std::vector<PolicySequence> seqs = labelledNetRuns(L.data, runs, L.sim, L.net, codes.codes, L.o.execution,
-                                                        L.o.dagger.phase_window);
-  s.swapAverage();
-  L.net->train();
-  for (std::size_t i = 0; i < seqs.size(); ++i) {
-    seqs[i].rollout = -round;  // not a clean rollout (0), whose codes are the run codes
-    const LabelledRun& r = runs[i];
-    latent_source.push_back(L.cl.code_seq[static_cast<std::size_t>(r.movement)][static_cast<std::size_t>(r.code)]);
-  }
-  const SequenceTensors add = toTensors(L.net, seqs);
-  for (std::size_t i = 0; i < add.size(); ++i) {
-    train.qn.push_back(add.qn[i]);
-    train.an.push_back(add.an[i]);
-    train.rn.push_back(add.rn[i]);
-    train.target.push_back(add.target[i]);
-    train.action.push_back(add.action[i]);
-    train.r.push_back(add.r[i]);
-    train.movement.push_back(add.movement[i]);
-  }
-  train.ticks += add.ticks;
-  if (progress) {
-    char line[200];
-    std::snprintf(line, sizeof line, "dagger round %d: %zu runs (%zu ticks) labelled in %.0f s; %zu training sequences",
-                  round, seqs.size(), tickCount(seqs), secondsSince(t0), train.size());
-    *progress << line << std::endl;
-  }
 }
 
 // An epoch's sums over its batches (all ranks' once summed).
@@ -404,7 +343,7 @@ struct LiveLine {
 EpochSums closedLoopEpoch(const Loop& L, TrainState& s, int epoch, LiveLine& live) {
   const TrainOptions& o = L.o;
   EpochSums sums;
-  const int k_cl = epoch - L.closed_loop_after;
+  const int k_cl = epoch - o.max_epochs;
   const std::vector<ClosedLoopRun> runs = closedLoopEpochRuns(L.data, L.cl, L.sim, L.period_s, o.closed_loop, o.seed, k_cl);
   const int horizon = closedLoopHorizon(o.closed_loop, k_cl);
   std::vector<std::size_t> order =
@@ -506,9 +445,7 @@ EpochSums teacherForcedEpoch(const Loop& L, TrainState& s, int epoch, LiveLine& 
                                                         static_cast<std::uint64_t>(k)),
                          torch::kFloat32)
                 .slice(0, lo, hi);
-        std::vector<std::size_t> source;
-        for (std::size_t i : index) source.push_back(L.latent_source.empty() ? i : L.latent_source[i]);
-        const RunLatentImpl::Draw draw = L.latent->forward(source == index ? p : pad(train, source), eps);
+        const RunLatentImpl::Draw draw = L.latent->forward(p, eps);
         p.in.z = draw.z_embedded;
         kl = o.latent_kl * (draw.kl * p.mask.sum(1)).sum();
       }
@@ -530,7 +467,7 @@ std::string epochLine(const EpochStats& st, const EpochStats& best_stats, int be
   const bool closed_loop = std::isfinite(st.closed_loop_hand_rms_m);
   char line[320];
   std::string text;  // the per-movement scores have no length bound: kept out of the buffer
-  const std::string phase = closed_loop ? "closed loop " : st.epoch > o.max_epochs ? "dagger " : "";
+  const std::string phase = closed_loop ? "closed loop " : "";
   if (o.select_by_rollout) {
     std::string moves;
     for (std::size_t m = 0; m < st.rollouts.size(); ++m) {
@@ -617,22 +554,17 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
   const double period_s = ControllerParams{}.period_s;
   // The codes a run takes at run time (model.bin's "run_codes"), scored with every epoch; the
   // closed-loop phase picks its rollouts' codes and targets from their starts and DTW tables.
-  // DAgger's runs take their codes and targets the same way.
-  const bool on_policy = o.closed_loop.enabled() || o.dagger.enabled();
+  const bool on_policy = o.closed_loop.enabled();
   RunCodeSource codes;
   if (latent || on_policy) codes = runCodeSource(data, x.train, sim.arm, o.arch.d_model);
   ClosedLoopData cl;
   if (on_policy) cl = closedLoopData(data, codes, sim, period_s, ControllerParams{}.workspace_margin_rad);
-  std::vector<std::size_t> latent_source;
   s.optimiser = std::make_unique<torch::optim::Adam>(s.params, torch::optim::AdamOptions(o.lr));
   if (o.ema_decay > 0.0)
     for (const torch::Tensor& p : s.params) s.ema.push_back(p.detach().clone());
   s.best_stats.rollout_dtw_m = std::numeric_limits<double>::quiet_NaN();
   s.best_stats.val_loss = std::numeric_limits<double>::infinity();
-  // Epochs max_epochs + 1 .. closed_loop_after are DAgger's, closed_loop_after + 1 .. last_epoch
-  // closed-loop ones.
-  const int closed_loop_after = o.max_epochs + (o.dagger.enabled() ? o.dagger.iterations * o.dagger.epochs : 0);
-  const int last_epoch = closed_loop_after + o.closed_loop.epochs;
+  const int last_epoch = o.max_epochs + o.closed_loop.epochs;
   if (!o.resume.empty()) resumeFrom(o, key, s, res);
   if (group) {
     // Ranks that disagree would call different collectives: refuse before the first batch.
@@ -652,18 +584,13 @@ TrainResult trainPolicy(const PolicyData& data, const SimModel& sim, const Train
     if (!on_policy) return epoch - res.best_epoch >= o.patience;
     return epoch > o.max_epochs && epoch - std::max(res.best_epoch, o.max_epochs) >= o.patience;
   };
-  const Loop L{data, sim, o, group.get(), net, latent, train, cl, period_s, latent_source, closed_loop_after};
+  const Loop L{data, sim, o, group.get(), net, latent, train, cl, period_s};
 
   const bool done_before = !res.history.empty() && stopsAfter(res.history.back().epoch);
   for (int epoch = s.first_epoch; epoch <= last_epoch && !done_before; ++epoch) {
     const Clock::time_point t_epoch = Clock::now();
-    const bool closed_loop = epoch > closed_loop_after;
-    if (closed_loop && epoch == closed_loop_after + 1) startClosedLoop(o, s);
-    const int round_epoch = epoch - o.max_epochs - 1;  // DAgger: epochs since its first
-    if (!closed_loop && round_epoch >= 0 && round_epoch % o.dagger.epochs == 0) {
-      if (round_epoch == 0) startPhase(o.dagger.lr > 0.0 ? o.dagger.lr : o.lr, s);
-      aggregateDagger(L, s, train, latent_source, codes, round_epoch / o.dagger.epochs + 1, progress);
-    }
+    const bool closed_loop = epoch > o.max_epochs;
+    if (closed_loop && epoch == o.max_epochs + 1) startClosedLoop(o, s);
     net->train();
     LiveLine live_line{live ? progress : nullptr, epoch, last_epoch, t_epoch, Clock::now()};
     EpochSums sums = closed_loop ? closedLoopEpoch(L, s, epoch, live_line) : teacherForcedEpoch(L, s, epoch, live_line);

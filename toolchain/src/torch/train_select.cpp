@@ -4,7 +4,6 @@
 #include "nao/policy.hpp"
 #include "nao/tools/command.hpp"
 #include "nao/tools/evaluate.hpp"
-#include "nao/tools/policy_execution.hpp"
 #include "nao/tools/toolchain_dims.hpp"
 #include "policy_train.hpp"
 #include "nao/metrics.hpp"
@@ -74,50 +73,7 @@ std::vector<PolicyRun> runsWith(const PolicyData& data, const std::vector<int>& 
   return rolloutPolicy(data, demos, sim, policy, workspace.empty() ? nullptr : &workspace);
 }
 
-template <class Dims>
-std::vector<PolicySequence> labelledWith(const PolicyData& data, const std::vector<LabelledRun>& runs,
-                                         const SimModel& sim, const PolicyNet& net,
-                                         const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e,
-                                         int phase_window) {
-  RuntimeNet<Dims> rt(net);
-  std::vector<JointEnvelope> workspace;
-  if (ControllerParams{}.workspace_margin_rad >= 0.0)
-    workspace = workspaceEnvelopes(rt.weights, ControllerParams{}.workspace_margin_rad, demonstratedWorkspace(data));
-  SimData sim_data(sim, JointVector::Zero());
-  std::vector<PolicySequence> out;
-  for (const LabelledRun& run : runs) {
-    const ModelRunCodes& c = codes.at(static_cast<std::size_t>(run.movement));
-    if (run.code < 0 || static_cast<std::size_t>(run.code) >= c.size())
-      throw std::invalid_argument("labelled runs: a code index out of range");
-    const float* code = c.code.data() + static_cast<std::size_t>(run.code) * static_cast<std::size_t>(c.d);
-    const RolloutPolicy policy = [&](int movement, int t, const JointVector& q, const JointVector& a_prev,
-                                     const JointVector& r) -> JointVector {
-      if (t == 0) rt.start(code);
-      return rt.step(movement, t, q, a_prev, r);
-    };
-    PolicySequence s = executeLabelled(sim, sim_data, data.demos.at(static_cast<std::size_t>(run.demo)).f, run.start,
-                                       run.ticks, run.movement, policy,
-                                       workspace.empty() ? nullptr : &workspace[static_cast<std::size_t>(run.movement)], e,
-                                       phase_window);
-    s.demo = run.demo;
-    out.push_back(std::move(s));
-  }
-  return out;
-}
-
 }  // namespace
-
-std::vector<PolicySequence> labelledNetRuns(const PolicyData& data, const std::vector<LabelledRun>& runs,
-                                            const SimModel& sim, const PolicyNet& net,
-                                            const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e,
-                                            int phase_window) {
-  if (net->conditioning() != Conditioning::kAutonomous) throw UserError("labelled runs are for an autonomous model");
-  if (net->arch().chunk > kPolicyMaxChunk)
-    throw UserError("rollouts through the runtime's step: the chunk exceeds what the runtime holds");
-  return withToolchainDims(net->arch(), "rollouts through the runtime's step", [&](auto dims) {
-    return labelledWith<typename decltype(dims)::type>(data, runs, sim, net, codes, e, phase_window);
-  });
-}
 
 bool hasRuntimeStep(const PolicyArch& arch) {
   return arch.chunk <= kPolicyMaxChunk && hasToolchainDims(arch);

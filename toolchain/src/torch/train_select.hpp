@@ -30,27 +30,6 @@ bool hasRuntimeStep(const PolicyArch& arch);
 std::vector<PolicyRun> netRuns(const PolicyData& data, const std::vector<int>& demos, const SimModel& sim,
                                const PolicyNet& net, const std::vector<ModelRunCodes>* codes = nullptr);
 
-/// A run of labelledNetRuns: of `movement` from `start` for `ticks` ticks with the run code of
-/// index `code` among the movement's run codes, labelled toward data.demos[demo].f.
-struct LabelledRun {
-  int movement = 0;
-  int code = -1;
-  int demo = -1;
-  int ticks = 0;
-  JointVector start = JointVector::Zero();
-  int source_code = -1;  ///< the code of the training demonstration its start was drawn around (-1: none)
-};
-
-/// `net`'s runs (the runtime's stepPolicy, as netRuns binds it; an autonomous model keeps to its
-/// workspace envelope) on the simulated ODE arm, each with the code it is given, every tick
-/// labelled by the executed demonstrations' expert toward its demonstration (executeLabelled):
-/// the on-policy states and their labels (DAgger). In list order; demo is set, rollout left 0
-/// for the caller. Throws UserError unless hasRuntimeStep(net->arch()) and autonomous.
-std::vector<PolicySequence> labelledNetRuns(const PolicyData& data, const std::vector<LabelledRun>& runs,
-                                            const SimModel& sim, const PolicyNet& net,
-                                            const std::vector<ModelRunCodes>& codes, const ExecutionOptions& e,
-                                            int phase_window = 0);
-
 /// What runs of each movement are measured against: its validation demonstrations' hand paths,
 /// the plane loops are counted in, their middle-phase speeds and loops, and the joint range of
 /// all the movement's demonstrations in the data.

@@ -51,7 +51,7 @@ struct RobotBackend {
 };
 
 /// One control period of a rollout with the caller's own action a (the toolchain's rollouts:
-/// training data execution, DAgger, evaluation baselines): read the robot's measured q, the
+/// training data execution, selection runs, evaluation baselines): read the robot's measured q, the
 /// tick's command (commandFor, as the controller's tick makes it), write it for one period.
 /// Fills `step` and returns the measured angles at the end of the period (the robot's, valid
 /// until its next command). Real-time safe.

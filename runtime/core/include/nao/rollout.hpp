@@ -1,6 +1,6 @@
 // The command path of a tick: what every tick of every rollout does between an action and the
 // command sent to the arm, written once. The controller's tick calls commandFor once per tick;
-// the toolchain's rollouts (training data execution, DAgger labelling, evaluation baselines)
+// the toolchain's rollouts (training data execution, selection runs, evaluation baselines)
 // call the same function with their own action laws, through nao_backends' rolloutStep, so a
 // baseline never re-spells the controller.
 //
