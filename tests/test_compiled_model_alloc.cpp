@@ -143,6 +143,30 @@ TEST_CASE("binding the compiled-in model allocates nothing and points into .roda
   }
 }
 
+TEST_CASE("a run's copy of a compiled-in blob holds the blob's bytes outside the image, whose released pages read back the same") {
+  // nao_rt reads the int8 or packed blob from this copy (anonymous memory), not from .rodata.
+  const ModelImage image = compiled::modelImage();
+  // An fp32 build has no blob: its model bytes stand in (copied and released the same way).
+  const std::uint8_t* blob = image.packed_bytes != nullptr ? image.packed_bytes
+                             : image.int8_bytes != nullptr ? image.int8_bytes
+                                                           : image.bytes;
+  const std::size_t n = image.packed_bytes != nullptr ? image.packed_size
+                        : image.int8_bytes != nullptr ? image.int8_size
+                                                      : image.size;
+  const std::vector<std::uint8_t> before(blob, blob + n);
+  const AlignedBytes copy = anonymousCopy(blob, n);
+  REQUIRE(copy.size == n);
+  CHECK_FALSE(inside(copy.data.get(), image.bytes, image.bytes + image.size));
+  if (image.packed_bytes != nullptr)
+    CHECK_FALSE(inside(copy.data.get(), image.packed_bytes, image.packed_bytes + image.packed_size));
+  if (image.int8_bytes != nullptr)
+    CHECK_FALSE(inside(copy.data.get(), image.int8_bytes, image.int8_bytes + image.int8_size));
+  CHECK(reinterpret_cast<std::uintptr_t>(copy.data.get()) % 64 == 0);
+  CHECK(std::memcmp(copy.data.get(), before.data(), n) == 0);
+  // The image's pages were handed back; reading them faults the file's bytes in again.
+  CHECK(std::memcmp(blob, before.data(), n) == 0);
+}
+
 TEST_CASE("the compiled-in binding and the --weights path compute the same bits over a long rollout") {
   using Dims = compiled::Dims;
   const ModelFile file = readModelFile(NAO_COMPILED_MODEL_SOURCE);

@@ -116,8 +116,9 @@ namespace detail {
 
 /// The run's policy weights: the compiled-in model's views at the generated offsets into
 /// .rodata (no lookup, no copy), or a --weights file's tensors copied into storage the weights
-/// own and bound by name; then the int8 or packed fp32 copy the run's precision asks for,
-/// compiled in or made into `copy`. Releases the decoded file copy first (one fp32 copy resident
+/// own and bound by name; then the int8 or packed fp32 copy the run's precision asks for in
+/// `copy`: a compiled-in one copied out of .rodata (anonymousCopy), or made from the views.
+/// Releases the decoded file copy first (one fp32 copy resident
 /// at a time). Configure time: allocates, throws.
 template <class Dims>
 PolicyWeights<Dims> bindRunWeights(PreparedRun& p, AlignedBytes& copy) {
@@ -132,14 +133,11 @@ PolicyWeights<Dims> bindRunWeights(PreparedRun& p, AlignedBytes& copy) {
   std::vector<std::uint8_t>().swap(p.model.bytes);
   if (p.precision == WeightPrecision::kInt8) {
     if constexpr (int8Supported<Dims>()) {
-      const std::uint8_t* blob = p.int8_bytes;
-      if (blob == nullptr) {
-        copy = quantizePolicyInt8<Dims>(weights);
-        blob = copy.data.get();
-      }
       if (quantizedModelBytes(p.model.header.arch) != quantizedPolicyBytes<Dims>())
         throw std::logic_error("nao_rt: the int8 blob of the model is not the compiled layout's size");
-      bindQuantizedWeights<Dims>(weights, blob);
+      copy = p.int8_bytes != nullptr ? anonymousCopy(p.int8_bytes, quantizedPolicyBytes<Dims>())
+                                     : quantizePolicyInt8<Dims>(weights);
+      bindQuantizedWeights<Dims>(weights, copy.data.get());
     } else {
       throw std::runtime_error("--precision int8: this architecture has an odd or over-512 input size; int8 "
                                "needs even input sizes up to 512");
@@ -149,14 +147,11 @@ PolicyWeights<Dims> bindRunWeights(PreparedRun& p, AlignedBytes& copy) {
   // --precision fp32-packed) or made at start-up.
   if (p.precision == WeightPrecision::kFp32Packed) {
     if constexpr (packedSupported<Dims>()) {
-      const std::uint8_t* blob = p.packed_bytes;
-      if (blob == nullptr) {
-        copy = packPolicyFp32<Dims>(weights);
-        blob = copy.data.get();
-      }
       if (packedModelBytes(p.model.header.arch) != packedPolicyBytes<Dims>())
         throw std::logic_error("nao_rt: the packed blob of the model is not the compiled layout's size");
-      bindPackedWeights<Dims>(weights, blob);
+      copy = p.packed_bytes != nullptr ? anonymousCopy(p.packed_bytes, packedPolicyBytes<Dims>())
+                                       : packPolicyFp32<Dims>(weights);
+      bindPackedWeights<Dims>(weights, copy.data.get());
     } else {
       throw std::runtime_error("--precision fp32-packed: this architecture has a matrix the packed layout does "
                                "not take (outputs in multiples of 32, inputs of 16)");
@@ -273,7 +268,7 @@ RunReport runController(const RunOptions& options, std::ostream& out, std::ostre
     if (!isRobotBackendName(options.robot))
       throw UsageError("--robot '" + options.robot + "': expected " + kRobotBackendNames);
     PreparedRun p = prepareRun(options, Dims::arch());
-    AlignedBytes copy_storage;  // the int8 or packed copy made at start-up (none compiled in)
+    AlignedBytes copy_storage;  // the int8 or packed copy the run reads (copied or made at start-up)
     PolicyWeights<Dims> weights = detail::bindRunWeights<Dims>(p, copy_storage);
     const PolicyKernel kernel = weights.kernel;
     ControllerParams controller_params = options.controller;

@@ -172,4 +172,20 @@ void checkPackedImage(const ModelImage& image, const PolicyArch& arch, const std
                     "packed fp32", "packed", origin);
 }
 
+AlignedBytes anonymousCopy(const std::uint8_t* image_bytes, std::size_t size) {
+  AlignedBytes copy;
+  copy.size = size;
+  copy.data.reset(static_cast<std::uint8_t*>(::operator new[](size, std::align_val_t{64})));
+  // A MiB at a time, each part's image pages released once copied: the blob and its copy are
+  // never resident together (peak RSS as reading the blob in place).
+  constexpr std::size_t kPart = std::size_t{1} << 20;
+  for (std::size_t off = 0; off < size; off += kPart) {
+    const std::size_t n = std::min(kPart, size - off);
+    std::memcpy(copy.data.get() + off, image_bytes + off, n);
+    releaseImagePages(image_bytes + off, n);
+  }
+  releaseImagePages(image_bytes, size);  // the pages straddling two parts
+  return copy;
+}
+
 }  // namespace nao

@@ -65,6 +65,15 @@ struct AlignedBytes {
   std::size_t size = 0;
 };
 
+/// `size` bytes of a compiled-in blob (the int8 or packed copy in .rodata) copied into
+/// anonymous memory, and the blob's whole pages handed back (releaseImagePages): the bytes a
+/// run reads every tick then live in memory of its own, not in the binary's file pages, whose
+/// cost to walk depends on how the file came to be cached. Measured on the test VMs: a freshly
+/// linked nao_rt's page-cache pages made every fifth warming of the 24 MB packed copy take
+/// ~25 ms instead of 1-3 ms (and its answers miss LoLA's 12 ms cycle); the same binary copied,
+/// or these bytes in anonymous memory, never did. Configure time: allocates.
+AlignedBytes anonymousCopy(const std::uint8_t* image_bytes, std::size_t size);
+
 /// The int8 blob of `model` (quantizedModelBytes(arch) bytes, padding zero). Configure time:
 /// allocates. Throws ModelFileError if a matrix has an odd input size or more than 512 inputs
 /// (the kernels' exact int32 range).
