@@ -6,7 +6,8 @@
 # for an hour by default, with faults every few minutes: a packet gap (--drop, 6 or 40 cycles),
 # a garbage packet (--garbage), malformed packets (--bad-length, 3 cycles) and a camera folder
 # moved away for a second while its replayer writes (its writer fails and is restarted at the
-# frame due once the folder is back, like an OpenPose that lost its output folder). The run ends
+# frame due once the folder is back, like an OpenPose that lost its output folder; the move waits
+# until it falls >= 3 s from a replay loop's start and end). The run ends
 # with SIGINT (the safe stop). nao_rt cannot reconnect to LoLA (a lost link ends the run, exit 3),
 # so the hang-up is tested after the soak: a robot that closes the socket, then a restarted nao_rt
 # on a new LoLA connection (what a supervisor would do), timed.
@@ -545,7 +546,7 @@ done
 n_faults=$n
 
 # --- the camera replay (polled from the main loop) -----------------------------------------------
-rep_loop=-1 rep_loops=0 rep_restarts=0 cam_away=0 cam_back_at=0
+rep_loop=-1 rep_loops=0 rep_restarts=0 cam_away=0 cam_back_at=0 loop_t=0
 start_replayer() {  # VIEW FOLDER: one camera's replayer, its pid in REPLAY_PID
   "$tc" replay --recording "$1" --to "$2" >>"$tmp/replay.log" 2>&1 &
   REPLAY_PID=$!
@@ -585,11 +586,19 @@ replay_poll() {
     start_replayer "$tmp/view/$rep_loop/c1" "$rig/cam1"
     rep1=$REPLAY_PID
     rep_loops=$((rep_loops + 1))
+    loop_t=$NOW
     [[ -n "${t0:-}" ]] && log_event "$(((NOW - t0) / 1000))" loop "replay loop $rep_loop starts" "$(last_tick)"
     # The next loop's views now, while this one plays; the last-but-one's are done with.
     make_views $((rep_loop + 1))
     rm -rf "$tmp/view/$((rep_loop - 2))"
   fi
+}
+# A camera fault waits until its 1 s move falls inside a replay loop, >= 3 s from the loop's
+# start and end: a loop start pauses the feed by itself (the replayers reload), and the report
+# could not tell that pause from the fault's. A loop running late takes the fault at once.
+camera_window() {
+  local e=$((NOW - loop_t)) len=$((n_frames * 1000000 / 30))
+  ((e >= 3000000 && (e <= len - 4000000 || e > len + 3000000)))
 }
 camera_fault() {
   now
@@ -669,6 +678,7 @@ while :; do
   ((r >= stop_ms)) && break
   while ((fi_idx < n_faults)) && ((r >= f_ms[fi_idx])); do
     if [[ "${f_kind[fi_idx]}" == camera ]]; then
+      camera_window || break
       camera_fault || f_detail[fi_idx]+=" (not done: the folder was not there)"
     fi
     log_event "$r" "${f_kind[fi_idx]}" "${f_detail[fi_idx]}" "$(last_tick)"
