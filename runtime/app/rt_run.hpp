@@ -118,8 +118,8 @@ namespace detail {
 /// .rodata (no lookup, no copy), or a --weights file's tensors copied into storage the weights
 /// own and bound by name; then the int8 or packed fp32 copy the run's precision asks for in
 /// `copy`: a compiled-in one copied out of .rodata (anonymousCopy), or made from the views.
-/// Releases the decoded file copy first (one fp32 copy resident
-/// at a time). Configure time: allocates, throws.
+/// Releases the decoded file copy first (one fp32 copy resident at a time). Configure time:
+/// allocates, throws.
 template <class Dims>
 PolicyWeights<Dims> bindRunWeights(PreparedRun& p, AlignedBytes& copy) {
   PolicyWeights<Dims> weights =

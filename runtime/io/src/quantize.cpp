@@ -60,9 +60,7 @@ std::size_t sumOverMatrices(const PolicyArch& arch, Bytes bytes) {
 /// errors.
 template <class Section, class Write>
 AlignedBytes buildBlob(const ModelFile& model, std::size_t size, const char* who, Section section, Write write) {
-  AlignedBytes blob;
-  blob.size = size;
-  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
+  AlignedBytes blob = AlignedBytes::allocate(size);
   std::fill(blob.data.get(), blob.data.get() + blob.size, std::uint8_t{0});
   std::size_t off = 0;
   for (std::size_t i = 0; i < model.tensors.size(); ++i) {
@@ -173,9 +171,7 @@ void checkPackedImage(const ModelImage& image, const PolicyArch& arch, const std
 }
 
 AlignedBytes anonymousCopy(const std::uint8_t* image_bytes, std::size_t size) {
-  AlignedBytes copy;
-  copy.size = size;
-  copy.data.reset(static_cast<std::uint8_t*>(::operator new[](size, std::align_val_t{64})));
+  AlignedBytes copy = AlignedBytes::allocate(size);
   // A MiB at a time, each part's image pages released once copied: the blob and its copy are
   // never resident together (peak RSS as reading the blob in place).
   constexpr std::size_t kPart = std::size_t{1} << 20;

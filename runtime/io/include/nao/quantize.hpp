@@ -63,6 +63,14 @@ struct AlignedBytes {
   };
   std::unique_ptr<std::uint8_t[], Free> data;
   std::size_t size = 0;
+
+  /// `size` bytes, 64-byte aligned, uninitialised. Configure time: allocates.
+  static AlignedBytes allocate(std::size_t size) {
+    AlignedBytes b;
+    b.data.reset(static_cast<std::uint8_t*>(::operator new[](size, std::align_val_t{64})));
+    b.size = size;
+    return b;
+  }
 };
 
 /// `size` bytes of a compiled-in blob (the int8 or packed copy in .rodata) copied into
@@ -84,9 +92,7 @@ AlignedBytes quantizeModelInt8(const ModelFile& model);
 /// (tests/test_policy_int8.cpp). Configure time: allocates.
 template <class Dims>
 AlignedBytes quantizePolicyInt8(PolicyWeights<Dims> w) {
-  AlignedBytes blob;
-  blob.size = quantizedPolicyBytes<Dims>();
-  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
+  AlignedBytes blob = AlignedBytes::allocate(quantizedPolicyBytes<Dims>());
   std::fill(blob.data.get(), blob.data.get() + blob.size, std::uint8_t{0});
   std::size_t off = 0;
   detail::visitQuantViews(w, [&](const auto& view, auto&) {
@@ -117,9 +123,7 @@ AlignedBytes packModelFp32(const ModelFile& model);
 template <class Dims>
 AlignedBytes packPolicyFp32(PolicyWeights<Dims> w) {
   static_assert(packedSupported<Dims>(), "packPolicyFp32: a matrix of this architecture has no packed layout");
-  AlignedBytes blob;
-  blob.size = packedPolicyBytes<Dims>();
-  blob.data.reset(static_cast<std::uint8_t*>(::operator new[](blob.size, std::align_val_t{64})));
+  AlignedBytes blob = AlignedBytes::allocate(packedPolicyBytes<Dims>());
   std::size_t off = 0;
   detail::visitQuantViews(w, [&](const auto& view, auto&) {
     using V = std::remove_reference_t<decltype(view)>;
