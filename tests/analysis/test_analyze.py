@@ -12,6 +12,8 @@ import subprocess
 import tempfile
 import unittest
 
+import numpy as np
+
 import run_fixture
 from nao_analysis import figures, stats
 from nao_analysis.rundir import read_run
@@ -141,6 +143,7 @@ class EndToEnd(unittest.TestCase):
         with open(os.path.join(self.out, "report.html")) as f:
             page = f.read()
         self.assertTrue("Table 2" in page, "no Table 2 in the report")
+        self.assertTrue("How to read this page" in page, "no reading note in the report")
         self.assertIsNone(re.search(r"<script|<link|src=\"(?!data:)", page), "the report must not load anything")
         self.assertEqual(len(re.findall(r'<img [^>]*src="data:image/png;base64,', page)), 3 * len(MOVEMENTS) + 1)
         # Each run's summary.json and the command line (checked without dumping the page).
@@ -177,6 +180,58 @@ class Determinism(unittest.TestCase):
             raw = table2_rows(run, "elbow", "none", n_boot=100)
             self.assertEqual({r["detrend"] for r in raw}, {"none"})
             self.assertNotEqual([r["pearson_r"] for r in lin], [r["pearson_r"] for r in raw])
+        finally:
+            shutil.rmtree(tmp)
+
+
+class AutonomousHandPaths(unittest.TestCase):
+    """An autonomous run has no reference: its hand-path figure draws the demonstrations evaluate
+    leaves beside it (named_demo.csv; ../../demos/<run>.csv), each the forward kinematics of its
+    joints, and says so in the caption."""
+
+    @staticmethod
+    def _write_trajectory(path, q):
+        with open(path, "w") as f:
+            f.write("t_s,q_0,q_1,q_2,q_3,q_4\n")
+            for i, row in enumerate(q):
+                f.write(",".join(["%.17g" % (0.1 * i)] + ["%.17g" % x for x in row]) + "\n")
+
+    def test_the_named_and_held_out_demonstrations_are_drawn_from_their_files(self):
+        from nao_analysis import kinematics
+        tmp = tempfile.mkdtemp(prefix="nao-analysis-auto-")
+        try:
+            run_dir = run_fixture.write_run(os.path.join(tmp, "elbow", "autonomous", "elbow_000"), "elbow", n=40, seed=3)
+            with open(os.path.join(run_dir, "ticks.csv")) as f:
+                rows = list(csv.reader(f))
+            cols = [i for i, c in enumerate(rows[0]) if c.startswith("ee_ref_")]
+            for row in rows[1:]:
+                for i in cols:
+                    row[i] = "nan"  # as nao_rt writes an autonomous run
+            with open(os.path.join(run_dir, "ticks.csv"), "w", newline="") as f:
+                csv.writer(f, lineterminator="\n").writerows(rows)
+            t = 0.1 * np.arange(30)[:, None]
+            named = np.hstack([0.3 + 0.2 * np.sin(t), 0.1 * t, 0.2 + 0.0 * t, np.cos(t), -0.5 + 0.0 * t])
+            held = named[::-1] * 0.9
+            self._write_trajectory(os.path.join(run_dir, "named_demo.csv"), named)
+            os.makedirs(os.path.join(tmp, "elbow", "demos"))
+            self._write_trajectory(os.path.join(tmp, "elbow", "demos", "elbow_000.csv"), held)
+            arm = kinematics.load_arm_model()
+            run = read_run(run_dir)
+            paths = figures._hand_paths(run, arm)
+            self.assertEqual([p[1] for p in paths], [s[0] for s in figures.AUTONOMOUS_PATH_STYLES])
+            np.testing.assert_allclose(paths[0][0], kinematics.hand_position(arm, held), atol=1e-12)
+            np.testing.assert_allclose(paths[1][0], kinematics.hand_position(arm, named), atol=1e-12)
+            self.assertIn("code names", figures.hand_path_caption(run, "elbow"))
+            name = figures.figure_ee(run, "elbow", arm, tmp)
+            with open(os.path.join(tmp, name + ".svg")) as f:
+                self.assertIn("demonstration its code names", f.read())
+            # Without the files: the robot's path alone; a reference run keeps its three.
+            os.remove(os.path.join(run_dir, "named_demo.csv"))
+            shutil.rmtree(os.path.join(tmp, "elbow", "demos"))
+            self.assertEqual(len(figures._hand_paths(read_run(run_dir), arm)), 1)
+            ref = read_run(run_fixture.write_run(os.path.join(tmp, "ref"), "elbow", n=40, seed=3))
+            self.assertEqual([p[1] for p in figures._hand_paths(ref, arm)], [s[0] for s in figures.PATH_STYLES])
+            self.assertIn("ee_ref", figures.hand_path_caption(ref, "elbow"))
         finally:
             shutil.rmtree(tmp)
 

@@ -214,10 +214,7 @@ def analyze(args, command):
     for run, label in shown:
         progress("%s: figures" % label)
         made[label] = [
-            (figures.figure_ee(run, label, arm, out_dir),
-             "%s: hand trajectory (paper Figs. 8–10): green human-derived target FK(q_ref), blue "
-             "feature-extracted demonstration ee_ref, red robot ee; a–d mark the instants of the "
-             "attention figure" % label),
+            (figures.figure_ee(run, label, arm, out_dir), figures.hand_path_caption(run, label)),
             (figures.figure_attention(run, label, arm, out_dir),
              "%s: attention per body part over time and the robot pose at a–d (paper Figs. 11–13)" % label),
             (figures.figure_motion(run, label, out_dir),

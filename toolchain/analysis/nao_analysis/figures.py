@@ -61,11 +61,59 @@ def _shade_dropped(ax, run):
         ax.axvspan(t[i] - dt / 2, t[i] + dt / 2, color="0.85", lw=0, zorder=0)
 
 
+# An autonomous run has no reference to draw; `nao_toolchain evaluate` leaves beside it the
+# demonstration its code names (named_demo.csv) and the held-out one it starts from
+# (../../demos/<run>.csv): drawn in their place, as the paper draws the demonstration.
+AUTONOMOUS_PATH_STYLES = (("held-out demonstration it starts from", "tab:green"),
+                          ("demonstration its code names (it plays this one)", "tab:blue"),
+                          ("robot: ee", "tab:red"))
+
+
+def _trajectory_csv(path):
+    """The (n, 5) joint trajectory of an evaluate CSV (t_s,q_0..q_4), or None without the file."""
+    if not os.path.isfile(path):
+        return None
+    q = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    if q.shape[1] != 6:
+        raise ValueError("%s: expected the columns t_s,q_0..q_4" % path)
+    return q[:, 1:]
+
+
+def autonomous_demonstrations(run):
+    """(held-out, named) joint trajectories beside an autonomous run (None where absent), or
+    None for a run with a reference."""
+    if np.isfinite(run.columns["ee_ref_x"]).any():
+        return None
+    held = _trajectory_csv(os.path.join(run.path, "..", "..", "demos",
+                                        os.path.basename(os.path.normpath(run.path)) + ".csv"))
+    return held, _trajectory_csv(os.path.join(run.path, "named_demo.csv"))
+
+
 def _hand_paths(run, arm):
-    p_human = kinematics.hand_position(arm, run.joint_matrix("q_ref"))
-    p_feat = np.column_stack([run.columns[c] for c in ("ee_ref_x", "ee_ref_y", "ee_ref_z")])
+    """[(points (n, 3), legend, colour)] of the hand-path figure; the robot's last."""
     p_robot = np.column_stack([run.columns[c] for c in ("ee_x", "ee_y", "ee_z")])
-    return p_human, p_feat, p_robot
+    demos = autonomous_demonstrations(run)
+    if demos is None:
+        p_human = kinematics.hand_position(arm, run.joint_matrix("q_ref"))
+        p_feat = np.column_stack([run.columns[c] for c in ("ee_ref_x", "ee_ref_y", "ee_ref_z")])
+        return [(p, name, color) for p, (name, color) in zip((p_human, p_feat, p_robot), PATH_STYLES)]
+    paths = [(kinematics.hand_position(arm, q), name, color)
+             for q, (name, color) in zip(demos, AUTONOMOUS_PATH_STYLES) if q is not None]
+    return paths + [(p_robot,) + AUTONOMOUS_PATH_STYLES[2]]
+
+
+def hand_path_caption(run, label):
+    """The report's caption of figure_ee for this run."""
+    demos = autonomous_demonstrations(run)
+    if demos is None:
+        return ("%s: hand trajectory (paper Figs. 8–10): green human-derived target FK(q_ref), blue "
+                "feature-extracted demonstration ee_ref, red robot ee; a–d mark the instants of the "
+                "attention figure" % label)
+    parts = [text for q, text in zip(demos, ("green the held-out demonstration the run starts from",
+                                              "blue the training demonstration its code names, the one it plays"))
+             if q is not None]
+    return ("%s: hand trajectory of the autonomous run (paper Figs. 8–10): %sred the robot's hand; a–d mark "
+            "the instants of the attention figure" % (label, "".join(p + ", " for p in parts)))
 
 
 def figure_ee(run, label, arm, out_dir):
@@ -75,9 +123,9 @@ def figure_ee(run, label, arm, out_dir):
     fig = plt.figure(figsize=(11, 8.2))
     gs = GridSpec(2, 2, figure=fig, hspace=0.3, wspace=0.25)
     ax3 = fig.add_subplot(gs[0, 0], projection="3d")
-    for p, (name, color) in zip(paths, PATH_STYLES):
+    for p, name, color in paths:
         ax3.plot(p[:, 0], p[:, 1], p[:, 2], color=color, lw=1.2, label=name)
-    robot = paths[2]
+    robot = paths[-1][0]
     for m, lab in zip(marks, INSTANT_LABELS):
         ax3.scatter(*robot[m], color="k", s=12)
         ax3.text(*robot[m], " " + lab, fontsize=9)
@@ -88,7 +136,7 @@ def figure_ee(run, label, arm, out_dir):
     views = ((gs[0, 1], 0, 1, "top view: x-y"), (gs[1, 0], 0, 2, "side view: x-z"), (gs[1, 1], 1, 2, "front view: y-z"))
     for cell, i, k, title in views:
         ax = fig.add_subplot(cell)
-        for p, (name, color) in zip(paths, PATH_STYLES):
+        for p, name, color in paths:
             ax.plot(p[:, i], p[:, k], color=color, lw=1.2, label=name)
         for m, lab in zip(marks, INSTANT_LABELS):
             ax.plot(robot[m, i], robot[m, k], "k.", ms=5)

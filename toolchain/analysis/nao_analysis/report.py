@@ -239,6 +239,24 @@ figcaption { font-size: 0.85em; color: #555; } .note { color: #555; font-size: 0
 """
 
 
+# What a newcomer needs to read the page.
+READING_NOTE = (
+    "<h2>How to read this page</h2><ul>"
+    "<li>The policy reads the arm as five tokens, one per joint (body part), and at every tick "
+    "spreads its attention over them: the attention score of a joint is how much of it that body "
+    "part gets. The paper asks whether the policy attends to the joints that move.</li>"
+    "<li><b>Table 2</b> answers per movement and joint: the correlation (Pearson, Spearman, Kendall) "
+    "and the mutual information between the joint's angular velocity and its attention score over "
+    "the runs. Shaded cells are significant; the paper's own values stand beside them.</li>"
+    "<li><b>Each run</b>: its hand path beside the demonstration's (Figs. 8–10; red is the robot), "
+    "the attention per body part over time with the robot's pose at four instants a–d "
+    "(Figs. 11–13), and each joint's angle, velocity and acceleration under its attention score "
+    "(Figs. 14–16): where attention rises with a joint's speed, the policy watches the part that "
+    "moves.</li>"
+    "<li><b>UMAP</b>: the cross-attention outputs of every tick in two dimensions, coloured by run, "
+    "time and movement phase: how the policy's internal state travels through a movement.</li></ul>")
+
+
 def report_html(runs, labels, rows, figures, options, command, findings=None):
     """The whole page as one string. figures: {label or 'umap': [(name, caption), ...]};
     findings: findings.md's text, shown as it is."""
@@ -249,6 +267,7 @@ def report_html(runs, labels, rows, figures, options, command, findings=None):
              '<p class="note">Paper Table 2 and Figs. 8–16 from nao_rt runs, with what the '
              "paper lacks: bootstrap confidence intervals, shift-test p-values and the null of every mutual "
              "information (runs that repeat one rollout count once).</p>",
+             READING_NOTE,
              "<h2>Command</h2><pre>%s</pre>" % html.escape(command),
              "<p>Runs: %s. Output: <code>%s</code>.</p>" % (
                  ", ".join("<code>%s</code> (%s)" % (html.escape(_shown(r.path)), html.escape(lab)) for r, lab in zip(runs, labels)),

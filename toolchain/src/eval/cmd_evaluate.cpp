@@ -392,6 +392,9 @@ AutonomousScores scoreAutonomousRuns(const Setup& s, const SimModel& sim, const 
     r.replay_hands.push_back(handPath(s.arm, rep5.medoidQ()));
     r.code_fidelity.push_back(rt::dtwMeanDistance(run.hand, named));
     r.replay_fidelity.push_back(rt::dtwMeanDistance(r.replay_hands.back(), named));
+    // Beside the run, for its hand-path figure (toolchain/nao analyze): the demonstration it plays.
+    writeTrajectoryCsv((job.dir / "named_demo.csv").string(), w.train.f[static_cast<std::size_t>(rep5.medoid)],
+                       s.period_s);
     const RunScore replay_score = scoreRun(r.replay_hands.back(), held);
     r.replay_speed.push_back(replay_score.speed_m_s);
     r.replay_loops.push_back(replay_score.loops);
