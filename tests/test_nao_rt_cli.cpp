@@ -3,6 +3,7 @@
 #include "rt_info.hpp"
 
 #include "nao/policy_kernels.hpp"
+#include "nao/policy_weights.hpp"
 #include "nao/quantize.hpp"
 #include "support/test_util.hpp"
 
@@ -106,6 +107,19 @@ TEST_CASE("nao_rt --info --weights prints one JSON object describing the model")
   nao::rt::InfoOptions o8 = withWeights(path);
   o8.precision = "int8";
   CHECK(nlohmann::json::parse(info(o8).out)["precision"] == "int8");
+  CHECK_FALSE(j.contains("runs"));  // no compiled dimensions given: not known
+  // "runs": whether the nao_rt's compiled dimensions compute this model's step.
+  nao::rt::InfoOptions paper_only = withWeights(path);
+  paper_only.computes = [](const nao::PolicyArch& a) { return nao::computesPolicyArch<nao::PaperPolicyDims>(a); };
+  CHECK(nlohmann::json::parse(info(paper_only).out)["runs"] == false);
+  nao::rt::InfoOptions both = withWeights(path);
+  both.computes = [](const nao::PolicyArch& a) {
+    return nao::computesPolicyArch<nao::PaperPolicyDims>(a) || nao::computesPolicyArch<nao::SmallPolicyDims>(a);
+  };
+  nlohmann::json jb = nlohmann::json::parse(info(both).out);
+  CHECK(jb["runs"] == true);
+  jb.erase("runs");
+  CHECK(jb == j);  // the rest of the description is the same
 }
 
 TEST_CASE("nao_rt --info describes the compiled-in model, and says when there is none") {

@@ -11,7 +11,8 @@ int parseCommandLine(int argc, const char* const* argv, CommandLine& cl, std::os
   CLI::App app{
       "nao_rt: the NAO V6 right-arm imitation controller (docs/nao_rt.md) on the ODE-simulated arm\n"
       "(default) or on a NAO V6 through LoLA (--robot lola, docs/lola.md). It runs any model of its\n"
-      "compiled architecture (--weights); toolchain/nao build --model FILE builds one for another.\n"
+      "compiled-in model's, the paper's or the small configuration's architecture (--weights; --info\n"
+      "says \"runs\"); toolchain/nao build --model FILE builds one for another.\n"
       "Configures everything (URDF, policy, reference, attention ring, run buffers), then runs the\n"
       "deterministic 10 Hz loop - human frame -> retarget -> snap to key pose -> policy -> command ->\n"
       "100 x 1 ms of physics - with no heap allocation, and writes the run directory (docs/nao_rt.md).",

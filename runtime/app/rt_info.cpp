@@ -103,7 +103,14 @@ int runInfo(const InfoOptions& options, std::ostream& out, std::ostream& err) {
     }
     const WeightPrecision precision = runPrecision(options.precision, source == "compiled-in", options.compiled);
     requirePolicyKernel(options.kernel);  // what a run's binding would refuse
-    out << modelInfoJson(model, source, weightPrecisionName(precision), options.kernel) << "\n";
+    std::string json = modelInfoJson(model, source, weightPrecisionName(precision), options.kernel);
+    if (options.computes) {
+      // "runs" last: whether --weights of this file runs here or needs a nao_rt of its own.
+      auto j = nlohmann::ordered_json::parse(json);
+      j["runs"] = options.computes(model.header.arch);
+      json = j.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
+    }
+    out << json << "\n";
     return 0;
   } catch (const std::exception& e) {
     err << "nao_rt: " << oneLine(e.what()) << "\n";

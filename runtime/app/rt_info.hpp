@@ -8,6 +8,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <iosfwd>
 #include <string>
 
@@ -20,6 +21,8 @@ struct InfoOptions {
   std::string precision;                    ///< --precision; empty: what a run would default to
   /// The kernel a run with the same options binds its weights with (summary.json model.kernel).
   PolicyKernel kernel = bestPolicyKernel();
+  /// Whether this nao_rt computes an architecture's step (its compiled dimensions); empty: unknown.
+  std::function<bool(const PolicyArch&)> computes;
 };
 
 /// The JSON description of a checked model (pretty-printed, no trailing newline): format_version,
@@ -28,7 +31,8 @@ struct InfoOptions {
 /// kernel (the one a run with the same options binds the weights with), tensors,
 /// joints, starts (per movement, the autonomous starts' name and ticks; empty lists without
 /// any), metadata (parsed JSON if it parses, else the string), source. Throws ModelFileError for
-/// unusable starts.
+/// unusable starts. runInfo adds "runs": whether this nao_rt runs the model (its compiled
+/// dimensions compute the model's step), when it knows.
 std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision = "fp32",
                           PolicyKernel kernel = bestPolicyKernel());
 

@@ -1,7 +1,8 @@
-// nao_rt's main (docs/nao_rt.md) for a compiled architecture Dims: the command
-// line (rt_cli), the model info (rt_info), and the run (rt_run) with the counting allocator's
-// probes that summary.json's allocation counts come from. nao_rt_main.cpp instantiates it with
-// the compiled-in model; tests/lola's slower-CPU nao_rt with a clock of its own.
+// nao_rt's main (docs/nao_rt.md) for compiled architectures: the command line (rt_cli), the
+// model info (rt_info), and the run (rt_run) with the counting allocator's probes that
+// summary.json's allocation counts come from. nao_rt_main.cpp instantiates it with the
+// compiled-in model's dimensions and the paper and small ones beside them (a --weights file of
+// either runs without a build of its own); tests/lola's slower-CPU nao_rt with a clock of its own.
 #pragma once
 
 #include "rt_cli.hpp"
@@ -38,10 +39,35 @@ struct ReaderCounter final : ThreadAllocationCounter {
 }  // namespace detail
 #endif
 
-/// nao_rt: parses the command line, then --info or the run of the model compiled as Dims
-/// (`compiled`: the compiled-in model, or none). `clock` times the controller's stages
-/// (nullptr: CLOCK_MONOTONIC). Returns the exit status.
+/// The run of `options` with the policy compiled as Dims, its allocations counted in nao_rt.
 template <class Dims>
+int runCounted(RunOptions& options) {
+#if NAO_RT_COUNT_ALLOCATIONS
+  detail::ControlAndIoProbe probe;
+  detail::ReaderCounter reader;  // outlives the run, whose reader thread it is attached to
+  options.reader_allocations = &reader;
+  return runMain<Dims>(options, std::cout, std::cerr, &probe);
+#else
+  return runMain<Dims>(options, std::cout, std::cerr, nullptr);
+#endif
+}
+
+/// The architecture of a --weights file, if it reads as a model.bin (a file that does not is
+/// the run's to report).
+inline std::optional<PolicyArch> weightsArch(const std::string& path) {
+  if (path.empty()) return std::nullopt;
+  try {
+    return readModelFile(path).header.arch;
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+/// nao_rt: parses the command line, then --info or the run of the model. Dims are the compiled-in
+/// model's (`compiled`: that model, or none); a --weights file whose step Dims do not compute runs
+/// with the first of `Others` that does (each one more instantiation of the loop in the binary).
+/// `clock` times the controller's stages (nullptr: CLOCK_MONOTONIC). Returns the exit status.
+template <class Dims, class... Others>
 int naoRtMain(int argc, const char* const* argv, const ModelImage& compiled, ControllerClock* clock = nullptr) {
   try {
     CommandLine cl;
@@ -57,17 +83,16 @@ int naoRtMain(int argc, const char* const* argv, const ModelImage& compiled, Con
       info.compiled = cl.run.compiled;
       info.precision = cl.run.precision;
       info.kernel = runPolicyKernel(cl.run.policy_kernel);
+      info.computes = [](const PolicyArch& a) { return (computesPolicyArch<Dims>(a) || ... || computesPolicyArch<Others>(a)); };
       return runInfo(info, std::cout, std::cerr);
     }
 
-#if NAO_RT_COUNT_ALLOCATIONS
-    detail::ControlAndIoProbe probe;
-    detail::ReaderCounter reader;  // outlives the run, whose reader thread it is attached to
-    cl.run.reader_allocations = &reader;
-    return runMain<Dims>(cl.run, std::cout, std::cerr, &probe);
-#else
-    return runMain<Dims>(cl.run, std::cout, std::cerr, nullptr);
-#endif
+    if constexpr (sizeof...(Others) > 0) {
+      const std::optional<PolicyArch> arch = weightsArch(cl.run.weights_path);
+      if (arch && !computesPolicyArch<Dims>(*arch) && (computesPolicyArch<Others>(*arch) || ...))
+        return withPolicyDims<Others...>(*arch, [&](auto dims) { return runCounted<decltype(dims)>(cl.run); });
+    }
+    return runCounted<Dims>(cl.run);
   } catch (const std::exception& e) {
     std::cerr << "nao_rt: " << oneLine(e.what()) << "\n";
     return 1;

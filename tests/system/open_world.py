@@ -8,7 +8,8 @@
      configuration on them;
   3. `toolchain/nao build --model` builds the nao_rt of that model's architecture;
   4. that nao_rt runs every start of every movement (`--reference none --movement M --start I`),
-     and every run stays within the demonstrations' joint range + 0.1 rad;
+     and every run stays within the demonstrations' joint range + 0.1 rad; build/'s nao_rt, which
+     computes the small configuration's step beside its compiled-in model's, plays the same runs;
   5. `nao_toolchain evaluate --recordings` scores the model on its held-out recordings;
   6. neither nao_rt holds a symbol of the synthesiser, k-means or the offline triangulation.
 
@@ -75,6 +76,10 @@ class OpenWorld(unittest.TestCase):
     def test_the_model_holds_the_recorded_movements_and_their_starts(self):
         info = json.loads(run([self.nao_rt, "--weights", self.model, "--info"]))
         self.assertEqual(sorted(info["movements"]), sorted(MOVEMENTS), "the model holds exactly the recorded movements")
+        self.assertTrue(info["runs"], "the model's own nao_rt runs it")
+        built = json.loads(run([os.path.join(BUILD, "bin", "nao_rt"), "--weights", self.model, "--info"]))
+        self.assertEqual((built["d_model"], built["window"]), (32, 8), "a small-configuration model")
+        self.assertTrue(built["runs"], "build/'s nao_rt runs the small configuration too")
         self.assertTrue(os.path.exists(self.model[:-4] + ".md"), "the model has its card")
 
     def test_every_start_runs_inside_the_demonstrations_joint_range(self):
@@ -113,6 +118,14 @@ class OpenWorld(unittest.TestCase):
                     s = json.load(f)
                 self.assertEqual(len(s["start_q"]), 5)
                 self.assertEqual(s["allocations_after_activate"], 0)
+                if i == 0:
+                    # build/'s nao_rt computes the small configuration's step beside its own compiled-in
+                    # model's: the same run, tick for tick, as the nao_rt built with this model compiled in.
+                    other = log + "_build"
+                    run([os.path.join(BUILD, "bin", "nao_rt"), "--weights", self.model, "--reference", "none",
+                         "--movement", m, "--start", "0", "--zero-timing", "--log", other])
+                    with open(os.path.join(log, "ticks.csv"), "rb") as a, open(os.path.join(other, "ticks.csv"), "rb") as b:
+                        self.assertEqual(a.read(), b.read(), "%s: build/bin/nao_rt --weights plays the run of the model's own nao_rt" % m)
 
     def test_evaluate_scores_the_held_out_recordings(self):
         out = os.path.join(self.tmp, "eval")
