@@ -47,7 +47,7 @@ CORE_UNDEFINED_OK = re.compile(
     r"(mem(cpy|move|set|cmp)|strlen|strcmp|getenv|abort|__assert_fail|clock_gettime|snprintf|aligned_alloc|malloc|free|"
     r"posix_memalign|__cxa_atexit|"
     r"(sqrt|exp|expm1|log|log1p|log2|pow|sin|cos|sincos|tan|asin|acos|atan|atan2|sinh|cosh|tanh|fabs|fmod|hypot|"
-    r"floor|ceil|round|lround|trunc|fmin|fmax|cbrt|remainder)f?)$)")
+    r"floor|ceil|round|lround|nearbyint|rint|lrint|trunc|fmin|fmax|cbrt|remainder)f?)$)")
 CORE_FORBIDDEN = re.compile(
     r"nlohmann|msgpack|urdf|TiXml|tinyxml|console_bridge|\bd(World|Body|Joint|Init|Close|Space)[A-Z]|"
     r"RobotBackend|pthread_|std::thread|std::(__cxx11::)?basic_(i|o)?fstream|std::filesystem|\b(f?open|fopen64|mmap|munmap|"

@@ -804,4 +804,13 @@ Eigen::Matrix<float, 5, 1> centroid(const PolicyWeights<Dims>& w, int movement, 
   return w.centroids.col(m * w.clusters + kc);
 }
 
+// The step's two halves for the paper and the small configuration are compiled once, in nao_core
+// (policy_instances.cpp), not in every program and test that steps them: their fixed-size kernels
+// are most of a build's compile time. Other dimensions (a generated model's) instantiate where used.
+#define NAO_POLICY_STEP_INSTANCES(EXTERN, D)                                                            \
+  EXTERN template void encodePolicyTick<D>(const PolicyWeights<D>&, PolicyWorkspace<D>&, const PolicyInput&); \
+  EXTERN template void decodePolicyTick<D>(const PolicyWeights<D>&, PolicyWorkspace<D>&, unsigned);
+NAO_POLICY_STEP_INSTANCES(extern, PaperPolicyDims)
+NAO_POLICY_STEP_INSTANCES(extern, SmallPolicyDims)
+
 }  // namespace nao
