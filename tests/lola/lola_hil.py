@@ -28,6 +28,7 @@ import argparse
 import csv
 import json
 import os
+import shutil
 import signal
 import socket
 import struct
@@ -94,16 +95,32 @@ class Sim:
 
 
 def reference(a, tmp, movement):
-    """nao_rt's arguments for the recorded reference of `movement` (made once per case)."""
-    demo = os.path.join(tmp, "references", movement + "_000")
-    skeleton = os.path.join(demo, "skeleton.csv")
+    """nao_rt's arguments for the recorded reference of `movement`: made once per case, or once for
+    all cases under --references (named by the nao_toolchain that made it, so a rebuilt one makes
+    its own; written beside and renamed into place, so a reader never sees half of one)."""
+    if a.references:
+        st = os.stat(a.toolchain)
+        root = os.path.join(a.references, "%d-%d" % (st.st_size, st.st_mtime_ns))
+    else:
+        root = os.path.join(tmp, "references")
+    skeleton = os.path.join(root, movement + "_000", "skeleton.csv")
     if not os.path.exists(skeleton):
+        os.makedirs(root, exist_ok=True)
+        work = tempfile.mkdtemp(prefix=movement + ".", dir=root)
+        demo = os.path.join(work, movement + "_000")
         for cmd in ([a.toolchain, "synth", "--movement", movement, "--per-movement", "1", "--seed", "1000001", "--out",
-                     os.path.join(tmp, "references")],
-                    [a.toolchain, "triangulate", "--demo", demo, "--max-gap", "0", "--out", skeleton]):
+                     work],
+                    [a.toolchain, "triangulate", "--demo", demo, "--max-gap", "0", "--out",
+                     os.path.join(demo, "skeleton.csv")]):
             p = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
             if p.returncode != 0:
                 raise SystemExit("reference of %s: %s failed: %s" % (movement, " ".join(cmd), p.stderr[-1000:]))
+        try:
+            os.rename(demo, os.path.dirname(skeleton))
+        except OSError:
+            if not os.path.exists(skeleton):  # not another case's, made meanwhile
+                raise
+        shutil.rmtree(work, ignore_errors=True)
     return ["--reference", "file:" + skeleton, "--movement", movement]
 
 
@@ -485,6 +502,7 @@ def main():
     ap.add_argument("--slow-rt", help="nao_rt_slow_cpu (the slow:io_thread case)")
     ap.add_argument("--sim", required=True)
     ap.add_argument("--toolchain", required=True, help="nao_toolchain (synth, triangulate: the references)")
+    ap.add_argument("--references", help="folder the cases share their references in (default: one case's own)")
     ap.add_argument("case")
     a = ap.parse_args()
     kind, _, arg = a.case.partition(":")
