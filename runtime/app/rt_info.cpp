@@ -24,7 +24,7 @@ std::string oneLine(std::string s) {
 }  // namespace
 
 std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision,
-                          PolicyKernel kernel) {
+                          PolicyKernel kernel, std::optional<bool> runs) {
   using nlohmann::ordered_json;
   const ModelHeader& h = model.header;
   const PolicyArch& a = h.arch;
@@ -77,6 +77,7 @@ std::string modelInfoJson(const ModelFile& model, const std::string& source, con
   if (!metadata.is_discarded() && metadata.is_object()) metadata.erase("run_codes");
   j["metadata"] = metadata.is_discarded() ? ordered_json(h.metadata_json) : std::move(metadata);
   j["source"] = source;
+  if (runs) j["runs"] = *runs;  // whether --weights of this file runs here or needs a nao_rt of its own
   // Metadata is whatever the file holds: replace invalid UTF-8 rather than throw.
   return j.dump(2, ' ', false, ordered_json::error_handler_t::replace);
 }
@@ -103,14 +104,9 @@ int runInfo(const InfoOptions& options, std::ostream& out, std::ostream& err) {
     }
     const WeightPrecision precision = runPrecision(options.precision, source == "compiled-in", options.compiled);
     requirePolicyKernel(options.kernel);  // what a run's binding would refuse
-    std::string json = modelInfoJson(model, source, weightPrecisionName(precision), options.kernel);
-    if (options.computes) {
-      // "runs" last: whether --weights of this file runs here or needs a nao_rt of its own.
-      auto j = nlohmann::ordered_json::parse(json);
-      j["runs"] = options.computes(model.header.arch);
-      json = j.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
-    }
-    out << json << "\n";
+    std::optional<bool> runs;
+    if (options.computes) runs = options.computes(model.header.arch);
+    out << modelInfoJson(model, source, weightPrecisionName(precision), options.kernel, runs) << "\n";
     return 0;
   } catch (const std::exception& e) {
     err << "nao_rt: " << oneLine(e.what()) << "\n";

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 #include <iosfwd>
+#include <optional>
 #include <string>
 
 namespace nao::rt {
@@ -31,10 +32,10 @@ struct InfoOptions {
 /// kernel (the one a run with the same options binds the weights with), tensors,
 /// joints, starts (per movement, the autonomous starts' name and ticks; empty lists without
 /// any), metadata (parsed JSON if it parses, else the string), source. Throws ModelFileError for
-/// unusable starts. runInfo adds "runs": whether this nao_rt runs the model (its compiled
-/// dimensions compute the model's step), when it knows.
+/// unusable starts. `runs`, when known: whether this nao_rt runs the model (its compiled
+/// dimensions compute the model's step), the last key.
 std::string modelInfoJson(const ModelFile& model, const std::string& source, const std::string& precision = "fp32",
-                          PolicyKernel kernel = bestPolicyKernel());
+                          PolicyKernel kernel = bestPolicyKernel(), std::optional<bool> runs = std::nullopt);
 
 /// Checks the model and prints modelInfoJson + newline on `out`: returns 0. On any problem
 /// (no model, a bad file, joints that differ from the URDF, an unusable URDF) prints exactly

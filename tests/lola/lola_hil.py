@@ -26,6 +26,7 @@ Every process runs under a timeout; a hang fails the test.
 """
 import argparse
 import csv
+import hashlib
 import json
 import os
 import shutil
@@ -96,11 +97,11 @@ class Sim:
 
 def reference(a, tmp, movement):
     """nao_rt's arguments for the recorded reference of `movement`: made once per case, or once for
-    all cases under --references (named by the nao_toolchain that made it, so a rebuilt one makes
-    its own; written beside and renamed into place, so a reader never sees half of one)."""
+    all cases under --references (named by the SHA-256 of the nao_toolchain that made it, so another
+    build makes its own; written beside and renamed into place, so a reader never sees half of one)."""
     if a.references:
-        st = os.stat(a.toolchain)
-        root = os.path.join(a.references, "%d-%d" % (st.st_size, st.st_mtime_ns))
+        with open(a.toolchain, "rb") as f:
+            root = os.path.join(a.references, hashlib.sha256(f.read()).hexdigest()[:16])
     else:
         root = os.path.join(tmp, "references")
     skeleton = os.path.join(root, movement + "_000", "skeleton.csv")
